@@ -1,0 +1,19 @@
+# One INTERFACE target carries the warning flags (and the sanitizer flags); every target of ours links it.
+add_library(texstream_warnings INTERFACE)
+add_library(texstream::warnings ALIAS texstream_warnings)
+target_compile_options(texstream_warnings INTERFACE
+  -Wall -Wextra -Werror -Wshadow -Wnon-virtual-dtor -Wcast-align -Wunused -Woverloaded-virtual
+  -Wnull-dereference -Wdouble-promotion -Wformat=2 -Wimplicit-fallthrough)
+
+if(TEXSTREAM_SANITIZE)
+  if(TEXSTREAM_SANITIZE STREQUAL "thread")
+    set(_san_flags -fsanitize=thread)
+  elseif(TEXSTREAM_SANITIZE STREQUAL "address,undefined" OR TEXSTREAM_SANITIZE STREQUAL "address"
+         OR TEXSTREAM_SANITIZE STREQUAL "undefined")
+    set(_san_flags -fsanitize=${TEXSTREAM_SANITIZE} -fno-sanitize-recover=undefined)
+  else()
+    message(FATAL_ERROR "TEXSTREAM_SANITIZE must be empty, 'address,undefined' or 'thread', not '${TEXSTREAM_SANITIZE}'")
+  endif()
+  target_compile_options(texstream_warnings INTERFACE ${_san_flags} -fno-omit-frame-pointer -g)
+  target_link_options(texstream_warnings INTERFACE ${_san_flags})
+endif()

@@ -1,0 +1,90 @@
+#pragma once
+// Every parameter of texstream, one struct per part, read from one TOML file (config/default.toml) and
+// overridden by `--set part.key=value`. Units are in the key names. Each key is declared once, in
+// config.cpp's `visit_keys`, with its type, default, range and documentation; the parser, the `--set`
+// override, the documentation generator (docs/config.md) and the validation all come from that one list.
+// Unknown keys and out-of-range values are start-up errors that name the key — never silently clamped.
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "texstream/common/result.hpp"
+
+namespace texstream {
+
+struct SceneConfig {
+  std::string dir = "scenes/default";  // scene folder written by texstream-gen
+};
+
+struct ProtocolConfig {
+  std::string segment_name;             // empty: "texstream-<renderer pid>"
+  int64_t request_ring_capacity = 1024; // records, power of two
+  int64_t completion_ring_capacity = 1024;
+  int64_t staging_slot_count = 32;
+  int64_t staging_slot_bytes = 1 << 20; // one 512x512 RGBA8 mip
+  double heartbeat_timeout_ms = 1500;   // a peer whose heartbeat has not moved for this long is hung
+};
+
+struct ServerConfig {
+  std::string executable;               // empty: texstream-server next to texstream-render
+  int64_t worker_threads = 2;           // read + decode workers (2-core default)
+  int64_t ram_cache_bytes = 256ll << 20;
+  double idle_wait_ms = 20;             // futex wait between doorbells (also paces the heartbeat)
+  std::string log_level = "info";       // trace, debug, info, warn, error
+};
+
+struct RenderConfig {
+  std::string device = "llvmpipe";      // substring of the Vulkan device name; empty: the first device
+  bool validation = false;              // Khronos validation layer (tests turn it on)
+  bool window = false;                  // GLFW window instead of headless
+  int64_t width_px = 960;
+  int64_t height_px = 540;
+  int64_t frames = 90;                  // headless: frames to render (0: the whole camera path)
+  double frame_time_ms = 33.333;        // lock-step: virtual time per frame along the camera path
+  std::string camera_path;              // empty: <scene>/camera_path.txt
+  std::string output_dir = "out";
+  int64_t write_every_frames = 10;      // write every Nth frame as PNG (0: none; the last frame always)
+  double fov_y_deg = 60;
+  double offscreen_fov_y_deg = 75;      // wider off-screen FOV whose meshes are requested at W = 1 (seed 000 §3.2)
+  double near_m = 1;
+  double far_m = 20000;
+};
+
+struct StreamConfig {
+  double tau = 150;                     // mesh weight cutoff (seed 000 §3.3, Table 2)
+  double max_anisotropy = 16;           // A_m for the mip-level metadata; sampling uses A_m / 2 (seed 000 §3.2)
+  int64_t max_requests_in_flight = 256; // pre-queue depth sent to the server per cycle
+  int64_t max_mips_per_cycle = 512;     // upload budget per streaming cycle
+  bool colormap_blend = true;           // Eq. 8 blending; false samples directly
+};
+
+struct CacheConfig {
+  std::string format = "rgba8";         // rgba8 or bc1: the texel format of the GPU cache
+  int64_t layer_extent_px = 512;        // side of one cache layer; the largest texture extent it can hold
+  int64_t layers = 64;                  // array layers of the cache image (GPU memory bound)
+};
+
+struct Config {
+  SceneConfig scene;
+  ProtocolConfig protocol;
+  ServerConfig server;
+  RenderConfig render;
+  StreamConfig stream;
+  CacheConfig cache;
+
+  // Relations between fields (filament validateConfig style); messages name the keys.
+  Status validate() const;
+};
+
+// Reads `file` (empty: defaults only), then applies each "part.key=value" override in order.
+Result<Config> load_config(const std::filesystem::path& file, const std::vector<std::string>& overrides);
+// Parses TOML text (for tests); `what` names the source in errors.
+Result<Config> parse_config(const std::string& toml_text, const std::string& what,
+                            const std::vector<std::string>& overrides);
+// The same config as TOML text that parse_config reads back equal (handed to the spawned server).
+std::string to_toml(const Config& config);
+// Markdown table of every key: name, type, unit, default, range, meaning.
+std::string config_reference_markdown();
+
+}  // namespace texstream

@@ -1,0 +1,143 @@
+#pragma once
+// The on-disk scene: what texstream-gen writes, the server reads (texture files) and the renderer reads
+// (meshes, texture table, colormap). All binary files are little-endian with a magic and a version.
+//
+//   <scene>/scene.json         manifest: counts, format, origin and bounds (map coordinates, metres)
+//   <scene>/meshes.bin         MeshFileHeader, MeshRecord[mesh_count], Vertex[vertex_count], uint32 index[index_count]
+//   <scene>/textures.bin       TextureFileHeader, TextureRecord[texture_count]
+//   <scene>/colormap.bin       ColormapFileHeader, uint32 RGBA8[texture_count]   (seed 000 §3.7 City Colormap)
+//   <scene>/camera_path.txt    the default fly-through (see camera_path.hpp)
+//   <scene>/textures/XXX/YYYYYYYY.dds   one DDS per texture, all mips finest first, no DX10 extension:
+//                              mip L of texture T lies at 128 + mip_chain_offset(format, w, h, L)
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "texstream/common/result.hpp"
+#include "texstream/protocol/ids.hpp"
+#include "texstream/protocol/texel_format.hpp"
+
+namespace texstream::scene {
+
+inline constexpr uint32_t kSceneFormatVersion = 1;
+inline constexpr uint64_t kMeshMagic = 0x31304853454d5354ull;      // "TSMESH01"
+inline constexpr uint64_t kTextureMagic = 0x3130584554535354ull;   // "TSSTEX01"
+inline constexpr uint64_t kColormapMagic = 0x31304d4c4f435354ull;  // "TSCOLM01"
+
+struct MeshFileHeader {
+  uint64_t magic;
+  uint32_t version;
+  uint32_t reserved;
+  uint64_t mesh_count;
+  uint64_t vertex_count;
+  uint64_t index_count;
+};
+static_assert(sizeof(MeshFileHeader) == 40);
+
+// One mesh = one texture (seed 000: "a mesh is a set of primitives with one texture map").
+struct MeshRecord {
+  double origin[3];       // map coordinates in metres (x east, y north, z up); vertices are relative to it
+  float bounds_min[3];    // relative to origin
+  float bounds_max[3];
+  uint32_t first_vertex;
+  uint32_t vertex_count;
+  uint32_t first_index;   // indices are relative to first_vertex
+  uint32_t index_count;
+  uint32_t texture_id;
+  uint32_t reserved;
+};
+static_assert(sizeof(MeshRecord) == 72);
+
+struct Vertex {
+  float pos[3];     // metres, relative to the mesh origin
+  float normal[3];
+  float uv[2];      // [0,1] over the mesh's texture
+};
+static_assert(sizeof(Vertex) == 32);
+
+struct TextureFileHeader {
+  uint64_t magic;
+  uint32_t version;
+  uint32_t reserved;
+  uint64_t texture_count;
+};
+static_assert(sizeof(TextureFileHeader) == 24);
+
+struct TextureRecord {
+  uint32_t width;
+  uint32_t height;
+  uint32_t mip_count;  // full chain: full_mip_count(width, height)
+  uint32_t format;     // TexelFormat
+};
+static_assert(sizeof(TextureRecord) == 16);
+
+struct ColormapFileHeader {
+  uint64_t magic;
+  uint32_t version;
+  uint32_t reserved;
+  uint64_t texture_count;
+};
+static_assert(sizeof(ColormapFileHeader) == 24);
+
+struct Manifest {
+  uint32_t format_version = kSceneFormatVersion;
+  std::string name;
+  uint64_t seed = 0;
+  uint64_t mesh_count = 0;
+  uint64_t texture_count = 0;
+  TexelFormat texture_format = TexelFormat::kRgba8;
+  std::array<double, 3> origin{};      // the city's reference point (map coordinates)
+  std::array<double, 3> bounds_min{};  // map coordinates
+  std::array<double, 3> bounds_max{};
+  std::string camera_path = "camera_path.txt";
+};
+
+struct MeshData {
+  std::vector<MeshRecord> meshes;
+  std::vector<Vertex> vertices;
+  std::vector<uint32_t> indices;
+};
+
+Result<Manifest> read_manifest(const std::filesystem::path& dir);
+Status write_manifest(const std::filesystem::path& dir, const Manifest& m);
+
+// Readers validate everything: magic, version, counts against the file size, every mesh's ranges against
+// the arrays, every texture record's extent and mip count. Errors name the file and the record.
+Result<MeshData> read_meshes(const std::filesystem::path& dir);
+Result<std::vector<TextureRecord>> read_texture_table(const std::filesystem::path& dir);
+Result<std::vector<uint32_t>> read_colormap(const std::filesystem::path& dir, uint64_t expected_count);
+
+Status write_meshes(const std::filesystem::path& dir, const MeshData& data);
+Status write_texture_table(const std::filesystem::path& dir, std::span<const TextureRecord> textures);
+Status write_colormap(const std::filesystem::path& dir, std::span<const uint32_t> rgba);
+
+// <dir>/textures/<id>>12 as 3 hex digits>/<id as 8 hex digits>.dds
+std::filesystem::path texture_path(const std::filesystem::path& dir, TextureId id);
+
+// ---- DDS (the generator's per-texture file; also readable by OpenImageIO and image viewers) ----
+inline constexpr uint64_t kDdsHeaderBytes = 128;  // "DDS " + DDS_HEADER (124 bytes), no DX10 extension
+
+std::array<std::byte, kDdsHeaderBytes> make_dds_header(TexelFormat format, uint32_t width, uint32_t height,
+                                                       uint32_t mip_count);
+
+struct DdsInfo {
+  TexelFormat format;
+  uint32_t width;
+  uint32_t height;
+  uint32_t mip_count;
+};
+// Parses the 128 header bytes of a DDS we can serve (RGBA8 with standard masks, or DXT1). Names `what`
+// (the path) in errors.
+Result<DdsInfo> parse_dds_header(std::span<const std::byte> bytes, const std::string& what);
+
+inline uint64_t dds_mip_offset(TexelFormat format, uint32_t width, uint32_t height, uint32_t level) {
+  return kDdsHeaderBytes + mip_chain_offset(format, width, height, level);
+}
+inline uint64_t dds_file_bytes(TexelFormat format, uint32_t width, uint32_t height, uint32_t mip_count) {
+  return kDdsHeaderBytes + mip_chain_offset(format, width, height, mip_count);
+}
+
+}  // namespace texstream::scene

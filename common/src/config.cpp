@@ -1,0 +1,276 @@
+#include "texstream/common/config.hpp"
+
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+#include <toml++/toml.h>
+#include <variant>
+
+namespace texstream {
+
+namespace {
+
+struct Range {
+  double min;
+  double max;
+};
+constexpr Range kAny{-1e300, 1e300};
+
+// One declaration per key. Visitors: parse, apply override, print TOML, print docs.
+template <class V>
+void visit_keys(Config& c, V&& v) {
+  v("scene", "dir", c.scene.dir, "path", "Scene folder written by texstream-gen (relative paths are from the working directory)", kAny);
+
+  v("protocol", "segment_name", c.protocol.segment_name, "name", "POSIX shared-memory name; empty: texstream-<renderer pid>", kAny);
+  v("protocol", "request_ring_capacity", c.protocol.request_ring_capacity, "records", "Request ring size (power of two)", Range{4, 65536});
+  v("protocol", "completion_ring_capacity", c.protocol.completion_ring_capacity, "records", "Completion ring size (power of two)", Range{4, 65536});
+  v("protocol", "staging_slot_count", c.protocol.staging_slot_count, "slots", "Staging slots: bound the mips in flight between the processes", Range{1, 16384});
+  v("protocol", "staging_slot_bytes", c.protocol.staging_slot_bytes, "bytes", "Bytes per staging slot; must hold the largest mip", Range{4096, 64 << 20});
+  v("protocol", "heartbeat_timeout_ms", c.protocol.heartbeat_timeout_ms, "ms", "A peer whose progress heartbeat stalls this long is treated as hung", Range{10, 600000});
+
+  v("server", "executable", c.server.executable, "path", "texstream-server binary; empty: next to texstream-render", kAny);
+  v("server", "worker_threads", c.server.worker_threads, "threads", "Read/decode workers (default fits a 2-core machine)", Range{1, 64});
+  v("server", "ram_cache_bytes", c.server.ram_cache_bytes, "bytes", "Byte budget of the server's RAM cache of mips", Range{0, 1ll << 40});
+  v("server", "idle_wait_ms", c.server.idle_wait_ms, "ms", "Longest futex wait for new requests when idle", Range{0.1, 1000});
+  v("server", "log_level", c.server.log_level, "level", "trace, debug, info, warn or error", kAny);
+
+  v("render", "device", c.render.device, "name", "Substring of the Vulkan device name to use; empty: the first device", kAny);
+  v("render", "validation", c.render.validation, "bool", "Enable the Khronos validation layer", kAny);
+  v("render", "window", c.render.window, "bool", "Open a GLFW window instead of rendering headless", kAny);
+  v("render", "width_px", c.render.width_px, "px", "Framebuffer width", Range{16, 16384});
+  v("render", "height_px", c.render.height_px, "px", "Framebuffer height", Range{16, 16384});
+  v("render", "frames", c.render.frames, "frames", "Headless: frames to render; 0 = the whole camera path", Range{0, 1e9});
+  v("render", "frame_time_ms", c.render.frame_time_ms, "ms", "Virtual time per frame along the camera path (lock-step)", Range{0.01, 10000});
+  v("render", "camera_path", c.render.camera_path, "path", "Camera path file; empty: <scene>/camera_path.txt", kAny);
+  v("render", "output_dir", c.render.output_dir, "path", "Folder for frames and the run summary", kAny);
+  v("render", "write_every_frames", c.render.write_every_frames, "frames", "Write every Nth frame as PNG (0: only the last)", Range{0, 1e9});
+  v("render", "fov_y_deg", c.render.fov_y_deg, "deg", "Vertical field of view of the viewport", Range{1, 170});
+  v("render", "offscreen_fov_y_deg", c.render.offscreen_fov_y_deg, "deg", "Wider off-screen FOV whose meshes are requested at W = 1 (seed 000 §3.2)", Range{1, 170});
+  v("render", "near_m", c.render.near_m, "m", "Near plane", Range{1e-3, 1e6});
+  v("render", "far_m", c.render.far_m, "m", "Far plane", Range{1e-2, 1e8});
+
+  v("stream", "tau", c.stream.tau, "weight", "Mesh weight cutoff τ for compaction (seed 000 §3.3, Table 2)", Range{0, 1e12});
+  v("stream", "max_anisotropy", c.stream.max_anisotropy, "ratio", "A_m for the mip-level metadata; sampling uses A_m/2 (seed 000 §3.2)", Range{1, 16});
+  v("stream", "max_requests_in_flight", c.stream.max_requests_in_flight, "requests", "Requests outstanding at the server at once (pre-queue depth)", Range{1, 65536});
+  v("stream", "max_mips_per_cycle", c.stream.max_mips_per_cycle, "mips", "Most mips requested in one streaming cycle", Range{1, 1e7});
+  v("stream", "colormap_blend", c.stream.colormap_blend, "bool", "Blend sampled colour with the City Colormap by Eq. 8 (false: sample directly)", kAny);
+
+  v("cache", "format", c.cache.format, "name", "Texel format of the GPU cache: rgba8 or bc1", kAny);
+  v("cache", "layer_extent_px", c.cache.layer_extent_px, "px", "Side of one cache layer = the largest texture extent it holds (power of two)", Range{4, 16384});
+  v("cache", "layers", c.cache.layers, "layers", "Array layers of the cache image (bounds GPU memory)", Range{1, 2048});
+}
+
+using Value = std::variant<bool, int64_t, double, std::string>;
+
+std::string type_name(const bool&) { return "bool"; }
+std::string type_name(const int64_t&) { return "integer"; }
+std::string type_name(const double&) { return "float"; }
+std::string type_name(const std::string&) { return "string"; }
+
+std::string format_value(const bool& b) { return b ? "true" : "false"; }
+std::string format_value(const int64_t& i) { return std::to_string(i); }
+std::string format_value(const double& d) {
+  std::ostringstream s;
+  s.precision(17);
+  s << d;
+  std::string out = s.str();
+  if (out.find_first_of(".eEn") == std::string::npos) out += ".0";
+  return out;
+}
+std::string format_value(const std::string& s) {
+  std::string out = "\"";
+  for (char ch : s) {
+    if (ch == '"' || ch == '\\') out += '\\';
+    out += ch;
+  }
+  return out + "\"";
+}
+
+// toml++ as packaged by Debian throws on malformed input; turn that into a Result at the boundary.
+Result<toml::table> parse_toml(const std::string& text, const std::string& what) {
+  try {
+    return toml::parse(text, what);
+  } catch (const toml::parse_error& e) {
+    return make_error(ErrorCode::kInvalidArgument, what + ":" + std::to_string(e.source().begin.line) + ": " +
+                                                       std::string(e.description()));
+  }
+}
+
+Error key_error(const std::string& what, const std::string& key, const std::string& msg) {
+  return make_error(ErrorCode::kInvalidArgument, what + ": key '" + key + "': " + msg);
+}
+
+// Converts a TOML node to the field's type and range-checks it.
+template <class T>
+Status assign_from_node(T& field, const toml::node& node, const std::string& what, const std::string& key, Range r) {
+  if constexpr (std::is_same_v<T, bool>) {
+    auto v = node.value_exact<bool>();
+    if (!v) return key_error(what, key, "expected a bool");
+    field = *v;
+  } else if constexpr (std::is_same_v<T, int64_t>) {
+    auto v = node.value_exact<int64_t>();
+    if (!v) return key_error(what, key, "expected an integer");
+    if (static_cast<double>(*v) < r.min || static_cast<double>(*v) > r.max) {
+      return key_error(what, key, "value " + std::to_string(*v) + " outside [" + format_value(static_cast<int64_t>(r.min)) +
+                                      ", " + format_value(static_cast<int64_t>(r.max)) + "]");
+    }
+    field = *v;
+  } else if constexpr (std::is_same_v<T, double>) {
+    std::optional<double> v;
+    if (node.is_floating_point()) v = node.value_exact<double>();
+    else if (node.is_integer()) v = static_cast<double>(*node.value_exact<int64_t>());
+    if (!v) return key_error(what, key, "expected a number");
+    if (!std::isfinite(*v) || *v < r.min || *v > r.max) {
+      return key_error(what, key, "value " + format_value(*v) + " outside [" + format_value(r.min) + ", " + format_value(r.max) + "]");
+    }
+    field = *v;
+  } else {
+    auto v = node.value_exact<std::string>();
+    if (!v) return key_error(what, key, "expected a string");
+    field = *v;
+  }
+  return ok_status();
+}
+
+Status apply_table(Config& c, const toml::table& root, const std::string& what) {
+  std::set<std::string> known_parts;
+  std::set<std::string> known_keys;
+  visit_keys(c, [&](const char* part, const char* key, auto&, const char*, const char*, Range) {
+    known_parts.insert(part);
+    known_keys.insert(std::string(part) + "." + key);
+  });
+  for (const auto& [part_key, part_node] : root) {
+    const std::string part(part_key.str());
+    if (!known_parts.count(part)) return key_error(what, part, "unknown section");
+    const toml::table* t = part_node.as_table();
+    if (!t) return key_error(what, part, "expected a [" + part + "] table");
+    for (const auto& [k, node] : *t) {
+      const std::string full = part + "." + std::string(k.str());
+      if (!known_keys.count(full)) return key_error(what, full, "unknown key");
+    }
+  }
+  Status status = ok_status();
+  visit_keys(c, [&](const char* part, const char* key, auto& field, const char*, const char*, Range r) {
+    if (!status.ok()) return;
+    const toml::node* node = root.at_path(std::string(part) + "." + key).node();
+    if (!node) return;
+    status = assign_from_node(field, *node, what, std::string(part) + "." + key, r);
+  });
+  return status;
+}
+
+Status apply_override(Config& c, const std::string& text) {
+  const auto eq = text.find('=');
+  if (eq == std::string::npos || eq == 0) {
+    return make_error(ErrorCode::kInvalidArgument, "--set '" + text + "': expected part.key=value");
+  }
+  const std::string key = text.substr(0, eq);
+  const std::string value = text.substr(eq + 1);
+  const auto dot = key.find('.');
+  if (dot == std::string::npos) return key_error("--set", key, "expected part.key");
+  // Let TOML parse the value so that "--set render.frames=10" and "--set scene.dir=x" both work: a bare
+  // word that is not a TOML value is taken as a string.
+  const std::string part = key.substr(0, dot), name = key.substr(dot + 1);
+  bool is_string_key = false;
+  visit_keys(c, [&](const char* p, const char* k, auto& field, const char*, const char*, Range) {
+    if (std::string(p) + "." + k == key) is_string_key = std::is_same_v<std::decay_t<decltype(field)>, std::string>;
+  });
+  // A string key takes the text as it is (so "--set scene.dir=x" needs no quotes); other keys are parsed
+  // as TOML values so numbers and booleans keep their type.
+  const std::string rhs = is_string_key && !(value.size() >= 2 && value.front() == '"') ? format_value(value) : value;
+  auto parsed = parse_toml("[" + part + "]\n" + name + " = " + rhs + "\n", "--set " + key);
+  if (!parsed.ok()) return key_error("--set", key, "cannot parse value '" + value + "'");
+  return apply_table(c, parsed.value(), "--set");
+}
+
+bool is_pow2(int64_t v) { return v > 0 && (v & (v - 1)) == 0; }
+
+}  // namespace
+
+Status Config::validate() const {
+  auto bad = [](const std::string& key, const std::string& msg) {
+    return make_error(ErrorCode::kInvalidArgument, "config: key '" + key + "': " + msg);
+  };
+  if (!is_pow2(protocol.request_ring_capacity)) return bad("protocol.request_ring_capacity", "must be a power of two");
+  if (!is_pow2(protocol.completion_ring_capacity)) return bad("protocol.completion_ring_capacity", "must be a power of two");
+  if (!is_pow2(cache.layer_extent_px)) return bad("cache.layer_extent_px", "must be a power of two");
+  if (cache.format != "rgba8" && cache.format != "bc1") return bad("cache.format", "must be rgba8 or bc1, not '" + cache.format + "'");
+  static const std::set<std::string> levels{"trace", "debug", "info", "warn", "error"};
+  if (!levels.count(server.log_level)) return bad("server.log_level", "must be one of trace, debug, info, warn, error");
+  if (render.near_m >= render.far_m) return bad("render.near_m", "must be less than render.far_m");
+  if (render.offscreen_fov_y_deg < render.fov_y_deg) {
+    return bad("render.offscreen_fov_y_deg", "must be at least render.fov_y_deg");
+  }
+  // The largest mip a layer can hold must fit one staging slot (4 bytes per texel is the worst case).
+  const int64_t largest_mip = cache.layer_extent_px * cache.layer_extent_px * 4;
+  if (protocol.staging_slot_bytes < largest_mip) {
+    return bad("protocol.staging_slot_bytes", std::to_string(protocol.staging_slot_bytes) + " cannot hold a " +
+                                                  std::to_string(cache.layer_extent_px) + "² RGBA8 mip (" +
+                                                  std::to_string(largest_mip) + " bytes); raise it or lower cache.layer_extent_px");
+  }
+  if (stream.max_requests_in_flight > protocol.request_ring_capacity) {
+    return bad("stream.max_requests_in_flight", "must not exceed protocol.request_ring_capacity");
+  }
+  if (protocol.completion_ring_capacity < protocol.request_ring_capacity) {
+    return bad("protocol.completion_ring_capacity", "must be at least protocol.request_ring_capacity (every request is answered)");
+  }
+  return ok_status();
+}
+
+Result<Config> parse_config(const std::string& toml_text, const std::string& what, const std::vector<std::string>& overrides) {
+  Config c;
+  auto parsed = parse_toml(toml_text, what);
+  if (!parsed.ok()) return parsed.error();
+  TS_TRY(apply_table(c, parsed.value(), what));
+  for (const auto& o : overrides) TS_TRY(apply_override(c, o));
+  TS_TRY(c.validate());
+  return c;
+}
+
+Result<Config> load_config(const std::filesystem::path& file, const std::vector<std::string>& overrides) {
+  std::string text;
+  if (!file.empty()) {
+    std::ifstream in(file);
+    if (!in) return make_error(ErrorCode::kNotFound, "config file '" + file.string() + "' cannot be read");
+    std::ostringstream ss;
+    ss << in.rdbuf();
+    text = ss.str();
+  }
+  return parse_config(text, file.empty() ? std::string("<defaults>") : file.string(), overrides);
+}
+
+std::string to_toml(const Config& config) {
+  Config c = config;
+  std::map<std::string, std::string> parts;
+  std::vector<std::string> order;
+  visit_keys(c, [&](const char* part, const char* key, auto& field, const char*, const char*, Range) {
+    if (!parts.count(part)) order.push_back(part);
+    parts[part] += std::string(key) + " = " + format_value(field) + "\n";
+  });
+  std::string out;
+  for (const auto& p : order) out += "[" + p + "]\n" + parts[p] + "\n";
+  return out;
+}
+
+std::string config_reference_markdown() {
+  Config c;
+  std::string out = "| key | type | unit | default | range | meaning |\n|---|---|---|---|---|---|\n";
+  visit_keys(c, [&](const char* part, const char* key, auto& field, const char* unit, const char* doc, Range r) {
+    std::string range = "—";
+    using T = std::decay_t<decltype(field)>;
+    if constexpr (std::is_same_v<T, int64_t>) {
+      if (r.min > -1e299) range = std::to_string(static_cast<int64_t>(r.min)) + " … " + std::to_string(static_cast<int64_t>(r.max));
+    } else if constexpr (std::is_same_v<T, double>) {
+      if (r.min > -1e299) range = format_value(r.min) + " … " + format_value(r.max);
+    }
+    std::string def = format_value(field);
+    out += "| `" + std::string(part) + "." + key + "` | " + type_name(field) + " | " + unit + " | `" + def + "` | " + range +
+           " | " + doc + " |\n";
+  });
+  return out;
+}
+
+}  // namespace texstream

@@ -1,0 +1,80 @@
+#pragma once
+// The records that cross the rings. They are part of the segment ABI: fixed size, explicit padding, offsets
+// pinned by static_asserts here and again by tests/unit/protocol_layout_test.cpp. A change of any of them
+// bumps kLayoutVersion in segment_layout.hpp.
+#include <cstddef>
+#include <cstdint>
+#include <type_traits>
+
+namespace texstream {
+
+inline constexpr uint32_t kNoSlot = 0xffffffffu;
+
+enum class RequestKind : uint32_t {
+  kLoad = 1,         // load mip `mip_level` of `texture_id` into a staging slot
+  kReleaseSlot = 2,  // the renderer is done with `slot`: ownership goes back to the server
+};
+
+// renderer → server. 64 bytes, one cache line.
+struct RequestRecord {
+  uint32_t kind;        // RequestKind
+  uint32_t texture_id;  // kLoad
+  uint32_t mip_level;   // kLoad: 0 = full resolution
+  uint32_t slot;        // kReleaseSlot
+  uint64_t generation;  // streaming cycle that asked; a newer one supersedes requests not yet started
+  float priority;       // larger = sooner (seed 000 Eq. 1 mesh weight)
+  uint32_t reserved0;
+  uint64_t reserved1[4];
+};
+static_assert(std::is_trivially_copyable_v<RequestRecord> && std::is_standard_layout_v<RequestRecord>);
+static_assert(sizeof(RequestRecord) == 64 && alignof(RequestRecord) == 8);
+static_assert(offsetof(RequestRecord, kind) == 0);
+static_assert(offsetof(RequestRecord, texture_id) == 4);
+static_assert(offsetof(RequestRecord, mip_level) == 8);
+static_assert(offsetof(RequestRecord, slot) == 12);
+static_assert(offsetof(RequestRecord, generation) == 16);
+static_assert(offsetof(RequestRecord, priority) == 24);
+static_assert(offsetof(RequestRecord, reserved1) == 32);
+
+enum class CompletionStatus : uint32_t {
+  kOk = 1,         // payload in `slot`
+  kNotFound = 2,   // no such texture or file
+  kCorrupt = 3,    // the file does not match its header / index, or is truncated
+  kTimedOut = 4,   // storage did not answer in time
+  kCancelled = 5,  // superseded by a newer generation before it started
+  kIoError = 6,    // any other read failure
+  kUnfilled = 7,   // could not be served now (no free slot, busy origin): ask again later (seed 002 §4.3)
+};
+inline constexpr uint32_t kMaxCompletionStatus = 7;
+
+// server → renderer. 64 bytes. Everything in it is untrusted until the renderer has validated its copy.
+struct CompletionRecord {
+  uint32_t status;      // CompletionStatus
+  uint32_t slot;        // kOk: staging slot holding the payload; otherwise kNoSlot
+  uint32_t texture_id;
+  uint32_t mip_level;
+  uint64_t generation;  // echoed from the request
+  uint64_t byte_size;   // payload bytes at the start of the slot
+  uint32_t format;      // TexelFormat
+  uint32_t width;       // texels of this mip
+  uint32_t height;
+  uint32_t reserved0;
+  uint64_t checksum;    // XXH3-64 of the payload bytes
+  uint64_t reserved1;
+};
+static_assert(std::is_trivially_copyable_v<CompletionRecord> && std::is_standard_layout_v<CompletionRecord>);
+static_assert(sizeof(CompletionRecord) == 64 && alignof(CompletionRecord) == 8);
+static_assert(offsetof(CompletionRecord, status) == 0);
+static_assert(offsetof(CompletionRecord, slot) == 4);
+static_assert(offsetof(CompletionRecord, texture_id) == 8);
+static_assert(offsetof(CompletionRecord, mip_level) == 12);
+static_assert(offsetof(CompletionRecord, generation) == 16);
+static_assert(offsetof(CompletionRecord, byte_size) == 24);
+static_assert(offsetof(CompletionRecord, format) == 32);
+static_assert(offsetof(CompletionRecord, width) == 36);
+static_assert(offsetof(CompletionRecord, height) == 40);
+static_assert(offsetof(CompletionRecord, checksum) == 48);
+
+const char* to_string(CompletionStatus status);
+
+}  // namespace texstream

@@ -1,0 +1,132 @@
+#pragma once
+// The shared segment's fixed layout, computed by us (never by a managed allocator):
+//
+//   [0, 4096)           SegmentHeader   written once by the renderer before `ready` is set, then read-only
+//   [4096, 4160)        RendererBlock   written by the renderer only
+//   [4160, 4288)        ServerBlock     written by the server only
+//   request ring        RingControl + RequestRecord[request_capacity]        (renderer produces)
+//   completion ring     RingControl + CompletionRecord[completion_capacity]  (server produces)
+//   staging slots       slot_count × slot_bytes, each 4 KiB aligned; a slot's owner is whoever the rings
+//                       last handed it to (server at start, renderer after a kOk completion, server again
+//                       after a kReleaseSlot request)
+#include <cstddef>
+#include <cstdint>
+
+#include "texstream/protocol/records.hpp"
+#include "texstream/protocol/shm_atomic.hpp"
+#include "texstream/protocol/spsc_ring.hpp"
+
+namespace texstream {
+
+inline constexpr uint64_t kSegmentMagic = 0x314d525453584554ull;  // "TEXSTRM1" read little-endian
+inline constexpr uint32_t kLayoutVersion = 1;
+inline constexpr uint64_t kSegmentHeaderBytes = 4096;
+inline constexpr uint64_t kSlotAlignment = 4096;
+inline constexpr uint32_t kCompilerIdBytes = 64;
+
+struct SegmentHeader {
+  uint64_t magic;
+  uint32_t layout_version;
+  uint32_t header_bytes;            // sizeof(SegmentHeader)
+  uint32_t boost_version;           // BOOST_VERSION of the creator
+  uint32_t request_record_bytes;    // sizeof(RequestRecord)
+  uint32_t completion_record_bytes; // sizeof(CompletionRecord)
+  uint32_t reserved0;
+  char compiler[kCompilerIdBytes];  // __VERSION__ of the creator, NUL-padded
+  uint64_t segment_bytes;
+  uint32_t request_capacity;        // records, power of two
+  uint32_t completion_capacity;     // records, power of two
+  uint32_t slot_count;
+  uint32_t reserved1;
+  uint64_t slot_bytes;              // multiple of kSlotAlignment
+  uint64_t request_ring_offset;
+  uint64_t completion_ring_offset;
+  uint64_t slots_offset;
+  uint64_t epoch;                   // random per creation and per reset after a server death
+  uint64_t reserved2[8];
+};
+static_assert(std::is_trivially_copyable_v<SegmentHeader> && std::is_standard_layout_v<SegmentHeader>);
+static_assert(sizeof(SegmentHeader) == 224);
+static_assert(offsetof(SegmentHeader, compiler) == 32);
+static_assert(offsetof(SegmentHeader, segment_bytes) == 96);
+static_assert(offsetof(SegmentHeader, slot_bytes) == 120);
+static_assert(offsetof(SegmentHeader, epoch) == 152);
+
+// Written by the renderer only.
+struct alignas(64) RendererBlock {
+  ShmAtomic<uint32_t> ready;       // 1 once the header and rings are initialised (release-stored last)
+  uint32_t pid;                    // set before `ready`
+  uint64_t start_time;             // /proc/<pid>/stat start time (clock ticks since boot): pid + this = identity
+  ShmAtomic<uint64_t> heartbeat;   // bumped once per frame: progress, not time
+  ShmAtomic<uint64_t> generation;  // the newest streaming cycle
+  ShmAtomic<uint32_t> doorbell;    // futex word: bumped after pushing requests
+  uint32_t reserved0;
+  ShmAtomic<uint64_t> server_epoch;  // epoch the current server was spawned for
+  uint64_t reserved1[2];
+};
+static_assert(sizeof(RendererBlock) == 64);
+static_assert(offsetof(RendererBlock, heartbeat) == 16);
+static_assert(offsetof(RendererBlock, doorbell) == 32);
+
+// Written by the server only.
+struct alignas(64) ServerBlock {
+  ShmAtomic<uint32_t> attached;    // 1 while a server serves this segment
+  ShmAtomic<uint32_t> pid;
+  ShmAtomic<uint64_t> start_time;
+  ShmAtomic<uint64_t> heartbeat;   // bumped by the server loop each iteration: progress, not time
+  ShmAtomic<uint32_t> sleeping;    // 1 while waiting on the doorbell futex (the renderer then wakes it)
+  uint32_t reserved0;
+  // Statistics (monotonic counters; relaxed stores, read for reports only).
+  ShmAtomic<uint64_t> completions;        // completions published
+  ShmAtomic<uint64_t> requests_received;  // kLoad records taken off the request ring
+  ShmAtomic<uint64_t> requests_cancelled; // superseded by a newer generation or coalesced away
+  ShmAtomic<uint64_t> ram_cache_hits;     // mips served from the RAM cache
+  ShmAtomic<uint64_t> ram_cache_misses;   // mips read from storage
+  ShmAtomic<uint64_t> bytes_read;         // bytes read from storage (exact mip reads + headers)
+  uint64_t reserved1[6];
+};
+static_assert(sizeof(ServerBlock) == 128);
+static_assert(offsetof(ServerBlock, heartbeat) == 16);
+static_assert(offsetof(ServerBlock, completions) == 32);
+
+struct SegmentParams {
+  uint32_t request_capacity = 1024;
+  uint32_t completion_capacity = 1024;
+  uint32_t slot_count = 64;
+  uint64_t slot_bytes = 1u << 20;
+};
+
+struct SegmentLayout {
+  uint64_t renderer_block_offset;
+  uint64_t server_block_offset;
+  uint64_t request_ring_offset;     // RingControl, then records
+  uint64_t completion_ring_offset;  // RingControl, then records
+  uint64_t slots_offset;
+  uint64_t slot_bytes;
+  uint64_t total_bytes;
+};
+
+constexpr uint64_t align_up(uint64_t v, uint64_t a) { return (v + a - 1) / a * a; }
+
+// Pure arithmetic; the caller has validated params (power-of-two capacities, bounded sizes).
+constexpr SegmentLayout compute_layout(const SegmentParams& p) {
+  SegmentLayout l{};
+  l.renderer_block_offset = kSegmentHeaderBytes;
+  l.server_block_offset = l.renderer_block_offset + sizeof(RendererBlock);
+  l.request_ring_offset = align_up(l.server_block_offset + sizeof(ServerBlock), 128);
+  l.completion_ring_offset =
+      align_up(l.request_ring_offset + sizeof(RingControl) + uint64_t{p.request_capacity} * sizeof(RequestRecord), 128);
+  l.slots_offset = align_up(
+      l.completion_ring_offset + sizeof(RingControl) + uint64_t{p.completion_capacity} * sizeof(CompletionRecord),
+      kSlotAlignment);
+  l.slot_bytes = align_up(p.slot_bytes, kSlotAlignment);
+  l.total_bytes = l.slots_offset + uint64_t{p.slot_count} * l.slot_bytes;
+  return l;
+}
+
+// Bounds on what a header may claim: a hostile header must not make us map or index absurd sizes.
+inline constexpr uint32_t kMaxRingCapacity = 1u << 16;
+inline constexpr uint32_t kMaxSlotCount = 1u << 14;
+inline constexpr uint64_t kMaxSlotBytes = 64ull << 20;
+
+}  // namespace texstream

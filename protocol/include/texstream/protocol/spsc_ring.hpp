@@ -1,0 +1,134 @@
+#pragma once
+// Single-producer single-consumer ring over memory in the shared segment (iceoryx spsc_fifo style).
+//
+// Positions increase forever (uint64_t never wraps in practice) and index the record array modulo the
+// capacity, a power of two. The producer is the only writer of `write_pos` and of the records; the consumer
+// is the only writer of `read_pos`. Each side keeps its own position in process memory as the truth and only
+// *publishes* it to the segment, so a hostile or corrupted peer can never move our own position; the peer's
+// published position is validated on every load (it must lie in [ours - capacity, ours] or [ours, ours +
+// capacity]) and a violation is a protocol error, never an out-of-bounds access.
+//
+// No locks, no waiting: every call returns at once. Safe against a peer killed at any instant: a record is
+// visible only after the release-store of the position that follows its full copy.
+#include <cstdint>
+#include <cstring>
+#include <optional>
+#include <type_traits>
+
+#include "texstream/common/contract.hpp"
+#include "texstream/protocol/shm_atomic.hpp"
+
+namespace texstream {
+
+// Lives in the segment. The two positions sit on separate cache lines: they have different writers.
+struct RingControl {
+  alignas(64) ShmAtomic<uint64_t> write_pos;  // written by the producer only
+  alignas(64) ShmAtomic<uint64_t> read_pos;   // written by the consumer only
+};
+static_assert(sizeof(RingControl) == 128);
+
+enum class RingError { kNone, kPeerCorrupt };
+
+template <class Record>
+class SpscRingProducer {
+  static_assert(std::is_trivially_copyable_v<Record>);
+
+ public:
+  SpscRingProducer() = default;
+  // `control` and `records` point into the segment; `capacity` is a power of two. Resumes from the published
+  // write position (a ring handed over after a peer restart has been reset to zero by its owner).
+  SpscRingProducer(RingControl* control, Record* records, uint32_t capacity)
+      : control_(control), records_(records), capacity_(capacity) {
+    TS_ASSERT(capacity != 0 && (capacity & (capacity - 1)) == 0, "ring capacity %u is not a power of two", capacity);
+    // relaxed: only this process writes write_pos; at construction no other thread of ours touches it.
+    write_pos_ = control_->write_pos.v.load(std::memory_order_relaxed);
+  }
+
+  // Producer thread only. Returns false when full (or when the consumer's published position is impossible:
+  // then error() says so and the ring refuses further pushes).
+  bool try_push(const Record& record) {
+    if (error_ != RingError::kNone) return false;
+    // acquire: pairs with the consumer's release-store of read_pos, so its reads of the slot we reuse are done.
+    const uint64_t read = control_->read_pos.v.load(std::memory_order_acquire);
+    if (read > write_pos_ || write_pos_ - read > capacity_) {
+      error_ = RingError::kPeerCorrupt;
+      return false;
+    }
+    if (write_pos_ - read == capacity_) return false;
+    std::memcpy(&records_[write_pos_ & (capacity_ - 1)], &record, sizeof(Record));
+    ++write_pos_;
+    // release: pairs with the consumer's acquire-load of write_pos; publishes the record copied above.
+    control_->write_pos.v.store(write_pos_, std::memory_order_release);
+    return true;
+  }
+
+  // Producer thread only: free space as seen now.
+  uint32_t free_space() const {
+    const uint64_t read = control_->read_pos.v.load(std::memory_order_acquire);  // pairs with consumer's release
+    if (read > write_pos_ || write_pos_ - read > capacity_) return 0;
+    return static_cast<uint32_t>(capacity_ - (write_pos_ - read));
+  }
+
+  RingError error() const { return error_; }
+  uint64_t position() const { return write_pos_; }
+  uint32_t capacity() const { return capacity_; }
+
+ private:
+  RingControl* control_ = nullptr;
+  Record* records_ = nullptr;
+  uint32_t capacity_ = 0;
+  uint64_t write_pos_ = 0;
+  RingError error_ = RingError::kNone;
+};
+
+template <class Record>
+class SpscRingConsumer {
+  static_assert(std::is_trivially_copyable_v<Record>);
+
+ public:
+  SpscRingConsumer() = default;
+  SpscRingConsumer(RingControl* control, Record* records, uint32_t capacity)
+      : control_(control), records_(records), capacity_(capacity) {
+    TS_ASSERT(capacity != 0 && (capacity & (capacity - 1)) == 0, "ring capacity %u is not a power of two", capacity);
+    read_pos_ = control_->read_pos.v.load(std::memory_order_relaxed);  // relaxed: we are its only writer
+  }
+
+  // Consumer thread only. Copies the next record out of the segment (read once; the caller validates the
+  // copy) or returns nullopt when empty or when the producer's published position is impossible.
+  std::optional<Record> try_pop() {
+    if (error_ != RingError::kNone) return std::nullopt;
+    // acquire: pairs with the producer's release-store of write_pos; makes the record's bytes visible.
+    const uint64_t write = control_->write_pos.v.load(std::memory_order_acquire);
+    if (write < read_pos_ || write - read_pos_ > capacity_) {
+      error_ = RingError::kPeerCorrupt;
+      return std::nullopt;
+    }
+    if (write == read_pos_) return std::nullopt;
+    Record out;
+    std::memcpy(&out, &records_[read_pos_ & (capacity_ - 1)], sizeof(Record));
+    ++read_pos_;
+    // release: pairs with the producer's acquire-load of read_pos; our copy above is complete before the
+    // producer may overwrite this record.
+    control_->read_pos.v.store(read_pos_, std::memory_order_release);
+    return out;
+  }
+
+  // Consumer thread only: records waiting now (0 on a corrupt peer position).
+  uint32_t size() const {
+    const uint64_t write = control_->write_pos.v.load(std::memory_order_acquire);  // pairs with producer's release
+    if (write < read_pos_ || write - read_pos_ > capacity_) return 0;
+    return static_cast<uint32_t>(write - read_pos_);
+  }
+
+  RingError error() const { return error_; }
+  uint64_t position() const { return read_pos_; }
+
+ private:
+  RingControl* control_ = nullptr;
+  Record* records_ = nullptr;
+  uint32_t capacity_ = 0;
+  uint64_t read_pos_ = 0;
+  RingError error_ = RingError::kNone;
+};
+
+}  // namespace texstream
