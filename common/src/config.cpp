@@ -73,10 +73,10 @@ std::string type_name(const std::string&) { return "string"; }
 std::string format_value(const bool& b) { return b ? "true" : "false"; }
 std::string format_value(const int64_t& i) { return std::to_string(i); }
 std::string format_value(const double& d) {
-  std::ostringstream s;
-  s.precision(17);
-  s << d;
-  std::string out = s.str();
+  char buf[64];
+  // Shortest text that reads back to the same double (so 33.333 stays 33.333).
+  const auto res = std::to_chars(buf, buf + sizeof buf, d);
+  std::string out(buf, res.ptr);
   if (out.find_first_of(".eEn") == std::string::npos) out += ".0";
   return out;
 }
@@ -242,12 +242,13 @@ Result<Config> load_config(const std::filesystem::path& file, const std::vector<
   return parse_config(text, file.empty() ? std::string("<defaults>") : file.string(), overrides);
 }
 
-std::string to_toml(const Config& config) {
+std::string to_toml(const Config& config, bool with_comments) {
   Config c = config;
   std::map<std::string, std::string> parts;
   std::vector<std::string> order;
-  visit_keys(c, [&](const char* part, const char* key, auto& field, const char*, const char*, Range) {
+  visit_keys(c, [&](const char* part, const char* key, auto& field, const char* unit, const char* doc, Range) {
     if (!parts.count(part)) order.push_back(part);
+    if (with_comments) parts[part] += std::string("# ") + doc + " [" + unit + "]\n";
     parts[part] += std::string(key) + " = " + format_value(field) + "\n";
   });
   std::string out;

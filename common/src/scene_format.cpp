@@ -1,0 +1,474 @@
+#include "texstream/common/scene_format.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <limits>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <system_error>
+#include <type_traits>
+
+namespace texstream::scene {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr const char* kManifestFile = "scene.json";
+constexpr const char* kMeshFile = "meshes.bin";
+constexpr const char* kTextureFile = "textures.bin";
+constexpr const char* kColormapFile = "colormap.bin";
+
+// ---- small binary I/O helpers (stdio: one FILE*, large buffer, explicit error checks) ----
+
+struct FileCloser {
+  void operator()(std::FILE* f) const {
+    if (f != nullptr) std::fclose(f);
+  }
+};
+using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
+
+std::string errno_text() { return std::error_code(errno, std::generic_category()).message(); }
+
+// An input file and its size, opened for reading the header and arrays in order.
+struct InputFile {
+  FilePtr file;
+  uint64_t size = 0;
+  std::string what;
+
+  Status read(void* dst, uint64_t bytes, const char* part) {
+    if (bytes == 0) return ok_status();
+    if (std::fread(dst, 1, bytes, file.get()) != bytes)
+      return make_error(ErrorCode::kIo, what + ": short read of the " + part);
+    return ok_status();
+  }
+};
+
+Result<InputFile> open_input(const fs::path& path) {
+  InputFile in;
+  in.what = path.string();
+  std::error_code ec;
+  const auto size = fs::file_size(path, ec);
+  if (ec) {
+    const auto code = ec == std::errc::no_such_file_or_directory ? ErrorCode::kNotFound : ErrorCode::kIo;
+    return make_error(code, in.what + ": " + ec.message());
+  }
+  in.size = size;
+  in.file.reset(std::fopen(path.c_str(), "rb"));
+  if (!in.file) return make_error(ErrorCode::kIo, in.what + ": cannot open: " + errno_text());
+  return in;
+}
+
+// Writes a file as <path>.tmp and renames it into place, so that a crash never leaves a half-written file
+// under the real name (readers would otherwise find a header whose counts do not match the size).
+class OutputFile {
+ public:
+  static Result<OutputFile> create(const fs::path& path) {
+    OutputFile out;
+    out.path_ = path;
+    out.tmp_ = path;
+    out.tmp_ += ".tmp";
+    out.file_.reset(std::fopen(out.tmp_.c_str(), "wb"));
+    if (!out.file_) return make_error(ErrorCode::kIo, out.tmp_.string() + ": cannot create: " + errno_text());
+    // One large stdio buffer: the header and each array reach the kernel in few big writes.
+    std::setvbuf(out.file_.get(), nullptr, _IOFBF, 1 << 20);
+    return out;
+  }
+
+  void write(const void* src, uint64_t bytes) {
+    if (bytes != 0 && ok_ && std::fwrite(src, 1, bytes, file_.get()) != bytes) ok_ = false;
+  }
+
+  Status commit() {
+    std::FILE* f = file_.release();
+    const bool flushed = ok_ && std::fflush(f) == 0;
+    const bool closed = std::fclose(f) == 0;
+    if (!flushed || !closed) {
+      const std::string err = errno_text();
+      std::error_code ec;
+      fs::remove(tmp_, ec);
+      return make_error(ErrorCode::kIo, tmp_.string() + ": write failed: " + err);
+    }
+    std::error_code ec;
+    fs::rename(tmp_, path_, ec);
+    if (ec) return make_error(ErrorCode::kIo, path_.string() + ": cannot rename from .tmp: " + ec.message());
+    return ok_status();
+  }
+
+ private:
+  FilePtr file_;
+  fs::path path_;
+  fs::path tmp_;
+  bool ok_ = true;
+};
+
+template <class T>
+void write_array(OutputFile& out, std::span<const T> items) {
+  static_assert(std::is_trivially_copyable_v<T>);
+  out.write(items.data(), items.size_bytes());
+}
+
+// Checks magic and version of a binary header; `T` has magic and version fields.
+template <class T>
+Status check_magic_version(const T& h, uint64_t magic, const std::string& what) {
+  if (h.magic != magic) return make_error(ErrorCode::kCorrupt, what + ": bad magic (not a texstream file of this kind)");
+  if (h.version != kSceneFormatVersion)
+    return make_error(ErrorCode::kUnsupported, what + ": version " + std::to_string(h.version) + ", expected " +
+                                                   std::to_string(kSceneFormatVersion));
+  return ok_status();
+}
+
+bool finite3(const float v[3]) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
+bool finite3(const double v[3]) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
+
+Status validate_mesh(const MeshData& d, size_t i, const std::string& what) {
+  const MeshRecord& m = d.meshes[i];
+  const std::string rec = what + ": mesh " + std::to_string(i) + ": ";
+  if (uint64_t{m.first_vertex} + m.vertex_count > d.vertices.size())
+    return make_error(ErrorCode::kCorrupt, rec + "vertex range [" + std::to_string(m.first_vertex) + ", +" +
+                                               std::to_string(m.vertex_count) + ") exceeds " +
+                                               std::to_string(d.vertices.size()) + " vertices");
+  if (uint64_t{m.first_index} + m.index_count > d.indices.size())
+    return make_error(ErrorCode::kCorrupt, rec + "index range [" + std::to_string(m.first_index) + ", +" +
+                                               std::to_string(m.index_count) + ") exceeds " +
+                                               std::to_string(d.indices.size()) + " indices");
+  if (m.index_count % 3 != 0)
+    return make_error(ErrorCode::kCorrupt, rec + "index_count " + std::to_string(m.index_count) +
+                                               " is not a whole number of triangles");
+  if (!finite3(m.origin) || !finite3(m.bounds_min) || !finite3(m.bounds_max))
+    return make_error(ErrorCode::kCorrupt, rec + "origin or bounds not finite");
+  for (int a = 0; a < 3; ++a)
+    if (m.bounds_min[a] > m.bounds_max[a]) return make_error(ErrorCode::kCorrupt, rec + "bounds_min > bounds_max");
+  for (uint32_t k = 0; k < m.index_count; ++k) {
+    const uint32_t idx = d.indices[m.first_index + k];
+    if (idx >= m.vertex_count)
+      return make_error(ErrorCode::kCorrupt, rec + "index " + std::to_string(k) + " = " + std::to_string(idx) +
+                                                 " is outside its " + std::to_string(m.vertex_count) + " vertices");
+  }
+  for (uint32_t k = 0; k < m.vertex_count; ++k) {
+    const Vertex& v = d.vertices[m.first_vertex + k];
+    if (!finite3(v.pos) || !finite3(v.normal) || !std::isfinite(v.uv[0]) || !std::isfinite(v.uv[1]))
+      return make_error(ErrorCode::kCorrupt, rec + "vertex " + std::to_string(k) + " is not finite");
+  }
+  return ok_status();
+}
+
+// ---- manifest JSON helpers ----
+
+using json = nlohmann::json;
+
+template <class T>
+Status get_field(const json& j, const char* key, T& out, const std::string& what) {
+  const auto it = j.find(key);
+  if (it == j.end()) return make_error(ErrorCode::kCorrupt, what + ": missing key '" + key + "'");
+  try {
+    out = it->template get<T>();
+  } catch (const json::exception& e) {
+    return make_error(ErrorCode::kCorrupt, what + ": key '" + key + "' has the wrong type: " + e.what());
+  }
+  return ok_status();
+}
+
+Status get_vec3(const json& j, const char* key, std::array<double, 3>& out, const std::string& what) {
+  std::vector<double> v;
+  TS_TRY(get_field(j, key, v, what));
+  if (v.size() != 3) return make_error(ErrorCode::kCorrupt, what + ": key '" + key + "' must hold 3 numbers");
+  for (double x : v)
+    if (!std::isfinite(x)) return make_error(ErrorCode::kCorrupt, what + ": key '" + key + "' is not finite");
+  out = {v[0], v[1], v[2]};
+  return ok_status();
+}
+
+// DDS constants (Microsoft "DDS_HEADER structure" / "DDS_PIXELFORMAT structure").
+constexpr uint32_t kDdsMagic = 0x20534444;  // "DDS "
+constexpr uint32_t kDdsdCaps = 0x1, kDdsdHeight = 0x2, kDdsdWidth = 0x4, kDdsdPitch = 0x8,
+                   kDdsdPixelFormat = 0x1000, kDdsdMipMapCount = 0x20000, kDdsdLinearSize = 0x80000;
+constexpr uint32_t kDdpfAlphaPixels = 0x1, kDdpfFourCC = 0x4, kDdpfRgb = 0x40;
+constexpr uint32_t kDdsCapsComplex = 0x8, kDdsCapsTexture = 0x1000, kDdsCapsMipMap = 0x400000;
+constexpr uint32_t kFourCCDxt1 = 0x31545844;  // "DXT1"
+constexpr uint32_t kFourCCDx10 = 0x30315844;  // "DX10"
+
+// Word offsets (in uint32) into the 128 bytes, counting the magic as word 0.
+enum DdsWord : size_t {
+  kWMagic = 0, kWSize = 1, kWFlags = 2, kWHeight = 3, kWWidth = 4, kWPitchOrLinearSize = 5, kWDepth = 6,
+  kWMipMapCount = 7, kWPfSize = 19, kWPfFlags = 20, kWPfFourCC = 21, kWPfBitCount = 22, kWPfRMask = 23,
+  kWPfGMask = 24, kWPfBMask = 25, kWPfAMask = 26, kWCaps = 27, kWCaps2 = 28,
+};
+
+}  // namespace
+
+// ---------------------------------------------------------------- manifest
+
+Result<Manifest> read_manifest(const fs::path& dir) {
+  const fs::path path = dir / kManifestFile;
+  const std::string what = path.string();
+  std::ifstream in(path);
+  if (!in) {
+    std::error_code ec;
+    const bool exists = fs::exists(path, ec);
+    return make_error(exists ? ErrorCode::kIo : ErrorCode::kNotFound,
+                      what + (exists ? ": cannot open" : ": not found (no scene here, or generation did not finish)"));
+  }
+  json j;
+  try {
+    j = json::parse(in);
+  } catch (const json::exception& e) {
+    return make_error(ErrorCode::kCorrupt, what + ": not valid JSON: " + e.what());
+  }
+  if (!j.is_object()) return make_error(ErrorCode::kCorrupt, what + ": top level must be an object");
+
+  Manifest m;
+  TS_TRY(get_field(j, "format_version", m.format_version, what));
+  if (m.format_version != kSceneFormatVersion)
+    return make_error(ErrorCode::kUnsupported, what + ": format_version " + std::to_string(m.format_version) +
+                                                   ", expected " + std::to_string(kSceneFormatVersion));
+  TS_TRY(get_field(j, "name", m.name, what));
+  TS_TRY(get_field(j, "seed", m.seed, what));
+  TS_TRY(get_field(j, "mesh_count", m.mesh_count, what));
+  TS_TRY(get_field(j, "texture_count", m.texture_count, what));
+  std::string format;
+  TS_TRY(get_field(j, "texture_format", format, what));
+  const auto f = texel_format_from_string(format);
+  if (!f) return make_error(ErrorCode::kUnsupported, what + ": key 'texture_format': unknown format '" + format + "'");
+  m.texture_format = *f;
+  TS_TRY(get_vec3(j, "origin", m.origin, what));
+  TS_TRY(get_vec3(j, "bounds_min", m.bounds_min, what));
+  TS_TRY(get_vec3(j, "bounds_max", m.bounds_max, what));
+  for (int a = 0; a < 3; ++a)
+    if (m.bounds_min[a] > m.bounds_max[a])
+      return make_error(ErrorCode::kCorrupt, what + ": bounds_min[" + std::to_string(a) + "] > bounds_max");
+  TS_TRY(get_field(j, "camera_path", m.camera_path, what));
+  // Texture ids are uint32 on the wire (TextureId) and mesh records index them with uint32.
+  if (m.texture_count > std::numeric_limits<uint32_t>::max() || m.mesh_count > std::numeric_limits<uint32_t>::max())
+    return make_error(ErrorCode::kCorrupt, what + ": mesh_count or texture_count exceeds 2^32-1");
+  return m;
+}
+
+Status write_manifest(const fs::path& dir, const Manifest& m) {
+  json j;
+  j["format_version"] = m.format_version;
+  j["name"] = m.name;
+  j["seed"] = m.seed;
+  j["mesh_count"] = m.mesh_count;
+  j["texture_count"] = m.texture_count;
+  j["texture_format"] = std::string(to_string(m.texture_format));
+  j["origin"] = m.origin;
+  j["bounds_min"] = m.bounds_min;
+  j["bounds_max"] = m.bounds_max;
+  j["camera_path"] = m.camera_path;
+  const std::string text = j.dump(2) + "\n";
+  auto out = OutputFile::create(dir / kManifestFile);
+  if (!out) return out.error();
+  out->write(text.data(), text.size());
+  return out->commit();
+}
+
+// ---------------------------------------------------------------- meshes
+
+Result<MeshData> read_meshes(const fs::path& dir) {
+  auto opened = open_input(dir / kMeshFile);
+  if (!opened) return opened.error();
+  InputFile& in = *opened;
+  MeshFileHeader h{};
+  if (in.size < sizeof h) return make_error(ErrorCode::kCorrupt, in.what + ": shorter than its header");
+  TS_TRY(in.read(&h, sizeof h, "header"));
+  TS_TRY(check_magic_version(h, kMeshMagic, in.what));
+  // Counts are bounded by the file size before any multiplication, so nothing below can overflow.
+  const uint64_t body = in.size - sizeof h;
+  if (h.mesh_count > body / sizeof(MeshRecord) || h.vertex_count > body / sizeof(Vertex) ||
+      h.index_count > body / sizeof(uint32_t))
+    return make_error(ErrorCode::kCorrupt, in.what + ": counts exceed the file size");
+  const uint64_t expected = sizeof h + h.mesh_count * sizeof(MeshRecord) + h.vertex_count * sizeof(Vertex) +
+                            h.index_count * sizeof(uint32_t);
+  if (expected != in.size)
+    return make_error(ErrorCode::kCorrupt, in.what + ": size " + std::to_string(in.size) + " bytes, header says " +
+                                               std::to_string(expected) + " (truncated or trailing data)");
+  if (h.vertex_count > std::numeric_limits<uint32_t>::max() || h.index_count > std::numeric_limits<uint32_t>::max())
+    return make_error(ErrorCode::kCorrupt, in.what + ": vertex or index count exceeds 2^32-1");
+
+  MeshData d;
+  d.meshes.resize(h.mesh_count);
+  d.vertices.resize(h.vertex_count);
+  d.indices.resize(h.index_count);
+  TS_TRY(in.read(d.meshes.data(), h.mesh_count * sizeof(MeshRecord), "mesh records"));
+  TS_TRY(in.read(d.vertices.data(), h.vertex_count * sizeof(Vertex), "vertices"));
+  TS_TRY(in.read(d.indices.data(), h.index_count * sizeof(uint32_t), "indices"));
+  for (size_t i = 0; i < d.meshes.size(); ++i) TS_TRY(validate_mesh(d, i, in.what));
+  return d;
+}
+
+Status write_meshes(const fs::path& dir, const MeshData& data) {
+  auto out = OutputFile::create(dir / kMeshFile);
+  if (!out) return out.error();
+  const MeshFileHeader h{kMeshMagic, kSceneFormatVersion, 0, data.meshes.size(), data.vertices.size(),
+                         data.indices.size()};
+  out->write(&h, sizeof h);
+  write_array(*out, std::span<const MeshRecord>(data.meshes));
+  write_array(*out, std::span<const Vertex>(data.vertices));
+  write_array(*out, std::span<const uint32_t>(data.indices));
+  return out->commit();
+}
+
+// ---------------------------------------------------------------- texture table
+
+Result<std::vector<TextureRecord>> read_texture_table(const fs::path& dir) {
+  auto opened = open_input(dir / kTextureFile);
+  if (!opened) return opened.error();
+  InputFile& in = *opened;
+  TextureFileHeader h{};
+  if (in.size < sizeof h) return make_error(ErrorCode::kCorrupt, in.what + ": shorter than its header");
+  TS_TRY(in.read(&h, sizeof h, "header"));
+  TS_TRY(check_magic_version(h, kTextureMagic, in.what));
+  const uint64_t body = in.size - sizeof h;
+  if (h.texture_count > body / sizeof(TextureRecord) || sizeof h + h.texture_count * sizeof(TextureRecord) != in.size)
+    return make_error(ErrorCode::kCorrupt, in.what + ": size " + std::to_string(in.size) + " bytes does not hold " +
+                                               std::to_string(h.texture_count) + " texture records exactly");
+  std::vector<TextureRecord> t(h.texture_count);
+  TS_TRY(in.read(t.data(), h.texture_count * sizeof(TextureRecord), "texture records"));
+  for (size_t i = 0; i < t.size(); ++i) {
+    const TextureRecord& r = t[i];
+    const std::string rec = in.what + ": texture " + std::to_string(i) + ": ";
+    if (!valid_texture_extent(r.width, r.height))
+      return make_error(ErrorCode::kCorrupt, rec + "extent " + std::to_string(r.width) + "x" +
+                                                 std::to_string(r.height) + " outside 1.." +
+                                                 std::to_string(kMaxTextureExtent));
+    if (r.mip_count != full_mip_count(r.width, r.height))
+      return make_error(ErrorCode::kCorrupt, rec + "mip_count " + std::to_string(r.mip_count) + ", a full chain has " +
+                                                 std::to_string(full_mip_count(r.width, r.height)));
+    if (!texel_format_from_raw(r.format))
+      return make_error(ErrorCode::kUnsupported, rec + "unknown format " + std::to_string(r.format));
+  }
+  return t;
+}
+
+Status write_texture_table(const fs::path& dir, std::span<const TextureRecord> textures) {
+  auto out = OutputFile::create(dir / kTextureFile);
+  if (!out) return out.error();
+  const TextureFileHeader h{kTextureMagic, kSceneFormatVersion, 0, textures.size()};
+  out->write(&h, sizeof h);
+  write_array(*out, textures);
+  return out->commit();
+}
+
+// ---------------------------------------------------------------- colormap
+
+Result<std::vector<uint32_t>> read_colormap(const fs::path& dir, uint64_t expected_count) {
+  auto opened = open_input(dir / kColormapFile);
+  if (!opened) return opened.error();
+  InputFile& in = *opened;
+  ColormapFileHeader h{};
+  if (in.size < sizeof h) return make_error(ErrorCode::kCorrupt, in.what + ": shorter than its header");
+  TS_TRY(in.read(&h, sizeof h, "header"));
+  TS_TRY(check_magic_version(h, kColormapMagic, in.what));
+  if (h.texture_count != expected_count)
+    return make_error(ErrorCode::kCorrupt, in.what + ": holds " + std::to_string(h.texture_count) +
+                                               " colours, the scene has " + std::to_string(expected_count) +
+                                               " textures");
+  const uint64_t body = in.size - sizeof h;
+  if (h.texture_count > body / sizeof(uint32_t) || sizeof h + h.texture_count * sizeof(uint32_t) != in.size)
+    return make_error(ErrorCode::kCorrupt, in.what + ": size " + std::to_string(in.size) + " bytes does not hold " +
+                                               std::to_string(h.texture_count) + " colours exactly");
+  std::vector<uint32_t> c(h.texture_count);
+  TS_TRY(in.read(c.data(), h.texture_count * sizeof(uint32_t), "colours"));
+  return c;
+}
+
+Status write_colormap(const fs::path& dir, std::span<const uint32_t> rgba) {
+  auto out = OutputFile::create(dir / kColormapFile);
+  if (!out) return out.error();
+  const ColormapFileHeader h{kColormapMagic, kSceneFormatVersion, 0, rgba.size()};
+  out->write(&h, sizeof h);
+  write_array(*out, rgba);
+  return out->commit();
+}
+
+// ---------------------------------------------------------------- texture files
+
+fs::path texture_path(const fs::path& dir, TextureId id) {
+  char folder[8];
+  char file[16];
+  std::snprintf(folder, sizeof folder, "%03x", (id.value >> 12) & 0xfffu);
+  std::snprintf(file, sizeof file, "%08x.dds", id.value);
+  return dir / "textures" / folder / file;
+}
+
+std::array<std::byte, kDdsHeaderBytes> make_dds_header(TexelFormat format, uint32_t width, uint32_t height,
+                                                       uint32_t mip_count) {
+  TS_ASSERT(valid_texture_extent(width, height), "DDS extent %ux%u", width, height);
+  TS_ASSERT(mip_count >= 1 && mip_count <= full_mip_count(width, height), "DDS mip_count %u for %ux%u", mip_count,
+            width, height);
+  uint32_t w[kDdsHeaderBytes / 4] = {};
+  w[kWMagic] = kDdsMagic;
+  w[kWSize] = 124;
+  w[kWFlags] = kDdsdCaps | kDdsdHeight | kDdsdWidth | kDdsdPixelFormat | kDdsdMipMapCount;
+  w[kWHeight] = height;
+  w[kWWidth] = width;
+  w[kWDepth] = 0;
+  w[kWMipMapCount] = mip_count;
+  w[kWPfSize] = 32;
+  if (format == TexelFormat::kBc1) {
+    w[kWFlags] |= kDdsdLinearSize;
+    w[kWPitchOrLinearSize] = static_cast<uint32_t>(mip_bytes(format, width, height, 0));
+    w[kWPfFlags] = kDdpfFourCC;
+    w[kWPfFourCC] = kFourCCDxt1;
+  } else {
+    TS_ASSERT(format == TexelFormat::kRgba8, "DDS format %u", static_cast<uint32_t>(format));
+    w[kWFlags] |= kDdsdPitch;
+    w[kWPitchOrLinearSize] = width * 4;
+    w[kWPfFlags] = kDdpfRgb | kDdpfAlphaPixels;
+    w[kWPfBitCount] = 32;
+    w[kWPfRMask] = 0x000000ffu;
+    w[kWPfGMask] = 0x0000ff00u;
+    w[kWPfBMask] = 0x00ff0000u;
+    w[kWPfAMask] = 0xff000000u;
+  }
+  w[kWCaps] = kDdsCapsTexture | (mip_count > 1 ? kDdsCapsComplex | kDdsCapsMipMap : 0u);
+  std::array<std::byte, kDdsHeaderBytes> out{};
+  std::memcpy(out.data(), w, sizeof w);  // little-endian host: the format's byte order
+  return out;
+}
+
+Result<DdsInfo> parse_dds_header(std::span<const std::byte> bytes, const std::string& what) {
+  if (bytes.size() < kDdsHeaderBytes)
+    return make_error(ErrorCode::kCorrupt, what + ": " + std::to_string(bytes.size()) +
+                                               " bytes, shorter than a DDS header (128)");
+  uint32_t w[kDdsHeaderBytes / 4];
+  std::memcpy(w, bytes.data(), sizeof w);
+  if (w[kWMagic] != kDdsMagic) return make_error(ErrorCode::kCorrupt, what + ": not a DDS file (bad magic)");
+  if (w[kWSize] != 124 || w[kWPfSize] != 32)
+    return make_error(ErrorCode::kCorrupt, what + ": DDS header or pixel-format size field is wrong");
+  DdsInfo info{};
+  info.width = w[kWWidth];
+  info.height = w[kWHeight];
+  if (!valid_texture_extent(info.width, info.height))
+    return make_error(ErrorCode::kCorrupt, what + ": extent " + std::to_string(info.width) + "x" +
+                                               std::to_string(info.height) + " outside 1.." +
+                                               std::to_string(kMaxTextureExtent));
+  if ((w[kWCaps2] & 0xfe00u) != 0 || ((w[kWFlags] & 0x800000u) != 0 && w[kWDepth] > 1))
+    return make_error(ErrorCode::kUnsupported, what + ": cube maps and volume textures are not served");
+  const uint32_t pf = w[kWPfFlags];
+  if ((pf & kDdpfFourCC) != 0) {
+    if (w[kWPfFourCC] == kFourCCDx10)
+      return make_error(ErrorCode::kUnsupported, what + ": DX10 extension header is not supported");
+    if (w[kWPfFourCC] != kFourCCDxt1)
+      return make_error(ErrorCode::kUnsupported, what + ": FourCC other than DXT1 is not supported");
+    info.format = TexelFormat::kBc1;
+  } else if ((pf & kDdpfRgb) != 0 && w[kWPfBitCount] == 32 && w[kWPfRMask] == 0x000000ffu &&
+             w[kWPfGMask] == 0x0000ff00u && w[kWPfBMask] == 0x00ff0000u &&
+             ((pf & kDdpfAlphaPixels) == 0 || w[kWPfAMask] == 0xff000000u)) {
+    info.format = TexelFormat::kRgba8;
+  } else {
+    return make_error(ErrorCode::kUnsupported, what + ": pixel format is neither DXT1 nor 32-bit RGBA (R in the low byte)");
+  }
+  // Without DDSD_MIPMAPCOUNT the file holds only the base level; a count of 0 means the same by convention.
+  info.mip_count = (w[kWFlags] & kDdsdMipMapCount) != 0 ? std::max(1u, w[kWMipMapCount]) : 1u;
+  if (info.mip_count > full_mip_count(info.width, info.height))
+    return make_error(ErrorCode::kCorrupt, what + ": mip count " + std::to_string(info.mip_count) + " exceeds the " +
+                                               std::to_string(full_mip_count(info.width, info.height)) +
+                                               " levels of a full chain");
+  return info;
+}
+
+}  // namespace texstream::scene

@@ -83,7 +83,8 @@ Result<Config> load_config(const std::filesystem::path& file, const std::vector<
 Result<Config> parse_config(const std::string& toml_text, const std::string& what,
                             const std::vector<std::string>& overrides);
 // The same config as TOML text that parse_config reads back equal (handed to the spawned server).
-std::string to_toml(const Config& config);
+// With comments: each key is preceded by its documentation and unit (how config/default.toml is made).
+std::string to_toml(const Config& config, bool with_comments = false);
 // Markdown table of every key: name, type, unit, default, range, meaning.
 std::string config_reference_markdown();
 

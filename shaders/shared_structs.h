@@ -1,0 +1,97 @@
+// Structs and binding numbers read by both C++ (renderer/include/texstream/render/gpu_structs.hpp, which
+// static_asserts every size and offset) and GLSL (every shader in this folder). Written once, here (the nvpro
+// host_device.h pattern). Only scalar, vec4/uvec4 and mat4 members, so std140 and std430 agree with the plain
+// C++ layout; buffers are std430 unless they are the uniform block.
+#ifndef TEXSTREAM_SHARED_STRUCTS_H
+#define TEXSTREAM_SHARED_STRUCTS_H
+
+#ifdef __cplusplus
+#include <cstdint>
+namespace texstream::gpu {
+using uint = uint32_t;
+struct vec4 { float x, y, z, w; };
+struct uvec4 { uint32_t x, y, z, w; };
+struct mat4 { float m[16]; };  // column-major, as glm and GLSL store it
+#define TS_CONST inline constexpr uint32_t
+#define TS_FCONST inline constexpr float
+#else
+#define TS_CONST const uint
+#define TS_FCONST const float
+#endif
+
+// ---- descriptor set 0: one layout for every pipeline ----
+TS_CONST kBindingFrame = 0;        // uniform FrameUniforms
+TS_CONST kBindingMeshes = 1;       // buffer MeshGpu[mesh_count], camera-relative offsets, rewritten per frame
+TS_CONST kBindingTextures = 2;     // buffer TextureGpu[texture_count]
+TS_CONST kBindingMeshMeta = 3;     // buffer MeshMeta[mesh_count], the sparse visibility metadata (seed 000 §3.2)
+TS_CONST kBindingCache = 4;        // sampler2DArray: the texture cache image (seed 000 §3.6)
+TS_CONST kBindingCompacted = 5;    // buffer CompactList: meshes with weight >= tau (seed 000 §3.3)
+
+// TextureGpu.placement.y when no mip of the texture is resident: the shader draws the colormap colour.
+TS_CONST kNotResident = 0xffffffffu;
+// MeshMeta.mip_fixed before any fragment wrote it (atomicMin identity).
+TS_CONST kNoMip = 0xffffffffu;
+// Fixed point of the metadata atomics: mip levels in 1/256 of a level, weights in 1/16 (W <= 17 per fragment,
+// so 2^32 / (17 * 16) ~ 15.8 M fragments per mesh before the sum could wrap; a 4K frame has 8.3 M pixels).
+TS_CONST kMipFixedScale = 256u;
+TS_CONST kWeightFixedScale = 16u;
+// FrameUniforms.flags.x bits.
+TS_CONST kFlagColormapBlend = 1u;  // Eq. 8 blending (config stream.colormap_blend)
+TS_CONST kFlagLighting = 2u;       // headlight shading; off gives the plain texel colour
+TS_CONST kCompactWorkgroupSize = 64u;
+
+struct FrameUniforms {
+  vec4 camera_forward;  // xyz: unit view direction (world axes; the view has no translation)
+  vec4 params;          // x: A_m (metadata anisotropy), y: A_s (sampling taps), z: foreground distance (m) of
+                        //    Eq. 2, w: ambient term of the headlight
+  uvec4 flags;          // x: kFlag* bits, y: mesh count, z: weight cutoff tau in kWeightFixedScale units, w: 0
+  uvec4 cache;          // x: cache layer extent (px), y: cache mip count, z, w: 0
+};
+
+// Per-pass constants (push constants): the main pass and the wide off-screen metadata pass differ only here.
+struct PassConstants {
+  mat4 view_proj;       // rotation-only view times projection: vertices arrive camera-relative
+  vec4 pass;            // x: lod offset (log2 of this pass's pixel footprint over the viewport's; 0 in the main
+                        //    pass), y: weight per fragment (viewport pixels one fragment stands for), zw: |ndc|
+                        //    bounds of the viewport inside this pass (> 1 in the main pass: nothing is outside)
+};
+
+struct MeshGpu {
+  float offset_x;       // mesh origin minus camera position, computed in double on the CPU, then rounded
+  float offset_y;
+  float offset_z;
+  uint texture_id;
+};
+
+struct TextureGpu {
+  uvec4 placement;      // x: cache layer, y: finest resident mip (kNotResident: none), z: coarsest resident mip,
+                        // w: mip count of the texture
+  uvec4 region;         // x, y: region origin in the layer at mip 0 (px); z, w: texture width, height (px)
+  uvec4 colour;         // x: City Colormap RGBA8 (sRGB, R in the low byte), y, z, w: 0
+};
+
+struct MeshMeta {
+  uint mip_fixed;       // atomicMin of the per-fragment mip level (kMipFixedScale units)
+  uint weight_fixed;    // atomicAdd of the per-fragment weight W (kWeightFixedScale units)
+};
+
+struct CompactEntry {
+  uint mesh_id;
+  uint mip_fixed;
+  uint weight_fixed;
+  uint reserved;
+};
+
+#ifdef __cplusplus
+struct CompactListHeader {
+  uint count;           // atomic counter; may exceed capacity (entries past it are dropped)
+  uint capacity;
+  uint reserved0;
+  uint reserved1;
+};
+}  // namespace texstream::gpu
+#undef TS_CONST
+#undef TS_FCONST
+#endif
+
+#endif

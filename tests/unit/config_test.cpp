@@ -1,0 +1,114 @@
+// Configuration: every key parses, unknown keys and bad values are errors naming the key, overrides apply in
+// order, and the shipped config/default.toml and docs/config.md agree with the code.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <sstream>
+
+#include "texstream/common/config.hpp"
+
+namespace texstream {
+namespace {
+
+std::string error_of(const std::string& toml, std::vector<std::string> overrides = {}) {
+  auto c = parse_config(toml, "test.toml", overrides);
+  return c.ok() ? std::string() : c.error().message;
+}
+
+TEST(Config, DefaultsValidate) {
+  auto c = parse_config("", "empty", {});
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  EXPECT_EQ(c->stream.tau, 150.0);  // seed 000 Table 2
+  EXPECT_EQ(c->render.device, "llvmpipe");
+}
+
+TEST(Config, ParsesEveryKindOfValue) {
+  auto c = parse_config("[render]\nwidth_px = 320\nvalidation = true\nfov_y_deg = 45\n[scene]\ndir = \"x/y\"\n", "t", {});
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  EXPECT_EQ(c->render.width_px, 320);
+  EXPECT_TRUE(c->render.validation);
+  EXPECT_EQ(c->render.fov_y_deg, 45.0);  // an integer is accepted for a float key
+  EXPECT_EQ(c->scene.dir, "x/y");
+}
+
+TEST(Config, UnknownKeysAndSectionsAreErrorsNamingThem) {
+  EXPECT_NE(error_of("[render]\nwidht_px = 3\n").find("'render.widht_px'"), std::string::npos);
+  EXPECT_NE(error_of("[rendr]\nwidth_px = 3\n").find("'rendr'"), std::string::npos);
+  EXPECT_NE(error_of("top = 1\n").find("'top'"), std::string::npos);
+}
+
+TEST(Config, OutOfRangeAndWrongTypeAreErrorsNamingTheKey) {
+  EXPECT_NE(error_of("[render]\nwidth_px = 0\n").find("'render.width_px'"), std::string::npos);
+  EXPECT_NE(error_of("[render]\nwidth_px = \"wide\"\n").find("'render.width_px'"), std::string::npos);
+  EXPECT_NE(error_of("[stream]\ntau = -1.0\n").find("'stream.tau'"), std::string::npos);
+  EXPECT_NE(error_of("[stream]\ntau = nan\n").find("'stream.tau'"), std::string::npos);
+  EXPECT_NE(error_of("[render]\nvalidation = 1\n").find("'render.validation'"), std::string::npos);
+  EXPECT_NE(error_of("[render]\nwidth_px = 3.5\n").find("'render.width_px'"), std::string::npos);
+}
+
+TEST(Config, RelationsBetweenKeysAreValidated) {
+  EXPECT_NE(error_of("[protocol]\nrequest_ring_capacity = 1000\n").find("'protocol.request_ring_capacity'"),
+            std::string::npos);
+  EXPECT_NE(error_of("[cache]\nformat = \"dxt5\"\n").find("'cache.format'"), std::string::npos);
+  EXPECT_NE(error_of("[render]\nnear_m = 100.0\nfar_m = 10.0\n").find("'render.near_m'"), std::string::npos);
+  EXPECT_NE(error_of("[protocol]\nstaging_slot_bytes = 4096\n").find("'protocol.staging_slot_bytes'"), std::string::npos);
+}
+
+TEST(Config, MalformedTomlNamesFileAndLine) {
+  const std::string e = error_of("[render]\nwidth_px = = 3\n");
+  EXPECT_NE(e.find("test.toml:2"), std::string::npos) << e;
+}
+
+TEST(Config, OverridesApplyInOrderAndAreChecked) {
+  auto c = parse_config("[render]\nframes = 5\n", "t", {"render.frames=7", "render.frames=9", "scene.dir=abc/def",
+                                                         "render.validation=true", "protocol.segment_name=1234"});
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  EXPECT_EQ(c->render.frames, 9);
+  EXPECT_EQ(c->scene.dir, "abc/def");
+  EXPECT_TRUE(c->render.validation);
+  EXPECT_EQ(c->protocol.segment_name, "1234");  // a string key keeps a numeric-looking value as text
+  EXPECT_NE(error_of("", {"render.nope=1"}).find("'render.nope'"), std::string::npos);
+  EXPECT_NE(error_of("", {"render.frames"}).find("render.frames"), std::string::npos);
+  EXPECT_NE(error_of("", {"render.frames=-3"}).find("'render.frames'"), std::string::npos);
+}
+
+TEST(Config, TomlRoundTrip) {
+  auto c = parse_config("", "t", {"render.width_px=333", "stream.tau=12.25", "scene.dir=with \"quote\""});
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  auto back = parse_config(to_toml(c.value()), "roundtrip", {});
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_EQ(to_toml(back.value()), to_toml(c.value()));
+  EXPECT_EQ(back->render.width_px, 333);
+  EXPECT_EQ(back->stream.tau, 12.25);
+  EXPECT_EQ(back->scene.dir, "with \"quote\"");
+}
+
+std::string slurp(const std::string& path) {
+  std::ifstream in(path);
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+TEST(Config, ShippedProfilesParse) {
+  for (const char* name : {"default.toml", "lavapipe.toml", "gpu.toml", "test.toml"}) {
+    auto c = load_config(std::string(TEXSTREAM_SOURCE_DIR) + "/config/" + name, {});
+    EXPECT_TRUE(c.ok()) << name << ": " << (c.ok() ? "" : c.error().message);
+  }
+}
+
+TEST(Config, DefaultTomlStatesTheCodeDefaults) {
+  auto shipped = load_config(std::string(TEXSTREAM_SOURCE_DIR) + "/config/default.toml", {});
+  ASSERT_TRUE(shipped.ok()) << shipped.error().message;
+  EXPECT_EQ(to_toml(shipped.value()), to_toml(Config{}))
+      << "config/default.toml and the defaults in config.hpp disagree; regenerate with texstream-config --defaults";
+}
+
+TEST(Config, ReferenceDocIsCurrent) {
+  const std::string doc = slurp(std::string(TEXSTREAM_SOURCE_DIR) + "/docs/config.md");
+  EXPECT_NE(doc.find(config_reference_markdown()), std::string::npos)
+      << "docs/config.md is stale; regenerate with: build/bin/texstream-config --reference";
+}
+
+}  // namespace
+}  // namespace texstream

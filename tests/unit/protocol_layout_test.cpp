@@ -1,0 +1,115 @@
+// Pins the segment ABI a second time, from outside the headers: a change to any offset or size fails here
+// and must come with a kLayoutVersion bump.
+#include <gtest/gtest.h>
+
+#include <boost/version.hpp>
+#include <cstring>
+
+#include "texstream/protocol/records.hpp"
+#include "texstream/protocol/segment.hpp"
+#include "texstream/protocol/segment_layout.hpp"
+
+namespace texstream {
+namespace {
+
+TEST(ProtocolLayout, RecordSizesAndOffsets) {
+  EXPECT_EQ(sizeof(RequestRecord), 64u);
+  EXPECT_EQ(offsetof(RequestRecord, generation), 16u);
+  EXPECT_EQ(offsetof(RequestRecord, priority), 24u);
+  EXPECT_EQ(sizeof(CompletionRecord), 64u);
+  EXPECT_EQ(offsetof(CompletionRecord, byte_size), 24u);
+  EXPECT_EQ(offsetof(CompletionRecord, checksum), 48u);
+  EXPECT_EQ(sizeof(SegmentHeader), 224u);
+  EXPECT_EQ(sizeof(RendererBlock), 64u);
+  EXPECT_EQ(sizeof(ServerBlock), 128u);
+  EXPECT_EQ(sizeof(RingControl), 128u);
+  EXPECT_EQ(offsetof(RingControl, read_pos), 64u);
+  EXPECT_EQ(kLayoutVersion, 1u);
+}
+
+TEST(ProtocolLayout, ComputedLayoutIsAlignedAndDisjoint) {
+  const SegmentParams p{1024, 1024, 32, 1 << 20};
+  const SegmentLayout l = compute_layout(p);
+  EXPECT_EQ(l.renderer_block_offset, kSegmentHeaderBytes);
+  EXPECT_GE(l.server_block_offset, l.renderer_block_offset + sizeof(RendererBlock));
+  EXPECT_EQ(l.request_ring_offset % 128, 0u);
+  EXPECT_GE(l.completion_ring_offset, l.request_ring_offset + sizeof(RingControl) + 1024 * sizeof(RequestRecord));
+  EXPECT_EQ(l.slots_offset % kSlotAlignment, 0u);
+  EXPECT_GE(l.slots_offset, l.completion_ring_offset + sizeof(RingControl) + 1024 * sizeof(CompletionRecord));
+  EXPECT_EQ(l.total_bytes, l.slots_offset + 32ull * (1 << 20));
+  // An odd slot size is rounded up to whole pages so every slot starts page-aligned.
+  EXPECT_EQ(compute_layout({4, 4, 3, 5000}).slot_bytes, 8192u);
+}
+
+TEST(ProtocolLayout, RecordRoundTripThroughBytes) {
+  RequestRecord r{};
+  r.kind = static_cast<uint32_t>(RequestKind::kLoad);
+  r.texture_id = 123456;
+  r.mip_level = 7;
+  r.generation = 0x0102030405060708ull;
+  r.priority = 1234.5f;
+  unsigned char bytes[sizeof r];
+  std::memcpy(bytes, &r, sizeof r);
+  // Little-endian wire: the generation's low byte sits at offset 16.
+  EXPECT_EQ(bytes[16], 0x08);
+  RequestRecord back{};
+  std::memcpy(&back, bytes, sizeof back);
+  EXPECT_EQ(back.texture_id, 123456u);
+  EXPECT_EQ(back.mip_level, 7u);
+  EXPECT_EQ(back.generation, r.generation);
+  EXPECT_EQ(back.priority, 1234.5f);
+
+  CompletionRecord c{};
+  c.status = static_cast<uint32_t>(CompletionStatus::kOk);
+  c.slot = 3;
+  c.byte_size = 65536;
+  c.checksum = 0xdeadbeefcafef00dull;
+  unsigned char cb[sizeof c];
+  std::memcpy(cb, &c, sizeof c);
+  CompletionRecord cback{};
+  std::memcpy(&cback, cb, sizeof cback);
+  EXPECT_EQ(cback.slot, 3u);
+  EXPECT_EQ(cback.byte_size, 65536u);
+  EXPECT_EQ(cback.checksum, c.checksum);
+}
+
+TEST(ProtocolLayout, HeaderValidationNamesTheField) {
+  const SegmentParams p{64, 64, 4, 1 << 16};
+  const SegmentHeader good = make_header(p, 42);
+  const uint64_t mapped = compute_layout(p).total_bytes;
+  EXPECT_TRUE(validate_header(good, mapped).ok());
+
+  auto expect_field = [&](SegmentHeader h, const char* field) {
+    const Status st = validate_header(h, mapped);
+    ASSERT_FALSE(st.ok()) << field;
+    EXPECT_NE(st.error().message.find(std::string("'") + field + "'"), std::string::npos) << st.error().message;
+  };
+  SegmentHeader h = good;
+  h.magic ^= 1;
+  expect_field(h, "magic");
+  h = good;
+  h.layout_version = 99;
+  expect_field(h, "layout_version");
+  h = good;
+  h.boost_version = BOOST_VERSION + 100;
+  expect_field(h, "boost_version");
+  h = good;
+  h.compiler[0] = 'X';
+  expect_field(h, "compiler");
+  h = good;
+  h.request_capacity = 48;  // not a power of two
+  expect_field(h, "request_capacity");
+  h = good;
+  h.slot_count = 0;
+  expect_field(h, "slot_count");
+  h = good;
+  h.slots_offset += 4096;  // a region moved elsewhere
+  expect_field(h, "slots_offset");
+  h = good;
+  h.slot_count = 8;  // claims more slots than are mapped
+  h.segment_bytes = compute_layout({64, 64, 8, 1 << 16}).total_bytes;
+  expect_field(h, "segment_bytes");
+}
+
+}  // namespace
+}  // namespace texstream

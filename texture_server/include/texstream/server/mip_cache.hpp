@@ -1,0 +1,68 @@
+#pragma once
+// The server's RAM cache of mips (DESIGN.md "Texture server": tiers; seed 002 §3.2: the Texture Server
+// "manages an in-memory texture cache" and limits its size).
+//
+// Contract (OIIO ImageCache / Granite asset manager style):
+// - Budget: the bytes of the cached payloads never exceed `budget_bytes`. A mip larger than the budget, or
+//   one that cannot fit because everything that would have to go is pinned, is not admitted.
+// - Pinning: lookup() hands out a shared_ptr; while anyone outside the cache holds one the entry is pinned
+//   and is never evicted (so the budget counts only memory the cache could actually free). The cache keeps
+//   one reference per entry; new references are made only under its lock, so use_count() == 1 seen under the
+//   lock proves nobody else holds the entry.
+// - One evictor: eviction happens only inside insert(), under the cache's lock.
+// - Statistics: hits, misses, insertions, evictions, rejections, bytes and entries.
+// Thread-safe. No syscall is made while the lock is held.
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <unordered_map>
+#include <vector>
+
+#include "texstream/server/eviction_policy.hpp"
+#include "texstream/server/mip_key.hpp"
+
+namespace texstream::server {
+
+// One cached mip: the payload exactly as it is handed to the renderer, and its checksum (so a hit does not
+// hash again).
+struct CachedMip {
+  std::vector<std::byte> bytes;
+  uint64_t checksum = 0;
+};
+
+struct MipCacheStats {
+  uint64_t hits = 0;
+  uint64_t misses = 0;
+  uint64_t insertions = 0;
+  uint64_t evictions = 0;
+  uint64_t rejections = 0;  // insert() refused: larger than the budget, or the rest was pinned
+  uint64_t bytes = 0;       // payload bytes held now
+  uint64_t entries = 0;
+  uint64_t budget_bytes = 0;
+};
+
+class MipCache {
+ public:
+  MipCache(uint64_t budget_bytes, std::unique_ptr<EvictionPolicy> policy);
+
+  // A pinned reference to the mip, or nullptr. Counts a hit or a miss.
+  std::shared_ptr<const CachedMip> lookup(MipKey key);
+  // True if the mip is cached now. Counts nothing (for peeking at whether a request is a fast hit).
+  bool contains(MipKey key) const;
+  // Admits `mip`, evicting unpinned entries in policy order until it fits. Returns false if it was not
+  // admitted. A key already cached keeps its entry (two loads of the same mip raced; both are equal).
+  bool insert(MipKey key, std::shared_ptr<const CachedMip> mip);
+  // True if a mip of this size could ever be admitted (callers skip the private copy otherwise).
+  bool admissible(uint64_t bytes) const { return budget_ > 0 && bytes <= budget_; }
+
+  MipCacheStats stats() const;
+
+ private:
+  const uint64_t budget_;
+  mutable std::mutex mutex_;
+  std::unique_ptr<EvictionPolicy> policy_;
+  std::unordered_map<MipKey, std::shared_ptr<const CachedMip>, MipKeyHash> entries_;
+  MipCacheStats stats_;
+};
+
+}  // namespace texstream::server

@@ -1,0 +1,85 @@
+#pragma once
+// The texture server (DESIGN.md "Texture server", seed 002 §3.2/§4.3): serves one renderer through one shared
+// segment. One dispatcher thread — the caller of run() — is the only consumer of the request ring and the
+// only producer of the completion ring; it validates every record, keeps the pending loads in a priority heap,
+// owns the staging slots, serves RAM-cache hits itself and hands misses to a small worker pool.
+//
+// Every valid kLoad gets exactly one completion: kOk (the slot is the renderer's until its kReleaseSlot),
+// kNotFound, kCorrupt, kIoError, or kCancelled (coalesced with a duplicate or superseded by a newer
+// generation before it started). Invalid records are logged and dropped. A full completion ring never blocks
+// and never drops: completions wait in a local queue.
+#include <atomic>
+#include <cstdint>
+#include <deque>
+#include <filesystem>
+#include <memory>
+#include <vector>
+
+#include "texstream/common/config.hpp"
+#include "texstream/common/result.hpp"
+#include "texstream/common/scene_format.hpp"
+#include "texstream/protocol/liveness.hpp"
+#include "texstream/protocol/segment.hpp"
+#include "texstream/server/mip_cache.hpp"
+#include "texstream/server/mip_loader.hpp"
+#include "texstream/server/request_scheduler.hpp"
+#include "texstream/server/slot_pool.hpp"
+#include "texstream/server/storage.hpp"
+#include "texstream/server/worker_pool.hpp"
+
+namespace texstream::server {
+
+enum class RunOutcome {
+  kStopped,       // the stop flag was set
+  kRendererDead,  // the renderer that owns the segment exited (or was never alive)
+  kPeerCorrupt,   // a ring position published by the renderer is impossible: the protocol is broken
+};
+const char* to_string(RunOutcome outcome);
+
+class Server {
+ public:
+  // Reads the scene's texture table (errors name the file) and attaches to `segment`. The segment and the
+  // storage must outlive the server.
+  static Result<std::unique_ptr<Server>> create(Segment& segment, const std::filesystem::path& scene_dir,
+                                                const ServerConfig& config, Storage& storage);
+  ~Server();
+  Server(const Server&) = delete;
+  Server& operator=(const Server&) = delete;
+
+  // Serves until `stop` is set, the renderer dies, or the renderer breaks the ring protocol. Writes the
+  // ServerBlock (pid, start time, attached = 1 while running, heartbeat every iteration, statistics).
+  RunOutcome run(const std::atomic<bool>& stop);
+
+  MipCacheStats cache_stats() const { return cache_.stats(); }
+
+ private:
+  Server(Segment& segment, const std::filesystem::path& scene_dir, const ServerConfig& config, Storage& storage,
+         std::vector<scene::TextureRecord> textures);
+
+  // One pass of the loop; returns true if anything happened (then the loop does not sleep).
+  bool drain_requests();
+  void handle_load(const RequestRecord& r);
+  void handle_release(const RequestRecord& r);
+  bool collect_results();
+  bool dispatch();
+  void complete(const CompletionRecord& c);
+  bool flush_completions();
+  void idle_wait();
+
+  Segment& segment_;
+  ServerConfig config_;
+  std::vector<scene::TextureRecord> textures_;
+  SpscRingConsumer<RequestRecord> requests_;
+  SpscRingProducer<CompletionRecord> completions_;
+  MipCache cache_;
+  MipLoader loader_;
+  RequestScheduler scheduler_;
+  SlotPool slots_;
+  uint32_t loads_in_flight_ = 0;
+  std::deque<CompletionRecord> overflow_;       // completions waiting for room in the ring
+  std::vector<LoadRequest> cancelled_scratch_;  // reused each iteration: no allocation when warm
+  std::vector<LoadResult> results_scratch_;
+  std::unique_ptr<WorkerPool> workers_;         // last member: its threads die before what they use
+};
+
+}  // namespace texstream::server

@@ -1,0 +1,59 @@
+#pragma once
+// A few threads doing the slow part of a load (storage reads and the copy into a slot) so that the
+// dispatcher thread, which alone touches the rings, never blocks on I/O. Sized by server.worker_threads
+// (2 by default: the 2-core machine of DESIGN.md). The dispatcher submits a job only when a worker is idle,
+// so the scheduler's heap, not this queue, decides what runs next (a request still pending can be
+// superseded; one handed here has started).
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include "texstream/common/scene_format.hpp"
+#include "texstream/protocol/records.hpp"
+#include "texstream/server/request_scheduler.hpp"
+
+namespace texstream::server {
+
+struct LoadJob {
+  LoadRequest request;
+  scene::TextureRecord record;
+  uint32_t slot;
+};
+
+struct LoadResult {
+  CompletionRecord completion;
+  uint32_t slot;  // the slot the job held, whatever its status
+};
+
+class WorkerPool {
+ public:
+  using Work = std::function<CompletionRecord(const LoadJob&)>;
+  // `on_result` runs on the worker thread after each result is queued (the server wakes its dispatcher).
+  WorkerPool(uint32_t threads, Work work, std::function<void()> on_result);
+  ~WorkerPool();  // finishes the jobs already started, drops the others, joins
+  WorkerPool(const WorkerPool&) = delete;
+  WorkerPool& operator=(const WorkerPool&) = delete;
+
+  void submit(const LoadJob& job);
+  // Appends every finished result to `out` (the dispatcher keeps `out` between calls: no allocation when warm).
+  void take_results(std::vector<LoadResult>& out);
+  uint32_t threads() const { return static_cast<uint32_t>(threads_.size()); }
+
+ private:
+  void worker_main();
+
+  Work work_;
+  std::function<void()> on_result_;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::deque<LoadJob> jobs_;
+  std::vector<LoadResult> results_;
+  bool stopping_ = false;
+  std::vector<std::thread> threads_;
+};
+
+}  // namespace texstream::server
