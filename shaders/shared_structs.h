@@ -44,7 +44,8 @@ struct FrameUniforms {
   vec4 camera_forward;  // xyz: unit view direction (world axes; the view has no translation)
   vec4 params;          // x: A_m (metadata anisotropy), y: A_s (sampling taps), z: foreground distance (m) of
                         //    Eq. 2, w: ambient term of the headlight
-  uvec4 flags;          // x: kFlag* bits, y: mesh count, z: weight cutoff tau in kWeightFixedScale units, w: 0
+  uvec4 flags;          // x: kFlag* bits, y: mesh count, z: weight cutoff tau in kWeightFixedScale units,
+                        // w: capacity of the compacted list (entries)
   uvec4 cache;          // x: cache layer extent (px), y: cache mip count, z, w: 0
 };
 
@@ -83,11 +84,10 @@ struct CompactEntry {
 };
 
 #ifdef __cplusplus
+// Head of the compacted list buffer (compact.comp declares the same four words, then CompactEntry[]).
 struct CompactListHeader {
-  uint count;           // atomic counter; may exceed capacity (entries past it are dropped)
-  uint capacity;
-  uint reserved0;
-  uint reserved1;
+  uint count;           // atomic counter; may exceed the capacity (entries past it are dropped)
+  uint reserved[3];
 };
 }  // namespace texstream::gpu
 #undef TS_CONST

@@ -341,7 +341,7 @@ TEST_F(SceneFormatTest, OpenImageIoReadsOurRgba8Dds) {
     ASSERT_EQ(spec.height, static_cast<int>(e.height));
     ASSERT_EQ(spec.nchannels, 4);
     std::vector<uint8_t> px(size_t{e.width} * e.height * 4);
-    ASSERT_TRUE(in->read_image(0, 4, OIIO::TypeDesc::UINT8, px.data())) << in->geterror();
+    ASSERT_TRUE(in->read_image(0, static_cast<int>(l), 0, 4, OIIO::TypeDesc::UINT8, px.data())) << in->geterror();
     for (uint32_t y = 0; y < e.height; ++y)
       for (uint32_t x = 0; x < e.width; ++x) {
         const uint8_t* q = &px[(size_t{y} * e.width + x) * 4];
@@ -377,7 +377,7 @@ TEST_F(SceneFormatTest, OpenImageIoReadsOurBc1Dds) {
     ASSERT_EQ(in->spec().width, static_cast<int>(e.width));
     ASSERT_EQ(in->spec().height, static_cast<int>(e.height));
     std::vector<uint8_t> px(size_t{e.width} * e.height * static_cast<size_t>(in->spec().nchannels));
-    ASSERT_TRUE(in->read_image(0, in->spec().nchannels, OIIO::TypeDesc::UINT8, px.data())) << in->geterror();
+    ASSERT_TRUE(in->read_image(0, static_cast<int>(l), 0, in->spec().nchannels, OIIO::TypeDesc::UINT8, px.data())) << in->geterror();
     EXPECT_EQ(px[0], 255);
     EXPECT_EQ(px[1], 0);
     EXPECT_EQ(px[2], 0);

@@ -1,0 +1,123 @@
+#pragma once
+// The renderer's supervisor of its texstream-server child: spawn (posix_spawn), death told by the kernel
+// (a pidfd through PidWatch), reaping without blocking (waitpid WNOHANG), restart with exponential back-off,
+// a "colormap only" mode after repeated crashes, and a progress watchdog that SIGKILLs a hung server.
+//
+// Frame-safe: every method but the destructor returns at once. Time is passed in (`now`), never read here,
+// so the back-off schedule can be tested with a virtual clock. One thread (the renderer's frame loop) owns it.
+//
+// The caller (StreamClient) sequences what must happen around a death: reap() reports it, the caller resets
+// the shared segment (only after the reap: the dead process was the sole writer of its words), and only
+// then calls spawn_if_due(), which spawns once the back-off has passed.
+#include <chrono>
+#include <cstdint>
+#include <deque>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "texstream/common/config.hpp"
+#include "texstream/common/result.hpp"
+#include "texstream/protocol/liveness.hpp"
+
+namespace texstream {
+
+using SteadyTime = std::chrono::steady_clock::time_point;
+
+// `texstream-server --segment NAME --scene DIR [--config FILE] [--set part.key=value]... --spawned`
+struct ServerCommand {
+  std::filesystem::path executable;
+  std::string segment_name;
+  std::filesystem::path scene_dir;
+  std::filesystem::path config_file;   // empty: no --config
+  std::vector<std::string> overrides;  // each passed as `--set <override>`
+  std::vector<std::string> argv() const;
+};
+
+// `server.executable`, or `texstream-server` next to the running binary (/proc/self/exe). Fails, naming the
+// path and the key, if the file is not there or not executable.
+Result<std::filesystem::path> resolve_server_executable(const Config& config);
+
+struct RestartPolicy {
+  std::chrono::milliseconds first_delay{50};    // first restart after a crash; doubles per recent crash
+  std::chrono::milliseconds max_delay{5000};    // cap of the doubling
+  uint32_t crash_limit = 5;                     // this many crashes within crash_window → colormap only
+  std::chrono::milliseconds crash_window{30000};
+  std::chrono::milliseconds slow_retry{30000};  // colormap only: still try this often
+  // Until the server reports `attached`, it may still be loading its scene and config: its heartbeat is
+  // not expected to move yet, so the watchdog waits this long instead of the heartbeat timeout.
+  std::chrono::milliseconds startup_grace{10000};
+};
+
+enum class ServerState : uint8_t {
+  kStopped,       // never started (or spawning disabled)
+  kRunning,       // a child process exists and has not been killed by us
+  kBackingOff,    // dead; a restart is scheduled
+  kColormapOnly,  // crashed crash_limit times within crash_window: restarts slowed to slow_retry
+};
+const char* to_string(ServerState state);
+
+struct ServerExit {
+  int pid = 0;
+  std::string how;          // "exited with status 3", "killed by signal 9", "could not be spawned: ..."
+  bool killed_by_us = false;
+  std::string kill_reason;  // why we killed it, if we did
+};
+
+class ServerProcess {
+ public:
+  ServerProcess(ServerCommand command, RestartPolicy policy);
+  // Kills the child (SIGTERM, then SIGKILL after a short grace) and reaps it. May block briefly.
+  ~ServerProcess();
+  ServerProcess(const ServerProcess&) = delete;
+  ServerProcess& operator=(const ServerProcess&) = delete;
+
+  // Spawns a child if there is none and the back-off has passed. Returns true if one was started. A failed
+  // posix_spawn counts as a crash (logged; the next try is scheduled), and is reported by the next reap().
+  bool spawn_if_due(SteadyTime now);
+
+  // Non-blocking. If the child has died (pidfd readable), reaps it and returns how it ended; also returns a
+  // pending spawn failure. Schedules the next spawn by the back-off policy.
+  std::optional<ServerExit> reap(SteadyTime now);
+
+  // Progress watchdog. `heartbeat` is ServerBlock.heartbeat, `attached` ServerBlock.attached. The server is
+  // hung if its heartbeat has not moved for `timeout` (startup_grace before it attached) while
+  // `work_outstanding`. A hung server is SIGKILLed (reap() then reports it). Returns true if it killed.
+  bool watch_heartbeat(uint64_t heartbeat, bool attached, bool work_outstanding, std::chrono::milliseconds timeout,
+                       SteadyTime now);
+
+  // SIGKILL now (a protocol violation, a hang). The child stays until reap() collects it. No-op if none.
+  void kill(const std::string& why);
+
+  bool has_child() const { return pid_ > 0; }
+  // A child exists and we have not decided to kill it: requests may be sent to it.
+  bool serving() const { return pid_ > 0 && !killing_; }
+  int pid() const { return pid_; }
+  ServerState state() const;
+  SteadyTime next_spawn_at() const { return next_spawn_at_; }
+  uint64_t spawns() const { return spawns_; }
+  uint64_t deaths() const { return deaths_total_; }
+  const ServerCommand& command() const { return command_; }
+
+ private:
+  void record_death(SteadyTime now);
+
+  ServerCommand command_;
+  RestartPolicy policy_;
+  int pid_ = -1;
+  PidWatch watch_;
+  bool killing_ = false;
+  std::string kill_reason_;
+  std::optional<ServerExit> spawn_failure_;
+  SteadyTime spawned_at_{};
+  SteadyTime next_spawn_at_{};
+  std::deque<SteadyTime> recent_deaths_;  // within crash_window
+  bool colormap_only_ = false;
+  uint64_t spawns_ = 0;
+  uint64_t deaths_total_ = 0;
+  uint64_t last_heartbeat_ = 0;
+  SteadyTime last_progress_{};
+};
+
+}  // namespace texstream

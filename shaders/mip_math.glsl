@@ -1,0 +1,38 @@
+// Mip level under anisotropic filtering (Hollemeersch et al., as used by seed 000 §3.2). The C++ twin is
+// renderer/include/texstream/render/mip_math.hpp; tests/unit/render_mip_math_test.cpp pins its values.
+// dx, dy: texture-coordinate derivatives along screen x and y, in texels of mip 0.
+struct AnisoLod {
+  float lod;   // log2(p_max / N)
+  float taps;  // N = min(ceil(p_max / p_min), max_aniso), at least 1
+};
+
+AnisoLod anisotropic_lod(vec2 dx, vec2 dy, float max_aniso) {
+  float px = length(dx);
+  float py = length(dy);
+  float pmax = max(px, py);
+  float pmin = min(px, py);
+  // p_min = 0 (a degenerate footprint) is infinitely anisotropic: N = max_aniso.
+  float n = pmin > 0.0 ? min(ceil(pmax / pmin), max_aniso) : max_aniso;
+  n = max(n, 1.0);
+  AnisoLod r;
+  // p_max = 0 (no change across the pixel) is infinite magnification; -64 stands for it and is clamped later.
+  r.lod = pmax > 0.0 ? log2(pmax / n) : -64.0;
+  r.taps = n;
+  return r;
+}
+
+// Eq. 2 with a stated unit: c_w = min(w_clip / D, 1). gl_FragCoord.w is 1 / w_clip and w_clip is the view-space
+// depth in metres, so the paper's literal min(1 / gl_FragCoord.w, 1) saturates at 1 m and w_d would vanish for
+// every fragment of a city. We divide by a foreground distance D (FrameUniforms.params.z) so that w_d falls from
+// 1 at the camera to 0 at D metres.
+float distance_weight(float frag_coord_w, float foreground_distance_m) {
+  float c_w = min((1.0 / frag_coord_w) / foreground_distance_m, 1.0);
+  float one_minus = 1.0 - c_w;
+  return one_minus * one_minus * one_minus * one_minus;
+}
+
+// Eq. 1: W = 1 + 8 w_d + 8 w_m, with w_m = min(M / M_max, 1) (Eq. 3).
+float fragment_weight(float w_d, float displayed_mip, float mip_max) {
+  float w_m = mip_max > 0.0 ? min(displayed_mip / mip_max, 1.0) : 0.0;
+  return 1.0 + 8.0 * w_d + 8.0 * w_m;
+}

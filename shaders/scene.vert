@@ -1,0 +1,24 @@
+#version 450
+// Scene vertices: positions relative to their mesh origin, moved by the mesh's camera-relative offset
+// (computed in double on the CPU), so the view matrix has no translation and nothing jitters at map
+// coordinates. firstInstance of each indirect draw is the mesh id.
+#include "bindings.glsl"
+
+layout(location = 0) in vec3 in_position;
+layout(location = 1) in vec3 in_normal;
+layout(location = 2) in vec2 in_uv;
+
+layout(location = 0) out vec2 out_uv;
+layout(location = 1) out vec3 out_normal;
+layout(location = 2) flat out uint out_mesh;
+layout(location = 3) out vec4 out_clip;
+
+void main() {
+  MeshGpu mesh = meshes[gl_InstanceIndex];
+  vec3 relative = in_position + vec3(mesh.offset_x, mesh.offset_y, mesh.offset_z);
+  gl_Position = pc.view_proj * vec4(relative, 1.0);
+  out_uv = in_uv;
+  out_normal = in_normal;
+  out_mesh = uint(gl_InstanceIndex);
+  out_clip = gl_Position;
+}

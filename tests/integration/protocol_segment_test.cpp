@@ -1,0 +1,200 @@
+// The segment over real POSIX shared memory and real processes: create/open, a refused header, stale
+// segments of killed owners removed, identity that survives pid reuse, a futex doorbell across processes,
+// and rings whose peer is SIGKILLed mid-stream.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstring>
+#include <thread>
+
+#include "texstream/protocol/liveness.hpp"
+#include "texstream/protocol/segment.hpp"
+
+namespace texstream {
+namespace {
+
+std::string unique_name(const char* what) {
+  return "texstream-test-" + std::string(what) + "-" + std::to_string(getpid());
+}
+
+TEST(Segment, CreateOpenShareRingsAndSlots) {
+  const std::string name = unique_name("basic");
+  auto created = Segment::create(name, {64, 64, 4, 1 << 16});
+  ASSERT_TRUE(created.ok()) << created.error().message;
+  auto opened = Segment::open(name);
+  ASSERT_TRUE(opened.ok()) << opened.error().message;
+  Segment& r = *created.value();
+  Segment& s = *opened.value();
+  EXPECT_EQ(s.header().epoch, r.header().epoch);
+  EXPECT_EQ(s.renderer_block().pid, static_cast<uint32_t>(getpid()));
+
+  SpscRingProducer<RequestRecord> req(r.request_control(), r.request_records(), 64);
+  SpscRingConsumer<RequestRecord> srv(s.request_control(), s.request_records(), 64);
+  RequestRecord rec{};
+  rec.kind = static_cast<uint32_t>(RequestKind::kLoad);
+  rec.texture_id = 42;
+  ASSERT_TRUE(req.try_push(rec));
+  auto got = srv.try_pop();
+  ASSERT_TRUE(got.has_value());
+  EXPECT_EQ(got->texture_id, 42u);
+
+  std::memset(s.slot(3).data(), 0xab, 100);
+  EXPECT_EQ(static_cast<unsigned char>(r.slot(3)[99]), 0xab);
+  EXPECT_EQ(s.slot(3).size(), 1u << 16);
+
+  // A second create with the same name must fail, not share.
+  EXPECT_FALSE(Segment::create(name, {64, 64, 4, 1 << 16}).ok());
+}
+
+TEST(Segment, OpenRefusesAMismatchedHeaderNamingTheField) {
+  const std::string name = unique_name("mismatch");
+  auto created = Segment::create(name, {64, 64, 4, 1 << 16});
+  ASSERT_TRUE(created.ok());
+  // Simulate a peer built with another layout version by patching the mapped header.
+  auto peer = Segment::open(name);
+  ASSERT_TRUE(peer.ok());
+  auto* raw = reinterpret_cast<SegmentHeader*>(peer.value()->slot(0).data() - peer.value()->header().slots_offset);
+  raw->layout_version = kLayoutVersion + 1;
+  auto refused = Segment::open(name);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("'layout_version'"), std::string::npos) << refused.error().message;
+}
+
+TEST(Segment, OpenOfAMissingSegmentFailsClearly) {
+  auto r = Segment::open(unique_name("absent"));
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().message.find("absent"), std::string::npos);
+}
+
+TEST(Segment, StaleSegmentOfAKilledOwnerIsRemoved) {
+  const std::string prefix = "texstream-test-stale-" + std::to_string(getpid()) + "-";
+  const std::string name = prefix + "a";
+  int ready[2];
+  ASSERT_EQ(pipe(ready), 0);
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    auto seg = Segment::create(name, {16, 16, 2, 4096});
+    char ok = seg.ok() ? 1 : 0;
+    (void)!write(ready[1], &ok, 1);
+    pause();  // killed by the parent; the segment name stays behind
+    _exit(0);
+  }
+  char ok = 0;
+  ASSERT_EQ(read(ready[0], &ok, 1), 1);
+  ASSERT_EQ(ok, 1);
+  // While the owner lives, its segment is not stale.
+  EXPECT_EQ(Segment::remove_stale(prefix), 0);
+  EXPECT_TRUE(Segment::open(name).ok());
+  kill(child, SIGKILL);
+  waitpid(child, nullptr, 0);
+  EXPECT_EQ(Segment::remove_stale(prefix), 1);
+  EXPECT_FALSE(Segment::open(name).ok());
+  close(ready[0]);
+  close(ready[1]);
+}
+
+TEST(Liveness, IdentityIsPidPlusStartTime) {
+  const auto mine = process_start_time(getpid());
+  ASSERT_TRUE(mine.has_value());
+  EXPECT_TRUE(process_alive(getpid(), *mine));
+  // Same pid, another start time: a reused pid is not the same process.
+  EXPECT_FALSE(process_alive(getpid(), *mine + 1));
+  EXPECT_FALSE(process_alive(0, 0));
+}
+
+TEST(Liveness, PidfdTellsDeathPromptly) {
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    pause();
+    _exit(0);
+  }
+  PidWatch watch(child);
+  ASSERT_TRUE(watch.valid());
+  EXPECT_FALSE(watch.dead());
+  kill(child, SIGKILL);
+  const auto t0 = std::chrono::steady_clock::now();
+  while (!watch.dead() && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(5)) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  const auto waited = std::chrono::steady_clock::now() - t0;
+  EXPECT_TRUE(watch.dead());
+  EXPECT_LT(waited, std::chrono::milliseconds(100)) << "DESIGN: death is told by the kernel within 100 ms";
+  waitpid(child, nullptr, 0);
+}
+
+TEST(Liveness, FutexDoorbellWakesAnotherProcess) {
+  const std::string name = unique_name("futex");
+  auto created = Segment::create(name, {16, 16, 1, 4096});
+  ASSERT_TRUE(created.ok());
+  auto& bell = created.value()->renderer_block().doorbell;
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    auto seg = Segment::open(name);
+    if (!seg.ok()) _exit(2);
+    auto& b = seg.value()->renderer_block().doorbell;
+    const auto t0 = std::chrono::steady_clock::now();
+    while (b.v.load() == 0 && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(10)) {
+      futex_wait(b, 0, std::chrono::seconds(10));
+    }
+    const auto waited = std::chrono::steady_clock::now() - t0;
+    _exit(b.v.load() == 1 && waited < std::chrono::seconds(5) ? 0 : 1);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  bell.v.fetch_add(1);
+  futex_wake_all(bell);
+  int status = 0;
+  waitpid(child, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+}
+
+TEST(Segment, ProducerKilledMidStreamLeavesOnlyWholeRecords) {
+  const std::string name = unique_name("kill");
+  auto created = Segment::create(name, {256, 256, 1, 4096});
+  ASSERT_TRUE(created.ok());
+  Segment& r = *created.value();
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    auto seg = Segment::open(name);
+    if (!seg.ok()) _exit(2);
+    SpscRingProducer<RequestRecord> p(seg.value()->request_control(), seg.value()->request_records(), 256);
+    for (uint32_t i = 0;; ) {
+      RequestRecord rec{};
+      rec.kind = static_cast<uint32_t>(RequestKind::kLoad);
+      rec.texture_id = i;
+      rec.generation = uint64_t{i} * 7 + 3;
+      if (p.try_push(rec)) ++i;
+    }
+  }
+  SpscRingConsumer<RequestRecord> c(r.request_control(), r.request_records(), 256);
+  uint32_t expected = 0, torn = 0;
+  const auto t0 = std::chrono::steady_clock::now();
+  bool killed = false;
+  while (true) {
+    if (!killed && std::chrono::steady_clock::now() - t0 > std::chrono::milliseconds(300)) {
+      kill(child, SIGKILL);
+      waitpid(child, nullptr, 0);
+      killed = true;
+    }
+    auto rec = c.try_pop();
+    if (!rec) {
+      if (killed) break;
+      continue;
+    }
+    if (rec->texture_id != expected || rec->generation != uint64_t{expected} * 7 + 3) ++torn;
+    ++expected;
+  }
+  EXPECT_GT(expected, 1000u);
+  EXPECT_EQ(torn, 0u);
+  EXPECT_EQ(c.error(), RingError::kNone);
+}
+
+}  // namespace
+}  // namespace texstream
