@@ -67,6 +67,7 @@ class Server {
   void idle_wait();
 
   Segment& segment_;
+  std::filesystem::path scene_dir_;
   ServerConfig config_;
   std::vector<scene::TextureRecord> textures_;
   SpscRingConsumer<RequestRecord> requests_;

@@ -1,0 +1,41 @@
+#pragma once
+// What a run of texstream-render reports at its end: printed, and written as <output_dir>/summary.json.
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "texstream/common/result.hpp"
+
+namespace texstream::render {
+
+struct LatencyStats {
+  double median_ms = 0;
+  double avg_ms = 0;
+  double max_ms = 0;
+  static LatencyStats from(std::vector<double> samples_ms);
+};
+
+struct RunSummary {
+  std::string device;
+  std::filesystem::path output_dir;
+  uint64_t frames = 0;
+  LatencyStats frame_latency;
+  uint64_t mips_streamed = 0;       // uploaded into the cache and published
+  double mb_streamed = 0;           // 10^6 bytes of those
+  double server_ram_hit_rate = 0;   // server RAM cache hits / (hits + misses); 0 when nothing was asked
+  uint64_t protocol_errors = 0;
+  uint64_t server_restarts = 0;
+  uint64_t validation_errors = 0;
+  uint64_t validation_warnings = 0;
+  uint64_t textures_resident = 0;   // textures with at least one mip in the cache at the end
+  uint64_t texture_count = 0;
+  uint64_t streaming_cycles = 0;
+  uint64_t evictions = 0;
+
+  std::string to_json() const;
+  std::string to_text() const;
+  Status write_json(const std::filesystem::path& file) const;
+};
+
+}  // namespace texstream::render

@@ -1,0 +1,214 @@
+#pragma once
+// The renderer's end of the shared-memory protocol: it creates the segment, spawns and supervises
+// texstream-server (ServerProcess), sends load requests, and receives, validates and hands over completed
+// mips. No Vulkan: the renderer gives it a MipSink that says where a mip's bytes go (e.g. a mapped staging
+// buffer) and what to do with them once checked.
+//
+// Once per frame, never blocking (DESIGN.md: nothing on the frame path waits on the server):
+//   client.begin_cycle();                       // a streaming cycle starts: new Generation
+//   states.run_cycle(list, s, b, [&](const MipRequest& r) { return client.try_request(...); });
+//   client.poll(sink, budget);                  // heartbeat, server liveness, completions → sink
+//
+// Trust: every completion is copied out of the ring once and validated (check_completion, then the
+// texture table, then "did we ask for this", then slot ownership) before any slot byte is read; the
+// payload is copied once and its checksum computed on the copy. A server that breaks the protocol loses
+// only its own records; one that corrupts a ring position is killed and restarted.
+//
+// Slot ownership (segment_layout.hpp): the server owns every slot at start; a kOk completion hands its slot
+// to us; a kReleaseSlot request hands it back. We track which slots we hold, so a completion naming a slot
+// we already hold is refused (and never released twice).
+//
+// Single-threaded: the renderer's frame thread makes every call.
+#include <chrono>
+#include <cstdint>
+#include <deque>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "texstream/common/config.hpp"
+#include "texstream/common/result.hpp"
+#include "texstream/protocol/completion_check.hpp"
+#include "texstream/protocol/ids.hpp"
+#include "texstream/protocol/records.hpp"
+#include "texstream/protocol/segment.hpp"
+#include "texstream/protocol/spsc_ring.hpp"
+#include "texstream/render/server_process.hpp"
+#include "texstream/render/texture_states.hpp"
+
+namespace texstream {
+
+// Where completed mips go. Implemented by the renderer; called only from within StreamClient::poll.
+class MipSink {
+ public:
+  virtual ~MipSink() = default;
+  // Room for `bytes` of (texture, mip), or an empty span for "no room now": the completion then stays
+  // pending (its slot still ours) and is offered again first by the next poll. A non-empty span must hold
+  // at least `bytes` bytes (a shorter one is a bug of the sink and aborts).
+  virtual std::span<std::byte> reserve(TextureId texture, MipLevel mip, uint64_t bytes) = 0;
+  // `data` (the first `bytes` of the reserved span) holds the mip, checksum verified.
+  virtual void commit(TextureId texture, MipLevel mip, std::span<std::byte> data) = 0;
+  // The answer for (texture, mip) was refused: a record that failed validation (then `reserved` is
+  // empty), or a payload whose checksum did not match (then `reserved` is the span reserve() gave, free
+  // again). Nothing is uploaded; the texture state machine counts it and asks again.
+  virtual void reject(TextureId texture, MipLevel mip, std::span<std::byte> reserved) = 0;
+  // The request ended without a payload: the server's status, or kCancelled for a request lost with a
+  // dead or restarted server. The texture state machine decides whether to ask again.
+  virtual void failed(TextureId texture, MipLevel mip, CompletionStatus status) = 0;
+};
+
+// Why a request was or was not sent.
+enum class RequestOutcome : uint8_t {
+  kSent,
+  kAlreadyInFlight,   // that (texture, mip) is still in flight
+  kInFlightLimit,     // stream.max_requests_in_flight reached
+  kRingFull,          // no room in the request ring (room is kept for slot releases)
+  kNoServer,          // the server is dead, backing off or in colormap-only mode
+  kUnknownTexture,    // id outside the texture table
+  kBadMip,            // mip level >= the texture's mip count
+};
+const char* to_string(RequestOutcome outcome);
+// kSent → kSent; outcomes about this one (texture, mip) → kSkip; outcomes about the whole pipe → kStop.
+SendResult to_send_result(RequestOutcome outcome);
+
+enum class StreamServerState : uint8_t {
+  kExternal,      // spawn_server = false: someone else serves the segment
+  kRunning,
+  kBackingOff,
+  kColormapOnly,
+  kBroken,        // external server broke a ring: nothing is sent until reset_external_server()
+};
+const char* to_string(StreamServerState state);
+
+struct StreamStats {
+  uint64_t requests_sent = 0;
+  uint64_t releases_sent = 0;
+  uint64_t completions_ok = 0;                           // committed to the sink (checksum matched)
+  uint64_t completions_rejected = 0;                     // kOk whose payload the checks refused
+  uint64_t completions_failed[kMaxCompletionStatus + 1] = {};  // by CompletionStatus value
+  uint64_t requests_lost = 0;                            // in flight when the server died
+  uint64_t bytes_received = 0;                           // payload bytes committed
+  uint64_t protocol_errors = 0;
+  uint64_t server_restarts = 0;                          // spawns after the first
+  uint64_t server_deaths = 0;
+  uint64_t in_flight = 0;
+  uint64_t slots_held = 0;                               // handed to us, not yet handed back
+  uint64_t releases_queued = 0;                          // waiting for room in the request ring
+  // Copied from ServerBlock, summed over every server this client has run.
+  uint64_t server_ram_cache_hits = 0;
+  uint64_t server_ram_cache_misses = 0;
+  uint64_t server_bytes_read = 0;
+  uint64_t server_requests_cancelled = 0;
+  StreamServerState server_state = StreamServerState::kExternal;
+};
+
+struct StreamClientOptions {
+  // false: do not spawn texstream-server. Whoever serves the segment opens it by name (Segment::open) —
+  // tests play the server in a thread this way, and a renderer can attach to a server started by hand.
+  // Without a child there is no restart: a ring error puts the client in kBroken until
+  // reset_external_server().
+  bool spawn_server = true;
+  RestartPolicy restart;
+  // Clock for back-off and the heartbeat watchdog (tests inject a virtual one). Default: steady_clock.
+  std::function<SteadyTime()> clock;
+};
+
+class StreamClient {
+ public:
+  // Removes stale "texstream-" segments, creates this one (protocol.segment_name or "texstream-<pid>",
+  // sized from `config.protocol`), and spawns the server (unless options.spawn_server is false) with
+  // `--scene scene_dir`, `--config config_file` (if not empty) and each override as `--set`.
+  // `shapes` is the scene's texture table, indexed by texture id.
+  static Result<std::unique_ptr<StreamClient>> start(const Config& config, std::vector<TextureShape> shapes,
+                                                     const std::filesystem::path& scene_dir,
+                                                     const std::filesystem::path& config_file,
+                                                     const std::vector<std::string>& overrides,
+                                                     StreamClientOptions options = {});
+  ~StreamClient();
+  StreamClient(const StreamClient&) = delete;
+  StreamClient& operator=(const StreamClient&) = delete;
+
+  // A new streaming cycle: a new Generation, published in RendererBlock.generation (a newer generation
+  // lets the server drop requests of older ones it has not started).
+  void begin_cycle();
+  Generation generation() const { return generation_; }
+
+  // Pushes a kLoad for (texture, mip) with the current generation. Never blocks.
+  RequestOutcome try_request(TextureId texture, MipLevel mip, float priority);
+  bool request(TextureId texture, MipLevel mip, float priority) {
+    return try_request(texture, mip, priority) == RequestOutcome::kSent;
+  }
+  // A Sender for TextureStates::run_cycle that sends through try_request.
+  TextureStates::Sender sender();
+
+  // Once per frame: bumps RendererBlock.heartbeat, pushes queued slot releases, supervises the server
+  // (reap, watchdog, restart), then takes completions off the ring and hands at most `max_mips` payloads
+  // to `sink` (statuses without payload are not counted against it).
+  void poll(MipSink& sink, size_t max_mips);
+
+  StreamStats stats() const;
+  bool in_flight(TextureId texture, MipLevel mip) const;
+  const Segment& segment() const { return *segment_; }
+  Segment& segment() { return *segment_; }
+  int server_pid() const { return process_ ? process_->pid() : -1; }
+
+  // Kills the spawned server as if it had hung (tests of the restart path; a renderer's "restart server"
+  // key). With spawn_server = false: marks everything in flight lost and resets the segment's rings — the
+  // caller guarantees the external server has let go of the segment.
+  void restart_server(const std::string& why, MipSink& sink);
+  void reset_external_server(MipSink& sink) { restart_server("reset requested", sink); }
+
+ private:
+  struct InFlight {
+    Generation generation;
+  };
+
+  StreamClient() = default;
+  SteadyTime now() const;
+  void attach_rings();
+  void ring_doorbell();
+  void flush_releases();
+  void release_slot(SlotIndex slot);
+  void supervise(MipSink& sink);
+  void on_server_gone(MipSink& sink, const std::string& why);
+  void protocol_error(const std::string& what);
+  // Returns false when the sink had no room (the completion is held).
+  bool deliver(const CheckedCompletion& c, MipSink& sink);
+  void handle_record(const CompletionRecord& record, MipSink& sink, size_t& mips);
+  bool accepting_requests() const;
+  // The request ring's read position as published by the server, checked against ours (the ring itself
+  // only notices an impossible position when it pushes, and a full-looking ring never pushes).
+  std::optional<uint64_t> server_read_position() const;
+  static constexpr uint64_t kNoPosition = ~0ull;
+  // A slot we released whose kReleaseSlot the server has not read yet (clears the mark once it has).
+  bool slot_in_transit(uint32_t slot);
+  static uint64_t key(TextureId texture, MipLevel mip) { return (uint64_t{texture.value} << 32) | mip.value; }
+
+  Config config_;
+  StreamClientOptions options_;
+  std::vector<TextureShape> shapes_;
+  std::unique_ptr<Segment> segment_;
+  std::unique_ptr<ServerProcess> process_;  // null when spawn_server is false
+  SpscRingProducer<RequestRecord> requests_;
+  SpscRingConsumer<CompletionRecord> completions_;
+  Generation generation_{0};
+  std::unordered_map<uint64_t, InFlight> in_flight_;
+  std::vector<uint8_t> slot_held_;          // by slot index: handed to us and not yet handed back
+  std::deque<SlotIndex> release_queue_;     // held slots whose kReleaseSlot found no room in the ring
+  // By slot: request-ring position of the kReleaseSlot that handed it back (kNoPosition: none pending). The
+  // slot is the server's only once it has read that record; naming it in a completion earlier is a violation.
+  std::vector<uint64_t> release_pos_;
+  std::optional<CheckedCompletion> held_;  // passed every check; the sink had no room
+  uint32_t release_reserve_ = 0;            // request-ring records kept free for releases
+  bool broken_ = false;                     // external server broke a ring
+  StreamStats stats_;
+  // ServerBlock counters of servers that have died (the block is zeroed by the reset).
+  uint64_t past_hits_ = 0, past_misses_ = 0, past_bytes_read_ = 0, past_cancelled_ = 0;
+};
+
+}  // namespace texstream

@@ -1,0 +1,62 @@
+#pragma once
+// Instance, optional validation layer with a counting debug messenger, physical device chosen by name
+// substring (lavapipe "llvmpipe" by default), logical device and one graphics+compute+transfer queue.
+#include <vulkan/vulkan.h>
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "texstream/common/result.hpp"
+
+namespace texstream::render {
+
+struct VulkanContextOptions {
+  std::string device_substring;  // empty: the first device
+  bool validation = false;       // VK_LAYER_KHRONOS_validation + debug messenger
+  bool need_bc1 = false;         // textureCompressionBC (cache.format = bc1)
+};
+
+// Counts of validation messages; the messenger callback may run on any thread.
+struct ValidationCounters {
+  std::atomic<uint32_t> errors{0};
+  std::atomic<uint32_t> warnings{0};
+};
+
+class VulkanContext {
+ public:
+  static Result<std::unique_ptr<VulkanContext>> create(const VulkanContextOptions& options);
+  ~VulkanContext();
+  VulkanContext(const VulkanContext&) = delete;
+  VulkanContext& operator=(const VulkanContext&) = delete;
+
+  VkInstance instance() const { return instance_; }
+  VkPhysicalDevice physical_device() const { return physical_; }
+  VkDevice device() const { return device_; }
+  VkQueue queue() const { return queue_; }
+  uint32_t queue_family() const { return queue_family_; }
+  const VkPhysicalDeviceProperties& properties() const { return properties_; }
+  std::string device_name() const { return properties_.deviceName; }
+
+  uint32_t validation_errors() const { return counters_->errors.load(std::memory_order_relaxed); }
+  uint32_t validation_warnings() const { return counters_->warnings.load(std::memory_order_relaxed); }
+
+  // A memory type index among `type_bits` that has all of `required`; prefers one that also has `preferred`.
+  Result<uint32_t> find_memory_type(uint32_t type_bits, VkMemoryPropertyFlags required,
+                                    VkMemoryPropertyFlags preferred) const;
+
+ private:
+  VulkanContext() = default;
+  VkInstance instance_ = VK_NULL_HANDLE;
+  VkDebugUtilsMessengerEXT messenger_ = VK_NULL_HANDLE;
+  VkPhysicalDevice physical_ = VK_NULL_HANDLE;
+  VkDevice device_ = VK_NULL_HANDLE;
+  VkQueue queue_ = VK_NULL_HANDLE;
+  uint32_t queue_family_ = 0;
+  VkPhysicalDeviceProperties properties_{};
+  VkPhysicalDeviceMemoryProperties memory_properties_{};
+  std::unique_ptr<ValidationCounters> counters_ = std::make_unique<ValidationCounters>();
+};
+
+}  // namespace texstream::render

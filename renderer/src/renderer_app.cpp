@@ -1,0 +1,313 @@
+#include "texstream/render/renderer_app.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+
+#include "texstream/common/camera_path.hpp"
+#include "texstream/render/broad_phase.hpp"
+#include "texstream/render/camera.hpp"
+#include "texstream/render/frame_capture.hpp"
+#include "texstream/render/gpu_structs.hpp"
+#include "texstream/render/scene_data.hpp"
+#include "texstream/render/scene_gpu.hpp"
+#include "texstream/render/scene_passes.hpp"
+#include "texstream/render/shader_compiler.hpp"
+#include "texstream/render/stream_client.hpp"
+#include "texstream/render/texture_cache.hpp"
+#include "texstream/render/texture_states.hpp"
+#include "texstream/render/visibility_list.hpp"
+#include "texstream/render/vk_check.hpp"
+#include "texstream/render/vulkan_context.hpp"
+
+namespace texstream::render {
+
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+// Eq. 2's foreground distance D (see shaders/mip_math.glsl): w_d falls from 1 at the camera to 0 at D. 500 m
+// spans a street-level view of a city block; there is no config key for it yet.
+constexpr float kForegroundDistanceM = 500.0f;
+// Headlight ambient term: surfaces seen edge-on keep 60 % of their colour, camera-facing ones 100 %.
+constexpr float kAmbient = 0.6f;
+// A new streaming cycle starts once at most this fraction of the previous cycle's requests is unanswered
+// ("mostly answered"), so the server always has work queued but the list stays fresh.
+constexpr double kCycleOutstandingFraction = 0.25;
+// The wide metadata pass renders at 1/4 of the viewport per axis: it only ranks off-screen meshes.
+constexpr uint32_t kWidePassDivisor = 4;
+
+class Renderer {
+ public:
+  explicit Renderer(const RenderRun& run) : run_(run), cfg_(run.config) {}
+  Result<RunSummary> run();
+
+ private:
+  Status set_up();
+  Status render_frame(uint64_t index, bool last);
+  void start_cycle();
+  gpu::PassConstants wide_pass_constants(const Camera& cam) const;
+
+  const RenderRun& run_;
+  const Config& cfg_;
+  fs::path output_dir_;
+  SceneData scene_;
+  std::unique_ptr<CameraPath> path_;
+  std::unique_ptr<VulkanContext> ctx_;
+  std::unique_ptr<TextureStates> states_;
+  std::unique_ptr<TextureCache> cache_;
+  std::unique_ptr<SceneGpu> scene_gpu_;
+  std::unique_ptr<ShaderCompiler> compiler_;
+  std::unique_ptr<ScenePasses> passes_;
+  std::unique_ptr<FrameCapture> capture_;
+  std::unique_ptr<BroadPhase> broad_phase_;
+  std::unique_ptr<StreamClient> client_;
+  UniqueCommandPool pool_;
+  VkCommandBuffer cmd_ = VK_NULL_HANDLE;
+  UniqueFence fence_;
+  std::vector<uint32_t> visible_;
+  std::vector<double> latencies_ms_;
+  uint64_t serial_ = 0;
+  uint64_t cycles_ = 0;
+  uint64_t last_cycle_sent_ = 0;
+  uint64_t load_bytes_ = 0;
+};
+
+Status Renderer::set_up() {
+  output_dir_ = cfg_.render.output_dir;
+  std::error_code ec;
+  fs::create_directories(output_dir_ / "frames", ec);
+  if (ec) return make_error(ErrorCode::kIo, "render.output_dir '" + output_dir_.string() + "': " + ec.message());
+
+  auto scene = SceneData::load(cfg_.scene.dir);
+  if (!scene) return scene.error();
+  scene_ = std::move(*scene);
+  const fs::path path_file = cfg_.render.camera_path.empty() ? scene_.dir / scene_.manifest.camera_path
+                                                             : fs::path(cfg_.render.camera_path);
+  auto path = CameraPath::load(path_file);
+  if (!path) return path.error();
+  if (path->keys().empty()) return make_error(ErrorCode::kInvalidArgument, path_file.string() + ": no keyframes");
+  path_ = std::make_unique<CameraPath>(std::move(*path));
+
+  const auto format = texel_format_from_string(cfg_.cache.format);
+  if (!format) {
+    return make_error(ErrorCode::kInvalidArgument, "cache.format: '" + cfg_.cache.format + "' is not rgba8 or bc1");
+  }
+  auto ctx = VulkanContext::create({cfg_.render.device, cfg_.render.validation, *format == TexelFormat::kBc1});
+  if (!ctx) return ctx.error();
+  ctx_ = std::move(*ctx);
+  spdlog::info("vulkan device: {}", ctx_->device_name());
+
+  states_ = std::make_unique<TextureStates>(scene_.shapes());
+  TextureCacheOptions co;
+  co.format = *format;
+  co.layer_extent = static_cast<uint32_t>(cfg_.cache.layer_extent_px);
+  co.layers = static_cast<uint32_t>(cfg_.cache.layers);
+  // Room for several slots' worth of mips in flight to the GPU, at least 32 MiB.
+  co.staging_bytes = std::max<uint64_t>(32ull << 20, 4 * static_cast<uint64_t>(cfg_.protocol.staging_slot_bytes));
+  auto cache = TextureCache::create(*ctx_, co, scene_, *states_);
+  if (!cache) return cache.error();
+  cache_ = std::move(*cache);
+  // Fixed load size s until the adaptive controller (Eq. 4-7) exists: half the staging ring, so one cycle's
+  // answers fit in it with room to spare.
+  load_bytes_ = co.staging_bytes / 2;
+
+  auto gpu = SceneGpu::create(*ctx_, scene_);
+  if (!gpu) return gpu.error();
+  scene_gpu_ = std::make_unique<SceneGpu>(std::move(*gpu));
+  compiler_ = std::make_unique<ShaderCompiler>(ShaderCompiler::default_source_dir(), ShaderCompiler::default_cache_dir());
+  ScenePassesOptions po;
+  po.width = static_cast<uint32_t>(cfg_.render.width_px);
+  po.height = static_cast<uint32_t>(cfg_.render.height_px);
+  po.wide_width = std::max(16u, po.width / kWidePassDivisor);
+  po.wide_height = std::max(16u, po.height / kWidePassDivisor);
+  auto passes = ScenePasses::create(*ctx_, *compiler_, po, *scene_gpu_, *cache_);
+  if (!passes) return passes.error();
+  passes_ = std::move(*passes);
+  auto capture = FrameCapture::create(*ctx_, po.width, po.height);
+  if (!capture) return capture.error();
+  capture_ = std::make_unique<FrameCapture>(std::move(*capture));
+  broad_phase_ = std::make_unique<BroadPhase>(scene_.meshes.meshes);
+
+  VkDevice device = ctx_->device();
+  VkCommandPoolCreateInfo pci{};
+  pci.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
+  pci.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
+  pci.queueFamilyIndex = ctx_->queue_family();
+  VkCommandPool pool = VK_NULL_HANDLE;
+  TS_VK_TRY(vkCreateCommandPool(device, &pci, nullptr, &pool));
+  pool_ = UniqueCommandPool(device, pool);
+  VkCommandBufferAllocateInfo ai{};
+  ai.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
+  ai.commandPool = pool;
+  ai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+  ai.commandBufferCount = 1;
+  TS_VK_TRY(vkAllocateCommandBuffers(device, &ai, &cmd_));
+  VkFenceCreateInfo fci{};
+  fci.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
+  VkFence fence = VK_NULL_HANDLE;
+  TS_VK_TRY(vkCreateFence(device, &fci, nullptr, &fence));
+  fence_ = UniqueFence(device, fence);
+
+  auto client = StreamClient::start(cfg_, scene_.shapes(), scene_.dir, run_.config_file, run_.overrides);
+  if (!client) return client.error();
+  client_ = std::move(*client);
+  return ok_status();
+}
+
+gpu::PassConstants Renderer::wide_pass_constants(const Camera& cam) const {
+  const auto& o = passes_->options();
+  const double t_view = std::tan(cfg_.render.fov_y_deg * M_PI / 360.0);
+  const double t_wide = std::tan(cfg_.render.offscreen_fov_y_deg * M_PI / 360.0);
+  // One wide-pass pixel spans `ratio` viewport pixels per axis: its mip level is log2(ratio) coarser than the
+  // viewport would need, and it stands for ratio^2 viewport pixels of W = 1 each (seed 000 §3.2).
+  const double ratio = (t_wide / o.wide_height) / (t_view / o.height);
+  gpu::PassConstants pc{};
+  const glm::mat4 vp = cam.wide_proj * cam.view;
+  std::memcpy(pc.view_proj.m, &vp[0][0], sizeof pc.view_proj.m);
+  const auto bound = static_cast<float>(t_view / t_wide);  // the viewport's |ndc| extent inside the wide pass
+  pc.pass = {static_cast<float>(-std::log2(ratio)), static_cast<float>(ratio * ratio), bound, bound};
+  return pc;
+}
+
+Status Renderer::render_frame(uint64_t index, bool last) {
+  const auto t0 = Clock::now();
+  const double time_s = static_cast<double>(index) * cfg_.render.frame_time_ms / 1000.0;
+  CameraLens lens{cfg_.render.fov_y_deg, cfg_.render.offscreen_fov_y_deg,
+                  static_cast<double>(cfg_.render.width_px) / static_cast<double>(cfg_.render.height_px),
+                  cfg_.render.near_m, cfg_.render.far_m};
+  const Camera cam = make_camera(path_->sample(time_s), lens);
+
+  // Broad phase over the wide frustum: the wide pass needs those meshes too.
+  broad_phase_->query(Frustum::from_matrix(cam.wide_proj * cam.view), cam.position, visible_);
+  FrameRecording rec;
+  rec.draw_count = scene_gpu_->write_draws(scene_, visible_, cam.position);
+  const glm::mat4 vp = cam.proj * cam.view;
+  std::memcpy(rec.main.view_proj.m, &vp[0][0], sizeof rec.main.view_proj.m);
+  rec.main.pass = {0.0f, 1.0f, 2.0f, 2.0f};
+  rec.wide = wide_pass_constants(cam);
+
+  auto* fu = scene_gpu_->frame_uniforms.as<gpu::FrameUniforms>();
+  const float a_m = static_cast<float>(cfg_.stream.max_anisotropy);
+  fu->camera_forward = {cam.forward.x, cam.forward.y, cam.forward.z, 0.0f};
+  // A_s = A_m / 2 (seed 000 §3.2), at least one tap.
+  fu->params = {a_m, std::max(1.0f, std::floor(a_m / 2.0f)), kForegroundDistanceM, kAmbient};
+  const double tau_fixed = std::min(cfg_.stream.tau * gpu::kWeightFixedScale, 4294967295.0);
+  fu->flags = {(cfg_.stream.colormap_blend ? gpu::kFlagColormapBlend : 0u) | gpu::kFlagLighting,
+               scene_gpu_->mesh_count, static_cast<uint32_t>(std::ceil(tau_fixed)), scene_gpu_->compact_capacity};
+  fu->cache = {cache_->layer_extent(), cache_->mip_levels(), 0, 0};
+
+  // Completions that arrived since the last frame: validated by the client, copied into the staging ring.
+  client_->poll(*cache_, static_cast<size_t>(cfg_.stream.max_mips_per_cycle));
+  const uint64_t in_flight = client_->stats().in_flight;
+  rec.read_back_list =
+      static_cast<double>(in_flight) <= kCycleOutstandingFraction * static_cast<double>(last_cycle_sent_);
+  const bool write = last || (cfg_.render.write_every_frames > 0 &&
+                              index % static_cast<uint64_t>(cfg_.render.write_every_frames) == 0);
+
+  VkDevice device = ctx_->device();
+  ++serial_;
+  TS_VK_TRY(vkResetCommandBuffer(cmd_, 0));
+  VkCommandBufferBeginInfo bi{};
+  bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
+  bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  TS_VK_TRY(vkBeginCommandBuffer(cmd_, &bi));
+  cache_->record_uploads(cmd_, serial_);
+  passes_->record(cmd_, rec);
+  if (write) capture_->record(cmd_, passes_->colour().handle());
+  TS_VK_TRY(vkEndCommandBuffer(cmd_));
+  VkSubmitInfo si{};
+  si.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
+  si.commandBufferCount = 1;
+  si.pCommandBuffers = &cmd_;
+  VkFence fence = fence_.get();
+  TS_VK_TRY(vkResetFences(device, 1, &fence));
+  TS_VK_TRY(vkQueueSubmit(ctx_->queue(), 1, &si, fence));
+  TS_VK_TRY(vkWaitForFences(device, 1, &fence, VK_TRUE, UINT64_MAX));
+  cache_->on_submission_complete(serial_);
+  if (rec.read_back_list) start_cycle();
+  latencies_ms_.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+
+  if (write) {
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%05llu.png", static_cast<unsigned long long>(index));
+    TS_TRY(capture_->write_png(output_dir_ / "frames" / name));
+  }
+  return ok_status();
+}
+
+void Renderer::start_cycle() {
+  const auto* header = scene_gpu_->readback.as<gpu::CompactListHeader>();
+  const uint32_t count = std::min(header->count, scene_gpu_->compact_capacity);
+  const auto* entries = reinterpret_cast<const gpu::CompactEntry*>(scene_gpu_->readback.bytes().data() +
+                                                                   sizeof(gpu::CompactListHeader));
+  uint64_t skipped = 0;
+  const auto candidates = build_candidates({entries, count}, scene_.meshes.meshes, &skipped);
+  if (skipped) spdlog::warn("visibility list: {} entries with a bad mesh id skipped", skipped);
+
+  client_->begin_cycle();
+  ++cycles_;
+  // stream.max_mips_per_cycle caps the requests of one cycle on top of the load size s.
+  uint64_t sent = 0;
+  const auto max_mips = static_cast<uint64_t>(cfg_.stream.max_mips_per_cycle);
+  auto send = client_->sender();
+  const auto result = states_->run_cycle(candidates, load_bytes_, 0.0f, [&](const MipRequest& r) {
+    if (sent >= max_mips) return SendResult::kStop;
+    const SendResult s = send(r);
+    if (s == SendResult::kSent) ++sent;
+    return s;
+  });
+  last_cycle_sent_ = result.sent.size();
+  spdlog::debug("cycle {}: {} candidates, {} requests, {} bytes", cycles_, candidates.size(), result.sent.size(),
+                result.bytes);
+}
+
+Result<RunSummary> Renderer::run() {
+  TS_TRY(set_up());
+  uint64_t frames = static_cast<uint64_t>(cfg_.render.frames);
+  if (frames == 0) frames = static_cast<uint64_t>(std::floor(path_->duration_s() * 1000.0 / cfg_.render.frame_time_ms)) + 1;
+  for (uint64_t i = 0; i < frames; ++i) TS_TRY(render_frame(i, i + 1 == frames));
+  TS_VK_TRY(vkDeviceWaitIdle(ctx_->device()));
+
+  const StreamStats ss = client_->stats();
+  RunSummary s;
+  s.device = ctx_->device_name();
+  s.output_dir = fs::absolute(output_dir_);
+  s.frames = frames;
+  s.frame_latency = LatencyStats::from(latencies_ms_);
+  s.mips_streamed = cache_->stats().mips_uploaded;
+  s.mb_streamed = static_cast<double>(cache_->stats().bytes_uploaded) / 1e6;
+  const uint64_t lookups = ss.server_ram_cache_hits + ss.server_ram_cache_misses;
+  s.server_ram_hit_rate = lookups ? static_cast<double>(ss.server_ram_cache_hits) / static_cast<double>(lookups) : 0.0;
+  s.protocol_errors = ss.protocol_errors;
+  s.server_restarts = ss.server_restarts;
+  s.textures_resident = cache_->resident_textures();
+  s.texture_count = scene_.textures.size();
+  s.streaming_cycles = cycles_;
+  s.evictions = cache_->stats().evictions;
+  // Shut the server down and release the device before the validation counts are read: teardown is validated too.
+  client_.reset();
+  passes_.reset();
+  capture_.reset();
+  scene_gpu_.reset();
+  cache_.reset();
+  fence_.reset();
+  pool_.reset();
+  s.validation_errors = ctx_->validation_errors();
+  s.validation_warnings = ctx_->validation_warnings();
+  TS_TRY(s.write_json(output_dir_ / "summary.json"));
+  return s;
+}
+
+}  // namespace
+
+Result<RunSummary> run_renderer(const RenderRun& run) {
+  Renderer r(run);
+  return r.run();
+}
+
+}  // namespace texstream::render

@@ -1,0 +1,469 @@
+#include "texstream/render/stream_client.hpp"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cstring>
+#include <spdlog/spdlog.h>
+#include <utility>
+
+#include "texstream/common/contract.hpp"
+#include "texstream/protocol/checksum.hpp"
+#include "texstream/protocol/liveness.hpp"
+#include "texstream/protocol/texel_format.hpp"
+
+namespace texstream {
+
+namespace {
+
+// Protocol errors are logged in full at first, then sampled: a hostile server must not flood the log.
+constexpr uint64_t kProtocolErrorsLoggedInFull = 20;
+constexpr uint64_t kProtocolErrorLogEvery = 1000;
+
+std::string mip_name(uint32_t texture, uint32_t mip) {
+  return "texture " + std::to_string(texture) + " mip " + std::to_string(mip);
+}
+
+}  // namespace
+
+const char* to_string(RequestOutcome outcome) {
+  switch (outcome) {
+    case RequestOutcome::kSent: return "sent";
+    case RequestOutcome::kAlreadyInFlight: return "already in flight";
+    case RequestOutcome::kInFlightLimit: return "in-flight limit reached";
+    case RequestOutcome::kRingFull: return "request ring full";
+    case RequestOutcome::kNoServer: return "no server";
+    case RequestOutcome::kUnknownTexture: return "unknown texture";
+    case RequestOutcome::kBadMip: return "mip level out of range";
+  }
+  return "?";
+}
+
+SendResult to_send_result(RequestOutcome outcome) {
+  switch (outcome) {
+    case RequestOutcome::kSent: return SendResult::kSent;
+    case RequestOutcome::kAlreadyInFlight:
+    case RequestOutcome::kUnknownTexture:
+    case RequestOutcome::kBadMip: return SendResult::kSkip;
+    case RequestOutcome::kInFlightLimit:
+    case RequestOutcome::kRingFull:
+    case RequestOutcome::kNoServer: return SendResult::kStop;
+  }
+  return SendResult::kStop;
+}
+
+const char* to_string(StreamServerState state) {
+  switch (state) {
+    case StreamServerState::kExternal: return "external";
+    case StreamServerState::kRunning: return "running";
+    case StreamServerState::kBackingOff: return "backing off";
+    case StreamServerState::kColormapOnly: return "colormap only";
+    case StreamServerState::kBroken: return "broken";
+  }
+  return "?";
+}
+
+Result<std::unique_ptr<StreamClient>> StreamClient::start(const Config& config, std::vector<TextureShape> shapes,
+                                                           const std::filesystem::path& scene_dir,
+                                                           const std::filesystem::path& config_file,
+                                                           const std::vector<std::string>& overrides,
+                                                           StreamClientOptions options) {
+  TS_TRY(config.validate());
+  std::unique_ptr<StreamClient> c(new StreamClient());
+  c->config_ = config;
+  c->options_ = std::move(options);
+  c->shapes_ = std::move(shapes);
+
+  std::filesystem::path executable;
+  if (c->options_.spawn_server) {
+    auto exe = resolve_server_executable(config);
+    if (!exe) return exe.error();
+    executable = *exe;
+  }
+
+  // Segments of renderers that died without cleaning up (pid + start time no longer alive).
+  if (const int removed = Segment::remove_stale("texstream-"); removed > 0) {
+    spdlog::info("removed {} stale shared segment(s) of dead renderers", removed);
+  }
+  const std::string name = config.protocol.segment_name.empty() ? "texstream-" + std::to_string(::getpid())
+                                                                 : config.protocol.segment_name;
+  // config.validate() and the key ranges bound these (powers of two, 1..16384 slots, <= 64 MiB a slot).
+  SegmentParams params;
+  params.request_capacity = static_cast<uint32_t>(config.protocol.request_ring_capacity);
+  params.completion_capacity = static_cast<uint32_t>(config.protocol.completion_ring_capacity);
+  params.slot_count = static_cast<uint32_t>(config.protocol.staging_slot_count);
+  params.slot_bytes = static_cast<uint64_t>(config.protocol.staging_slot_bytes);
+  auto segment = Segment::create(name, params);
+  if (!segment) return segment.error();
+  c->segment_ = std::move(*segment);
+  c->slot_held_.assign(c->segment_->slot_count(), 0);
+  c->release_pos_.assign(c->segment_->slot_count(), kNoPosition);
+  // Loads never take the last records of the request ring: those are for slot releases, so a ring filled
+  // with loads cannot keep the server from getting its slots back.
+  c->release_reserve_ = std::min<uint32_t>(c->segment_->slot_count(), c->segment_->header().request_capacity / 4);
+  c->attach_rings();
+
+  if (c->options_.spawn_server) {
+    ServerCommand cmd{executable, name, scene_dir, config_file, overrides};
+    c->process_ = std::make_unique<ServerProcess>(std::move(cmd), c->options_.restart);
+    c->segment_->renderer_block().server_epoch.v.store(c->segment_->header().epoch, std::memory_order_relaxed);
+    c->process_->spawn_if_due(c->now());
+  }
+  spdlog::info("stream client: segment '{}' ({} slots x {} bytes), {} textures, server {}", name,
+               c->segment_->slot_count(), c->segment_->slot_bytes(), c->shapes_.size(),
+               c->options_.spawn_server ? executable.string() : std::string("external"));
+  return c;
+}
+
+StreamClient::~StreamClient() {
+  process_.reset();  // kill and reap the server before the segment (and its name) goes away
+  segment_.reset();
+}
+
+SteadyTime StreamClient::now() const {
+  return options_.clock ? options_.clock() : std::chrono::steady_clock::now();
+}
+
+void StreamClient::attach_rings() {
+  const SegmentHeader& h = segment_->header();
+  requests_ = SpscRingProducer<RequestRecord>(segment_->request_control(), segment_->request_records(),
+                                              h.request_capacity);
+  completions_ = SpscRingConsumer<CompletionRecord>(segment_->completion_control(), segment_->completion_records(),
+                                                    h.completion_capacity);
+}
+
+void StreamClient::begin_cycle() {
+  generation_ = Generation(generation_.value + 1);
+  // release: a server that sees this generation also sees the requests pushed before it (ring release).
+  segment_->renderer_block().generation.v.store(generation_.value, std::memory_order_release);
+}
+
+std::optional<uint64_t> StreamClient::server_read_position() const {
+  // acquire: pairs with the server's release-store of read_pos (as in SpscRingProducer::try_push).
+  const uint64_t read = const_cast<Segment&>(*segment_).request_control()->read_pos.v.load(std::memory_order_acquire);
+  const uint64_t write = requests_.position();
+  if (read > write || write - read > requests_.capacity()) return std::nullopt;
+  return read;
+}
+
+bool StreamClient::slot_in_transit(uint32_t slot) {
+  if (release_pos_[slot] == kNoPosition) return false;
+  const std::optional<uint64_t> read = server_read_position();
+  if (read && *read > release_pos_[slot]) {
+    release_pos_[slot] = kNoPosition;  // the server has read our release: the slot is its own again
+    return false;
+  }
+  return true;
+}
+
+bool StreamClient::accepting_requests() const {
+  if (broken_) return false;
+  return process_ ? process_->serving() : true;
+}
+
+RequestOutcome StreamClient::try_request(TextureId texture, MipLevel mip, float priority) {
+  if (texture.value >= shapes_.size()) return RequestOutcome::kUnknownTexture;
+  if (mip.value >= shapes_[texture.value].mip_count) return RequestOutcome::kBadMip;
+  if (!accepting_requests()) return RequestOutcome::kNoServer;
+  if (in_flight_.count(key(texture, mip))) return RequestOutcome::kAlreadyInFlight;
+  if (in_flight_.size() >= static_cast<size_t>(config_.stream.max_requests_in_flight)) {
+    return RequestOutcome::kInFlightLimit;
+  }
+  flush_releases();  // queued releases go first: the server waits for its slots
+  if (requests_.free_space() <= release_reserve_) return RequestOutcome::kRingFull;
+  RequestRecord r{};
+  r.kind = static_cast<uint32_t>(RequestKind::kLoad);
+  r.texture_id = texture.value;
+  r.mip_level = mip.value;
+  r.slot = kNoSlot;
+  r.generation = generation_.value;
+  r.priority = priority;
+  if (!requests_.try_push(r)) return RequestOutcome::kRingFull;  // a ring error: poll() restarts the server
+  in_flight_.emplace(key(texture, mip), InFlight{generation_});
+  ++stats_.requests_sent;
+  ring_doorbell();
+  return RequestOutcome::kSent;
+}
+
+TextureStates::Sender StreamClient::sender() {
+  return [this](const MipRequest& r) { return to_send_result(try_request(r.texture, r.mip, r.priority)); };
+}
+
+void StreamClient::ring_doorbell() {
+  RendererBlock& rb = segment_->renderer_block();
+  // release: pairs with the server's acquire-load of the doorbell; the records pushed before are visible.
+  rb.doorbell.v.fetch_add(1, std::memory_order_release);
+  // seq_cst fence: our push and bump are ordered before the load of `sleeping` below; pairs with the
+  // server's fence between storing sleeping = 1 and re-checking the ring, so one of us sees the other.
+  std::atomic_thread_fence(std::memory_order_seq_cst);
+  if (segment_->server_block().sleeping.v.load(std::memory_order_relaxed) == 1) futex_wake_all(rb.doorbell);
+}
+
+void StreamClient::release_slot(SlotIndex slot) {
+  TS_ASSERT(slot.value < slot_held_.size() && slot_held_[slot.value], "releasing slot %u that we do not hold",
+            slot.value);
+  release_queue_.push_back(slot);
+  flush_releases();
+}
+
+void StreamClient::flush_releases() {
+  bool pushed = false;
+  while (!release_queue_.empty()) {
+    RequestRecord r{};
+    r.kind = static_cast<uint32_t>(RequestKind::kReleaseSlot);
+    r.texture_id = 0;
+    r.mip_level = 0;
+    r.slot = release_queue_.front().value;
+    r.generation = generation_.value;
+    const uint64_t position = requests_.position();
+    if (!requests_.try_push(r)) break;  // full (or a ring error, handled by poll): keep it for next time
+    slot_held_[release_queue_.front().value] = 0;  // the server owns it once it has read the record
+    release_pos_[release_queue_.front().value] = position;
+    release_queue_.pop_front();
+    ++stats_.releases_sent;
+    pushed = true;
+  }
+  if (pushed) ring_doorbell();
+}
+
+void StreamClient::protocol_error(const std::string& what) {
+  ++stats_.protocol_errors;
+  const uint64_t n = stats_.protocol_errors;
+  if (n <= kProtocolErrorsLoggedInFull || n % kProtocolErrorLogEvery == 0) {
+    spdlog::warn("texstream-server broke the protocol (error #{}): {}", n, what);
+  }
+}
+
+void StreamClient::on_server_gone(MipSink& sink, const std::string& why) {
+  // Keep the dead server's statistics: the reset zeroes its block.
+  const ServerBlock& sb = segment_->server_block();
+  past_hits_ += sb.ram_cache_hits.v.load(std::memory_order_relaxed);
+  past_misses_ += sb.ram_cache_misses.v.load(std::memory_order_relaxed);
+  past_bytes_read_ += sb.bytes_read.v.load(std::memory_order_relaxed);
+  past_cancelled_ += sb.requests_cancelled.v.load(std::memory_order_relaxed);
+
+  // Everything in flight is lost; the state machine asks again (kCancelled is retried, never counted).
+  std::vector<uint64_t> lost;
+  lost.reserve(in_flight_.size());
+  for (const auto& [k, f] : in_flight_) lost.push_back(k);
+  std::sort(lost.begin(), lost.end());  // deterministic order for the sink
+  in_flight_.clear();
+  held_.reset();
+  release_queue_.clear();
+  std::fill(slot_held_.begin(), slot_held_.end(), 0);  // the next server owns every slot
+  std::fill(release_pos_.begin(), release_pos_.end(), kNoPosition);
+  stats_.requests_lost += lost.size();
+  if (!lost.empty() || !why.empty()) {
+    spdlog::warn("texstream-server gone ({}): {} request(s) in flight lost", why, lost.size());
+  }
+  for (uint64_t k : lost) {
+    sink.failed(TextureId(static_cast<uint32_t>(k >> 32)), MipLevel(static_cast<uint32_t>(k)),
+                CompletionStatus::kCancelled);
+  }
+}
+
+void StreamClient::supervise(MipSink& sink) {
+  const bool ring_broken = requests_.error() != RingError::kNone || completions_.error() != RingError::kNone ||
+                           !server_read_position().has_value();
+  if (!process_) {
+    if (ring_broken && !broken_) {
+      protocol_error("a ring position of the external server is impossible; stopping until reset");
+      broken_ = true;
+      on_server_gone(sink, "ring corrupt");
+    }
+    return;
+  }
+  const SteadyTime t = now();
+  if (auto exit = process_->reap(t)) {
+    ++stats_.server_deaths;
+    on_server_gone(sink, "pid " + std::to_string(exit->pid) + " " + exit->how +
+                             (exit->killed_by_us ? " after we killed it: " + exit->kill_reason : ""));
+    // Only now, with the process reaped, are its words in the segment ours to reset.
+    segment_->reset_after_server_death();
+    attach_rings();
+  }
+  if (process_->serving()) {
+    if (ring_broken) {
+      protocol_error("a ring position is impossible");
+      process_->kill("it corrupted a ring position");
+    } else {
+      const ServerBlock& sb = segment_->server_block();
+      const auto timeout = std::chrono::milliseconds(static_cast<int64_t>(config_.protocol.heartbeat_timeout_ms));
+      process_->watch_heartbeat(sb.heartbeat.v.load(std::memory_order_relaxed),
+                                sb.attached.v.load(std::memory_order_relaxed) == 1, !in_flight_.empty(), timeout, t);
+    }
+  }
+  if (!process_->has_child()) {
+    segment_->renderer_block().server_epoch.v.store(segment_->header().epoch, std::memory_order_relaxed);
+    process_->spawn_if_due(t);
+  }
+}
+
+void StreamClient::poll(MipSink& sink, size_t max_mips) {
+  RendererBlock& rb = segment_->renderer_block();
+  // relaxed: a progress counter only; we are its sole writer.
+  rb.heartbeat.v.store(rb.heartbeat.v.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
+  supervise(sink);
+  if (!accepting_requests()) return;
+  flush_releases();
+
+  size_t mips = 0;
+  if (held_) {
+    if (mips >= max_mips) return;
+    const CheckedCompletion c = *held_;
+    held_.reset();
+    if (!deliver(c, sink)) return;  // still no room: keep order, try again next poll
+    ++mips;
+  }
+  // Bounded by one ring's worth per poll: a server publishing as fast as we consume cannot hold us here.
+  const uint32_t max_records = segment_->header().completion_capacity;
+  for (uint32_t n = 0; n < max_records && mips < max_mips && !held_; ++n) {
+    const std::optional<CompletionRecord> record = completions_.try_pop();
+    if (!record) break;
+    handle_record(*record, sink, mips);
+  }
+  if (completions_.error() != RingError::kNone) supervise(sink);  // act on a corrupt position this frame
+}
+
+void StreamClient::handle_record(const CompletionRecord& record, MipSink& sink, size_t& mips) {
+  const uint32_t slot_count = segment_->slot_count();
+  auto checked = check_completion(record, slot_count, segment_->slot_bytes());
+  if (!checked) {
+    protocol_error(checked.error().message + " (" + mip_name(record.texture_id, record.mip_level) + ")");
+    // A server that believes it handed us a slot gets it back, once; a slot we already hold is not
+    // released again (that would give the server a slot twice).
+    if (record.status == static_cast<uint32_t>(CompletionStatus::kOk) && record.slot < slot_count &&
+        !slot_held_[record.slot] && !slot_in_transit(record.slot)) {
+      slot_held_[record.slot] = 1;
+      release_slot(SlotIndex(record.slot));
+    }
+    // A request it claims to answer is answered badly: ask again later.
+    if (auto it = in_flight_.find(key(TextureId(record.texture_id), MipLevel(record.mip_level)));
+        it != in_flight_.end()) {
+      in_flight_.erase(it);
+      ++stats_.completions_rejected;
+      sink.reject(TextureId(record.texture_id), MipLevel(record.mip_level), {});
+    }
+    return;
+  }
+  const CheckedCompletion& c = *checked;
+  const bool ok = c.status == CompletionStatus::kOk;
+  const auto in_flight = in_flight_.find(key(c.texture, c.mip));
+  const bool asked = in_flight != in_flight_.end();
+
+  auto refuse = [&](const std::string& what, bool release) {
+    protocol_error(what + " (" + mip_name(c.texture.value, c.mip.value) + ")");
+    if (ok && release) release_slot(c.slot);
+    if (asked) {
+      in_flight_.erase(in_flight);
+      ++stats_.completions_rejected;
+      sink.reject(c.texture, c.mip, {});
+    }
+  };
+
+  if (ok) {
+    if (slot_held_[c.slot.value]) {
+      refuse("slot " + std::to_string(c.slot.value) + " handed over while we still hold it", false);
+      return;
+    }
+    // If the server's read position has not passed our release record even now, it had certainly not read
+    // it when it published this completion: it handed over a slot it did not own.
+    if (slot_in_transit(c.slot.value)) {
+      refuse("slot " + std::to_string(c.slot.value) + " handed over before the server read its release", false);
+      return;
+    }
+    slot_held_[c.slot.value] = 1;  // the ring has handed it to us
+  }
+  if (c.texture.value >= shapes_.size()) {
+    refuse("texture id outside the table of " + std::to_string(shapes_.size()), true);
+    return;
+  }
+  if (!asked) {
+    refuse("an answer to a request we did not send (or already answered)", true);
+    return;
+  }
+  if (c.generation != in_flight->second.generation) {
+    refuse("generation " + std::to_string(c.generation.value) + " but the request had " +
+               std::to_string(in_flight->second.generation.value),
+           true);
+    return;
+  }
+  if (!ok) {
+    in_flight_.erase(in_flight);
+    ++stats_.completions_failed[static_cast<uint32_t>(c.status)];
+    sink.failed(c.texture, c.mip, c.status);
+    return;
+  }
+  if (auto st = check_against_texture(c, shapes_[c.texture.value]); !st.ok()) {
+    refuse(st.error().message, true);
+    return;
+  }
+  if (deliver(c, sink)) ++mips;
+}
+
+bool StreamClient::deliver(const CheckedCompletion& c, MipSink& sink) {
+  std::span<std::byte> dst = sink.reserve(c.texture, c.mip, c.byte_size);
+  if (dst.empty()) {
+    held_ = c;  // the slot stays ours and the request stays in flight until there is room
+    return false;
+  }
+  TS_ASSERT(dst.size() >= c.byte_size, "MipSink::reserve gave %zu bytes for a %llu-byte mip", dst.size(),
+            static_cast<unsigned long long>(c.byte_size));
+  // check_completion bounded slot < slot_count and byte_size <= slot_bytes: the read stays in the slot.
+  const std::span<std::byte> src = segment_->slot(c.slot.value);
+  std::memcpy(dst.data(), src.data(), c.byte_size);  // read the shared bytes once
+  in_flight_.erase(key(c.texture, c.mip));
+  const std::span<std::byte> payload = dst.first(c.byte_size);
+  // The checksum is computed on our copy: the server may change the slot after we read it.
+  if (payload_checksum(payload.data(), payload.size()) == c.checksum) {
+    ++stats_.completions_ok;
+    stats_.bytes_received += c.byte_size;
+    sink.commit(c.texture, c.mip, payload);
+  } else {
+    protocol_error("payload checksum mismatch (" + mip_name(c.texture.value, c.mip.value) + ")");
+    ++stats_.completions_rejected;
+    sink.reject(c.texture, c.mip, dst);
+  }
+  release_slot(c.slot);
+  return true;
+}
+
+void StreamClient::restart_server(const std::string& why, MipSink& sink) {
+  if (process_) {
+    process_->kill(why);  // the next poll reaps it, marks requests lost, resets and respawns
+    return;
+  }
+  on_server_gone(sink, why);
+  segment_->reset_after_server_death();
+  attach_rings();
+  broken_ = false;
+}
+
+bool StreamClient::in_flight(TextureId texture, MipLevel mip) const { return in_flight_.count(key(texture, mip)) != 0; }
+
+StreamStats StreamClient::stats() const {
+  StreamStats s = stats_;
+  s.in_flight = in_flight_.size();
+  s.slots_held = static_cast<uint64_t>(std::count(slot_held_.begin(), slot_held_.end(), uint8_t{1}));
+  s.releases_queued = release_queue_.size();
+  const ServerBlock& sb = const_cast<Segment&>(*segment_).server_block();
+  s.server_ram_cache_hits = past_hits_ + sb.ram_cache_hits.v.load(std::memory_order_relaxed);
+  s.server_ram_cache_misses = past_misses_ + sb.ram_cache_misses.v.load(std::memory_order_relaxed);
+  s.server_bytes_read = past_bytes_read_ + sb.bytes_read.v.load(std::memory_order_relaxed);
+  s.server_requests_cancelled = past_cancelled_ + sb.requests_cancelled.v.load(std::memory_order_relaxed);
+  if (process_) {
+    s.server_restarts = process_->spawns() > 0 ? process_->spawns() - 1 : 0;
+    switch (process_->state()) {
+      case ServerState::kStopped:
+      case ServerState::kBackingOff: s.server_state = StreamServerState::kBackingOff; break;
+      case ServerState::kRunning: s.server_state = StreamServerState::kRunning; break;
+      case ServerState::kColormapOnly: s.server_state = StreamServerState::kColormapOnly; break;
+    }
+  } else {
+    s.server_state = broken_ ? StreamServerState::kBroken : StreamServerState::kExternal;
+  }
+  return s;
+}
+
+}  // namespace texstream

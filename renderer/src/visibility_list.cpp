@@ -1,0 +1,38 @@
+#include "texstream/render/visibility_list.hpp"
+
+#include <algorithm>
+#include <unordered_map>
+
+namespace texstream::render {
+
+std::vector<StreamCandidate> build_candidates(std::span<const gpu::CompactEntry> entries,
+                                              std::span<const scene::MeshRecord> meshes, uint64_t* skipped) {
+  std::unordered_map<uint32_t, size_t> index;  // texture id -> position in out
+  std::vector<StreamCandidate> out;
+  out.reserve(entries.size());
+  uint64_t bad = 0;
+  for (const gpu::CompactEntry& e : entries) {
+    if (e.mesh_id >= meshes.size() || e.mip_fixed == gpu::kNoMip) {
+      ++bad;
+      continue;
+    }
+    const uint32_t texture = meshes[e.mesh_id].texture_id;
+    const float mip = static_cast<float>(e.mip_fixed) / static_cast<float>(gpu::kMipFixedScale);
+    const float weight = static_cast<float>(e.weight_fixed) / static_cast<float>(gpu::kWeightFixedScale);
+    auto [it, inserted] = index.emplace(texture, out.size());
+    if (inserted) {
+      out.push_back(StreamCandidate{TextureId(texture), mip, weight});
+    } else {
+      StreamCandidate& c = out[it->second];
+      c.desired_mip = std::min(c.desired_mip, mip);
+      c.weight += weight;
+    }
+  }
+  std::sort(out.begin(), out.end(), [](const StreamCandidate& a, const StreamCandidate& b) {
+    return a.weight != b.weight ? a.weight > b.weight : a.texture < b.texture;
+  });
+  if (skipped) *skipped = bad;
+  return out;
+}
+
+}  // namespace texstream::render

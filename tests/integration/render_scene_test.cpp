@@ -1,0 +1,94 @@
+// texstream-render on a generated city (texstream-gen --textures 200) with the real server and the validation
+// layer: exit code 0, zero validation errors, the PNGs it promised, textures resident. Plus the error paths of
+// the command line.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+const fs::path kBin = TEXSTREAM_BIN_DIR;
+
+fs::path fresh_dir(const std::string& name) {
+  fs::path d = fs::temp_directory_path() / ("texstream_render_it_" + name + "_" + std::to_string(::getpid()));
+  fs::remove_all(d);
+  fs::create_directories(d);
+  return d;
+}
+
+// Runs `cmd` with stdout+stderr into `log`; returns the exit code (-1 if it did not exit normally).
+int run(const std::string& cmd, const fs::path& log) {
+  const int status = std::system((cmd + " > '" + log.string() + "' 2>&1").c_str());
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+class RenderScene : public ::testing::TestWithParam<std::string> {};
+
+}  // namespace
+
+TEST_P(RenderScene, TinyCityRendersWithoutValidationErrors) {
+  const std::string format = GetParam();
+  const fs::path dir = fresh_dir("scene_" + format);
+  ASSERT_EQ(run((kBin / "texstream-gen").string() + " --out " + (dir / "scene").string() +
+                    " --textures 200 --seed 7 --threads 1 --format " + format,
+                dir / "gen.log"),
+            0)
+      << slurp(dir / "gen.log");
+  const fs::path out = dir / "out";
+  const std::string cmd = (kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
+                          " --set render.validation=true --set render.frames=30 --set render.write_every_frames=10" +
+                          " --set cache.format=" + format + " --set render.output_dir=" + out.string();
+  const int rc = run(cmd, dir / "render.log");
+  const std::string log = slurp(dir / "render.log");
+  ASSERT_EQ(rc, 0) << log;
+  for (const char* f : {"frame_00000.png", "frame_00010.png", "frame_00020.png", "frame_00029.png"}) {
+    EXPECT_TRUE(fs::exists(out / "frames" / f)) << f << "\n" << log;
+  }
+  ASSERT_TRUE(fs::exists(out / "summary.json")) << log;
+  const auto summary = nlohmann::json::parse(slurp(out / "summary.json"));
+  EXPECT_EQ(summary["frames"].get<int>(), 30);
+  EXPECT_EQ(summary["validation_errors"].get<int>(), 0) << log;
+  EXPECT_GT(summary["textures_resident"].get<int>(), 0) << log;
+  EXPECT_GT(summary["mips_streamed"].get<int>(), 0);
+  EXPECT_EQ(summary["protocol_errors"].get<int>(), 0);
+  EXPECT_NE(summary["device"].get<std::string>().find("llvmpipe"), std::string::npos);
+  EXPECT_NE(log.find("output folder"), std::string::npos);
+  fs::remove_all(dir);
+}
+
+INSTANTIATE_TEST_SUITE_P(Formats, RenderScene, ::testing::Values("rgba8", "bc1"));
+
+TEST(RenderCli, UnknownKeyIsExitTwoAndNamed) {
+  const fs::path dir = fresh_dir("cli");
+  const int rc = run((kBin / "texstream-render").string() + " --set render.no_such_key=1", dir / "log");
+  EXPECT_EQ(rc, 2);
+  EXPECT_NE(slurp(dir / "log").find("no_such_key"), std::string::npos) << slurp(dir / "log");
+  EXPECT_EQ(run((kBin / "texstream-render").string() + " --bogus-flag", dir / "log2"), 2);
+  fs::remove_all(dir);
+}
+
+TEST(RenderCli, MissingSceneNamesThePath) {
+  const fs::path dir = fresh_dir("noscene");
+  const int rc = run((kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "nowhere").string() +
+                         " --set render.output_dir=" + (dir / "out").string(),
+                     dir / "log");
+  EXPECT_EQ(rc, 1);
+  EXPECT_NE(slurp(dir / "log").find("nowhere"), std::string::npos) << slurp(dir / "log");
+  fs::remove_all(dir);
+}

@@ -1,0 +1,248 @@
+// The real texstream-server executable against a segment this test (or a forked child) created: arguments
+// and exit codes, one streamed mip, clean exit on SIGTERM, and exit when the segment's owner dies.
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "texstream/common/scene_format.hpp"
+#include "texstream/protocol/checksum.hpp"
+#include "texstream/protocol/liveness.hpp"
+#include "texstream/protocol/segment.hpp"
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+
+namespace texstream {
+namespace {
+
+const std::string kServer = std::string(TEXSTREAM_BIN_DIR) + "/texstream-server";
+
+// Starts the server with `args`; stdout/stderr stay the test's (its log lines show up in ctest output)
+// unless `stderr_file` is given.
+pid_t spawn_server(const std::vector<std::string>& args, const fs::path& stderr_file = {}) {
+  std::vector<std::string> all{kServer};
+  all.insert(all.end(), args.begin(), args.end());
+  const pid_t pid = fork();
+  if (pid == 0) {
+    if (!stderr_file.empty()) {
+      const int fd = open(stderr_file.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+      if (fd >= 0) dup2(fd, 2);
+    }
+    std::vector<char*> argv;
+    for (auto& a : all) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    execv(kServer.c_str(), argv.data());
+    _exit(127);
+  }
+  return pid;
+}
+
+// waitpid with a deadline: the exit status, or nullopt (the process is then killed and reaped).
+std::optional<int> wait_exit(pid_t pid, std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  for (;;) {
+    int status = 0;
+    const pid_t r = waitpid(pid, &status, WNOHANG);
+    if (r == pid) return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    if (std::chrono::steady_clock::now() >= deadline) {
+      kill(pid, SIGKILL);
+      waitpid(pid, &status, 0);
+      return std::nullopt;
+    }
+    std::this_thread::sleep_for(5ms);
+  }
+}
+
+class ServerProcessTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    static int counter = 0;
+    name_ = "texstream-srvproc-" + std::to_string(getpid()) + "-" + std::to_string(counter++);
+    dir_ = fs::temp_directory_path() / name_;
+    fs::create_directories(dir_);
+    const scene::TextureRecord t{32, 32, full_mip_count(32, 32), uint32_t(TexelFormat::kRgba8)};
+    ASSERT_TRUE(scene::write_texture_table(dir_, std::span(&t, 1)).ok());
+    const auto header = scene::make_dds_header(TexelFormat::kRgba8, 32, 32, t.mip_count);
+    payload_.resize(scene::dds_file_bytes(TexelFormat::kRgba8, 32, 32, t.mip_count) - scene::kDdsHeaderBytes);
+    for (size_t i = 0; i < payload_.size(); ++i) payload_[i] = static_cast<std::byte>((i * 13 + 5) & 0xff);
+    const fs::path path = scene::texture_path(dir_, TextureId(0));
+    fs::create_directories(path.parent_path());
+    std::ofstream f(path, std::ios::binary);
+    f.write(reinterpret_cast<const char*>(header.data()), header.size());
+    f.write(reinterpret_cast<const char*>(payload_.data()), static_cast<std::streamsize>(payload_.size()));
+  }
+
+  void TearDown() override {
+    Segment::remove(name_);  // a killed owner could not remove it
+    fs::remove_all(dir_);
+  }
+
+  std::vector<std::string> server_args(bool spawned = false) {
+    std::vector<std::string> a{"--segment", name_, "--scene", dir_.string(), "--set", "server.idle_wait_ms=5"};
+    if (spawned) a.push_back("--spawned");
+    return a;
+  }
+
+  // Plays the renderer on a mapping of the segment: loads mip 1 of texture 0 and checks the bytes.
+  void stream_one_mip(Segment& seg) {
+    SpscRingProducer<RequestRecord> requests(seg.request_control(), seg.request_records(),
+                                             seg.header().request_capacity);
+    SpscRingConsumer<CompletionRecord> completions(seg.completion_control(), seg.completion_records(),
+                                                   seg.header().completion_capacity);
+    RequestRecord r{};
+    r.kind = static_cast<uint32_t>(RequestKind::kLoad);
+    r.mip_level = 1;
+    r.generation = 1;
+    ASSERT_TRUE(requests.try_push(r));
+    seg.renderer_block().doorbell.v.fetch_add(1, std::memory_order_seq_cst);
+    if (seg.server_block().sleeping.v.load(std::memory_order_seq_cst) == 1) futex_wake_all(seg.renderer_block().doorbell);
+    std::optional<CompletionRecord> c;
+    const auto deadline = std::chrono::steady_clock::now() + 10s;
+    while (!(c = completions.try_pop()) && std::chrono::steady_clock::now() < deadline) std::this_thread::sleep_for(1ms);
+    ASSERT_TRUE(c) << "no completion within 10 s";
+    ASSERT_EQ(c->status, uint32_t(CompletionStatus::kOk));
+    ASSERT_EQ(c->byte_size, 16u * 16u * 4u);
+    const uint64_t offset = mip_chain_offset(TexelFormat::kRgba8, 32, 32, 1);
+    EXPECT_EQ(std::memcmp(seg.slot(c->slot).data(), payload_.data() + offset, c->byte_size), 0);
+    EXPECT_EQ(c->checksum, payload_checksum(payload_.data() + offset, c->byte_size));
+  }
+
+  bool wait_attached(Segment& seg, uint32_t want) {
+    const auto deadline = std::chrono::steady_clock::now() + 10s;
+    while (seg.server_block().attached.v.load(std::memory_order_acquire) != want) {
+      if (std::chrono::steady_clock::now() >= deadline) return false;
+      std::this_thread::sleep_for(2ms);
+    }
+    return true;
+  }
+
+  // A forked child that creates the segment and sleeps until killed (optionally spawning the server itself,
+  // as the renderer does). Returns the child's pid; `server_pid` gets the grandchild's when spawned.
+  pid_t fork_owner(bool spawn_server_too, pid_t* server_pid) {
+    int fds[2];
+    if (pipe(fds) != 0) return -1;
+    const pid_t pid = fork();
+    if (pid == 0) {
+      close(fds[0]);
+      auto seg = Segment::create(name_, {});
+      pid_t child_server = 0;
+      if (seg.ok() && spawn_server_too) child_server = spawn_server(server_args(true));
+      const int32_t msg = seg.ok() ? static_cast<int32_t>(child_server) : -1;
+      (void)!write(fds[1], &msg, sizeof msg);
+      for (;;) pause();  // killed by the test; never returns into gtest
+    }
+    close(fds[1]);
+    int32_t msg = -1;
+    const ssize_t n = read(fds[0], &msg, sizeof msg);
+    close(fds[0]);
+    if (n != sizeof msg || msg < 0) {
+      kill(pid, SIGKILL);
+      waitpid(pid, nullptr, 0);
+      return -1;
+    }
+    if (server_pid) *server_pid = msg;
+    return pid;
+  }
+
+  std::string name_;
+  fs::path dir_;
+  std::vector<std::byte> payload_;
+};
+
+TEST_F(ServerProcessTest, BadArgumentsExitWithCode2) {
+  const pid_t no_segment = spawn_server({"--scene", dir_.string()});
+  EXPECT_EQ(wait_exit(no_segment, 10s), 2);
+  const pid_t bad_key = spawn_server({"--segment", name_, "--set", "server.no_such_key=1"});
+  EXPECT_EQ(wait_exit(bad_key, 10s), 2);
+  const pid_t bad_range = spawn_server({"--segment", name_, "--set", "server.worker_threads=0"});
+  EXPECT_EQ(wait_exit(bad_range, 10s), 2);
+}
+
+TEST_F(ServerProcessTest, MissingSegmentExitsWithCode3) {
+  const pid_t pid = spawn_server(server_args());
+  EXPECT_EQ(wait_exit(pid, 10s), 3);
+}
+
+TEST_F(ServerProcessTest, HeaderMismatchExitsWithCode3NamingTheField) {
+  auto seg = Segment::create(name_, {});
+  ASSERT_TRUE(seg.ok()) << seg.error().message;
+  // As if the renderer were built from another layout version: the header sits just before the RendererBlock.
+  auto* header = reinterpret_cast<SegmentHeader*>(reinterpret_cast<std::byte*>(&(*seg)->renderer_block()) -
+                                                  kSegmentHeaderBytes);
+  header->layout_version = kLayoutVersion + 1;
+  const fs::path log = dir_ / "stderr.txt";
+  const pid_t pid = spawn_server(server_args(), log);
+  EXPECT_EQ(wait_exit(pid, 10s), 3);
+  std::ifstream f(log);
+  std::ostringstream buffer;
+  buffer << f.rdbuf();
+  const std::string text = buffer.str();
+  EXPECT_NE(text.find("layout_version"), std::string::npos) << text;
+}
+
+TEST_F(ServerProcessTest, MissingSceneExitsWithCode2) {
+  auto seg = Segment::create(name_, {});
+  ASSERT_TRUE(seg.ok()) << seg.error().message;
+  const pid_t pid = spawn_server({"--segment", name_, "--scene", (dir_ / "nope").string()});
+  EXPECT_EQ(wait_exit(pid, 10s), 2);
+}
+
+TEST_F(ServerProcessTest, StreamsAMipAndExitsCleanlyOnSigterm) {
+  auto seg = Segment::create(name_, {});
+  ASSERT_TRUE(seg.ok()) << seg.error().message;
+  const pid_t pid = spawn_server(server_args());
+  ASSERT_TRUE(wait_attached(**seg, 1)) << "server never attached";
+  EXPECT_EQ((*seg)->server_block().pid.v.load(), static_cast<uint32_t>(pid));
+  EXPECT_TRUE(process_alive(pid, (*seg)->server_block().start_time.v.load()));
+  stream_one_mip(**seg);
+  kill(pid, SIGTERM);
+  EXPECT_EQ(wait_exit(pid, 10s), 0);
+  EXPECT_EQ((*seg)->server_block().attached.v.load(), 0u);
+}
+
+TEST_F(ServerProcessTest, ExitsWhenTheSegmentOwnerDies) {
+  const pid_t owner = fork_owner(false, nullptr);
+  ASSERT_GT(owner, 0) << "owner child could not create the segment";
+  auto seg = Segment::open(name_);
+  ASSERT_TRUE(seg.ok()) << seg.error().message;
+  const pid_t pid = spawn_server(server_args());
+  ASSERT_TRUE(wait_attached(**seg, 1));
+  stream_one_mip(**seg);
+  kill(owner, SIGKILL);
+  waitpid(owner, nullptr, 0);
+  EXPECT_EQ(wait_exit(pid, 10s), 0) << "the server must notice its renderer's death (pidfd) and exit 0";
+}
+
+TEST_F(ServerProcessTest, SpawnedServerDiesWithItsParent) {
+  pid_t server = 0;
+  const pid_t owner = fork_owner(true, &server);
+  ASSERT_GT(owner, 0);
+  ASSERT_GT(server, 0);
+  auto seg = Segment::open(name_);
+  ASSERT_TRUE(seg.ok()) << seg.error().message;
+  ASSERT_TRUE(wait_attached(**seg, 1));
+  const uint64_t start = (*seg)->server_block().start_time.v.load();
+  ASSERT_TRUE(process_alive(server, start));
+  kill(owner, SIGKILL);
+  waitpid(owner, nullptr, 0);
+  // The server is the owner's child, not ours: watch its identity (pid + start time) disappear.
+  const auto deadline = std::chrono::steady_clock::now() + 10s;
+  while (process_alive(server, start) && std::chrono::steady_clock::now() < deadline) std::this_thread::sleep_for(5ms);
+  EXPECT_FALSE(process_alive(server, start)) << "a --spawned server must die with its parent";
+}
+
+}  // namespace
+}  // namespace texstream

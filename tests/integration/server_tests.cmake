@@ -1,0 +1,8 @@
+# texture_server integration tests: a Server in the test process over a real segment (the test plays the
+# renderer), and the real texstream-server executable against a segment owned by a forked child.
+texstream_add_integration_test(server_streaming_test ${CMAKE_CURRENT_LIST_DIR}/server_streaming_test.cpp)
+target_link_libraries(server_streaming_test PRIVATE texstream::server)
+
+texstream_add_integration_test(server_process_test ${CMAKE_CURRENT_LIST_DIR}/server_process_test.cpp)
+target_link_libraries(server_process_test PRIVATE texstream::server)
+add_dependencies(server_process_test texstream-server)

@@ -1,0 +1,98 @@
+#include <gtest/gtest.h>
+
+#include <vector>
+
+#include "texstream/server/request_scheduler.hpp"
+
+namespace texstream::server {
+namespace {
+
+LoadRequest req(uint32_t texture, uint32_t mip, uint64_t generation, float priority) {
+  return LoadRequest{TextureId(texture), MipLevel(mip), Generation(generation), priority};
+}
+
+TEST(RequestSchedulerTest, PopsHighestPriorityFirstAndFifoOnTies) {
+  RequestScheduler s;
+  EXPECT_FALSE(s.add(req(1, 0, 1, 5)));
+  EXPECT_FALSE(s.add(req(2, 0, 1, 9)));
+  EXPECT_FALSE(s.add(req(3, 0, 1, 5)));
+  EXPECT_FALSE(s.add(req(4, 0, 1, 1)));
+  EXPECT_EQ(s.size(), 4u);
+  EXPECT_EQ(s.top()->texture.value, 2u);
+  std::vector<uint32_t> order;
+  while (auto r = s.pop()) order.push_back(r->texture.value);
+  EXPECT_EQ(order, (std::vector<uint32_t>{2, 1, 3, 4}));
+  EXPECT_TRUE(s.empty());
+}
+
+TEST(RequestSchedulerTest, DuplicateCoalescesKeepingMaxPriorityAndNewestGeneration) {
+  RequestScheduler s;
+  ASSERT_FALSE(s.add(req(1, 2, 1, 3)));
+  ASSERT_FALSE(s.add(req(7, 0, 1, 5)));
+  const auto cancelled = s.add(req(1, 2, 2, 8));
+  ASSERT_TRUE(cancelled);
+  EXPECT_EQ(cancelled->generation.value, 1u);  // the superseded request is the one answered
+  EXPECT_EQ(s.size(), 2u);
+  const auto top = s.pop();
+  EXPECT_EQ(top->texture.value, 1u);
+  EXPECT_EQ(top->generation.value, 2u);
+  EXPECT_FLOAT_EQ(top->priority, 8);
+  EXPECT_EQ(s.pop()->texture.value, 7u);
+  EXPECT_FALSE(s.pop());
+}
+
+TEST(RequestSchedulerTest, DuplicateWithLowerPriorityKeepsTheHigherOne) {
+  RequestScheduler s;
+  ASSERT_FALSE(s.add(req(1, 0, 1, 9)));
+  ASSERT_FALSE(s.add(req(2, 0, 1, 5)));
+  ASSERT_TRUE(s.add(req(1, 0, 2, 1)));
+  EXPECT_EQ(s.pop()->texture.value, 1u);
+}
+
+TEST(RequestSchedulerTest, NewerGenerationSupersedesWhatWasNotAskedAgain) {
+  RequestScheduler s;
+  for (uint32_t t = 0; t < 5; ++t) ASSERT_FALSE(s.add(req(t, 0, 1, static_cast<float>(t))));
+  ASSERT_TRUE(s.add(req(3, 0, 2, 1)));  // re-asked in cycle 2
+  ASSERT_FALSE(s.add(req(9, 0, 2, 1)));  // new in cycle 2
+  std::vector<LoadRequest> cancelled;
+  s.supersede_older_than(s.newest_generation(), cancelled);
+  EXPECT_EQ(cancelled.size(), 4u);  // 0, 1, 2, 4
+  for (const LoadRequest& c : cancelled) {
+    EXPECT_EQ(c.generation.value, 1u);
+    EXPECT_NE(c.texture.value, 3u);
+  }
+  EXPECT_EQ(s.size(), 2u);
+  std::vector<uint32_t> left;
+  while (auto r = s.pop()) {
+    EXPECT_EQ(r->generation.value, 2u);
+    left.push_back(r->texture.value);
+  }
+  EXPECT_EQ(left, (std::vector<uint32_t>{3, 9}));  // equal priority: 3 arrived first (cycle 1)
+}
+
+TEST(RequestSchedulerTest, RequestOlderThanNewestIsStaleOnArrival) {
+  RequestScheduler s;
+  ASSERT_FALSE(s.add(req(1, 0, 5, 1)));
+  const auto stale = s.add(req(2, 0, 4, 100));
+  ASSERT_TRUE(stale);
+  EXPECT_EQ(stale->texture.value, 2u);
+  EXPECT_EQ(s.size(), 1u);
+}
+
+TEST(RequestSchedulerTest, ManyPriorityRaisesKeepTheHeapBoundedAndCorrect) {
+  RequestScheduler s;
+  for (uint32_t t = 0; t < 10; ++t) ASSERT_FALSE(s.add(req(t, 0, 1, 0)));
+  // Raise texture 4 a thousand times: stale heap nodes pile up and must be compacted away.
+  for (int i = 1; i <= 1000; ++i) ASSERT_TRUE(s.add(req(4, 0, 1, static_cast<float>(i))));
+  EXPECT_EQ(s.size(), 10u);
+  EXPECT_EQ(s.pop()->texture.value, 4u);
+  int n = 0;
+  while (auto r = s.pop()) {
+    EXPECT_NE(r->texture.value, 4u);
+    ++n;
+  }
+  EXPECT_EQ(n, 9);
+}
+
+}  // namespace
+}  // namespace texstream::server

@@ -1,0 +1,275 @@
+#include "texstream/server/server.hpp"
+
+#include <unistd.h>
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "texstream/server/lru_eviction_policy.hpp"
+
+namespace texstream::server {
+
+namespace {
+
+// While loads are in flight the dispatcher naps at most this long: a worker's wake-up can slip in between the
+// dispatcher's last check and its futex_wait (the doorbell word, which workers do not write, has not changed),
+// so this bounds the cost of that race. 1 ms against loads of 0.1–10 ms.
+constexpr std::chrono::microseconds kBusyWait{1000};
+
+}  // namespace
+
+const char* to_string(RunOutcome outcome) {
+  switch (outcome) {
+    case RunOutcome::kStopped: return "stopped";
+    case RunOutcome::kRendererDead: return "renderer dead";
+    case RunOutcome::kPeerCorrupt: return "renderer broke the ring protocol";
+  }
+  return "?";
+}
+
+Result<std::unique_ptr<Server>> Server::create(Segment& segment, const std::filesystem::path& scene_dir,
+                                               const ServerConfig& config, Storage& storage) {
+  if (config.worker_threads < 1 || config.worker_threads > 64) {
+    return make_error(ErrorCode::kInvalidArgument, "server.worker_threads must be in [1, 64], not " +
+                                                       std::to_string(config.worker_threads));
+  }
+  if (config.ram_cache_bytes < 0) {
+    return make_error(ErrorCode::kInvalidArgument, "server.ram_cache_bytes must be >= 0");
+  }
+  if (!(config.idle_wait_ms > 0)) return make_error(ErrorCode::kInvalidArgument, "server.idle_wait_ms must be > 0");
+  Result<std::vector<scene::TextureRecord>> textures = scene::read_texture_table(scene_dir);
+  if (!textures.ok()) return textures.error();
+  // read_texture_table validates extents and mip counts; the format is re-checked here because everything
+  // downstream casts it.
+  for (size_t i = 0; i < textures->size(); ++i) {
+    if (!texel_format_from_raw((*textures)[i].format)) {
+      return make_error(ErrorCode::kCorrupt, "texture table of '" + scene_dir.string() + "': texture " +
+                                                 std::to_string(i) + " has unknown format " +
+                                                 std::to_string((*textures)[i].format));
+    }
+  }
+  return std::unique_ptr<Server>(new Server(segment, scene_dir, config, storage, std::move(textures).value()));
+}
+
+Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const ServerConfig& config, Storage& storage,
+               std::vector<scene::TextureRecord> textures)
+    : segment_(segment),
+      scene_dir_(scene_dir),
+      config_(config),
+      textures_(std::move(textures)),
+      requests_(segment.request_control(), segment.request_records(), segment.header().request_capacity),
+      completions_(segment.completion_control(), segment.completion_records(), segment.header().completion_capacity),
+      cache_(static_cast<uint64_t>(config.ram_cache_bytes), std::make_unique<LruEvictionPolicy>()),
+      loader_(scene_dir, storage, cache_, segment.server_block()),
+      slots_(segment.slot_count()) {
+  cancelled_scratch_.reserve(256);
+  results_scratch_.reserve(64);
+  ShmAtomic<uint32_t>* doorbell = &segment_.renderer_block().doorbell;
+  workers_ = std::make_unique<WorkerPool>(
+      static_cast<uint32_t>(config.worker_threads),
+      [this](const LoadJob& job) { return loader_.load(job.request, job.record, job.slot, segment_.slot(job.slot)); },
+      // FUTEX_WAKE does not write the word: the renderer stays its only writer. It only cuts the dispatcher's nap.
+      [doorbell] { futex_wake_all(*doorbell); });
+}
+
+Server::~Server() {
+  workers_.reset();  // join before the members the workers use go away
+}
+
+RunOutcome Server::run(const std::atomic<bool>& stop) {
+  ServerBlock& block = segment_.server_block();
+  RendererBlock& renderer = segment_.renderer_block();
+  const int self = static_cast<int>(::getpid());
+  // relaxed: these words are published to the renderer by the release-store of `attached` below.
+  block.pid.v.store(static_cast<uint32_t>(self), std::memory_order_relaxed);
+  block.start_time.v.store(process_start_time(self).value_or(0), std::memory_order_relaxed);
+  block.attached.v.store(1, std::memory_order_release);  // pairs with the renderer's acquire-load
+
+  // A pid alone is not an identity: first check that the pid in the segment is still the process that
+  // created it (pid + start time), then watch that pid through a pidfd — the kernel tells us when it exits.
+  const int renderer_pid = static_cast<int>(renderer.pid);
+  RunOutcome outcome = RunOutcome::kStopped;
+  PidWatch watch;
+  if (!process_alive(renderer_pid, renderer.start_time)) {
+    spdlog::warn("the renderer (pid {}) that created segment '{}' is gone", renderer_pid, segment_.name());
+    outcome = RunOutcome::kRendererDead;
+  } else {
+    watch = PidWatch(renderer_pid);
+  }
+
+  while (outcome == RunOutcome::kStopped && !stop.load(std::memory_order_relaxed)) {
+    block.heartbeat.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: progress counter, no data behind it
+    if (watch.dead()) {
+      spdlog::info("the renderer (pid {}) exited", renderer_pid);
+      outcome = RunOutcome::kRendererDead;
+      break;
+    }
+    bool busy = flush_completions();
+    busy |= drain_requests();
+    busy |= collect_results();
+    busy |= dispatch();
+    busy |= flush_completions();
+    if (requests_.error() != RingError::kNone || completions_.error() != RingError::kNone) {
+      spdlog::error("segment '{}': the renderer published an impossible ring position; giving up the segment",
+                    segment_.name());
+      outcome = RunOutcome::kPeerCorrupt;
+      break;
+    }
+    if (!busy) idle_wait();
+  }
+  block.attached.v.store(0, std::memory_order_release);  // pairs with the renderer's acquire-load
+  const MipCacheStats s = cache_.stats();
+  spdlog::info("{}: {} completions, {} cache hits, {} misses, {} evictions, {} bytes read", to_string(outcome),
+               block.completions.v.load(std::memory_order_relaxed), s.hits, s.misses, s.evictions,
+               block.bytes_read.v.load(std::memory_order_relaxed));
+  return outcome;
+}
+
+bool Server::drain_requests() {
+  bool any = false;
+  // Bounded per pass so that a flood of requests cannot starve completions and the heartbeat.
+  const uint32_t budget = segment_.header().request_capacity;
+  for (uint32_t i = 0; i < budget; ++i) {
+    const std::optional<RequestRecord> r = requests_.try_pop();
+    if (!r) break;
+    any = true;
+    if (r->kind == static_cast<uint32_t>(RequestKind::kLoad)) {
+      handle_load(*r);
+    } else if (r->kind == static_cast<uint32_t>(RequestKind::kReleaseSlot)) {
+      handle_release(*r);
+    } else {
+      spdlog::warn("dropped a request record of unknown kind {}", r->kind);
+    }
+  }
+  if (!any) return false;
+  // The batch read now is the renderer's latest cycle: pending requests of older cycles that it did not ask
+  // for again are stale (seed 002 §4.3: the server must not get bogged down processing old requests).
+  cancelled_scratch_.clear();
+  scheduler_.supersede_older_than(scheduler_.newest_generation(), cancelled_scratch_);
+  for (const LoadRequest& c : cancelled_scratch_) {
+    segment_.server_block().requests_cancelled.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
+    complete(make_completion(c, CompletionStatus::kCancelled));
+  }
+  return true;
+}
+
+void Server::handle_load(const RequestRecord& r) {
+  // Validate the copy: the ring's bytes are the renderer's and may be anything.
+  if (r.texture_id >= textures_.size()) {
+    spdlog::warn("dropped a load of texture {}: the scene has {} textures", r.texture_id, textures_.size());
+    return;
+  }
+  const scene::TextureRecord& t = textures_[r.texture_id];
+  if (r.mip_level >= t.mip_count) {
+    spdlog::warn("dropped a load of texture {} mip {}: it has {} mips", r.texture_id, r.mip_level, t.mip_count);
+    return;
+  }
+  if (std::isnan(r.priority)) {
+    spdlog::warn("dropped a load of texture {} mip {}: priority is NaN", r.texture_id, r.mip_level);
+    return;
+  }
+  ServerBlock& block = segment_.server_block();
+  block.requests_received.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
+  const LoadRequest request{TextureId(r.texture_id), MipLevel(r.mip_level), Generation(r.generation), r.priority};
+  const uint64_t bytes = mip_bytes(static_cast<TexelFormat>(t.format), t.width, t.height, r.mip_level);
+  if (bytes > segment_.slot_bytes()) {
+    spdlog::warn("texture {} mip {}: {} ({}): {} bytes do not fit a staging slot of {} bytes", r.texture_id,
+                 r.mip_level, to_string(CompletionStatus::kIoError),
+                 scene::texture_path(scene_dir_, request.texture).string(), bytes, segment_.slot_bytes());
+    complete(make_completion(request, CompletionStatus::kIoError));
+    return;
+  }
+  if (const std::optional<LoadRequest> cancelled = scheduler_.add(request)) {
+    block.requests_cancelled.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
+    complete(make_completion(*cancelled, CompletionStatus::kCancelled));
+  }
+}
+
+void Server::handle_release(const RequestRecord& r) {
+  if (!slots_.release_from_renderer(r.slot)) {
+    spdlog::warn("dropped a release of slot {}: the renderer does not own it ({} slots)", r.slot, slots_.count());
+  }
+}
+
+bool Server::collect_results() {
+  results_scratch_.clear();
+  workers_->take_results(results_scratch_);
+  for (const LoadResult& r : results_scratch_) {
+    TS_ASSERT(loads_in_flight_ > 0, "a worker result with no load in flight");
+    --loads_in_flight_;
+    if (r.completion.status == static_cast<uint32_t>(CompletionStatus::kOk)) {
+      slots_.hand_to_renderer(r.slot);
+    } else {
+      slots_.release_unused(r.slot);
+    }
+    complete(r.completion);
+  }
+  return !results_scratch_.empty();
+}
+
+bool Server::dispatch() {
+  bool any = false;
+  const uint32_t workers = workers_->threads();
+  while (!scheduler_.empty() && slots_.free_count() > 0) {
+    const std::optional<LoadRequest> top = scheduler_.top();
+    const bool worker_idle = loads_in_flight_ < workers;
+    // With every worker busy, a RAM-cache hit is still served here at once: a slow read must not hold up a
+    // fast hit (seed 002 §3.2, the bimodal access problem).
+    if (!worker_idle && !cache_.contains(top->key())) break;
+    const LoadRequest request = *scheduler_.pop();
+    const scene::TextureRecord& record = textures_[request.texture.value];
+    const uint32_t slot = *slots_.acquire();
+    any = true;
+    const CompletionRecord hit = loader_.serve_cached(request, record, slot, segment_.slot(slot));
+    if (hit.status == static_cast<uint32_t>(CompletionStatus::kOk)) {
+      slots_.hand_to_renderer(slot);
+      complete(hit);
+      continue;
+    }
+    // A miss (or an entry evicted since contains()): the job may wait in the pool's queue for a worker.
+    ++loads_in_flight_;
+    workers_->submit(LoadJob{request, record, slot});
+  }
+  return any;
+}
+
+void Server::complete(const CompletionRecord& c) {
+  // Order is kept: once anything waits locally, later completions queue behind it.
+  if (overflow_.empty() && completions_.try_push(c)) {
+    segment_.server_block().completions.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
+    return;
+  }
+  overflow_.push_back(c);
+}
+
+bool Server::flush_completions() {
+  bool any = false;
+  while (!overflow_.empty() && completions_.try_push(overflow_.front())) {
+    overflow_.pop_front();
+    segment_.server_block().completions.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
+    any = true;
+  }
+  return any;
+}
+
+void Server::idle_wait() {
+  ServerBlock& block = segment_.server_block();
+  RendererBlock& renderer = segment_.renderer_block();
+  const auto idle = std::chrono::microseconds(static_cast<int64_t>(config_.idle_wait_ms * 1000.0));
+  // Loads in flight or completions waiting for ring space: nap briefly (workers also wake us).
+  const bool short_nap = loads_in_flight_ > 0 || !overflow_.empty();
+  const auto timeout = short_nap ? std::min(idle, kBusyWait) : idle;
+  // The renderer pushes, bumps the doorbell, then (seq_cst) reads `sleeping` and wakes us if it is 1. We
+  // store `sleeping` and read the doorbell, both seq_cst (a store-load pair no weaker order keeps; seq_cst
+  // operations rather than a fence so that TSan sees them), and only then re-check the ring: a push we miss
+  // here bumped the doorbell after our read, so futex_wait returns at once instead of sleeping on it.
+  block.sleeping.v.store(1, std::memory_order_seq_cst);  // pairs with the renderer's seq_cst load of sleeping
+  const uint32_t seen = renderer.doorbell.v.load(std::memory_order_seq_cst);  // pairs with its bump (release+)
+  if (requests_.size() == 0) futex_wait(renderer.doorbell, seen, timeout);
+  block.sleeping.v.store(0, std::memory_order_relaxed);  // relaxed: a late 0 costs the renderer one wake call
+}
+
+}  // namespace texstream::server

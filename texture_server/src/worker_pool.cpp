@@ -1,0 +1,56 @@
+#include "texstream/server/worker_pool.hpp"
+
+namespace texstream::server {
+
+WorkerPool::WorkerPool(uint32_t threads, Work work, std::function<void()> on_result)
+    : work_(std::move(work)), on_result_(std::move(on_result)) {
+  results_.reserve(64);
+  threads_.reserve(threads);
+  for (uint32_t i = 0; i < threads; ++i) threads_.emplace_back([this] { worker_main(); });
+}
+
+WorkerPool::~WorkerPool() {
+  {
+    std::lock_guard lock(mutex_);
+    stopping_ = true;
+    jobs_.clear();
+  }
+  cv_.notify_all();
+  for (std::thread& t : threads_) t.join();
+}
+
+void WorkerPool::submit(const LoadJob& job) {
+  {
+    std::lock_guard lock(mutex_);
+    jobs_.push_back(job);
+  }
+  cv_.notify_one();
+}
+
+void WorkerPool::take_results(std::vector<LoadResult>& out) {
+  std::lock_guard lock(mutex_);
+  out.insert(out.end(), results_.begin(), results_.end());
+  results_.clear();
+}
+
+void WorkerPool::worker_main() {
+  for (;;) {
+    LoadJob job;
+    {
+      std::unique_lock lock(mutex_);
+      cv_.wait(lock, [this] { return stopping_ || !jobs_.empty(); });
+      if (stopping_) return;
+      job = jobs_.front();
+      jobs_.pop_front();
+    }
+    // The read and the copy run with no lock held.
+    const CompletionRecord completion = work_(job);
+    {
+      std::lock_guard lock(mutex_);
+      results_.push_back({completion, job.slot});
+    }
+    if (on_result_) on_result_();
+  }
+}
+
+}  // namespace texstream::server

@@ -1,0 +1,97 @@
+// texstream-gen: writes a procedural city scene (see scene_generator.hpp and common/scene_format.hpp).
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <chrono>
+#include <cstdio>
+#include <mutex>
+#include <thread>
+
+#include "scene_generator.hpp"
+
+namespace {
+
+// A one-line progress bar on stderr, redrawn at most every 200 ms; called from worker threads.
+class ProgressBar {
+ public:
+  void update(uint64_t done, uint64_t total) {
+    std::lock_guard lock(mutex_);
+    const auto now = std::chrono::steady_clock::now();
+    if (done < total && now - last_ < std::chrono::milliseconds(200)) return;
+    last_ = now;
+    const double elapsed = std::chrono::duration<double>(now - start_).count();
+    const double rate = elapsed > 0 ? static_cast<double>(done) / elapsed : 0.0;
+    const int width = 30, filled = static_cast<int>(width * done / std::max<uint64_t>(total, 1));
+    std::fprintf(stderr, "\r[%.*s%*s] %llu/%llu textures  %.0f/s  ETA %.0f s   ", filled,
+                 "##############################", width - filled, "", static_cast<unsigned long long>(done),
+                 static_cast<unsigned long long>(total), rate, rate > 0 ? static_cast<double>(total - done) / rate : 0.0);
+    if (done >= total) std::fprintf(stderr, "\n");
+  }
+
+ private:
+  std::mutex mutex_;
+  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+  std::chrono::steady_clock::time_point last_{};
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  using namespace texstream;
+  gen::GeneratorOptions opt;
+  std::string format = "bc1";
+  std::vector<double> origin;
+  CLI::App app{"texstream-gen: writes a procedural city scene (meshes, one DDS texture per mesh with a full mip "
+               "chain, City Colormap, default camera path)"};
+  app.add_option("--out", opt.out, "Scene folder to write")->required();
+  app.add_option("--textures", opt.texture_count, "Number of textures (= meshes), exactly")->required()
+      ->check(CLI::Range(uint64_t{1}, uint64_t{0xffffffffu}));
+  app.add_option("--seed", opt.seed, "Random seed: the same seed gives byte-identical files")->required();
+  app.add_option("--format", format, "Texel format of the textures")->check(CLI::IsMember({"rgba8", "bc1"}))
+      ->capture_default_str();
+  app.add_option("--threads", opt.threads, "Worker threads (default: all cores)")->check(CLI::Range(1u, 1024u));
+  app.add_option("--origin", origin, "Map coordinates X Y of the city centre, metres (default: 392000 5820000, "
+                                     "UTM 33N Berlin)")->expected(2);
+  app.add_flag("--force", opt.force, "Write into a non-empty folder, replacing a previous scene there");
+  CLI11_PARSE(app, argc, argv);
+  opt.format = *texel_format_from_string(format);
+  if (origin.size() == 2) {
+    opt.origin[0] = origin[0];
+    opt.origin[1] = origin[1];
+  }
+
+  const bool show_progress = ::isatty(STDERR_FILENO) || opt.texture_count >= 10000;
+  ProgressBar bar;
+  gen::ProgressFn progress;
+  if (show_progress) progress = [&bar](uint64_t done, uint64_t total) { bar.update(done, total); };
+
+  const auto start = std::chrono::steady_clock::now();
+  auto stats = gen::generate_scene(opt, progress);
+  if (!stats) {
+    std::fprintf(stderr, "texstream-gen: error: %s\n", stats.error().message.c_str());
+    return 1;
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const unsigned threads = opt.threads != 0 ? opt.threads : std::max(1u, std::thread::hardware_concurrency());
+
+  std::printf("texture extents (per side):\n");
+  uint64_t sides = 0;
+  for (uint64_t c : stats->side_histogram) sides += c;
+  for (size_t k = 0; k < stats->side_histogram.size(); ++k) {
+    if (stats->side_histogram[k] == 0) continue;
+    const double share = 100.0 * static_cast<double>(stats->side_histogram[k]) / static_cast<double>(sides);
+    std::printf("  2^%-2zu %5u  %9llu  %5.1f%%  %.*s\n", k, 1u << k,
+                static_cast<unsigned long long>(stats->side_histogram[k]), share, static_cast<int>(share / 2),
+                "##################################################");
+  }
+  std::printf("non-square textures: %.1f%%, average %.1f KB per texture, %.2f triangles per texture\n",
+              100.0 * static_cast<double>(stats->textures - stats->square_textures) / static_cast<double>(stats->textures),
+              static_cast<double>(stats->texture_bytes) / static_cast<double>(stats->textures) / 1024.0,
+              static_cast<double>(stats->triangles) / static_cast<double>(stats->textures));
+  std::printf("texstream-gen: %llu textures, %llu meshes, %llu triangles, %.1f MB written to %s in %.2f s "
+              "(%.0f textures/s on %u threads, %s)\n",
+              static_cast<unsigned long long>(stats->textures), static_cast<unsigned long long>(stats->meshes),
+              static_cast<unsigned long long>(stats->triangles), static_cast<double>(stats->bytes_written) / 1e6,
+              opt.out.c_str(), seconds, static_cast<double>(stats->textures) / seconds, threads, format.c_str());
+  return 0;
+}
