@@ -58,7 +58,7 @@ void TextureStates::roll_back(State& s) {
 }
 
 CycleResult TextureStates::run_cycle(std::span<const StreamCandidate> candidates, uint64_t load_bytes, float bias,
-                                     const Sender& send) {
+                                     const Sender& send, size_t max_requests) {
   CycleResult out;
   for (const StreamCandidate& c : candidates) {
     if (!contains(c.texture)) {
@@ -73,6 +73,10 @@ CycleResult TextureStates::run_cycle(std::span<const StreamCandidate> candidates
     // load, so the mip that first pushes the batch over s is still loaded.
     if (out.bytes > load_bytes) {
       out.stopped_by_load_size = true;
+      break;
+    }
+    if (out.sent.size() >= max_requests) {
+      out.stopped_by_count = true;
       break;
     }
     const MipRequest request{c.texture, MipLevel(*mip), c.weight, mip_bytes(shape.format, shape.width, shape.height, *mip)};

@@ -204,6 +204,21 @@ TEST(TextureStates, LoadSizeStopsTheCycleAfterTheMipThatExceedsIt) {
   }
 }
 
+TEST(TextureStates, MaxRequestsCapsTheCycle) {
+  TextureStates s(table());
+  Recorder rec;
+  const std::vector<StreamCandidate> list{cand(T0, 0), cand(T1, 0), cand(T2, 0)};
+  auto r = s.run_cycle(list, kHuge, 0, rec.fn(), 2);
+  ASSERT_EQ(r.sent.size(), 2u);
+  EXPECT_TRUE(r.stopped_by_count);
+  EXPECT_FALSE(r.stopped_by_load_size);
+  EXPECT_EQ(s.view(T2).phase, TexturePhase::kInitial);
+  r = s.run_cycle(list, kHuge, 0, rec.fn(), 2);
+  ASSERT_EQ(r.sent.size(), 1u);
+  EXPECT_EQ(r.sent[0].texture, T2);
+  EXPECT_FALSE(r.stopped_by_count);
+}
+
 TEST(TextureStates, TexturesWithNothingToLoadDoNotEndTheCycle) {
   TextureStates s(table());
   Recorder rec;

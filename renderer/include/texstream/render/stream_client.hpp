@@ -6,7 +6,7 @@
 //
 // Once per frame, never blocking (DESIGN.md: nothing on the frame path waits on the server):
 //   client.begin_cycle();                       // a streaming cycle starts: new Generation
-//   states.run_cycle(list, s, b, [&](const MipRequest& r) { return client.try_request(...); });
+//   states.run_cycle(list, s, b, client.sender(), max_mips_per_cycle);   // Algorithm 1 → kLoad requests
 //   client.poll(sink, budget);                  // heartbeat, server liveness, completions → sink
 //
 // Trust: every completion is copied out of the ring once and validated (check_completion, then the

@@ -18,6 +18,7 @@
 //   * The load-size test `if loadedBatchSize > s then break` runs before each load, exactly as in
 //     Algorithm 1, so the mip that first pushes the batch over s is still loaded; unlike the listing, the
 //     test comes before the state change, so the texture that hits the limit keeps its state.
+#include <cstddef>
 #include <cstdint>
 #include <functional>
 #include <optional>
@@ -80,6 +81,7 @@ struct CycleResult {
   uint64_t bytes = 0;           // sum of sent[i].bytes
   bool stopped_by_load_size = false;
   bool stopped_by_sender = false;
+  bool stopped_by_count = false;  // max_requests reached
   uint64_t unknown_textures = 0;  // candidates whose id is not in the texture table (ignored)
 };
 
@@ -104,9 +106,10 @@ class TextureStates {
 
   // One streaming cycle of Algorithm 1 (LoadTextures) over `candidates` in the given order (the caller
   // sorts by descending weight), with load size `load_bytes` (s) and mip bias `bias` (b >= 0). Every mip
-  // chosen is passed to `send`, in order, and what it accepts is returned.
+  // chosen is passed to `send`, in order, and what it accepts is returned. `max_requests` (config
+  // stream.max_mips_per_cycle) caps the mips sent in one cycle on top of s.
   CycleResult run_cycle(std::span<const StreamCandidate> candidates, uint64_t load_bytes, float bias,
-                        const Sender& send);
+                        const Sender& send, size_t max_requests = SIZE_MAX);
 
   // The renderer has uploaded `mip` of `texture` and may sample it. Returns false (and changes nothing)
   // when that mip is not the pending one: a late answer to a request from before an invalidate().

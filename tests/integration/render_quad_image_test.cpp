@@ -1,0 +1,238 @@
+// THE key image test. A scene written with the scene_format writers holds one quad that faces a still camera
+// and covers a known 256 x 256 pixel rectangle, textured with a 256 x 256 RGBA8 DDS of a known pattern. After
+// texstream-render has streamed the texture from the real texstream-server down to its finest mip, the quad's
+// pixels in the last PNG must equal the texture's mip 0 resampled to the rectangle (1:1 here), within
+// mean abs error < 4/255 and PSNR > 30 dB. Lighting is exactly 1 for a camera-facing quad and Eq. 8 gives the
+// colormap no weight at mip 0, so neither may change a texel. On failure, actual, expected and diff PNGs are
+// written next to the test output and their paths printed.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <vector>
+
+#define STB_IMAGE_IMPLEMENTATION
+#include <stb_image.h>
+#define STB_IMAGE_WRITE_IMPLEMENTATION
+#include <stb_image_write.h>
+
+#include "texstream/common/scene_format.hpp"
+
+namespace fs = std::filesystem;
+using namespace texstream;
+
+namespace {
+
+const fs::path kBin = TEXSTREAM_BIN_DIR;
+constexpr uint32_t kTex = 256;        // texture side
+constexpr int kWidth = 960, kHeight = 540;
+constexpr double kFovY = 60.0;
+constexpr double kDistance = 100.0;   // camera to quad, metres
+constexpr double kRectPx = 256.0;     // the quad's side on screen: one pixel per texel
+constexpr double kCamX = 392000.0, kCamY = 5820000.0, kCamZ = 50.0;  // map coordinates: large offsets on purpose
+
+struct Rgba {
+  uint8_t r, g, b, a;
+};
+
+// Pattern: red = x, green = y (smooth gradients), blue = a 32-texel checker (sharp edges every 32 texels).
+Rgba texel(uint32_t x, uint32_t y) {
+  const bool dark = ((x / 32) + (y / 32)) % 2 == 0;
+  return {static_cast<uint8_t>(x), static_cast<uint8_t>(y), static_cast<uint8_t>(dark ? 40 : 220), 255};
+}
+
+std::vector<std::vector<Rgba>> mip_chain() {
+  std::vector<std::vector<Rgba>> mips;
+  std::vector<Rgba> level(kTex * kTex);
+  for (uint32_t y = 0; y < kTex; ++y)
+    for (uint32_t x = 0; x < kTex; ++x) level[y * kTex + x] = texel(x, y);
+  mips.push_back(level);
+  for (uint32_t side = kTex / 2; side >= 1; side /= 2) {
+    const auto& prev = mips.back();
+    std::vector<Rgba> next(side * side);
+    for (uint32_t y = 0; y < side; ++y)
+      for (uint32_t x = 0; x < side; ++x) {
+        int sum[4] = {0, 0, 0, 0};
+        for (uint32_t dy = 0; dy < 2; ++dy)
+          for (uint32_t dx = 0; dx < 2; ++dx) {
+            const Rgba& p = prev[(2 * y + dy) * side * 2 + 2 * x + dx];
+            sum[0] += p.r, sum[1] += p.g, sum[2] += p.b, sum[3] += p.a;
+          }
+        next[y * side + x] = {static_cast<uint8_t>(sum[0] / 4), static_cast<uint8_t>(sum[1] / 4),
+                              static_cast<uint8_t>(sum[2] / 4), static_cast<uint8_t>(sum[3] / 4)};
+      }
+    mips.push_back(next);
+  }
+  return mips;
+}
+
+double focal_px() { return (kHeight / 2.0) / std::tan(kFovY * M_PI / 360.0); }
+
+void write_scene(const fs::path& dir) {
+  const double half = kDistance * (kRectPx / 2.0) / focal_px();  // quad half-size in metres
+  const auto h = static_cast<float>(half);
+  scene::MeshData md;
+  scene::MeshRecord m{};
+  m.origin[0] = kCamX;
+  m.origin[1] = kCamY + kDistance;  // straight ahead of a camera looking north
+  m.origin[2] = kCamZ;
+  m.bounds_min[0] = -h, m.bounds_min[1] = 0, m.bounds_min[2] = -h;
+  m.bounds_max[0] = h, m.bounds_max[1] = 0, m.bounds_max[2] = h;
+  m.vertex_count = 4;
+  m.index_count = 6;
+  m.texture_id = 0;
+  md.meshes.push_back(m);
+  // Normal towards the camera; uv (0, 0) at the top-left corner as seen: texture row 0 at the top.
+  md.vertices = {{{-h, 0, h}, {0, -1, 0}, {0, 0}},
+                 {{h, 0, h}, {0, -1, 0}, {1, 0}},
+                 {{h, 0, -h}, {0, -1, 0}, {1, 1}},
+                 {{-h, 0, -h}, {0, -1, 0}, {0, 1}}};
+  md.indices = {0, 1, 2, 0, 2, 3};
+  ASSERT_TRUE(scene::write_meshes(dir, md).ok());
+
+  const uint32_t mips = full_mip_count(kTex, kTex);
+  const scene::TextureRecord rec{kTex, kTex, mips, static_cast<uint32_t>(TexelFormat::kRgba8)};
+  ASSERT_TRUE(scene::write_texture_table(dir, std::span(&rec, 1)).ok());
+  const auto chain = mip_chain();
+  const Rgba avg = chain.back()[0];
+  const uint32_t colour = avg.r | (avg.g << 8) | (avg.b << 16) | (255u << 24);
+  ASSERT_TRUE(scene::write_colormap(dir, std::span(&colour, 1)).ok());
+
+  const fs::path dds = scene::texture_path(dir, TextureId(0));
+  fs::create_directories(dds.parent_path());
+  std::ofstream out(dds, std::ios::binary);
+  const auto header = scene::make_dds_header(TexelFormat::kRgba8, kTex, kTex, mips);
+  out.write(reinterpret_cast<const char*>(header.data()), header.size());
+  for (const auto& level : chain)
+    out.write(reinterpret_cast<const char*>(level.data()), static_cast<std::streamsize>(level.size() * 4));
+  ASSERT_TRUE(out.good());
+  out.close();
+
+  std::ofstream(dir / "camera_path.txt") << "# still camera looking north at the quad\n"
+                                         << std::fixed << "0 " << kCamX << " " << kCamY << " " << kCamZ << " 0 0\n"
+                                         << "1000 " << kCamX << " " << kCamY << " " << kCamZ << " 0 0\n";
+  scene::Manifest man;
+  man.name = "render quad image test";
+  man.mesh_count = 1;
+  man.texture_count = 1;
+  man.texture_format = TexelFormat::kRgba8;
+  man.origin = {kCamX, kCamY, kCamZ};
+  man.bounds_min = {kCamX - half, kCamY + kDistance, kCamZ - half};
+  man.bounds_max = {kCamX + half, kCamY + kDistance, kCamZ + half};
+  ASSERT_TRUE(scene::write_manifest(dir, man).ok());
+}
+
+int run(const std::string& cmd, const fs::path& log) {
+  const int status = std::system((cmd + " > '" + log.string() + "' 2>&1").c_str());
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// Bilinear sample of mip 0 at texel coordinates (tx, ty) (texel centres at +0.5), edges clamped.
+std::array<double, 3> sample(const std::vector<Rgba>& mip0, double tx, double ty) {
+  const double fx = std::clamp(tx - 0.5, 0.0, kTex - 1.0), fy = std::clamp(ty - 0.5, 0.0, kTex - 1.0);
+  const auto x0 = static_cast<uint32_t>(fx), y0 = static_cast<uint32_t>(fy);
+  const uint32_t x1 = std::min(x0 + 1, kTex - 1), y1 = std::min(y0 + 1, kTex - 1);
+  const double ax = fx - x0, ay = fy - y0;
+  std::array<double, 3> out{};
+  for (int c = 0; c < 3; ++c) {
+    auto ch = [&](uint32_t x, uint32_t y) {
+      const Rgba& p = mip0[y * kTex + x];
+      return static_cast<double>(c == 0 ? p.r : c == 1 ? p.g : p.b);
+    };
+    out[c] = (1 - ay) * ((1 - ax) * ch(x0, y0) + ax * ch(x1, y0)) + ay * ((1 - ax) * ch(x0, y1) + ax * ch(x1, y1));
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST(RenderQuadImage, FinestMipMatchesTheTextureOnScreen) {
+  const fs::path dir = fs::temp_directory_path() / ("texstream_render_quad_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir / "scene");
+  write_scene(dir / "scene");
+  if (HasFatalFailure()) return;
+
+  const fs::path out = dir / "out";
+  const std::string cmd = (kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
+                          " --set render.validation=true --set render.frames=60 --set render.write_every_frames=0" +
+                          " --set render.width_px=" + std::to_string(kWidth) +
+                          " --set render.height_px=" + std::to_string(kHeight) +
+                          " --set render.fov_y_deg=" + std::to_string(kFovY) +
+                          " --set cache.format=rgba8 --set render.output_dir=" + out.string();
+  const int rc = run(cmd, dir / "render.log");
+  const std::string log = slurp(dir / "render.log");
+  ASSERT_EQ(rc, 0) << log;
+  const auto summary = nlohmann::json::parse(slurp(out / "summary.json"));
+  EXPECT_EQ(summary["validation_errors"].get<int>(), 0) << log;
+  ASSERT_EQ(summary["textures_resident"].get<int>(), 1) << log;
+
+  int w = 0, h = 0, n = 0;
+  const fs::path png = out / "frames" / "frame_00059.png";
+  unsigned char* pixels = stbi_load(png.c_str(), &w, &h, &n, 4);
+  ASSERT_NE(pixels, nullptr) << png;
+  ASSERT_EQ(w, kWidth);
+  ASSERT_EQ(h, kHeight);
+
+  // Where the quad lands: a camera-facing square of kRectPx pixels centred on the screen.
+  const double x0 = kWidth / 2.0 - kRectPx / 2.0, y0 = kHeight / 2.0 - kRectPx / 2.0;
+  const auto chain = mip_chain();
+  // One pixel of margin: edge pixels are partly covered / clamped and say nothing about the texels.
+  const int px0 = static_cast<int>(x0) + 1, px1 = static_cast<int>(x0 + kRectPx) - 1;
+  const int py0 = static_cast<int>(y0) + 1, py1 = static_cast<int>(y0 + kRectPx) - 1;
+  const int rw = px1 - px0, rh = py1 - py0;
+  std::vector<unsigned char> actual(rw * rh * 4), expected(rw * rh * 4), diff(rw * rh * 4);
+  double abs_sum = 0, sq_sum = 0;
+  for (int y = py0; y < py1; ++y)
+    for (int x = px0; x < px1; ++x) {
+      const double u = (x + 0.5 - x0) / kRectPx, v = (y + 0.5 - y0) / kRectPx;
+      const auto e = sample(chain[0], u * kTex, v * kTex);
+      const unsigned char* a = pixels + (static_cast<size_t>(y) * w + x) * 4;
+      const size_t o = (static_cast<size_t>(y - py0) * rw + (x - px0)) * 4;
+      for (int c = 0; c < 3; ++c) {
+        const double d = a[c] - e[c];
+        abs_sum += std::abs(d);
+        sq_sum += d * d;
+        actual[o + c] = a[c];
+        expected[o + c] = static_cast<unsigned char>(std::lround(e[c]));
+        diff[o + c] = static_cast<unsigned char>(std::min(255.0, std::abs(d) * 8));  // x8 to make small errors visible
+      }
+      actual[o + 3] = expected[o + 3] = diff[o + 3] = 255;
+    }
+  const double count = 3.0 * rw * rh;
+  const double mae = abs_sum / count;
+  const double mse = sq_sum / count;
+  const double psnr = mse > 0 ? 10.0 * std::log10(255.0 * 255.0 / mse) : 99.0;
+  // A pixel well outside the quad is background, not texture: the comparison above is not vacuous.
+  const unsigned char* outside = pixels + (static_cast<size_t>(20) * w + 20) * 4;
+  const bool background_differs = std::abs(outside[0] - 20) + std::abs(outside[1] - 20) > 0;
+  stbi_image_free(pixels);
+  EXPECT_TRUE(background_differs);
+
+  std::printf("quad image: mean abs error %.3f / 255, PSNR %.2f dB over %d x %d pixels\n", mae, psnr, rw, rh);
+  const bool pass = mae < 4.0 && psnr > 30.0;
+  if (!pass) {
+    const fs::path a = dir / "quad_actual.png", e = dir / "quad_expected.png", d = dir / "quad_diff_x8.png";
+    stbi_write_png(a.c_str(), rw, rh, 4, actual.data(), rw * 4);
+    stbi_write_png(e.c_str(), rw, rh, 4, expected.data(), rw * 4);
+    stbi_write_png(d.c_str(), rw, rh, 4, diff.data(), rw * 4);
+    ADD_FAILURE() << "quad pixels differ from the texture: MAE " << mae << "/255, PSNR " << psnr << " dB\n"
+                  << "  actual:   " << a << "\n  expected: " << e << "\n  diff x8:  " << d << "\n" << log;
+    return;  // keep the folder for inspection
+  }
+  fs::remove_all(dir);
+}
