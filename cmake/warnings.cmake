@@ -8,6 +8,9 @@ target_compile_options(texstream_warnings INTERFACE
 if(TEXSTREAM_SANITIZE)
   if(TEXSTREAM_SANITIZE STREQUAL "thread")
     set(_san_flags -fsanitize=thread)
+    # GCC 12 warns (-Wtsan) that TSan does not model std::atomic_thread_fence; the doorbell's fences are
+    # documented and paired, so keep the warning visible but not fatal.
+    target_compile_options(texstream_warnings INTERFACE -Wno-error=tsan)
   elseif(TEXSTREAM_SANITIZE STREQUAL "address,undefined" OR TEXSTREAM_SANITIZE STREQUAL "address"
          OR TEXSTREAM_SANITIZE STREQUAL "undefined")
     set(_san_flags -fsanitize=${TEXSTREAM_SANITIZE} -fno-sanitize-recover=undefined)

@@ -51,14 +51,18 @@ void visit_keys(Config& c, V&& v) {
   v("render", "offscreen_fov_y_deg", c.render.offscreen_fov_y_deg, "deg", "Wider off-screen FOV whose meshes are requested at W = 1 (seed 000 §3.2)", Range{1, 170});
   v("render", "near_m", c.render.near_m, "m", "Near plane", Range{1e-3, 1e6});
   v("render", "far_m", c.render.far_m, "m", "Far plane", Range{1e-2, 1e8});
+  v("render", "headlight_ambient", c.render.headlight_ambient, "fraction", "Headlight: camera-facing surfaces keep all their colour, edge-on ones this fraction (1 = unlit)", Range{0, 1});
+  v("render", "staging_bytes", c.render.staging_bytes, "bytes", "Host-visible staging ring for uploads into the cache", Range{1 << 20, 1ll << 34});
 
   v("stream", "tau", c.stream.tau, "weight", "Mesh weight cutoff τ for compaction (seed 000 §3.3, Table 2)", Range{0, 1e12});
   v("stream", "max_anisotropy", c.stream.max_anisotropy, "ratio", "A_m for the mip-level metadata; sampling uses A_m/2 (seed 000 §3.2)", Range{1, 16});
   v("stream", "max_requests_in_flight", c.stream.max_requests_in_flight, "requests", "Requests outstanding at the server at once (pre-queue depth)", Range{1, 65536});
   v("stream", "max_mips_per_cycle", c.stream.max_mips_per_cycle, "mips", "Most mips requested in one streaming cycle", Range{1, 1e7});
   v("stream", "colormap_blend", c.stream.colormap_blend, "bool", "Blend sampled colour with the City Colormap by Eq. 8 (false: sample directly)", kAny);
+  v("stream", "foreground_distance_m", c.stream.foreground_distance_m, "m", "Eq. 2 distance weight: w_d = (1 - min(depth / this, 1))^4 (the seed's c_w normalised to metres)", Range{1e-3, 1e7});
+  v("stream", "load_bytes", c.stream.load_bytes, "bytes", "Load size s of one streaming cycle (fixed until the adaptive controller, Eq. 4-7)", Range{4096, 1ll << 34});
 
-  v("cache", "format", c.cache.format, "name", "Texel format of the GPU cache: rgba8 or bc1", kAny);
+  v("cache", "format", c.cache.format, "name", "Texel format of the GPU cache: auto (the scene's), rgba8 or bc1", kAny);
   v("cache", "layer_extent_px", c.cache.layer_extent_px, "px", "Side of one cache layer = the largest texture extent it holds (power of two)", Range{4, 16384});
   v("cache", "layers", c.cache.layers, "layers", "Array layers of the cache image (bounds GPU memory)", Range{1, 2048});
 }
@@ -197,7 +201,15 @@ Status Config::validate() const {
   if (!is_pow2(protocol.request_ring_capacity)) return bad("protocol.request_ring_capacity", "must be a power of two");
   if (!is_pow2(protocol.completion_ring_capacity)) return bad("protocol.completion_ring_capacity", "must be a power of two");
   if (!is_pow2(cache.layer_extent_px)) return bad("cache.layer_extent_px", "must be a power of two");
-  if (cache.format != "rgba8" && cache.format != "bc1") return bad("cache.format", "must be rgba8 or bc1, not '" + cache.format + "'");
+  if (cache.format != "auto" && cache.format != "rgba8" && cache.format != "bc1") {
+    return bad("cache.format", "must be auto, rgba8 or bc1, not '" + cache.format + "'");
+  }
+  if (render.staging_bytes < protocol.staging_slot_bytes) {
+    return bad("render.staging_bytes", "must hold at least one staging slot (protocol.staging_slot_bytes)");
+  }
+  if (stream.load_bytes > render.staging_bytes) {
+    return bad("stream.load_bytes", "must not exceed render.staging_bytes (one cycle's mips must fit the staging ring)");
+  }
   static const std::set<std::string> levels{"trace", "debug", "info", "warn", "error"};
   if (!levels.count(server.log_level)) return bad("server.log_level", "must be one of trace, debug, info, warn, error");
   if (render.near_m >= render.far_m) return bad("render.near_m", "must be less than render.far_m");

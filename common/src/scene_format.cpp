@@ -163,6 +163,11 @@ template <class T>
 Status get_field(const json& j, const char* key, T& out, const std::string& what) {
   const auto it = j.find(key);
   if (it == j.end()) return make_error(ErrorCode::kCorrupt, what + ": missing key '" + key + "'");
+  // nlohmann would silently wrap a negative number into an unsigned field.
+  if constexpr (std::is_unsigned_v<T>) {
+    if (!it->is_number_unsigned())
+      return make_error(ErrorCode::kCorrupt, what + ": key '" + key + "' must be a non-negative integer");
+  }
   try {
     out = it->template get<T>();
   } catch (const json::exception& e) {

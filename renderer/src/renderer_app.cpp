@@ -30,11 +30,6 @@ namespace {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
-// Eq. 2's foreground distance D (see shaders/mip_math.glsl): w_d falls from 1 at the camera to 0 at D. 500 m
-// spans a street-level view of a city block; there is no config key for it yet.
-constexpr float kForegroundDistanceM = 500.0f;
-// Headlight ambient term: surfaces seen edge-on keep 60 % of their colour, camera-facing ones 100 %.
-constexpr float kAmbient = 0.6f;
 // A new streaming cycle starts once at most this fraction of the previous cycle's requests is unanswered
 // ("mostly answered"), so the server always has work queued but the list stays fresh.
 constexpr double kCycleOutstandingFraction = 0.25;
@@ -93,9 +88,11 @@ Status Renderer::set_up() {
   if (path->keys().empty()) return make_error(ErrorCode::kInvalidArgument, path_file.string() + ": no keyframes");
   path_ = std::make_unique<CameraPath>(std::move(*path));
 
-  const auto format = texel_format_from_string(cfg_.cache.format);
+  // cache.format = auto takes the scene's texel format; an explicit one must match the scene's textures.
+  const auto format = cfg_.cache.format == "auto" ? std::optional<TexelFormat>(scene_.manifest.texture_format)
+                                                  : texel_format_from_string(cfg_.cache.format);
   if (!format) {
-    return make_error(ErrorCode::kInvalidArgument, "cache.format: '" + cfg_.cache.format + "' is not rgba8 or bc1");
+    return make_error(ErrorCode::kInvalidArgument, "cache.format: '" + cfg_.cache.format + "' is not auto, rgba8 or bc1");
   }
   auto ctx = VulkanContext::create({cfg_.render.device, cfg_.render.validation, *format == TexelFormat::kBc1});
   if (!ctx) return ctx.error();
@@ -107,14 +104,12 @@ Status Renderer::set_up() {
   co.format = *format;
   co.layer_extent = static_cast<uint32_t>(cfg_.cache.layer_extent_px);
   co.layers = static_cast<uint32_t>(cfg_.cache.layers);
-  // Room for several slots' worth of mips in flight to the GPU, at least 32 MiB.
-  co.staging_bytes = std::max<uint64_t>(32ull << 20, 4 * static_cast<uint64_t>(cfg_.protocol.staging_slot_bytes));
+  co.staging_bytes = static_cast<uint64_t>(cfg_.render.staging_bytes);
   auto cache = TextureCache::create(*ctx_, co, scene_, *states_);
   if (!cache) return cache.error();
   cache_ = std::move(*cache);
-  // Fixed load size s until the adaptive controller (Eq. 4-7) exists: half the staging ring, so one cycle's
-  // answers fit in it with room to spare.
-  load_bytes_ = co.staging_bytes / 2;
+  // Fixed load size s until the adaptive controller (Eq. 4-7) exists; validate() keeps it within the staging ring.
+  load_bytes_ = static_cast<uint64_t>(cfg_.stream.load_bytes);
 
   auto gpu = SceneGpu::create(*ctx_, scene_);
   if (!gpu) return gpu.error();
@@ -195,7 +190,8 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   const float a_m = static_cast<float>(cfg_.stream.max_anisotropy);
   fu->camera_forward = {cam.forward.x, cam.forward.y, cam.forward.z, 0.0f};
   // A_s = A_m / 2 (seed 000 §3.2), at least one tap.
-  fu->params = {a_m, std::max(1.0f, std::floor(a_m / 2.0f)), kForegroundDistanceM, kAmbient};
+  fu->params = {a_m, std::max(1.0f, std::floor(a_m / 2.0f)), static_cast<float>(cfg_.stream.foreground_distance_m),
+                static_cast<float>(cfg_.render.headlight_ambient)};
   const double tau_fixed = std::min(cfg_.stream.tau * gpu::kWeightFixedScale, 4294967295.0);
   fu->flags = {(cfg_.stream.colormap_blend ? gpu::kFlagColormapBlend : 0u) | gpu::kFlagLighting,
                scene_gpu_->mesh_count, static_cast<uint32_t>(std::ceil(tau_fixed)), scene_gpu_->compact_capacity};

@@ -141,7 +141,7 @@ void StreamClient::begin_cycle() {
 
 std::optional<uint64_t> StreamClient::server_read_position() const {
   // acquire: pairs with the server's release-store of read_pos (as in SpscRingProducer::try_push).
-  const uint64_t read = const_cast<Segment&>(*segment_).request_control()->read_pos.v.load(std::memory_order_acquire);
+  const uint64_t read = std::as_const(*segment_).request_control()->read_pos.v.load(std::memory_order_acquire);
   const uint64_t write = requests_.position();
   if (read > write || write - read > requests_.capacity()) return std::nullopt;
   return read;
@@ -447,7 +447,7 @@ StreamStats StreamClient::stats() const {
   s.in_flight = in_flight_.size();
   s.slots_held = static_cast<uint64_t>(std::count(slot_held_.begin(), slot_held_.end(), uint8_t{1}));
   s.releases_queued = release_queue_.size();
-  const ServerBlock& sb = const_cast<Segment&>(*segment_).server_block();
+  const ServerBlock& sb = std::as_const(*segment_).server_block();
   s.server_ram_cache_hits = past_hits_ + sb.ram_cache_hits.v.load(std::memory_order_relaxed);
   s.server_ram_cache_misses = past_misses_ + sb.ram_cache_misses.v.load(std::memory_order_relaxed);
   s.server_bytes_read = past_bytes_read_ + sb.bytes_read.v.load(std::memory_order_relaxed);

@@ -145,6 +145,13 @@ TEST_F(SceneFormatTest, ManifestRejectsMissingWrongAndUnknown) {
   ASSERT_FALSE(e3.ok());
   expect_error_names(e3.error(), "'seed'");
 
+  std::string negative = s;
+  negative.replace(negative.find("\"texture_count\": 0"), 18, "\"texture_count\": -1");
+  write_text(negative);
+  auto e5 = read_manifest(dir_);
+  ASSERT_FALSE(e5.ok());
+  expect_error_names(e5.error(), "texture_count");
+
   std::string wrong_type = s;
   wrong_type.replace(wrong_type.find("\"mesh_count\": 0"), 15, "\"mesh_count\": \"a\"");
   write_text(wrong_type);

@@ -49,6 +49,8 @@ struct RenderConfig {
   double offscreen_fov_y_deg = 75;      // wider off-screen FOV whose meshes are requested at W = 1 (seed 000 §3.2)
   double near_m = 1;
   double far_m = 20000;
+  double headlight_ambient = 0.6;       // headlight: camera-facing surfaces 1, edge-on ones this fraction (1 = unlit)
+  int64_t staging_bytes = 32ll << 20;   // host-visible staging ring for uploads into the cache
 };
 
 struct StreamConfig {
@@ -57,10 +59,12 @@ struct StreamConfig {
   int64_t max_requests_in_flight = 256; // pre-queue depth sent to the server per cycle
   int64_t max_mips_per_cycle = 512;     // upload budget per streaming cycle
   bool colormap_blend = true;           // Eq. 8 blending; false samples directly
+  double foreground_distance_m = 500;   // Eq. 2: w_d falls from 1 at the camera to 0 at this view depth
+  int64_t load_bytes = 16ll << 20;      // fixed load size s per streaming cycle (until the adaptive controller)
 };
 
 struct CacheConfig {
-  std::string format = "rgba8";         // rgba8 or bc1: the texel format of the GPU cache
+  std::string format = "auto";          // auto (the scene's format), rgba8 or bc1: the texel format of the GPU cache
   int64_t layer_extent_px = 512;        // side of one cache layer; the largest texture extent it can hold
   int64_t layers = 64;                  // array layers of the cache image (GPU memory bound)
 };

@@ -76,6 +76,6 @@ inline Error make_error(ErrorCode code, std::string message) { return Error{code
 // Propagates an error from an expression returning Result<...> out of a function returning Result<...>.
 #define TS_TRY(expr)                                       \
   do {                                                     \
-    auto ts_try_result_ = (expr);                          \
+    auto&& ts_try_result_ = (expr);                        \
     if (!ts_try_result_.ok()) return ts_try_result_.error(); \
   } while (0)

@@ -35,11 +35,15 @@ class Segment {
   const std::string& name() const { return name_; }
   const SegmentHeader& header() const { return header_copy_; }  // validated local copy, never re-read
   RendererBlock& renderer_block() { return *renderer_block_; }
+  const RendererBlock& renderer_block() const { return *renderer_block_; }
   ServerBlock& server_block() { return *server_block_; }
+  const ServerBlock& server_block() const { return *server_block_; }
 
   RingControl* request_control() { return request_control_; }
+  const RingControl* request_control() const { return request_control_; }
   RequestRecord* request_records() { return request_records_; }
   RingControl* completion_control() { return completion_control_; }
+  const RingControl* completion_control() const { return completion_control_; }
   CompletionRecord* completion_records() { return completion_records_; }
 
   uint32_t slot_count() const { return header_copy_.slot_count; }

@@ -4,7 +4,9 @@
 // a "colormap only" mode after repeated crashes, and a progress watchdog that SIGKILLs a hung server.
 //
 // Frame-safe: every method but the destructor returns at once. Time is passed in (`now`), never read here,
-// so the back-off schedule can be tested with a virtual clock. One thread (the renderer's frame loop) owns it.
+// so the back-off schedule can be tested with a virtual clock. One thread (the renderer's frame loop) owns it
+// and must outlive the child: a `--spawned` server asks for PR_SET_PDEATHSIG, which Linux fires when the
+// *thread* that spawned it exits, not the process.
 //
 // The caller (StreamClient) sequences what must happen around a death: reap() reports it, the caller resets
 // the shared segment (only after the reap: the dead process was the sole writer of its words), and only
