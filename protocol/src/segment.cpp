@@ -1,6 +1,7 @@
 #include "texstream/protocol/segment.hpp"
 
 #include <dirent.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <boost/interprocess/mapped_region.hpp>
@@ -37,6 +38,10 @@ std::string compiler_id() {
 }
 
 bool is_pow2(uint32_t v) { return v != 0 && (v & (v - 1)) == 0; }
+
+// How long a segment may stay un-ready before remove_stale() takes its creator for dead. Creation takes
+// microseconds; a minute leaves room for a creator that is descheduled on a loaded 2-core machine.
+constexpr time_t kCreationGraceS = 60;
 
 }  // namespace
 
@@ -236,17 +241,27 @@ int Segment::remove_stale(const std::string& prefix) {
   while (dirent* e = ::readdir(dir)) {
     const std::string name = e->d_name;
     if (name.rfind(prefix, 0) != 0) continue;
+    // A segment that is not `ready` may be one another process is creating right now (shm_open, truncate and
+    // the header take microseconds): it counts as stale only once it is older than kCreationGrace.
+    struct stat st {};
+    if (::stat(("/dev/shm/" + name).c_str(), &st) != 0) continue;
+    const bool old_enough = ::time(nullptr) - st.st_ctime > kCreationGraceS;
     bool stale = false;
     try {
       bip::shared_memory_object shm(bip::open_only, name.c_str(), bip::read_only);
       bip::offset_t size = 0;
       if (!shm.get_size(size) || size < static_cast<bip::offset_t>(kSegmentHeaderBytes + sizeof(RendererBlock))) {
-        stale = true;  // too small to be a segment we made: a creator died before truncate()
+        stale = old_enough;  // too small to be a segment: a creator died before truncate()
       } else {
         bip::mapped_region region(shm, bip::read_only, 0, kSegmentHeaderBytes + sizeof(RendererBlock));
         const auto* rb = reinterpret_cast<const RendererBlock*>(static_cast<const std::byte*>(region.get_address()) +
                                                                 kSegmentHeaderBytes);
-        stale = !process_alive(static_cast<int>(rb->pid), rb->start_time);
+        // acquire: pairs with the creator's release-store of `ready`; pid and start time are valid after it.
+        if (rb->ready.v.load(std::memory_order_acquire) != 1) {
+          stale = old_enough;
+        } else {
+          stale = !process_alive(static_cast<int>(rb->pid), rb->start_time);
+        }
       }
     } catch (const bip::interprocess_exception&) {
       continue;

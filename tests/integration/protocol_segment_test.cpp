@@ -10,6 +10,8 @@
 #include <cstring>
 #include <thread>
 
+#include <boost/interprocess/shared_memory_object.hpp>
+
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
 
@@ -95,6 +97,19 @@ TEST(Segment, StaleSegmentOfAKilledOwnerIsRemoved) {
   EXPECT_FALSE(Segment::open(name).ok());
   close(ready[0]);
   close(ready[1]);
+}
+
+TEST(Segment, ASegmentBeingCreatedIsNotTakenForStale) {
+  // Another process between shm_open/truncate and `ready`: its segment has pid 0 and is not ready. A
+  // concurrent remove_stale() (every renderer runs one at start) must leave it alone.
+  const std::string prefix = "texstream-test-creating-" + std::to_string(getpid()) + "-";
+  const std::string name = prefix + "a";
+  boost::interprocess::shared_memory_object shm(boost::interprocess::create_only, name.c_str(),
+                                                boost::interprocess::read_write);
+  EXPECT_EQ(Segment::remove_stale(prefix), 0) << "an empty, just-created segment was removed";
+  shm.truncate(static_cast<boost::interprocess::offset_t>(compute_layout({16, 16, 1, 4096}).total_bytes));
+  EXPECT_EQ(Segment::remove_stale(prefix), 0) << "a sized but not yet ready segment was removed";
+  EXPECT_TRUE(Segment::remove(name));
 }
 
 TEST(Liveness, IdentityIsPidPlusStartTime) {
