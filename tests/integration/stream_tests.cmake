@@ -1,5 +1,5 @@
 # Streaming client against a fake server thread on a real shared segment, the server supervisor against
-# stand-in processes, and one end-to-end run with the real texstream-server (skipped if it is not built).
+# stand-in processes, and one end-to-end run with the real texstream-server (the server is built first).
 if(NOT TARGET texstream_stream)
   include(${PROJECT_SOURCE_DIR}/renderer/stream.cmake)
 endif()
@@ -9,3 +9,6 @@ texstream_add_integration_test(stream_integration_tests
   ${CMAKE_CURRENT_LIST_DIR}/stream_server_process_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/stream_real_server_test.cpp)
 target_link_libraries(stream_integration_tests PRIVATE texstream::stream texstream::protocol texstream::common)
+if(TARGET texstream-server)
+  add_dependencies(stream_integration_tests texstream-server)
+endif()
