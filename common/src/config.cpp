@@ -36,6 +36,8 @@ void visit_keys(Config& c, V&& v) {
   v("server", "ram_cache_bytes", c.server.ram_cache_bytes, "bytes", "Byte budget of the server's RAM cache of mips", Range{0, 1ll << 40});
   v("server", "idle_wait_ms", c.server.idle_wait_ms, "ms", "Longest futex wait for new requests when idle", Range{0.1, 1000});
   v("server", "log_level", c.server.log_level, "level", "trace, debug, info, warn or error", kAny);
+  v("server", "cache_policy", c.server.cache_policy, "name", "RAM cache eviction: lru, or level (seed 002 Eq. 4 discard priority)", kAny);
+  v("server", "rate_limit_mb_s", c.server.rate_limit_mb_s, "MB/s", "Cap on storage reads (0: unlimited), seed 002 §3.3", Range{0, 1e6});
 
   v("render", "device", c.render.device, "name", "Substring of the Vulkan device name to use; empty: the first device", kAny);
   v("render", "validation", c.render.validation, "bool", "Enable the Khronos validation layer", kAny);
@@ -52,6 +54,8 @@ void visit_keys(Config& c, V&& v) {
   v("render", "near_m", c.render.near_m, "m", "Near plane", Range{1e-3, 1e6});
   v("render", "far_m", c.render.far_m, "m", "Far plane", Range{1e-2, 1e8});
   v("render", "headlight_ambient", c.render.headlight_ambient, "fraction", "Headlight: camera-facing surfaces keep all their colour, edge-on ones this fraction (1 = unlit)", Range{0, 1});
+  v("render", "debug_view", c.render.debug_view, "name", "none, mip (displayed mip as grey), weight (heat map) or mesh_id", kAny);
+  v("render", "feedback", c.render.feedback, "bool", "Visibility metadata pass and compaction (off only to measure their cost)", kAny);
   v("render", "staging_bytes", c.render.staging_bytes, "bytes", "Host-visible staging ring for uploads into the cache", Range{1 << 20, 1ll << 34});
 
   v("stream", "tau", c.stream.tau, "weight", "Mesh weight cutoff τ for compaction (seed 000 §3.3, Table 2)", Range{0, 1e12});
@@ -60,8 +64,15 @@ void visit_keys(Config& c, V&& v) {
   v("stream", "max_mips_per_cycle", c.stream.max_mips_per_cycle, "mips", "Most mips requested in one streaming cycle", Range{1, 1e7});
   v("stream", "colormap_blend", c.stream.colormap_blend, "bool", "Blend sampled colour with the City Colormap by Eq. 8 (false: sample directly)", kAny);
   v("stream", "foreground_distance_m", c.stream.foreground_distance_m, "m", "Eq. 2 distance weight: w_d = (1 - min(depth / this, 1))^4 (the seed's c_w normalised to metres)", Range{1e-3, 1e7});
-  v("stream", "load_bytes", c.stream.load_bytes, "bytes", "Load size s of one streaming cycle (fixed until the adaptive controller, Eq. 4-7)", Range{4096, 1ll << 34});
 
+  v("controller", "mode", c.controller.mode, "name", "adaptive (Eq. 4-7), none (s = s_max, b = 0: the seed's baseline) or fixed", kAny);
+  v("controller", "alpha_ms", c.controller.alpha_ms, "ms", "α: target maximum frame latency (seed 000 Table 2)", Range{0.1, 10000});
+  v("controller", "beta", c.controller.beta, "levels", "β: maximum mip bias (Table 2)", Range{0, 16});
+  v("controller", "s_min_mb", c.controller.s_min_mb, "MB", "Minimum load size s_min (Table 2: one 64 KiB sparse block)", Range{0.001, 1e5});
+  v("controller", "s_max_mb", c.controller.s_max_mb, "MB", "Maximum load size s_max (Table 2)", Range{0.001, 1e5});
+  v("controller", "load_time_ms", c.controller.load_time_ms, "ms", "Longest time one streaming cycle may spend loading (Table 2)", Range{0.1, 1e6});
+  v("controller", "fixed_load_mb", c.controller.fixed_load_mb, "MB", "mode = fixed: load size s", Range{0.001, 1e5});
+  v("controller", "fixed_bias", c.controller.fixed_bias, "levels", "mode = fixed: mip bias b", Range{0, 16});
   v("cache", "format", c.cache.format, "name", "Texel format of the GPU cache: auto (the scene's), rgba8 or bc1", kAny);
   v("cache", "layer_extent_px", c.cache.layer_extent_px, "px", "Side of one cache layer = the largest texture extent it holds (power of two)", Range{4, 16384});
   v("cache", "layers", c.cache.layers, "layers", "Array layers of the cache image (bounds GPU memory)", Range{1, 2048});
@@ -207,11 +218,15 @@ Status Config::validate() const {
   if (render.staging_bytes < protocol.staging_slot_bytes) {
     return bad("render.staging_bytes", "must hold at least one staging slot (protocol.staging_slot_bytes)");
   }
-  if (stream.load_bytes > render.staging_bytes) {
-    return bad("stream.load_bytes", "must not exceed render.staging_bytes (one cycle's mips must fit the staging ring)");
-  }
   static const std::set<std::string> levels{"trace", "debug", "info", "warn", "error"};
   if (!levels.count(server.log_level)) return bad("server.log_level", "must be one of trace, debug, info, warn, error");
+  static const std::set<std::string> policies{"lru", "level"};
+  if (!policies.count(server.cache_policy)) return bad("server.cache_policy", "must be lru or level, not '" + server.cache_policy + "'");
+  static const std::set<std::string> views{"none", "mip", "weight", "mesh_id"};
+  if (!views.count(render.debug_view)) return bad("render.debug_view", "must be none, mip, weight or mesh_id");
+  static const std::set<std::string> modes{"adaptive", "none", "fixed"};
+  if (!modes.count(controller.mode)) return bad("controller.mode", "must be adaptive, none or fixed, not '" + controller.mode + "'");
+  if (controller.s_min_mb > controller.s_max_mb) return bad("controller.s_min_mb", "must not exceed controller.s_max_mb");
   if (render.near_m >= render.far_m) return bad("render.near_m", "must be less than render.far_m");
   if (render.offscreen_fov_y_deg < render.fov_y_deg) {
     return bad("render.offscreen_fov_y_deg", "must be at least render.fov_y_deg");

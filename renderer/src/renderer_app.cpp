@@ -108,8 +108,9 @@ Status Renderer::set_up() {
   auto cache = TextureCache::create(*ctx_, co, scene_, *states_);
   if (!cache) return cache.error();
   cache_ = std::move(*cache);
-  // Fixed load size s until the adaptive controller (Eq. 4-7) exists; validate() keeps it within the staging ring.
-  load_bytes_ = static_cast<uint64_t>(cfg_.stream.load_bytes);
+  // Fixed load size s (controller.fixed_load_mb, MB = 10^6 bytes as in seed Table 2) until the adaptive
+  // controller (Eq. 4-7) is wired in.
+  load_bytes_ = static_cast<uint64_t>(cfg_.controller.fixed_load_mb * 1e6);
 
   auto gpu = SceneGpu::create(*ctx_, scene_);
   if (!gpu) return gpu.error();

@@ -32,6 +32,8 @@ struct ServerConfig {
   int64_t ram_cache_bytes = 256ll << 20;
   double idle_wait_ms = 20;             // futex wait between doorbells (also paces the heartbeat)
   std::string log_level = "info";       // trace, debug, info, warn, error
+  std::string cache_policy = "lru";     // RAM cache eviction: lru, or level (seed 002 Eq. 4 discard priority)
+  double rate_limit_mb_s = 0;           // storage read rate cap in MB/s (0: unlimited), seed 002 §3.3
 };
 
 struct RenderConfig {
@@ -51,6 +53,8 @@ struct RenderConfig {
   double far_m = 20000;
   double headlight_ambient = 0.6;       // headlight: camera-facing surfaces 1, edge-on ones this fraction (1 = unlit)
   int64_t staging_bytes = 32ll << 20;   // host-visible staging ring for uploads into the cache
+  std::string debug_view = "none";      // none, mip (displayed mip as grey), weight (heat map), mesh_id
+  bool feedback = true;                 // visibility metadata pass + compaction (off: for cost measurements)
 };
 
 struct StreamConfig {
@@ -60,7 +64,18 @@ struct StreamConfig {
   int64_t max_mips_per_cycle = 512;     // upload budget per streaming cycle
   bool colormap_blend = true;           // Eq. 8 blending; false samples directly
   double foreground_distance_m = 500;   // Eq. 2: w_d falls from 1 at the camera to 0 at this view depth
-  int64_t load_bytes = 16ll << 20;      // fixed load size s per streaming cycle (until the adaptive controller)
+};
+
+// Adaptive streaming controller, seed 000 §3.4 Eq. 4-7 and Table 2.
+struct ControllerConfig {
+  std::string mode = "adaptive";        // adaptive (Eq. 4-7), none (s = s_max, b = 0: the seed's baseline), fixed
+  double alpha_ms = 16;                 // α: target maximum frame latency
+  double beta = 8;                      // β: maximum mip bias
+  double s_min_mb = 0.065;              // minimum load size (one 64 KiB sparse block)
+  double s_max_mb = 64;                 // maximum load size
+  double load_time_ms = 16;             // maximum time one streaming cycle may spend loading
+  double fixed_load_mb = 16;            // mode = fixed: load size s
+  double fixed_bias = 0;                // mode = fixed: mip bias b
 };
 
 struct CacheConfig {
@@ -75,6 +90,7 @@ struct Config {
   ServerConfig server;
   RenderConfig render;
   StreamConfig stream;
+  ControllerConfig controller;
   CacheConfig cache;
 
   // Relations between fields (filament validateConfig style); messages name the keys.

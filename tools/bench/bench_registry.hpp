@@ -1,0 +1,27 @@
+#pragma once
+// texstream-bench subcommands register themselves here, one file each (server_bench.cpp, controller_bench.cpp,
+// ...), so parts can add benchmarks without touching main.cpp. Every subcommand accepts --quick (finishes in
+// 60 s on the 2-core machine) and ends its output with exactly one line `summary: key=value ...`.
+#include <string>
+#include <vector>
+
+namespace texstream::bench {
+
+struct Command {
+  const char* name;
+  const char* help;
+  int (*run)(const std::vector<std::string>& args);  // args after the subcommand name; returns the exit code
+};
+
+void register_command(const Command& command);
+const std::vector<Command>& commands();
+
+struct Registrar {
+  explicit Registrar(const Command& command) { register_command(command); }
+};
+
+}  // namespace texstream::bench
+
+// In a subcommand's .cpp: TEXSTREAM_BENCH_COMMAND(server, "RAM cache and exact-read throughput", run_server);
+#define TEXSTREAM_BENCH_COMMAND(id, help, fn) \
+  static const ::texstream::bench::Registrar texstream_bench_registrar_##id({#id, help, fn})

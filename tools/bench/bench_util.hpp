@@ -1,0 +1,70 @@
+#pragma once
+// Small helpers every benchmark uses: percentiles, the summary line, and a monotonic stopwatch.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace texstream::bench {
+
+// p in [0, 100]; nearest-rank on a sorted copy. Empty input gives 0.
+inline double percentile(std::vector<double> values, double p) {
+  if (values.empty()) return 0.0;
+  std::sort(values.begin(), values.end());
+  const double rank = p / 100.0 * static_cast<double>(values.size() - 1);
+  const size_t lo = static_cast<size_t>(rank);
+  const size_t hi = std::min(lo + 1, values.size() - 1);
+  const double frac = rank - static_cast<double>(lo);
+  return values[lo] * (1.0 - frac) + values[hi] * frac;
+}
+
+inline double mean(const std::vector<double>& values) {
+  if (values.empty()) return 0.0;
+  double sum = 0;
+  for (double v : values) sum += v;
+  return sum / static_cast<double>(values.size());
+}
+
+// Prints `summary: k1=v1 k2=v2 ...` as the last line of a benchmark (keys are read by tooling: keep them stable).
+class Summary {
+ public:
+  Summary& add(const std::string& key, double value) {
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%.6g", value);
+    items_.emplace_back(key, buf);
+    return *this;
+  }
+  Summary& add(const std::string& key, const std::string& value) {
+    items_.emplace_back(key, value);
+    return *this;
+  }
+  Summary& add_bool(const std::string& key, bool value) { return add(key, std::string(value ? "true" : "false")); }
+  void print() const {
+    std::string line = "summary:";
+    for (const auto& [k, v] : items_) line += " " + k + "=" + v;
+    std::printf("%s\n", line.c_str());
+    std::fflush(stdout);
+  }
+
+ private:
+  std::vector<std::pair<std::string, std::string>> items_;
+};
+
+class Stopwatch {
+ public:
+  Stopwatch() : t0_(std::chrono::steady_clock::now()) {}
+  double seconds() const { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0_).count(); }
+  double micros() const { return seconds() * 1e6; }
+  void reset() { t0_ = std::chrono::steady_clock::now(); }
+
+ private:
+  std::chrono::steady_clock::time_point t0_;
+};
+
+inline bool has_flag(const std::vector<std::string>& args, const std::string& flag) {
+  return std::find(args.begin(), args.end(), flag) != args.end();
+}
+
+}  // namespace texstream::bench
