@@ -5,7 +5,8 @@
 add_library(texstream_stream STATIC
   ${CMAKE_CURRENT_LIST_DIR}/src/texture_states.cpp
   ${CMAKE_CURRENT_LIST_DIR}/src/server_process.cpp
-  ${CMAKE_CURRENT_LIST_DIR}/src/stream_client.cpp)
+  ${CMAKE_CURRENT_LIST_DIR}/src/stream_client.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/src/adaptive_controller.cpp)
 add_library(texstream::stream ALIAS texstream_stream)
 target_include_directories(texstream_stream PUBLIC ${CMAKE_CURRENT_LIST_DIR}/include)
 target_link_libraries(texstream_stream

@@ -12,12 +12,17 @@ AnisoLod anisotropic_lod(vec2 dx, vec2 dy, float max_aniso) {
   float pmax = max(px, py);
   float pmin = min(px, py);
   // p_min = 0 (a degenerate footprint) is infinitely anisotropic: N = max_aniso.
-  float n = pmin > 0.0 ? min(ceil(pmax / pmin), max_aniso) : max_aniso;
+  // ceil() of a ratio that rounding pushed just above an integer would double N (and drop the level by one) for
+  // an isotropic footprint whose two axes differ in the last bits: ratios within 1/256 of an integer count as it.
+  float n = pmin > 0.0 ? min(ceil(pmax / pmin - 1.0 / 256.0), max_aniso) : max_aniso;
   n = max(n, 1.0);
   AnisoLod r;
   // p_max = 0 (no change across the pixel) is infinite magnification; -64 stands for it and is clamped later.
   r.lod = pmax > 0.0 ? log2(pmax / n) : -64.0;
-  r.taps = n;
+  // Non-finite derivatives (uv blowing up at a degenerate or near-plane triangle edge): ask for the coarsest
+  // level rather than let a NaN reach clamp() (undefined) or the fixed-point conversion. 64 clamps to M_max.
+  if (isnan(r.lod) || isinf(r.lod)) r.lod = isinf(r.lod) && r.lod < 0.0 ? -64.0 : 64.0;
+  r.taps = isnan(n) ? max_aniso : n;
   return r;
 }
 
@@ -26,7 +31,9 @@ AnisoLod anisotropic_lod(vec2 dx, vec2 dy, float max_aniso) {
 // every fragment of a city. We divide by a foreground distance D (FrameUniforms.params.z) so that w_d falls from
 // 1 at the camera to 0 at D metres.
 float distance_weight(float frag_coord_w, float foreground_distance_m) {
-  float c_w = min((1.0 / frag_coord_w) / foreground_distance_m, 1.0);
+  // gl_FragCoord.w > 0 for every fragment that survived clipping; the max() only keeps a broken driver's 0
+  // from turning into inf * 0 = NaN.
+  float c_w = clamp((1.0 / max(frag_coord_w, 1e-30)) / foreground_distance_m, 0.0, 1.0);
   float one_minus = 1.0 - c_w;
   return one_minus * one_minus * one_minus * one_minus;
 }

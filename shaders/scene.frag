@@ -1,7 +1,14 @@
 #version 450
 // Main pass: shades with the texture cache (only resident mips) and the City Colormap (Eq. 8), and writes the
-// per-mesh visibility metadata (Eq. 1-3). Compiled a second time with WIDE_PASS for the small off-screen pass
-// at the wider FOV: that variant writes metadata only, W = 1 per viewport pixel, and only outside the viewport.
+// per-mesh visibility metadata (Eq. 1-3). It runs after a depth pre-pass with an EQUAL depth test, so only the
+// fragments that end up in the image run it: a mesh gets metadata exactly when it has a visible pixel.
+// Variants:
+//   WIDE_PASS  the small off-screen pass at the wider FOV: metadata only, W = 1 per viewport pixel, and only
+//              outside the viewport (seed 000 §3.2);
+//   LOD_PROBE  also writes, per pixel, the metadata's level next to the device's textureQueryLod (tests and
+//              texstream-bench visibility check the formula against the hardware).
+// FrameUniforms.view.x selects a debug view (render.debug_view): displayed mip as grey, weight heat map,
+// mesh ids.
 layout(early_fragment_tests) in;  // metadata only from fragments that passed the depth test (seed 000 §3.2)
 
 #include "bindings.glsl"
@@ -19,6 +26,23 @@ layout(location = 3) in vec4 in_clip;
 layout(location = 0) out vec4 out_colour;
 #endif
 
+#ifdef LOD_PROBE
+layout(set = 0, binding = kBindingProbeSampler) uniform sampler2DArray probe_image;
+layout(set = 0, binding = kBindingLodProbe, std430) writeonly buffer ProbeBlock { LodProbeSample probe[]; };
+#endif
+
+// Blue -> cyan -> green -> yellow -> red over t in [0, 1]: the weight heat map.
+vec3 heat(float t) {
+  t = clamp(t, 0.0, 1.0);
+  return clamp(vec3(4.0 * t - 2.0, t < 0.5 ? 2.0 * t * 2.0 : 4.0 - 4.0 * t, 2.0 - 4.0 * t), 0.0, 1.0);
+}
+
+// The mesh id view: (id + 1) * kMeshIdHashMul mod 2^24 as three raw bytes (the debug target is UNORM).
+vec3 mesh_id_colour(uint mesh) {
+  uint code = ((mesh + 1u) * kMeshIdHashMul) & 0xffffffu;
+  return vec3(float(code & 0xffu), float((code >> 8) & 0xffu), float(code >> 16)) / 255.0;
+}
+
 void main() {
   MeshGpu mesh = meshes[in_mesh];
   TextureGpu tex = textures[mesh.texture_id];
@@ -28,6 +52,7 @@ void main() {
   vec2 dy = dFdy(in_uv) * extent;
   float mip_max = float(tex.placement.w - 1u);
   bool resident = tex.placement.y != kNotResident;
+  bool feedback = (frame.flags.x & kFlagFeedback) != 0u;
 
   // ---- visibility metadata ----
   AnisoLod meta = anisotropic_lod(dx, dy, frame.params.x);
@@ -83,9 +108,34 @@ void main() {
     float facing = abs(dot(normalize(in_normal), frame.camera_forward.xyz));
     light = mix(frame.params.w, 1.0, facing);
   }
-  out_colour = vec4(colour * light, 1.0);
+  uint view = frame.view.x;
+  if (view == kDebugViewMip) {
+    out_colour = vec4(vec3(displayed * 16.0 / 255.0), 1.0);  // grey: byte = 16 x level (seed 000 Fig. 5)
+  } else if (view == kDebugViewWeight) {
+    out_colour = vec4(heat((weight - 1.0) / 16.0), 1.0);
+  } else if (view == kDebugViewMeshId) {
+    out_colour = vec4(mesh_id_colour(in_mesh), 1.0);
+  } else {
+    out_colour = vec4(colour * light, 1.0);
+  }
+#ifdef LOD_PROBE
+  // textureQueryLod's lambda for the same footprint: the region's texels map 1:1 to the layer's, so the
+  // layer-space coordinate has the derivatives the metadata used. The probe sampler has anisotropy A_m.
+  vec2 st = (vec2(tex.region.xy) + in_uv * extent) / float(frame.cache.x);
+  vec2 queried = textureQueryLod(probe_image, st);
+  uint pixel = uint(gl_FragCoord.y) * frame.view.y + uint(gl_FragCoord.x);
+  probe[pixel] = LodProbeSample(meta.lod, queried.y, mip_max, 1.0);
+#endif
 #endif
 
-  atomicMin(mesh_meta[in_mesh].mip_fixed, uint(wanted * float(kMipFixedScale)));
-  atomicAdd(mesh_meta[in_mesh].weight_fixed, uint(weight * float(kWeightFixedScale) + 0.5));
+  if (!feedback) return;
+  // Most fragments of a mesh do not lower its minimum: a plain read first skips their atomic (a stale read
+  // only lets an unneeded atomicMin through, never skips a needed one, since the value only decreases).
+  uint mip_fixed = uint(wanted * float(kMipFixedScale));
+  if (mip_fixed < mesh_meta[in_mesh].mip_fixed) atomicMin(mesh_meta[in_mesh].mip_fixed, mip_fixed);
+  // Saturating sum (kWeightSaturate): the plain read may be stale, which only lets a bounded number of
+  // in-flight fragments add past the threshold (see shared_structs.h).
+  if (mesh_meta[in_mesh].weight_fixed < kWeightSaturate) {
+    atomicAdd(mesh_meta[in_mesh].weight_fixed, uint(weight * float(kWeightFixedScale) + 0.5));
+  }
 }

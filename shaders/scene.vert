@@ -8,6 +8,10 @@ layout(location = 0) in vec3 in_position;
 layout(location = 1) in vec3 in_normal;
 layout(location = 2) in vec2 in_uv;
 
+// The depth pre-pass and the main pass run this same shader in two pipelines; invariance makes their depths
+// bit-identical, so the main pass's EQUAL depth test keeps exactly the fragments that ended up visible.
+invariant gl_Position;
+
 layout(location = 0) out vec2 out_uv;
 layout(location = 1) out vec3 out_normal;
 layout(location = 2) flat out uint out_mesh;

@@ -26,6 +26,9 @@ TS_CONST kBindingTextures = 2;     // buffer TextureGpu[texture_count]
 TS_CONST kBindingMeshMeta = 3;     // buffer MeshMeta[mesh_count], the sparse visibility metadata (seed 000 §3.2)
 TS_CONST kBindingCache = 4;        // sampler2DArray: the texture cache image (seed 000 §3.6)
 TS_CONST kBindingCompacted = 5;    // buffer CompactList: meshes with weight >= tau (seed 000 §3.3)
+TS_CONST kBindingReadback = 6;     // buffer CompactList, host-visible: the used prefix of the compacted list
+TS_CONST kBindingLodProbe = 7;     // buffer LodProbeSample[width * height] (LOD_PROBE variant only; else 1 entry)
+TS_CONST kBindingProbeSampler = 8; // sampler2DArray: the cache image through a sampler with anisotropy A_m
 
 // TextureGpu.placement.y when no mip of the texture is resident: the shader draws the colormap colour.
 TS_CONST kNotResident = 0xffffffffu;
@@ -35,10 +38,24 @@ TS_CONST kNoMip = 0xffffffffu;
 // so 2^32 / (17 * 16) ~ 15.8 M fragments per mesh before the sum could wrap; a 4K frame has 8.3 M pixels).
 TS_CONST kMipFixedScale = 256u;
 TS_CONST kWeightFixedScale = 16u;
+// The weight sum saturates: a fragment adds only while the sum is below this, so with at most
+// (2^32 - 2^31) / (17 * 16) ~ 7.9 M fragments in flight between the read and the add it can never wrap (an 8K
+// frame covered by one mesh would otherwise wrap it). Sums at or above it mean "at least this much".
+TS_CONST kWeightSaturate = 0x80000000u;
 // FrameUniforms.flags.x bits.
 TS_CONST kFlagColormapBlend = 1u;  // Eq. 8 blending (config stream.colormap_blend)
 TS_CONST kFlagLighting = 2u;       // headlight shading; off gives the plain texel colour
+TS_CONST kFlagFeedback = 4u;       // write visibility metadata (config render.feedback)
 TS_CONST kCompactWorkgroupSize = 64u;
+// FrameUniforms.view.x: what the main pass draws (config render.debug_view). Debug views write raw bytes into a
+// UNORM target, so a PNG of them can be decoded exactly.
+TS_CONST kDebugViewNone = 0u;
+TS_CONST kDebugViewMip = 1u;       // grey = displayed mip level * 16 / 255 (seed 000 Fig. 5 inset): 0 black
+TS_CONST kDebugViewWeight = 2u;    // heat map of the per-fragment weight W, 1 (blue) .. 17 (red)
+TS_CONST kDebugViewMeshId = 3u;    // RGB = ((mesh id + 1) * kMeshIdHashMul) mod 2^24, 0 = nothing drawn
+// Odd multiplier (the 24 low bits of the golden-ratio constant 0x9E3779B1): a bijection on 24 bits that
+// scatters neighbouring ids over the colour cube; C++ inverts it to decode an id-buffer PNG.
+TS_CONST kMeshIdHashMul = 0x3779B1u;
 
 struct FrameUniforms {
   vec4 camera_forward;  // xyz: unit view direction (world axes; the view has no translation)
@@ -47,6 +64,17 @@ struct FrameUniforms {
   uvec4 flags;          // x: kFlag* bits, y: mesh count, z: weight cutoff tau in kWeightFixedScale units,
                         // w: capacity of the compacted list (entries)
   uvec4 cache;          // x: cache layer extent (px), y: cache mip count, z, w: 0
+  uvec4 view;           // x: debug view (kDebugView*), y: viewport width (px, row pitch of the LOD probe),
+                        // z, w: 0
+};
+
+// One fragment of the LOD_PROBE variant (tests and texstream-bench visibility): the metadata's level next to
+// the level the device's sampler would pick (textureQueryLod with anisotropy A_m) for the same fragment.
+struct LodProbeSample {
+  float computed;       // anisotropic_lod().lod, unclamped
+  float queried;        // textureQueryLod(...).y: the device's lambda for the same footprint
+  float mip_max;        // the texture's coarsest level
+  float written;        // 1 where a fragment was shaded
 };
 
 // Per-pass constants (push constants): the main pass and the wide off-screen metadata pass differ only here.
@@ -87,7 +115,7 @@ struct CompactEntry {
 // Head of the compacted list buffer (compact.comp declares the same four words, then CompactEntry[]).
 struct CompactListHeader {
   uint count;           // atomic counter; may exceed the capacity (entries past it are dropped)
-  uint reserved[3];
+  uint dispatch[3];     // VkDispatchIndirectCommand of the prefix copy (compact_args.comp writes it)
 };
 }  // namespace texstream::gpu
 #undef TS_CONST

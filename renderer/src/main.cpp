@@ -39,13 +39,6 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "texstream-render: %s\n", valid.error().message.c_str());
     return kExitBadArguments;
   }
-  if (config->render.window) {
-    std::fprintf(stderr,
-                 "texstream-render: render.window = true: the GLFW window is not implemented yet; run headless "
-                 "(render.window = false)\n");
-    return kExitBadArguments;
-  }
-
   texstream::render::RenderRun run{*config, config_file, overrides};
   auto summary = texstream::render::run_renderer(run);
   if (!summary) {

@@ -8,9 +8,11 @@
 #include <memory>
 
 #include "texstream/common/camera_path.hpp"
+#include "texstream/render/adaptive_controller.hpp"
 #include "texstream/render/broad_phase.hpp"
 #include "texstream/render/camera.hpp"
 #include "texstream/render/frame_capture.hpp"
+#include "texstream/render/interactive_session.hpp"
 #include "texstream/render/gpu_structs.hpp"
 #include "texstream/render/scene_data.hpp"
 #include "texstream/render/scene_gpu.hpp"
@@ -35,6 +37,36 @@ using Clock = std::chrono::steady_clock;
 constexpr double kCycleOutstandingFraction = 0.25;
 // The wide metadata pass renders at 1/4 of the viewport per axis: it only ranks off-screen meshes.
 constexpr uint32_t kWidePassDivisor = 4;
+
+// Seed 000's load time (Table 2: 16 ms) in the two-process design: file reads run in texstream-server, off
+// the frame; what a frame still spends on loading is taking completions (check, copy into staging, checksum,
+// queue the copy). Once a frame has spent controller.load_time_ms on that, reserve() answers "no room now":
+// the client keeps the completion and offers it first next frame. The first mip of a frame always passes.
+class LoadTimeSink final : public MipSink {
+ public:
+  LoadTimeSink(MipSink& inner, Clock::time_point deadline) : inner_(inner), deadline_(deadline) {}
+  std::span<std::byte> reserve(TextureId texture, MipLevel mip, uint64_t bytes) override {
+    if (taken_ > 0 && Clock::now() >= deadline_) {
+      limited_ = true;
+      return {};
+    }
+    auto span = inner_.reserve(texture, mip, bytes);
+    if (!span.empty()) ++taken_;
+    return span;
+  }
+  void commit(TextureId texture, MipLevel mip, std::span<std::byte> data) override { inner_.commit(texture, mip, data); }
+  void reject(TextureId texture, MipLevel mip, std::span<std::byte> reserved) override {
+    inner_.reject(texture, mip, reserved);
+  }
+  void failed(TextureId texture, MipLevel mip, CompletionStatus status) override { inner_.failed(texture, mip, status); }
+  bool limited() const { return limited_; }
+
+ private:
+  MipSink& inner_;
+  Clock::time_point deadline_;
+  uint64_t taken_ = 0;
+  bool limited_ = false;
+};
 
 class Renderer {
  public:
@@ -61,6 +93,7 @@ class Renderer {
   std::unique_ptr<FrameCapture> capture_;
   std::unique_ptr<BroadPhase> broad_phase_;
   std::unique_ptr<StreamClient> client_;
+  std::unique_ptr<InteractiveSession> interactive_;  // render.window = true only
   UniqueCommandPool pool_;
   VkCommandBuffer cmd_ = VK_NULL_HANDLE;
   UniqueFence fence_;
@@ -70,6 +103,10 @@ class Renderer {
   uint64_t cycles_ = 0;
   uint64_t last_cycle_sent_ = 0;
   uint64_t load_bytes_ = 0;
+  // Seed 000 §3.4: s and b for each cycle from the measured frame latencies (docs/controller.md).
+  std::unique_ptr<AdaptiveController> controller_;
+  double sum_load_mb_ = 0, sum_bias_ = 0, sum_tw_ms_ = 0;  // per-frame sums for the run summary
+  uint64_t load_time_limited_frames_ = 0;
 };
 
 Status Renderer::set_up() {
@@ -94,7 +131,20 @@ Status Renderer::set_up() {
   if (!format) {
     return make_error(ErrorCode::kInvalidArgument, "cache.format: '" + cfg_.cache.format + "' is not auto, rgba8 or bc1");
   }
-  auto ctx = VulkanContext::create({cfg_.render.device, cfg_.render.validation, *format == TexelFormat::kBc1});
+  VulkanContextOptions vo;
+  vo.device_substring = cfg_.render.device;
+  vo.validation = cfg_.render.validation;
+  vo.need_bc1 = *format == TexelFormat::kBc1;
+  if (cfg_.render.window) {
+    // The window first: the Vulkan instance needs its extensions. R records the flight next to the frames.
+    auto session = InteractiveSession::open(static_cast<uint32_t>(cfg_.render.width_px),
+                                            static_cast<uint32_t>(cfg_.render.height_px), path_->sample(0.0),
+                                            output_dir_ / "recorded_camera_path.txt");
+    if (!session) return session.error();
+    interactive_ = std::move(*session);
+    interactive_->configure(vo);
+  }
+  auto ctx = VulkanContext::create(vo);
   if (!ctx) return ctx.error();
   ctx_ = std::move(*ctx);
   spdlog::info("vulkan device: {}", ctx_->device_name());
@@ -108,9 +158,13 @@ Status Renderer::set_up() {
   auto cache = TextureCache::create(*ctx_, co, scene_, *states_);
   if (!cache) return cache.error();
   cache_ = std::move(*cache);
-  // Fixed load size s (controller.fixed_load_mb, MB = 10^6 bytes as in seed Table 2) until the adaptive
-  // controller (Eq. 4-7) is wired in.
-  load_bytes_ = static_cast<uint64_t>(cfg_.controller.fixed_load_mb * 1e6);
+  // Load size s and mip bias b: controller.mode adaptive (Eq. 4-7), none (s = s_max, b = 0) or fixed.
+  auto controller_params = ControllerParams::from_config(cfg_.controller);
+  if (!controller_params) return controller_params.error();
+  auto controller = AdaptiveController::create(*controller_params);
+  if (!controller) return controller.error();
+  controller_ = std::make_unique<AdaptiveController>(std::move(*controller));
+  load_bytes_ = controller_->load_bytes();
 
   auto gpu = SceneGpu::create(*ctx_, scene_);
   if (!gpu) return gpu.error();
@@ -121,9 +175,13 @@ Status Renderer::set_up() {
   po.height = static_cast<uint32_t>(cfg_.render.height_px);
   po.wide_width = std::max(16u, po.width / kWidePassDivisor);
   po.wide_height = std::max(16u, po.height / kWidePassDivisor);
+  auto view = debug_view_from_string(cfg_.render.debug_view);
+  if (!view) return view.error();
+  po.debug_view = *view;
   auto passes = ScenePasses::create(*ctx_, *compiler_, po, *scene_gpu_, *cache_);
   if (!passes) return passes.error();
   passes_ = std::move(*passes);
+  if (interactive_) TS_TRY(interactive_->attach(*ctx_));
   auto capture = FrameCapture::create(*ctx_, po.width, po.height);
   if (!capture) return capture.error();
   capture_ = std::make_unique<FrameCapture>(std::move(*capture));
@@ -176,7 +234,7 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   CameraLens lens{cfg_.render.fov_y_deg, cfg_.render.offscreen_fov_y_deg,
                   static_cast<double>(cfg_.render.width_px) / static_cast<double>(cfg_.render.height_px),
                   cfg_.render.near_m, cfg_.render.far_m};
-  const Camera cam = make_camera(path_->sample(time_s), lens);
+  const Camera cam = make_camera(interactive_ ? interactive_->next_pose() : path_->sample(time_s), lens);
 
   // Broad phase over the wide frustum: the wide pass needs those meshes too.
   broad_phase_->query(Frustum::from_matrix(cam.wide_proj * cam.view), cam.position, visible_);
@@ -199,10 +257,15 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   fu->cache = {cache_->layer_extent(), cache_->mip_levels(), 0, 0};
 
   // Completions that arrived since the last frame: validated by the client, copied into the staging ring.
-  client_->poll(*cache_, static_cast<size_t>(cfg_.stream.max_mips_per_cycle));
+  // At most controller.load_time_ms of this frame goes to it (LoadTimeSink).
+  LoadTimeSink timed(*cache_, Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                                 std::chrono::duration<double, std::milli>(cfg_.controller.load_time_ms)));
+  client_->poll(timed, static_cast<size_t>(cfg_.stream.max_mips_per_cycle));
+  if (timed.limited()) ++load_time_limited_frames_;
   const uint64_t in_flight = client_->stats().in_flight;
-  rec.read_back_list =
-      static_cast<double>(in_flight) <= kCycleOutstandingFraction * static_cast<double>(last_cycle_sent_);
+  rec.feedback = cfg_.render.feedback;  // off: no metadata, so no streaming cycle either
+  rec.read_back_list = rec.feedback && static_cast<double>(in_flight) <=
+                                           kCycleOutstandingFraction * static_cast<double>(last_cycle_sent_);
   const bool write = last || (cfg_.render.write_every_frames > 0 &&
                               index % static_cast<uint64_t>(cfg_.render.write_every_frames) == 0);
 
@@ -226,8 +289,22 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   TS_VK_TRY(vkQueueSubmit(ctx_->queue(), 1, &si, fence));
   TS_VK_TRY(vkWaitForFences(device, 1, &fence, VK_TRUE, UINT64_MAX));
   cache_->on_submission_complete(serial_);
+  if (interactive_) {
+    InteractiveReadout r;
+    r.frame_latency_ms = latencies_ms_.empty() ? 0.0 : latencies_ms_.back();
+    r.bytes_uploaded_total = cache_->stats().bytes_uploaded;
+    r.textures_resident = cache_->resident_textures();
+    r.texture_count = scene_.textures.size();
+    r.load_size_mb = static_cast<double>(load_bytes_) / 1e6;
+    TS_TRY(interactive_->present(passes_->colour().handle(), passes_->options().width, passes_->options().height, r));
+  }
   if (rec.read_back_list) start_cycle();
   latencies_ms_.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+  // Δt of Eq. 4-7 is in seconds; the next cycle uses the s and b this frame leads to.
+  controller_->on_frame(latencies_ms_.back() / 1e3);
+  sum_load_mb_ += controller_->load_size_bytes() / 1e6;
+  sum_bias_ += controller_->mip_bias();
+  sum_tw_ms_ += controller_->weighted_latency_s() * 1e3;
 
   if (write) {
     char name[32];
@@ -252,7 +329,10 @@ void Renderer::start_cycle() {
   uint64_t sent = 0;
   const auto max_mips = static_cast<uint64_t>(cfg_.stream.max_mips_per_cycle);
   auto send = client_->sender();
-  const auto result = states_->run_cycle(candidates, load_bytes_, 0.0f, [&](const MipRequest& r) {
+  // Algorithm 1: the cycle stops at load size s and refines a texture only while desired + b < resident.
+  load_bytes_ = controller_->load_bytes();
+  const auto bias = static_cast<float>(controller_->mip_bias());
+  const auto result = states_->run_cycle(candidates, load_bytes_, bias, [&](const MipRequest& r) {
     if (sent >= max_mips) return SendResult::kStop;
     const SendResult s = send(r);
     if (s == SendResult::kSent) ++sent;
@@ -267,7 +347,13 @@ Result<RunSummary> Renderer::run() {
   TS_TRY(set_up());
   uint64_t frames = static_cast<uint64_t>(cfg_.render.frames);
   if (frames == 0) frames = static_cast<uint64_t>(std::floor(path_->duration_s() * 1000.0 / cfg_.render.frame_time_ms)) + 1;
-  for (uint64_t i = 0; i < frames; ++i) TS_TRY(render_frame(i, i + 1 == frames));
+  // Window mode with render.frames = 0 runs until the window is closed.
+  if (interactive_ && cfg_.render.frames == 0) frames = UINT64_MAX;
+  uint64_t rendered = 0;
+  for (uint64_t i = 0; i < frames && !(interactive_ && interactive_->closed()); ++i, ++rendered)
+    TS_TRY(render_frame(i, i + 1 == frames));
+  frames = rendered;
+  if (interactive_) TS_TRY(interactive_->finish());
   TS_VK_TRY(vkDeviceWaitIdle(ctx_->device()));
 
   const StreamStats ss = client_->stats();
@@ -286,6 +372,13 @@ Result<RunSummary> Renderer::run() {
   s.texture_count = scene_.textures.size();
   s.streaming_cycles = cycles_;
   s.evictions = cache_->stats().evictions;
+  s.controller_mode = to_string(controller_->params().mode);
+  const double n = frames ? static_cast<double>(frames) : 1.0;
+  s.avg_load_size_mb = sum_load_mb_ / n;
+  s.avg_mip_bias = sum_bias_ / n;
+  s.avg_weighted_latency_ms = sum_tw_ms_ / n;
+  s.load_time_limited_frames = load_time_limited_frames_;
+  s.controller_rejected_frames = controller_->frames_rejected();
   // Shut the server down and release the device before the validation counts are read: teardown is validated too.
   client_.reset();
   passes_.reset();

@@ -38,6 +38,12 @@ std::string RunSummary::to_json() const {
   j["texture_count"] = texture_count;
   j["streaming_cycles"] = streaming_cycles;
   j["evictions"] = evictions;
+  j["controller"] = {{"mode", controller_mode},
+                     {"avg_load_size_mb", avg_load_size_mb},
+                     {"avg_mip_bias", avg_mip_bias},
+                     {"avg_weighted_latency_ms", avg_weighted_latency_ms},
+                     {"load_time_limited_frames", load_time_limited_frames},
+                     {"rejected_frames", controller_rejected_frames}};
   return j.dump(2);
 }
 
@@ -53,10 +59,12 @@ std::string RunSummary::to_text() const {
       "  server restarts     {}\n"
       "  validation          {} errors, {} warnings\n"
       "  textures resident   {} of {} ({} evictions)\n"
+      "  controller          {}: avg s {:.3f} MB, avg b {:.2f}, avg t_w {:.2f} ms, {} load-time-limited frames\n"
       "  output              {}\n",
       device, frames, frame_latency.median_ms, frame_latency.avg_ms, frame_latency.max_ms, mips_streamed, mb_streamed,
       streaming_cycles, 100.0 * server_ram_hit_rate, protocol_errors, server_restarts, validation_errors,
-      validation_warnings, textures_resident, texture_count, evictions, output_dir.string());
+      validation_warnings, textures_resident, texture_count, evictions, controller_mode, avg_load_size_mb,
+      avg_mip_bias, avg_weighted_latency_ms, load_time_limited_frames, output_dir.string());
 }
 
 Status RunSummary::write_json(const std::filesystem::path& file) const {

@@ -33,9 +33,12 @@ Result<SceneGpu> SceneGpu::create(const VulkanContext& ctx, const SceneData& sce
   TS_TRY(make(g.mesh_meta, n * sizeof(gpu::MeshMeta), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst,
               MemoryUse::kDeviceLocal));
   const VkDeviceSize list_bytes = sizeof(gpu::CompactListHeader) + n * sizeof(gpu::CompactEntry);
+  // The list header doubles as the indirect dispatch of the prefix copy (compact_args.comp).
   TS_TRY(make(g.compacted, list_bytes,
-              VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT | kDst, MemoryUse::kDeviceLocal));
-  TS_TRY(make(g.readback, list_bytes, kDst, MemoryUse::kHostVisible));
+              VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT | kDst,
+              MemoryUse::kDeviceLocal));
+  // Written by compact_copy.comp: only the header and the used prefix, only when a streaming cycle starts.
+  TS_TRY(make(g.readback, list_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible));
   TS_TRY(make(g.frame_uniforms, sizeof(gpu::FrameUniforms), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT,
               MemoryUse::kHostVisible));
 

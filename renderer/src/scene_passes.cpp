@@ -1,6 +1,8 @@
 #include "texstream/render/scene_passes.hpp"
 
+#include <algorithm>
 #include <array>
+#include <cstddef>
 #include <vector>
 
 #include "texstream/common/scene_format.hpp"
@@ -15,6 +17,8 @@ namespace texstream::render {
 namespace {
 
 constexpr VkFormat kColourFormat = VK_FORMAT_R8G8B8A8_SRGB;
+// Debug views write raw bytes (grey levels, heat colours, hashed ids) that a PNG must carry unchanged.
+constexpr VkFormat kDebugColourFormat = VK_FORMAT_R8G8B8A8_UNORM;
 // Reversed-Z wants float depth: precision is then nearly uniform in log-distance over near..far = 1..20000 m.
 constexpr VkFormat kDepthFormat = VK_FORMAT_D32_SFLOAT;
 constexpr VkShaderStageFlags kAllStages =
@@ -32,11 +36,11 @@ Result<UniqueShaderModule> make_module(const VulkanContext& ctx, ShaderCompiler&
   return UniqueShaderModule(ctx.device(), m);
 }
 
-Result<UniqueRenderPass> make_render_pass(VkDevice device, bool with_colour) {
+Result<UniqueRenderPass> make_render_pass(VkDevice device, bool with_colour, VkFormat colour_format) {
   std::vector<VkAttachmentDescription> atts;
   if (with_colour) {
     VkAttachmentDescription c{};
-    c.format = kColourFormat;
+    c.format = colour_format;
     c.samples = VK_SAMPLE_COUNT_1_BIT;
     c.loadOp = VK_ATTACHMENT_LOAD_OP_CLEAR;
     c.storeOp = VK_ATTACHMENT_STORE_OP_STORE;
@@ -123,6 +127,19 @@ void memory_barrier(VkCommandBuffer cmd, VkPipelineStageFlags src_stage, VkAcces
 
 }  // namespace
 
+Result<uint32_t> debug_view_from_string(const std::string& name) {
+  if (name == "none") return gpu::kDebugViewNone;
+  if (name == "mip") return gpu::kDebugViewMip;
+  if (name == "weight") return gpu::kDebugViewWeight;
+  if (name == "mesh_id") return gpu::kDebugViewMeshId;
+  return make_error(ErrorCode::kInvalidArgument,
+                    "render.debug_view: '" + name + "' is not none, mip, weight or mesh_id");
+}
+
+VkFormat ScenePasses::colour_format() const {
+  return options_.debug_view == gpu::kDebugViewNone ? kColourFormat : kDebugColourFormat;
+}
+
 Result<std::unique_ptr<ScenePasses>> ScenePasses::create(const VulkanContext& ctx, ShaderCompiler& compiler,
                                                          const ScenePassesOptions& options, const SceneGpu& scene,
                                                          const TextureCache& cache) {
@@ -136,7 +153,7 @@ Result<std::unique_ptr<ScenePasses>> ScenePasses::create(const VulkanContext& ct
 Status ScenePasses::create_targets(const VulkanContext& ctx) {
   VkDevice device = ctx.device();
   GpuImageInfo ci;
-  ci.format = kColourFormat;
+  ci.format = colour_format();
   ci.width = options_.width;
   ci.height = options_.height;
   ci.usage = VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT;
@@ -156,10 +173,10 @@ Status ScenePasses::create_targets(const VulkanContext& ctx) {
   if (!wide) return wide.error();
   wide_depth_ = std::move(*wide);
 
-  auto main_pass = make_render_pass(device, true);
+  auto main_pass = make_render_pass(device, true, colour_format());
   if (!main_pass) return main_pass.error();
   main_pass_ = std::move(*main_pass);
-  auto wide_pass = make_render_pass(device, false);
+  auto wide_pass = make_render_pass(device, false, colour_format());
   if (!wide_pass) return wide_pass.error();
   wide_pass_ = std::move(*wide_pass);
   auto main_fb = make_framebuffer(device, main_pass_.get(), {colour_.view(), depth_.view()}, options_.width,
@@ -170,6 +187,15 @@ Status ScenePasses::create_targets(const VulkanContext& ctx) {
                                   options_.wide_height);
   if (!wide_fb) return wide_fb.error();
   wide_fb_ = std::move(*wide_fb);
+
+  // The probe buffer: one sample per viewport pixel when probing, else one entry to keep the binding valid.
+  const VkDeviceSize probe_bytes =
+      sizeof(gpu::LodProbeSample) *
+      (options_.lod_probe ? static_cast<VkDeviceSize>(options_.width) * options_.height : 1);
+  auto probe = GpuBuffer::create(ctx, probe_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible);
+  if (!probe) return probe.error();
+  probe_ = std::move(*probe);
+  std::fill_n(probe_.bytes().data(), probe_bytes, std::byte{0});
   return ok_status();
 }
 
@@ -188,14 +214,25 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
   VkSampler sampler = VK_NULL_HANDLE;
   TS_VK_TRY(vkCreateSampler(device, &si, nullptr, &sampler));
   sampler_ = UniqueSampler(device, sampler);
+  // The probe sampler asks the device which level it would pick under anisotropy A_m (textureQueryLod).
+  probe_anisotropic_ = ctx.sampler_anisotropy();
+  si.anisotropyEnable = probe_anisotropic_ ? VK_TRUE : VK_FALSE;
+  si.maxAnisotropy = std::min(options_.probe_anisotropy, ctx.properties().limits.maxSamplerAnisotropy);
+  if (!probe_anisotropic_) si.maxAnisotropy = 1.0f;
+  VkSampler probe_sampler = VK_NULL_HANDLE;
+  TS_VK_TRY(vkCreateSampler(device, &si, nullptr, &probe_sampler));
+  probe_sampler_ = UniqueSampler(device, probe_sampler);
 
-  const std::array<VkDescriptorSetLayoutBinding, 6> bindings{{
+  const std::array<VkDescriptorSetLayoutBinding, 9> bindings{{
       {gpu::kBindingFrame, VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1, kAllStages, nullptr},
       {gpu::kBindingMeshes, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
       {gpu::kBindingTextures, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
       {gpu::kBindingMeshMeta, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
       {gpu::kBindingCache, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr},
       {gpu::kBindingCompacted, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
+      {gpu::kBindingReadback, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
+      {gpu::kBindingLodProbe, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
+      {gpu::kBindingProbeSampler, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr},
   }};
   VkDescriptorSetLayoutCreateInfo li{};
   li.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO;
@@ -206,8 +243,8 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
   set_layout_ = UniqueDescriptorSetLayout(device, set_layout);
 
   const std::array<VkDescriptorPoolSize, 3> sizes{{{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1},
-                                                   {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 4},
-                                                   {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1}}};
+                                                   {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 6},
+                                                   {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2}}};
   VkDescriptorPoolCreateInfo pi{};
   pi.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
   pi.maxSets = 1;
@@ -223,18 +260,25 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
   ai.pSetLayouts = &set_layout;
   TS_VK_TRY(vkAllocateDescriptorSets(device, &ai, &set_));
 
-  const std::array<VkDescriptorBufferInfo, 5> buffers{{
+  constexpr size_t kBuffers = 7;
+  const std::array<VkDescriptorBufferInfo, kBuffers> buffers{{
       {scene_.frame_uniforms.handle(), 0, VK_WHOLE_SIZE},
       {scene_.meshes.handle(), 0, VK_WHOLE_SIZE},
       {cache.texture_table(), 0, VK_WHOLE_SIZE},
       {scene_.mesh_meta.handle(), 0, VK_WHOLE_SIZE},
       {scene_.compacted.handle(), 0, VK_WHOLE_SIZE},
+      {scene_.readback.handle(), 0, VK_WHOLE_SIZE},
+      {probe_.handle(), 0, VK_WHOLE_SIZE},
   }};
   const VkDescriptorImageInfo image{sampler_.get(), cache.image_view(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
-  std::array<VkWriteDescriptorSet, 6> writes{};
-  const std::array<uint32_t, 5> buffer_bindings{gpu::kBindingFrame, gpu::kBindingMeshes, gpu::kBindingTextures,
-                                                gpu::kBindingMeshMeta, gpu::kBindingCompacted};
-  for (size_t i = 0; i < 5; ++i) {
+  const VkDescriptorImageInfo probe_image{probe_sampler_.get(), cache.image_view(),
+                                          VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
+  std::array<VkWriteDescriptorSet, kBuffers + 2> writes{};
+  const std::array<uint32_t, kBuffers> buffer_bindings{gpu::kBindingFrame,     gpu::kBindingMeshes,
+                                                       gpu::kBindingTextures,  gpu::kBindingMeshMeta,
+                                                       gpu::kBindingCompacted, gpu::kBindingReadback,
+                                                       gpu::kBindingLodProbe};
+  for (size_t i = 0; i < kBuffers; ++i) {
     writes[i] = {};
     writes[i].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
     writes[i].dstSet = set_;
@@ -243,13 +287,16 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
     writes[i].descriptorType = i == 0 ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
     writes[i].pBufferInfo = &buffers[i];
   }
-  writes[5] = {};
-  writes[5].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
-  writes[5].dstSet = set_;
-  writes[5].dstBinding = gpu::kBindingCache;
-  writes[5].descriptorCount = 1;
-  writes[5].descriptorType = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
-  writes[5].pImageInfo = &image;
+  for (size_t k = 0; k < 2; ++k) {
+    VkWriteDescriptorSet& w = writes[kBuffers + k];
+    w = {};
+    w.sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
+    w.dstSet = set_;
+    w.dstBinding = k == 0 ? gpu::kBindingCache : gpu::kBindingProbeSampler;
+    w.descriptorCount = 1;
+    w.descriptorType = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
+    w.pImageInfo = k == 0 ? &image : &probe_image;
+  }
   vkUpdateDescriptorSets(device, static_cast<uint32_t>(writes.size()), writes.data(), 0, nullptr);
 
   VkPushConstantRange range{kAllStages, 0, sizeof(gpu::PassConstants)};
@@ -269,12 +316,18 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
   VkDevice device = ctx.device();
   auto vert = make_module(ctx, compiler, {"scene.vert", ShaderStage::kVertex, {}});
   if (!vert) return vert.error();
-  auto frag = make_module(ctx, compiler, {"scene.frag", ShaderStage::kFragment, {}});
+  std::vector<std::string> main_defines;
+  if (options_.lod_probe) main_defines.push_back("LOD_PROBE");
+  auto frag = make_module(ctx, compiler, {"scene.frag", ShaderStage::kFragment, main_defines});
   if (!frag) return frag.error();
   auto wide_frag = make_module(ctx, compiler, {"scene.frag", ShaderStage::kFragment, {"WIDE_PASS"}});
   if (!wide_frag) return wide_frag.error();
   auto comp = make_module(ctx, compiler, {"compact.comp", ShaderStage::kCompute, {}});
   if (!comp) return comp.error();
+  auto args = make_module(ctx, compiler, {"compact_args.comp", ShaderStage::kCompute, {}});
+  if (!args) return args.error();
+  auto copy = make_module(ctx, compiler, {"compact_copy.comp", ShaderStage::kCompute, {}});
+  if (!copy) return copy.error();
 
   VkVertexInputBindingDescription vb{0, sizeof(scene::Vertex), VK_VERTEX_INPUT_RATE_VERTEX};
   const std::array<VkVertexInputAttributeDescription, 3> va{{
@@ -307,8 +360,6 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
   VkPipelineDepthStencilStateCreateInfo ds{};
   ds.sType = VK_STRUCTURE_TYPE_PIPELINE_DEPTH_STENCIL_STATE_CREATE_INFO;
   ds.depthTestEnable = VK_TRUE;
-  ds.depthWriteEnable = VK_TRUE;
-  ds.depthCompareOp = VK_COMPARE_OP_GREATER;  // reversed Z: nearer is larger
   VkPipelineColorBlendAttachmentState cba{};
   cba.colorWriteMask =
       VK_COLOR_COMPONENT_R_BIT | VK_COLOR_COMPONENT_G_BIT | VK_COLOR_COMPONENT_B_BIT | VK_COLOR_COMPONENT_A_BIT;
@@ -320,7 +371,14 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
   dy.dynamicStateCount = static_cast<uint32_t>(dyn.size());
   dy.pDynamicStates = dyn.data();
 
-  auto graphics = [&](VkShaderModule fs, VkRenderPass pass, bool colour, UniquePipeline& out) -> Status {
+  // fs = VK_NULL_HANDLE: the depth-only pre-pass (no fragment stage, colour writes masked).
+  auto graphics = [&](VkShaderModule fs, VkRenderPass pass, bool colour, VkCompareOp compare, bool depth_write,
+                      UniquePipeline& out) -> Status {
+    ds.depthCompareOp = compare;
+    ds.depthWriteEnable = depth_write ? VK_TRUE : VK_FALSE;
+    cba.colorWriteMask = fs == VK_NULL_HANDLE ? 0u
+                                              : VK_COLOR_COMPONENT_R_BIT | VK_COLOR_COMPONENT_G_BIT |
+                                                    VK_COLOR_COMPONENT_B_BIT | VK_COLOR_COMPONENT_A_BIT;
     std::array<VkPipelineShaderStageCreateInfo, 2> stages{};
     stages[0] = {};
     stages[0].sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
@@ -336,7 +394,7 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
     cb.pAttachments = colour ? &cba : nullptr;
     VkGraphicsPipelineCreateInfo gi{};
     gi.sType = VK_STRUCTURE_TYPE_GRAPHICS_PIPELINE_CREATE_INFO;
-    gi.stageCount = static_cast<uint32_t>(stages.size());
+    gi.stageCount = fs == VK_NULL_HANDLE ? 1u : 2u;
     gi.pStages = stages.data();
     gi.pVertexInputState = &vi;
     gi.pInputAssemblyState = &ia;
@@ -354,37 +412,53 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
     out = UniquePipeline(device, p);
     return ok_status();
   };
-  TS_TRY(graphics(frag->get(), main_pass_.get(), true, main_pipeline_));
-  TS_TRY(graphics(wide_frag->get(), wide_pass_.get(), false, wide_pipeline_));
+  // Reversed Z: nearer is larger. The pre-pass resolves visibility; the shading draw keeps only the fragments
+  // whose depth equals the winner's (bit-identical through `invariant gl_Position`).
+  TS_TRY(graphics(VK_NULL_HANDLE, main_pass_.get(), true, VK_COMPARE_OP_GREATER, true, prepass_pipeline_));
+  TS_TRY(graphics(frag->get(), main_pass_.get(), true, VK_COMPARE_OP_EQUAL, false, main_pipeline_));
+  TS_TRY(graphics(wide_frag->get(), wide_pass_.get(), false, VK_COMPARE_OP_GREATER, true, wide_pipeline_));
 
-  VkComputePipelineCreateInfo ci{};
-  ci.sType = VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO;
-  ci.stage = {};
-  ci.stage.sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
-  ci.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
-  ci.stage.module = comp->get();
-  ci.stage.pName = "main";
-  ci.layout = layout_.get();
-  VkPipeline p = VK_NULL_HANDLE;
-  TS_VK_TRY(vkCreateComputePipelines(device, VK_NULL_HANDLE, 1, &ci, nullptr, &p));
-  compact_pipeline_ = UniquePipeline(device, p);
+  auto compute = [&](VkShaderModule module, UniquePipeline& out) -> Status {
+    VkComputePipelineCreateInfo ci{};
+    ci.sType = VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO;
+    ci.stage = {};
+    ci.stage.sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
+    ci.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
+    ci.stage.module = module;
+    ci.stage.pName = "main";
+    ci.layout = layout_.get();
+    VkPipeline p = VK_NULL_HANDLE;
+    TS_VK_TRY(vkCreateComputePipelines(device, VK_NULL_HANDLE, 1, &ci, nullptr, &p));
+    out = UniquePipeline(device, p);
+    return ok_status();
+  };
+  TS_TRY(compute(comp->get(), compact_pipeline_));
+  TS_TRY(compute(args->get(), compact_args_pipeline_));
+  TS_TRY(compute(copy->get(), compact_copy_pipeline_));
   return ok_status();
 }
 
 void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const {
+  // The fields of the frame uniforms that describe these passes (the caller fills the rest before record()).
+  auto* fu = scene_.frame_uniforms.as<gpu::FrameUniforms>();
+  fu->flags.x = frame.feedback ? (fu->flags.x | gpu::kFlagFeedback) : (fu->flags.x & ~gpu::kFlagFeedback);
+  fu->view = {options_.debug_view, options_.width, 0, 0};
+
   // The previous submission's compaction wrote the sparse metadata and the list counter; this frame's fragment
   // atomics and the counter reset come after it (submission order + this barrier).
   memory_barrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_SHADER_READ_BIT,
                  VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
                  VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT);
-  vkCmdFillBuffer(cmd, scene_.compacted.handle(), 0, sizeof(gpu::CompactListHeader), 0);
+  if (frame.feedback) vkCmdFillBuffer(cmd, scene_.compacted.handle(), 0, sizeof(gpu::CompactListHeader), 0);
 
   const VkDeviceSize zero = 0;
-  auto draw_pass = [&](VkRenderPass pass, VkFramebuffer fb, uint32_t w, uint32_t h, VkPipeline pipeline,
-                       const gpu::PassConstants& pc, bool colour) {
+  auto draw_pass = [&](VkRenderPass pass, VkFramebuffer fb, uint32_t w, uint32_t h, VkPipeline prepass,
+                       VkPipeline pipeline, const gpu::PassConstants& pc, bool colour) {
     std::array<VkClearValue, 2> clears{};
-    // Sky colour in linear light (the attachment is sRGB); depth 0 is "infinitely far" with reversed Z.
+    // Sky colour in linear light (the attachment is sRGB); the id view clears to 0 = "no mesh". Depth 0 is
+    // "infinitely far" with reversed Z.
     clears[0].color = {{0.45f, 0.6f, 0.8f, 1.0f}};
+    if (options_.debug_view == gpu::kDebugViewMeshId) clears[0].color = {{0.0f, 0.0f, 0.0f, 1.0f}};
     clears[colour ? 1 : 0].depthStencil = {0.0f, 0};
     VkRenderPassBeginInfo bi{};
     bi.sType = VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO;
@@ -399,36 +473,48 @@ void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const
     vkCmdSetViewport(cmd, 0, 1, &viewport);
     vkCmdSetScissor(cmd, 0, 1, &scissor);
     if (frame.draw_count > 0) {
-      vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline);
       vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, layout_.get(), 0, 1, &set_, 0, nullptr);
       vkCmdPushConstants(cmd, layout_.get(), kAllStages, 0, sizeof pc, &pc);
       VkBuffer vb = scene_.vertices.handle();
       vkCmdBindVertexBuffers(cmd, 0, 1, &vb, &zero);
       vkCmdBindIndexBuffer(cmd, scene_.indices.handle(), 0, VK_INDEX_TYPE_UINT32);
-      vkCmdDrawIndexedIndirect(cmd, scene_.indirect.handle(), 0, frame.draw_count,
-                               sizeof(VkDrawIndexedIndirectCommand));
+      // Every surviving mesh in one multi-draw indirect call per pipeline (seed 001: few calls).
+      for (VkPipeline p : {prepass, pipeline}) {
+        if (p == VK_NULL_HANDLE) continue;
+        vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, p);
+        vkCmdDrawIndexedIndirect(cmd, scene_.indirect.handle(), 0, frame.draw_count,
+                                 sizeof(VkDrawIndexedIndirectCommand));
+      }
     }
     vkCmdEndRenderPass(cmd);
   };
-  draw_pass(main_pass_.get(), main_fb_.get(), options_.width, options_.height, main_pipeline_.get(), frame.main, true);
-  draw_pass(wide_pass_.get(), wide_fb_.get(), options_.wide_width, options_.wide_height, wide_pipeline_.get(),
-            frame.wide, false);
+  draw_pass(main_pass_.get(), main_fb_.get(), options_.width, options_.height, prepass_pipeline_.get(),
+            main_pipeline_.get(), frame.main, true);
+  if (!frame.feedback) return;
+  draw_pass(wide_pass_.get(), wide_fb_.get(), options_.wide_width, options_.wide_height, VK_NULL_HANDLE,
+            wide_pipeline_.get(), frame.wide, false);
 
   // Compaction reads what both passes' fragment shaders wrote and the cleared counter.
   memory_barrier(cmd, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
                  VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
                  VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
-  vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, compact_pipeline_.get());
   vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, layout_.get(), 0, 1, &set_, 0, nullptr);
+  vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, compact_pipeline_.get());
   const uint32_t groups = (scene_.mesh_count + gpu::kCompactWorkgroupSize - 1) / gpu::kCompactWorkgroupSize;
   if (groups > 0) vkCmdDispatch(cmd, groups, 1, 1);
 
   if (frame.read_back_list) {
+    // The final count -> the copy's group count (written into the list header), then the used prefix only.
     memory_barrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
-                   VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_READ_BIT);
-    const VkBufferCopy copy{0, 0, scene_.compacted.size()};
-    vkCmdCopyBuffer(cmd, scene_.compacted.handle(), scene_.readback.handle(), 1, &copy);
-    memory_barrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT, VK_PIPELINE_STAGE_HOST_BIT,
+                   VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
+    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, compact_args_pipeline_.get());
+    vkCmdDispatch(cmd, 1, 1, 1);
+    memory_barrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
+                   VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                   VK_ACCESS_INDIRECT_COMMAND_READ_BIT | VK_ACCESS_SHADER_READ_BIT);
+    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, compact_copy_pipeline_.get());
+    vkCmdDispatchIndirect(cmd, scene_.compacted.handle(), offsetof(gpu::CompactListHeader, dispatch));
+    memory_barrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT, VK_PIPELINE_STAGE_HOST_BIT,
                    VK_ACCESS_HOST_READ_BIT);
   }
 }

@@ -1,5 +1,7 @@
 #include "texstream/render/visibility_list.hpp"
 
+#include <tbb/parallel_sort.h>
+
 #include <algorithm>
 #include <unordered_map>
 
@@ -28,7 +30,9 @@ std::vector<StreamCandidate> build_candidates(std::span<const gpu::CompactEntry>
       c.weight += weight;
     }
   }
-  std::sort(out.begin(), out.end(), [](const StreamCandidate& a, const StreamCandidate& b) {
+  // Parallel CPU sort as in seed 000 §3.3 (TBB falls back to one thread for short lists). The order is total
+  // (ties by texture id, ids are unique after the merge), so the result does not depend on the threads.
+  tbb::parallel_sort(out.begin(), out.end(), [](const StreamCandidate& a, const StreamCandidate& b) {
     return a.weight != b.weight ? a.weight > b.weight : a.texture < b.texture;
   });
   if (skipped) *skipped = bad;

@@ -69,6 +69,7 @@ Result<std::unique_ptr<VulkanContext>> VulkanContext::create(const VulkanContext
     layers.push_back(kValidationLayer);
     extensions.push_back(VK_EXT_DEBUG_UTILS_EXTENSION_NAME);
   }
+  for (const std::string& e : options.instance_extensions) extensions.push_back(e.c_str());
   VkInstanceCreateInfo ici{};
   ici.sType = VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO;
   ici.pApplicationInfo = &app;
@@ -120,13 +121,18 @@ Result<std::unique_ptr<VulkanContext>> VulkanContext::create(const VulkanContext
   vkGetPhysicalDeviceQueueFamilyProperties(ctx->physical_, &family_count, families.data());
   bool found = false;
   for (uint32_t i = 0; i < family_count; ++i) {
-    if ((families[i].queueFlags & VK_QUEUE_GRAPHICS_BIT) && (families[i].queueFlags & VK_QUEUE_COMPUTE_BIT)) {
+    if ((families[i].queueFlags & VK_QUEUE_GRAPHICS_BIT) && (families[i].queueFlags & VK_QUEUE_COMPUTE_BIT) &&
+        (!options.can_present || options.can_present(ctx->instance_, ctx->physical_, i))) {
       ctx->queue_family_ = i;
       found = true;
       break;
     }
   }
-  if (!found) return make_error(ErrorCode::kUnsupported, "no graphics+compute queue family on the device");
+  if (!found) {
+    return make_error(ErrorCode::kUnsupported, options.can_present
+                                                   ? "no graphics+compute queue family that can present to the window"
+                                                   : "no graphics+compute queue family on the device");
+  }
 
   VkPhysicalDeviceFeatures supported{};
   vkGetPhysicalDeviceFeatures(ctx->physical_, &supported);
@@ -140,6 +146,11 @@ Result<std::unique_ptr<VulkanContext>> VulkanContext::create(const VulkanContext
   if (!supported.fragmentStoresAndAtomics)
     return make_error(ErrorCode::kUnsupported, "device lacks fragmentStoresAndAtomics");
   features.fragmentStoresAndAtomics = VK_TRUE;
+  // Only the LOD probe (tests, benchmark) samples anisotropically; without the feature it reports isotropic.
+  if (supported.samplerAnisotropy) {
+    features.samplerAnisotropy = VK_TRUE;
+    ctx->sampler_anisotropy_ = true;
+  }
   if (options.need_bc1) {
     if (!supported.textureCompressionBC)
       return make_error(ErrorCode::kUnsupported, "cache.format = bc1 but the device lacks textureCompressionBC");
@@ -157,6 +168,11 @@ Result<std::unique_ptr<VulkanContext>> VulkanContext::create(const VulkanContext
   dci.queueCreateInfoCount = 1;
   dci.pQueueCreateInfos = &qci;
   dci.pEnabledFeatures = &features;
+  const char* swapchain_ext = VK_KHR_SWAPCHAIN_EXTENSION_NAME;
+  if (options.can_present) {
+    dci.enabledExtensionCount = 1;
+    dci.ppEnabledExtensionNames = &swapchain_ext;
+  }
   TS_VK_TRY(vkCreateDevice(ctx->physical_, &dci, nullptr, &ctx->device_));
   vkGetDeviceQueue(ctx->device_, ctx->queue_family_, 0, &ctx->queue_);
   return ctx;

@@ -66,6 +66,17 @@ std::optional<int> wait_exit(pid_t pid, std::chrono::milliseconds timeout) {
   }
 }
 
+std::string read_text(const fs::path& file) {
+  std::string out;
+  if (FILE* f = std::fopen(file.c_str(), "rb")) {
+    char buf[4096];
+    size_t n;
+    while ((n = std::fread(buf, 1, sizeof buf, f)) > 0) out.append(buf, n);
+    std::fclose(f);
+  }
+  return out;
+}
+
 class ServerProcessTest : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -213,17 +224,72 @@ TEST_F(ServerProcessTest, StreamsAMipAndExitsCleanlyOnSigterm) {
   EXPECT_EQ((*seg)->server_block().attached.v.load(), 0u);
 }
 
-TEST_F(ServerProcessTest, ExitsWhenTheSegmentOwnerDies) {
+TEST_F(ServerProcessTest, SpawnedServerExitsWhenTheSegmentOwnerDies) {
   const pid_t owner = fork_owner(false, nullptr);
   ASSERT_GT(owner, 0) << "owner child could not create the segment";
   auto seg = Segment::open(name_);
   ASSERT_TRUE(seg.ok()) << seg.error().message;
-  const pid_t pid = spawn_server(server_args());
+  const pid_t pid = spawn_server(server_args(true));
   ASSERT_TRUE(wait_attached(**seg, 1));
   stream_one_mip(**seg);
   kill(owner, SIGKILL);
   waitpid(owner, nullptr, 0);
   EXPECT_EQ(wait_exit(pid, 10s), 0) << "the server must notice its renderer's death (pidfd) and exit 0";
+}
+
+TEST_F(ServerProcessTest, StandaloneServerWaitsForTheNextRendererOnTheSameName) {
+  const pid_t first = fork_owner(false, nullptr);
+  ASSERT_GT(first, 0) << "owner child could not create the segment";
+  auto seg = Segment::open(name_);
+  ASSERT_TRUE(seg.ok()) << seg.error().message;
+  const pid_t pid = spawn_server(server_args(false));
+  ASSERT_TRUE(wait_attached(**seg, 1));
+  stream_one_mip(**seg);
+  const uint64_t first_epoch = (*seg)->header().epoch;
+  kill(first, SIGKILL);
+  waitpid(first, nullptr, 0);
+  ASSERT_TRUE(wait_attached(**seg, 0)) << "the server must detach from the dead renderer's segment";
+  seg.value().reset();
+  // The dead renderer's name is still there (stale): the server must not attach to it again.
+  std::this_thread::sleep_for(300ms);
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, WNOHANG), 0) << "a standalone server must outlive its renderer";
+  // The next renderer removes the stale segment and creates its own under the same name.
+  ASSERT_EQ(Segment::remove_stale(name_), 1);
+  const pid_t second = fork_owner(false, nullptr);
+  ASSERT_GT(second, 0);
+  auto seg2 = Segment::open(name_);
+  ASSERT_TRUE(seg2.ok()) << seg2.error().message;
+  EXPECT_NE((*seg2)->header().epoch, first_epoch);
+  ASSERT_TRUE(wait_attached(**seg2, 1)) << "the standalone server never attached to the new segment";
+  stream_one_mip(**seg2);
+  kill(pid, SIGTERM);
+  EXPECT_EQ(wait_exit(pid, 10s), 0);
+  kill(second, SIGKILL);
+  waitpid(second, nullptr, 0);
+}
+
+TEST_F(ServerProcessTest, Sigusr1PrintsStatisticsAndKeepsServing) {
+  auto seg = Segment::create(name_, {});
+  ASSERT_TRUE(seg.ok()) << seg.error().message;
+  const fs::path log = dir_ / "server.log";
+  const pid_t pid = spawn_server(server_args(), log);
+  ASSERT_TRUE(wait_attached(**seg, 1));
+  stream_one_mip(**seg);
+  kill(pid, SIGUSR1);
+  std::string text;
+  const auto deadline = std::chrono::steady_clock::now() + 10s;
+  while (text.find("latency miss") == std::string::npos && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(10ms);
+    text = read_text(log);
+  }
+  EXPECT_NE(text.find("statistics (SIGUSR1)"), std::string::npos) << text;
+  EXPECT_NE(text.find("1 loads ok"), std::string::npos) << text;
+  EXPECT_NE(text.find("read amplification"), std::string::npos) << text;
+  int status = 0;
+  EXPECT_EQ(waitpid(pid, &status, WNOHANG), 0) << "SIGUSR1 must not stop the server";
+  kill(pid, SIGTERM);
+  EXPECT_EQ(wait_exit(pid, 10s), 0);
 }
 
 TEST_F(ServerProcessTest, SpawnedServerDiesWithItsParent) {

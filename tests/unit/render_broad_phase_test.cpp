@@ -75,3 +75,76 @@ TEST(BroadPhase, MeshContainingTheCameraIsKept) {
   bp.query(Frustum::from_matrix(cam.wide_proj * cam.view), cam.position, out);
   EXPECT_EQ(out, std::vector<uint32_t>{0});
 }
+
+namespace {
+
+// Brute force: every mesh box against the frustum, camera-relative in double first (what the tree must equal).
+std::vector<uint32_t> brute_force(const std::vector<scene::MeshRecord>& meshes, const Frustum& f,
+                                  const std::array<double, 3>& cam) {
+  std::vector<uint32_t> out;
+  for (uint32_t i = 0; i < meshes.size(); ++i) {
+    glm::vec3 lo, hi;
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = static_cast<float>(meshes[i].origin[a] + static_cast<double>(meshes[i].bounds_min[a]) - cam[a]);
+      hi[a] = static_cast<float>(meshes[i].origin[a] + static_cast<double>(meshes[i].bounds_max[a]) - cam[a]);
+    }
+    if (f.classify(lo, hi) != Frustum::Side::kOutside) out.push_back(i);
+  }
+  return out;
+}
+
+std::vector<scene::MeshRecord> random_city(uint32_t n, uint32_t seed) {
+  std::vector<scene::MeshRecord> meshes;
+  uint64_t s = seed * 0x9E3779B97F4A7C15ull + 1;
+  auto next = [&] {  // xorshift: deterministic, no <random> distribution differences between libraries
+    s ^= s << 13, s ^= s >> 7, s ^= s << 17;
+    return static_cast<double>(s % 1000000) / 1000000.0;
+  };
+  for (uint32_t i = 0; i < n; ++i) {
+    scene::MeshRecord m = mesh_at(kX - 5000 + 10000 * next(), kY - 5000 + 10000 * next(), 40 * next());
+    const auto size = static_cast<float>(1 + 30 * next());
+    for (int a = 0; a < 3; ++a) {
+      m.bounds_min[a] = -size;
+      m.bounds_max[a] = size;
+    }
+    meshes.push_back(m);
+  }
+  // A clump of identical meshes: the depth cap must stop the split, not loop.
+  for (int i = 0; i < 100; ++i) meshes.push_back(mesh_at(kX + 1, kY + 1, 0));
+  return meshes;
+}
+
+}  // namespace
+
+TEST(BroadPhase, QuadtreeEqualsBruteForceFromManyViews) {
+  const auto meshes = random_city(60000, 3);  // above kParallelMinMeshes: the TBB path runs too
+  BroadPhase bp(meshes);
+  EXPECT_GT(bp.node_count(), meshes.size() / BroadPhase::kLeafMeshes);
+  EXPECT_LE(bp.depth(), BroadPhase::kMaxDepth);
+  EXPECT_EQ(bp.mesh_count(), meshes.size());
+  for (int view = 0; view < 12; ++view) {
+    const CameraPose pose{{kX - 3000 + 500.0 * view, kY - 2000 + 300.0 * view, 20.0 + 10 * view}, 30.0 * view,
+                          -5.0 * (view % 4)};
+    const Camera cam = make_camera(pose, CameraLens{60, 75, 16.0 / 9.0, 1, 4000});
+    const Frustum f = Frustum::from_matrix(cam.wide_proj * cam.view);
+    std::vector<uint32_t> serial, parallel;
+    BroadPhaseStats stats;
+    bp.query(f, cam.position, serial, &stats, false);
+    bp.query(f, cam.position, parallel, nullptr, true);
+    EXPECT_EQ(serial, parallel) << "view " << view;  // same order, whatever the threads did
+    std::vector<uint32_t> sorted = serial;
+    std::sort(sorted.begin(), sorted.end());
+    EXPECT_EQ(sorted, brute_force(meshes, f, cam.position)) << "view " << view;
+    // The tree must skip work: far fewer boxes tested than meshes in the city.
+    EXPECT_LT(stats.nodes_tested + stats.meshes_tested, meshes.size() / 2) << "view " << view;
+  }
+}
+
+TEST(BroadPhase, EmptySceneAndSingleMesh) {
+  BroadPhase empty(std::span<const scene::MeshRecord>{});
+  std::vector<uint32_t> out{7};
+  const Camera cam = make_camera(CameraPose{{kX, kY, 0}, 0, 0}, CameraLens{});
+  empty.query(Frustum::from_matrix(cam.wide_proj * cam.view), cam.position, out);
+  EXPECT_TRUE(out.empty());
+  EXPECT_EQ(empty.node_count(), 0u);
+}

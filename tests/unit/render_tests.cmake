@@ -8,5 +8,6 @@ texstream_add_unit_test(render_unit_tests
   ${CMAKE_CURRENT_LIST_DIR}/render_staging_ring_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/render_mip_math_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/render_broad_phase_test.cpp
-  ${CMAKE_CURRENT_LIST_DIR}/render_visibility_list_test.cpp)
+  ${CMAKE_CURRENT_LIST_DIR}/render_visibility_list_test.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/render_interactive_test.cpp)
 target_link_libraries(render_unit_tests PRIVATE texstream::renderer)

@@ -2,6 +2,11 @@
 //
 //   texstream-server --segment NAME --scene DIR [--config FILE] [--set part.key=value]... [--spawned]
 //
+// Spawned (--spawned): serves the renderer that started it and exits with it. Standalone (no --spawned):
+// when the renderer dies, waits for the next one — a renderer configured with the same
+// protocol.segment_name recreates the segment under that name with a new epoch — and serves it.
+// SIGUSR1 logs the statistics (server_stats.hpp); they are also logged at exit.
+//
 // Exit codes: 0 stopped (SIGTERM/SIGINT) or the renderer exited; 2 bad arguments, configuration or scene;
 // 3 the segment cannot be opened or its header does not match this build (the message names the field);
 // 4 the renderer broke the ring protocol.
@@ -14,10 +19,13 @@
 #include <spdlog/spdlog.h>
 
 #include <atomic>
+#include <chrono>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "texstream/common/config.hpp"
+#include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
 #include "texstream/server/posix_storage.hpp"
 #include "texstream/server/server.hpp"
@@ -29,10 +37,16 @@ constexpr int kExitBadArguments = 2;
 constexpr int kExitSegment = 3;
 constexpr int kExitProtocol = 4;
 
+// Standalone: how often to look for the next client's segment. A renderer start takes far longer.
+constexpr std::chrono::milliseconds kNextClientPoll{100};
+
 std::atomic<bool> g_stop{false};
+std::atomic<bool> g_print_stats{false};
 static_assert(std::atomic<bool>::is_always_lock_free, "set from a signal handler");
 
+// Async-signal-safe: the handlers only store to lock-free atomics; the server loop does the work.
 extern "C" void on_stop_signal(int) { g_stop.store(true, std::memory_order_relaxed); }
+extern "C" void on_stats_signal(int) { g_print_stats.store(true, std::memory_order_relaxed); }
 
 void install_stop_handlers() {
   struct sigaction sa {};
@@ -41,6 +55,41 @@ void install_stop_handlers() {
   sa.sa_flags = 0;  // no SA_RESTART: a futex wait returns at once and the loop sees the flag
   sigaction(SIGTERM, &sa, nullptr);
   sigaction(SIGINT, &sa, nullptr);
+  struct sigaction st {};
+  st.sa_handler = on_stats_signal;
+  sigemptyset(&st.sa_mask);
+  st.sa_flags = 0;  // no SA_RESTART either: the idle futex wait returns and the loop prints at once
+  sigaction(SIGUSR1, &st, nullptr);
+}
+
+// Who a segment belongs to: the same name reappears for the next renderer with a new epoch and owner.
+struct ClientId {
+  uint64_t epoch = 0;
+  uint32_t pid = 0;
+  uint64_t start_time = 0;
+  bool operator==(const ClientId&) const = default;
+};
+
+ClientId client_of(const texstream::Segment& segment) {
+  return {segment.header().epoch, segment.renderer_block().pid, segment.renderer_block().start_time};
+}
+
+// Standalone: waits until a segment named `name` exists whose renderer is alive and is not `previous`.
+// Returns nullptr when stopped first.
+std::unique_ptr<texstream::Segment> wait_for_next_client(const std::string& name, const ClientId& previous) {
+  spdlog::info("waiting for the next renderer on segment '{}'", name);
+  while (!g_stop.load(std::memory_order_relaxed)) {
+    if (g_print_stats.exchange(false, std::memory_order_relaxed)) spdlog::info("statistics: no client attached");
+    texstream::Result<std::unique_ptr<texstream::Segment>> segment = texstream::Segment::open(name);
+    if (segment.ok()) {
+      const ClientId id = client_of(**segment);
+      if (!(id == previous) && texstream::process_alive(static_cast<int>(id.pid), id.start_time)) {
+        return std::move(segment).value();
+      }
+    }
+    std::this_thread::sleep_for(kNextClientPoll);  // a signal cuts it short; the loop then sees g_stop
+  }
+  return nullptr;
 }
 
 void setup_logging(const std::string& level) {
@@ -96,19 +145,25 @@ int main(int argc, char** argv) {
     return kExitSegment;
   }
   texstream::server::PosixStorage storage;
-  auto server = texstream::server::Server::create(**segment, config->scene.dir, config->server, storage);
-  if (!server.ok()) {
-    spdlog::error("{}", server.error().message);
-    return kExitBadArguments;
+  std::unique_ptr<texstream::Segment> current = std::move(segment).value();
+  for (;;) {
+    auto server = texstream::server::Server::create(*current, config->scene.dir, config->server, storage);
+    if (!server.ok()) {
+      spdlog::error("{}", server.error().message);
+      return kExitBadArguments;
+    }
+    spdlog::info("serving segment '{}' (epoch {:016x}) from scene '{}' ({} workers, RAM cache {} bytes, {} policy, "
+                 "rate limit {} MB/s)",
+                 segment_name, current->header().epoch, config->scene.dir, config->server.worker_threads,
+                 config->server.ram_cache_bytes, config->server.cache_policy, config->server.rate_limit_mb_s);
+    const texstream::server::RunOutcome outcome = (*server)->run(g_stop, &g_print_stats);
+    if (outcome == texstream::server::RunOutcome::kPeerCorrupt) return kExitProtocol;
+    if (outcome == texstream::server::RunOutcome::kStopped || spawned) return kExitOk;
+    // Standalone and the renderer died: drop its state (server, mapping) and serve the next one.
+    const ClientId previous = client_of(*current);
+    server.value().reset();
+    current.reset();
+    current = wait_for_next_client(segment_name, previous);
+    if (!current) return kExitOk;
   }
-  spdlog::info("serving segment '{}' from scene '{}' ({} workers, RAM cache {} bytes)", segment_name,
-               config->scene.dir, config->server.worker_threads, config->server.ram_cache_bytes);
-  const texstream::server::RunOutcome outcome = (*server)->run(g_stop);
-  switch (outcome) {
-    case texstream::server::RunOutcome::kStopped: return kExitOk;
-    // Standalone mode does not yet wait for a next client: it exits like a spawned server.
-    case texstream::server::RunOutcome::kRendererDead: return kExitOk;
-    case texstream::server::RunOutcome::kPeerCorrupt: return kExitProtocol;
-  }
-  return kExitOk;
 }

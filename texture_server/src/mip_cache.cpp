@@ -72,6 +72,11 @@ bool MipCache::insert(MipKey key, std::shared_ptr<const CachedMip> mip) {
   return true;
 }
 
+void MipCache::advance_clock(uint64_t now) {
+  std::lock_guard lock(mutex_);
+  policy_->on_tick(now);
+}
+
 MipCacheStats MipCache::stats() const {
   std::lock_guard lock(mutex_);
   MipCacheStats s = stats_;

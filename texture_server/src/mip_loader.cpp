@@ -6,6 +6,7 @@
 #include <cstring>
 
 #include "texstream/protocol/checksum.hpp"
+#include "texstream/server/oiio_mip_decoder.hpp"
 
 namespace texstream::server {
 
@@ -34,16 +35,44 @@ CompletionRecord ok_completion(const LoadRequest& request, const scene::TextureR
   return c;
 }
 
+CompletionStatus status_of(ErrorCode code) {
+  switch (code) {
+    case ErrorCode::kNotFound: return CompletionStatus::kNotFound;
+    case ErrorCode::kCorrupt:
+    case ErrorCode::kUnsupported: return CompletionStatus::kCorrupt;
+    case ErrorCode::kTimeout: return CompletionStatus::kTimedOut;
+    default: return CompletionStatus::kIoError;
+  }
+}
+
+std::string extent_text(Extent2D e) { return std::to_string(e.width) + "x" + std::to_string(e.height); }
+
 }  // namespace
 
-MipLoader::MipLoader(std::filesystem::path scene_dir, Storage& storage, MipCache& cache, ServerBlock& stats)
-    : scene_dir_(std::move(scene_dir)), storage_(storage), cache_(cache), stats_(stats) {}
+MipLoader::MipLoader(std::filesystem::path scene_dir, Storage& storage, MipCache& cache, ServerBlock& block,
+                     ServerStats& stats)
+    : scene_dir_(std::move(scene_dir)), storage_(storage), cache_(cache), block_(block), stats_(stats) {}
+
+CompletionStatus MipLoader::fail_status(const LoadRequest& request, CompletionStatus status,
+                                        const std::filesystem::path& path, const std::string& why) {
+  spdlog::warn("texture {} mip {}: {} ({}): {}", request.texture.value, request.mip.value, to_string(status),
+               path.string(), why);
+  switch (status) {
+    case CompletionStatus::kNotFound: stats_.add(stats_.not_found, 1); break;
+    case CompletionStatus::kCorrupt: stats_.add(stats_.corrupt, 1); break;
+    default: stats_.add(stats_.io_errors, 1); break;
+  }
+  return status;
+}
 
 CompletionRecord MipLoader::fail(const LoadRequest& request, CompletionStatus status,
                                  const std::filesystem::path& path, const std::string& why) {
-  spdlog::warn("texture {} mip {}: {} ({}): {}", request.texture.value, request.mip.value, to_string(status),
-               path.string(), why);
-  return make_completion(request, status);
+  return make_completion(request, fail_status(request, status, path, why));
+}
+
+void MipLoader::count_read(uint64_t bytes) {
+  block_.bytes_read.v.fetch_add(bytes, std::memory_order_relaxed);  // relaxed: statistic
+  stats_.add(stats_.bytes_read, bytes);
 }
 
 CompletionRecord MipLoader::serve_cached(const LoadRequest& request, const scene::TextureRecord& record,
@@ -53,52 +82,125 @@ CompletionRecord MipLoader::serve_cached(const LoadRequest& request, const scene
   TS_ASSERT(hit->bytes.size() <= slot.size(), "cached mip of %zu bytes does not fit a slot of %zu", hit->bytes.size(),
             slot.size());
   std::memcpy(slot.data(), hit->bytes.data(), hit->bytes.size());
-  stats_.ram_cache_hits.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: a statistic, read for reports
+  block_.ram_cache_hits.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: a statistic, read for reports
+  stats_.add(stats_.bytes_served_cached, hit->bytes.size());
   return ok_completion(request, record, slot_index, hit->bytes.size(), hit->checksum);
+}
+
+bool MipLoader::open_texture(const LoadRequest& request, Opened& opened, CompletionRecord& error) {
+  // A remembered file first: one open, no probing of the other suffixes.
+  if (std::optional<TextureFileEntry> known = index_.find(request.texture)) {
+    opened.path = texture_file_path(scene_dir_, request.texture, known->kind);
+    Result<std::unique_ptr<StorageFile>> f = storage_.open(opened.path);
+    if (f.ok()) {
+      opened.entry = *known;
+      opened.file = std::move(f).value();
+      return true;
+    }
+    index_.forget(request.texture);  // gone or renamed since: probe again below
+  }
+  std::string tried;
+  for (TextureFileKind kind : kTextureFileKinds) {
+    const std::filesystem::path path = texture_file_path(scene_dir_, request.texture, kind);
+    Result<std::unique_ptr<StorageFile>> f = storage_.open(path);
+    if (f.ok()) {
+      opened.path = path;
+      opened.entry = TextureFileEntry{kind, std::nullopt};
+      opened.file = std::move(f).value();
+      index_.remember(request.texture, opened.entry);
+      return true;
+    }
+    if (f.error().code != ErrorCode::kNotFound) {
+      error = fail(request, CompletionStatus::kIoError, path, f.error().message);
+      return false;
+    }
+    tried += tried.empty() ? suffix_of(kind) : std::string(", ") + suffix_of(kind);
+  }
+  error = fail(request, CompletionStatus::kNotFound, scene::texture_path(scene_dir_, request.texture),
+               "no texture file (tried " + tried + ")");
+  return false;
+}
+
+CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::TextureRecord& record, Opened& opened,
+                                     std::span<std::byte> target) {
+  const TexelFormat format = static_cast<TexelFormat>(record.format);  // validated with the texture table
+  const uint32_t level = request.mip.value;
+  const Extent2D expected = mip_extent(record.width, record.height, level);
+  const std::filesystem::path& path = opened.path;
+
+  bool decode = opened.entry.kind != TextureFileKind::kDds;
+  if (opened.entry.kind == TextureFileKind::kDds) {
+    if (!opened.entry.dds) {
+      std::array<std::byte, kDdsMaxHeaderBytes> header{};
+      Result<uint64_t> got = opened.file->read_at(header, 0);
+      if (!got.ok()) return fail_status(request, CompletionStatus::kIoError, path, got.error().message);
+      count_read(*got);
+      Result<DdsLayout> layout = parse_dds_layout(std::span(header).first(*got), path.string());
+      if (!layout.ok()) return fail_status(request, CompletionStatus::kCorrupt, path, layout.error().message);
+      opened.entry.dds = *layout;
+      index_.remember(request.texture, opened.entry);
+    }
+    const DdsLayout& dds = *opened.entry.dds;
+    if (level >= dds.mip_count) {
+      return fail_status(request, CompletionStatus::kCorrupt, path,
+                         "the file has " + std::to_string(dds.mip_count) + " mips, mip " + std::to_string(level) +
+                             " was asked (the texture table says " + std::to_string(record.mip_count) + ")");
+    }
+    const Extent2D in_file = mip_extent(dds.width, dds.height, level);
+    if (in_file != expected) {
+      return fail_status(request, CompletionStatus::kCorrupt, path,
+                         "mip " + std::to_string(level) + " is " + extent_text(in_file) + " in the file (" +
+                             extent_text({dds.width, dds.height}) + " at mip 0), the texture table says " +
+                             extent_text(expected));
+    }
+    if (format == TexelFormat::kBc1 && dds.encoding != DdsEncoding::kBc1) {
+      return fail_status(request, CompletionStatus::kCorrupt, path,
+                         "the texture table says bc1 but the file is not BC1/DXT1 (the server never encodes BC1)");
+    }
+    decode = format == TexelFormat::kRgba8 && dds.encoding != DdsEncoding::kRgba8;
+    if (!decode) {
+      // Exactly the mip's byte range.
+      const uint64_t offset = dds.mip_offset(level);
+      Result<uint64_t> got = opened.file->read_at(target, offset);
+      if (!got.ok()) return fail_status(request, CompletionStatus::kIoError, path, got.error().message);
+      count_read(*got);
+      if (*got != target.size()) {
+        index_.forget(request.texture);  // the file may have been replaced: look again next time
+        return fail_status(request, CompletionStatus::kCorrupt, path,
+                           "truncated: mip " + std::to_string(level) + " needs bytes [" + std::to_string(offset) +
+                               ", " + std::to_string(offset + target.size()) + "), the file ends after " +
+                               std::to_string(offset + *got));
+      }
+      return CompletionStatus::kOk;
+    }
+  }
+  if (format != TexelFormat::kRgba8) {
+    return fail_status(request, CompletionStatus::kCorrupt, path,
+                       "the texture table says " + std::string(to_string(format)) +
+                           " but the file holds decoded texels (only rgba8 textures may come from " +
+                           suffix_of(opened.entry.kind) + " files)");
+  }
+  DecodeOutcome outcome;
+  const Status decoded = decode_mip_rgba8(*opened.file, path, level, expected, target, outcome);
+  count_read(outcome.bytes_read);
+  if (!decoded.ok()) return fail_status(request, status_of(decoded.error().code), path, decoded.error().message);
+  return CompletionStatus::kOk;
 }
 
 CompletionRecord MipLoader::load(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot_index,
                                  std::span<std::byte> slot) {
   const TexelFormat format = static_cast<TexelFormat>(record.format);  // validated with the texture table
-  const uint32_t level = request.mip.value;
-  const uint64_t bytes = mip_bytes(format, record.width, record.height, level);
+  const uint64_t bytes = mip_bytes(format, record.width, record.height, request.mip.value);
   TS_ASSERT(bytes <= slot.size(), "mip of %llu bytes does not fit a slot of %zu (the dispatcher checks this)",
             static_cast<unsigned long long>(bytes), slot.size());
-  stats_.ram_cache_misses.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
+  block_.ram_cache_misses.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
 
-  const std::filesystem::path path = scene::texture_path(scene_dir_, request.texture);
-  Result<std::unique_ptr<StorageFile>> file = storage_.open(path);
-  if (!file.ok()) {
-    const CompletionStatus status =
-        file.error().code == ErrorCode::kNotFound ? CompletionStatus::kNotFound : CompletionStatus::kIoError;
-    return fail(request, status, path, file.error().message);
-  }
+  Opened opened;
+  CompletionRecord error{};
+  if (!open_texture(request, opened, error)) return error;
 
-  // The header is read on every miss rather than cached per texture. Measured on the dev machine (page cache
-  // warm): open + pread(16 KiB mip) + close 6.4 us, with the 128-byte header pread 7.6 us — 1.2 us per miss,
-  // none per RAM-cache hit, and it catches a file replaced under us. A per-texture map would save little.
-  std::array<std::byte, scene::kDdsHeaderBytes> header{};
-  Result<uint64_t> got = (*file)->read_at(header, 0);
-  if (!got.ok()) return fail(request, CompletionStatus::kIoError, path, got.error().message);
-  stats_.bytes_read.v.fetch_add(*got, std::memory_order_relaxed);  // relaxed: statistic
-  if (*got != header.size()) {
-    return fail(request, CompletionStatus::kCorrupt, path,
-                "truncated: " + std::to_string(*got) + " of " + std::to_string(header.size()) + " header bytes");
-  }
-  Result<scene::DdsInfo> info = scene::parse_dds_header(header, path.string());
-  if (!info.ok()) return fail(request, CompletionStatus::kCorrupt, path, info.error().message);
-  if (info->format != format || info->width != record.width || info->height != record.height ||
-      info->mip_count != record.mip_count) {
-    return fail(request, CompletionStatus::kCorrupt, path,
-                "header says " + std::string(to_string(info->format)) + " " + std::to_string(info->width) + "x" +
-                    std::to_string(info->height) + " with " + std::to_string(info->mip_count) +
-                    " mips, the texture table says " + std::string(to_string(format)) + " " +
-                    std::to_string(record.width) + "x" + std::to_string(record.height) + " with " +
-                    std::to_string(record.mip_count) + " mips");
-  }
-
-  // Read exactly the mip's byte range. Into a private buffer when the cache may keep it (the slot is shared
-  // memory the renderer could scribble on; the cache must hold what we read), otherwise straight into the slot.
+  // Into a private buffer when the cache may keep it (the slot is shared memory the renderer could scribble
+  // on; the cache must hold what we read), otherwise straight into the slot.
   std::shared_ptr<CachedMip> keep;
   std::span<std::byte> target = slot.first(bytes);
   if (cache_.admissible(bytes)) {
@@ -106,15 +208,9 @@ CompletionRecord MipLoader::load(const LoadRequest& request, const scene::Textur
     keep->bytes.resize(bytes);
     target = keep->bytes;
   }
-  const uint64_t offset = scene::dds_mip_offset(format, record.width, record.height, level);
-  got = (*file)->read_at(target, offset);
-  if (!got.ok()) return fail(request, CompletionStatus::kIoError, path, got.error().message);
-  stats_.bytes_read.v.fetch_add(*got, std::memory_order_relaxed);  // relaxed: statistic
-  if (*got != bytes) {
-    return fail(request, CompletionStatus::kCorrupt, path,
-                "truncated: mip " + std::to_string(level) + " needs bytes [" + std::to_string(offset) + ", " +
-                    std::to_string(offset + bytes) + "), the file ends after " + std::to_string(offset + *got));
-  }
+  const CompletionStatus status = read_mip(request, record, opened, target);
+  if (status != CompletionStatus::kOk) return make_completion(request, status);
+
   // The checksum is of the bytes we meant to hand over (equal to the slot's unless the renderer wrote into a
   // slot it does not own, which the renderer's own check then catches).
   const uint64_t checksum = payload_checksum(target.data(), bytes);
@@ -123,6 +219,7 @@ CompletionRecord MipLoader::load(const LoadRequest& request, const scene::Textur
     std::memcpy(slot.data(), keep->bytes.data(), bytes);
     cache_.insert(request.key(), std::move(keep));
   }
+  stats_.add(stats_.bytes_loaded, bytes);
   return ok_completion(request, record, slot_index, bytes, checksum);
 }
 

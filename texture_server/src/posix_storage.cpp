@@ -1,6 +1,7 @@
 #include "texstream/server/posix_storage.hpp"
 
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -33,6 +34,14 @@ class PosixFile final : public StorageFile {
       done += static_cast<uint64_t>(n);
     }
     return done;
+  }
+
+  Result<uint64_t> size() override {
+    struct stat st {};
+    if (::fstat(fd_, &st) != 0) {
+      return make_error(ErrorCode::kIo, "cannot stat '" + path_.string() + "': " + std::strerror(errno));
+    }
+    return static_cast<uint64_t>(st.st_size);
   }
 
  private:

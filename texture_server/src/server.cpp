@@ -7,8 +7,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <thread>
 
-#include "texstream/server/lru_eviction_policy.hpp"
+#include "texstream/server/rate_limited_storage.hpp"
 
 namespace texstream::server {
 
@@ -18,6 +19,23 @@ namespace {
 // dispatcher's last check and its futex_wait (the doorbell word, which workers do not write, has not changed),
 // so this bounds the cost of that race. 1 ms against loads of 0.1–10 ms.
 constexpr std::chrono::microseconds kBusyWait{1000};
+
+// Loads handed to the pool per worker. With 1, every miss costs a dispatcher round trip (worker result →
+// futex wake → dispatcher → condition variable → worker) before the worker starts its next read: measured
+// with texstream-bench server on the 2-core machine, misses ran at 0.07x plain read(). A second job per
+// worker lets it go on at once; the cost is that up to this many jobs per worker can no longer be superseded.
+constexpr uint32_t kJobsPerWorker = 2;
+
+// After a busy pass, poll this long (yielding the core) before sleeping on the futex: a renderer streaming
+// a batch pushes again within microseconds, and a futex sleep + wake costs two syscalls and a context switch
+// per batch. Bounded so an idle server costs nothing.
+constexpr std::chrono::microseconds kSpinBeforeSleep{50};
+
+uint64_t steady_now_ns() {
+  return static_cast<uint64_t>(
+      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+          .count());
+}
 
 }  // namespace
 
@@ -51,19 +69,35 @@ Result<std::unique_ptr<Server>> Server::create(Segment& segment, const std::file
                                                  std::to_string((*textures)[i].format));
     }
   }
-  return std::unique_ptr<Server>(new Server(segment, scene_dir, config, storage, std::move(textures).value()));
+  if (!(config.rate_limit_mb_s >= 0)) {
+    return make_error(ErrorCode::kInvalidArgument, "server.rate_limit_mb_s must be >= 0");
+  }
+  // Eq. 4's quadtree level: the texture's coarsest (1x1) mip is the root, l = 0.
+  const std::vector<scene::TextureRecord>* table = &textures.value();
+  Result<std::unique_ptr<EvictionPolicy>> policy =
+      make_eviction_policy(config.cache_policy, [table](MipKey key) {
+        const scene::TextureRecord& t = (*table)[key.texture().value];
+        return t.mip_count - 1 - std::min(key.mip().value, t.mip_count - 1);
+      });
+  if (!policy.ok()) return policy.error();
+  // The lambda points at the vector's heap buffer, which moving the vector into the Server keeps.
+  return std::unique_ptr<Server>(new Server(segment, scene_dir, config, storage, std::move(textures).value(),
+                                            std::move(policy).value()));
 }
 
 Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const ServerConfig& config, Storage& storage,
-               std::vector<scene::TextureRecord> textures)
+               std::vector<scene::TextureRecord> textures, std::unique_ptr<EvictionPolicy> policy)
     : segment_(segment),
       scene_dir_(scene_dir),
       config_(config),
       textures_(std::move(textures)),
       requests_(segment.request_control(), segment.request_records(), segment.header().request_capacity),
       completions_(segment.completion_control(), segment.completion_records(), segment.header().completion_capacity),
-      cache_(static_cast<uint64_t>(config.ram_cache_bytes), std::make_unique<LruEvictionPolicy>()),
-      loader_(scene_dir, storage, cache_, segment.server_block()),
+      rate_limited_(config.rate_limit_mb_s > 0
+                        ? std::make_unique<RateLimitedStorage>(storage, config.rate_limit_mb_s, &stats_)
+                        : nullptr),
+      cache_(static_cast<uint64_t>(config.ram_cache_bytes), std::move(policy)),
+      loader_(scene_dir, rate_limited_ ? *rate_limited_ : storage, cache_, segment.server_block(), stats_),
       slots_(segment.slot_count()) {
   cancelled_scratch_.reserve(256);
   results_scratch_.reserve(64);
@@ -79,7 +113,7 @@ Server::~Server() {
   workers_.reset();  // join before the members the workers use go away
 }
 
-RunOutcome Server::run(const std::atomic<bool>& stop) {
+RunOutcome Server::run(const std::atomic<bool>& stop, std::atomic<bool>* print_stats) {
   ServerBlock& block = segment_.server_block();
   RendererBlock& renderer = segment_.renderer_block();
   const int self = static_cast<int>(::getpid());
@@ -118,14 +152,30 @@ RunOutcome Server::run(const std::atomic<bool>& stop) {
       outcome = RunOutcome::kPeerCorrupt;
       break;
     }
+    update_gauges();
+    // relaxed: the flag carries no data; the handler that set it ran on this process.
+    if (print_stats && print_stats->exchange(false, std::memory_order_relaxed)) {
+      spdlog::info("statistics (SIGUSR1):\n{}", stats_report());
+    }
     if (!busy) idle_wait();
   }
   block.attached.v.store(0, std::memory_order_release);  // pairs with the renderer's acquire-load
-  const MipCacheStats s = cache_.stats();
-  spdlog::info("{}: {} completions, {} cache hits, {} misses, {} evictions, {} bytes read", to_string(outcome),
-               block.completions.v.load(std::memory_order_relaxed), s.hits, s.misses, s.evictions,
-               block.bytes_read.v.load(std::memory_order_relaxed));
+  spdlog::info("{}: {} completions\n{}", to_string(outcome), block.completions.v.load(std::memory_order_relaxed),
+               stats_report());
   return outcome;
+}
+
+std::string Server::stats_report() const { return format_stats(stats_, cache_.stats()); }
+
+void Server::update_gauges() {
+  stats_.pending.set(scheduler_.size());
+  stats_.in_flight.set(loads_in_flight_);
+  stats_.overflow.set(overflow_.size());
+}
+
+void Server::record_latency(LatencyHistogram& histogram, uint64_t received_ns) {
+  const uint64_t now = steady_now_ns();
+  histogram.record(now > received_ns ? (now - received_ns) / 1000 : 0);
 }
 
 bool Server::drain_requests() {
@@ -145,12 +195,17 @@ bool Server::drain_requests() {
     }
   }
   if (!any) return false;
+  if (scheduler_.newest_generation().value > clock_generation_) {
+    clock_generation_ = scheduler_.newest_generation().value;
+    cache_.advance_clock(clock_generation_);  // one streaming cycle = one "frame" of seed 002 Eq. 4
+  }
   // The batch read now is the renderer's latest cycle: pending requests of older cycles that it did not ask
   // for again are stale (seed 002 §4.3: the server must not get bogged down processing old requests).
   cancelled_scratch_.clear();
   scheduler_.supersede_older_than(scheduler_.newest_generation(), cancelled_scratch_);
   for (const LoadRequest& c : cancelled_scratch_) {
     segment_.server_block().requests_cancelled.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
+    stats_.add(stats_.cancelled, 1);
     complete(make_completion(c, CompletionStatus::kCancelled));
   }
   return true;
@@ -173,17 +228,20 @@ void Server::handle_load(const RequestRecord& r) {
   }
   ServerBlock& block = segment_.server_block();
   block.requests_received.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
-  const LoadRequest request{TextureId(r.texture_id), MipLevel(r.mip_level), Generation(r.generation), r.priority};
+  const LoadRequest request{TextureId(r.texture_id), MipLevel(r.mip_level), Generation(r.generation), r.priority,
+                            steady_now_ns()};
   const uint64_t bytes = mip_bytes(static_cast<TexelFormat>(t.format), t.width, t.height, r.mip_level);
   if (bytes > segment_.slot_bytes()) {
     spdlog::warn("texture {} mip {}: {} ({}): {} bytes do not fit a staging slot of {} bytes", r.texture_id,
                  r.mip_level, to_string(CompletionStatus::kIoError),
                  scene::texture_path(scene_dir_, request.texture).string(), bytes, segment_.slot_bytes());
+    stats_.add(stats_.io_errors, 1);
     complete(make_completion(request, CompletionStatus::kIoError));
     return;
   }
   if (const std::optional<LoadRequest> cancelled = scheduler_.add(request)) {
     block.requests_cancelled.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
+    stats_.add(stats_.cancelled, 1);
     complete(make_completion(*cancelled, CompletionStatus::kCancelled));
   }
 }
@@ -202,6 +260,8 @@ bool Server::collect_results() {
     --loads_in_flight_;
     if (r.completion.status == static_cast<uint32_t>(CompletionStatus::kOk)) {
       slots_.hand_to_renderer(r.slot);
+      stats_.add(stats_.loads_ok, 1);
+      record_latency(stats_.miss_latency, r.received_ns);
     } else {
       slots_.release_unused(r.slot);
     }
@@ -215,7 +275,7 @@ bool Server::dispatch() {
   const uint32_t workers = workers_->threads();
   while (!scheduler_.empty() && slots_.free_count() > 0) {
     const std::optional<LoadRequest> top = scheduler_.top();
-    const bool worker_idle = loads_in_flight_ < workers;
+    const bool worker_idle = loads_in_flight_ < workers * kJobsPerWorker;
     // With every worker busy, a RAM-cache hit is still served here at once: a slow read must not hold up a
     // fast hit (seed 002 §3.2, the bimodal access problem).
     if (!worker_idle && !cache_.contains(top->key())) break;
@@ -226,6 +286,8 @@ bool Server::dispatch() {
     const CompletionRecord hit = loader_.serve_cached(request, record, slot, segment_.slot(slot));
     if (hit.status == static_cast<uint32_t>(CompletionStatus::kOk)) {
       slots_.hand_to_renderer(slot);
+      stats_.add(stats_.hits_ok, 1);
+      record_latency(stats_.hit_latency, request.received_ns);
       complete(hit);
       continue;
     }
@@ -256,6 +318,12 @@ bool Server::flush_completions() {
 }
 
 void Server::idle_wait() {
+  // Spin briefly first (see kSpinBeforeSleep); any new request or worker result ends the spin.
+  const auto spin_end = std::chrono::steady_clock::now() + kSpinBeforeSleep;
+  while (std::chrono::steady_clock::now() < spin_end) {
+    if (requests_.size() > 0 || workers_->results_ready()) return;
+    std::this_thread::yield();
+  }
   ServerBlock& block = segment_.server_block();
   RendererBlock& renderer = segment_.renderer_block();
   const auto idle = std::chrono::microseconds(static_cast<int64_t>(config_.idle_wait_ms * 1000.0));

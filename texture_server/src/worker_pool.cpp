@@ -31,6 +31,7 @@ void WorkerPool::take_results(std::vector<LoadResult>& out) {
   std::lock_guard lock(mutex_);
   out.insert(out.end(), results_.begin(), results_.end());
   results_.clear();
+  ready_.store(0, std::memory_order_release);  // pairs with results_ready()'s acquire
 }
 
 void WorkerPool::worker_main() {
@@ -47,7 +48,8 @@ void WorkerPool::worker_main() {
     const CompletionRecord completion = work_(job);
     {
       std::lock_guard lock(mutex_);
-      results_.push_back({completion, job.slot});
+      results_.push_back({completion, job.slot, job.request.received_ns});
+      ready_.store(static_cast<uint32_t>(results_.size()), std::memory_order_release);  // pairs with results_ready()
     }
     if (on_result_) on_result_();
   }

@@ -4,6 +4,7 @@
 #include <vulkan/vulkan.h>
 
 #include <filesystem>
+#include <span>
 
 #include "texstream/common/result.hpp"
 #include "texstream/render/gpu_buffer.hpp"
@@ -19,6 +20,10 @@ class FrameCapture {
   void record(VkCommandBuffer cmd, VkImage image) const;
   // After the submission that ran record() has completed.
   Status write_png(const std::filesystem::path& file) const;
+  // After the submission that ran record() has completed: width * height RGBA8 pixels, rows top to bottom.
+  std::span<const std::byte> pixels() const { return buffer_.bytes(); }
+  uint32_t width() const { return width_; }
+  uint32_t height() const { return height_; }
 
  private:
   uint32_t width_ = 0;

@@ -10,11 +10,13 @@ namespace texstream::gpu {
 
 static_assert(sizeof(vec4) == 16 && sizeof(uvec4) == 16 && sizeof(mat4) == 64);
 
-static_assert(sizeof(FrameUniforms) == 64);
+static_assert(sizeof(FrameUniforms) == 80);
 static_assert(offsetof(FrameUniforms, camera_forward) == 0);
 static_assert(offsetof(FrameUniforms, params) == 16);
 static_assert(offsetof(FrameUniforms, flags) == 32);
 static_assert(offsetof(FrameUniforms, cache) == 48);
+static_assert(offsetof(FrameUniforms, view) == 64);
+static_assert(sizeof(LodProbeSample) == 16);
 
 static_assert(sizeof(PassConstants) == 80);  // push constants: Vulkan guarantees 128 bytes
 static_assert(offsetof(PassConstants, view_proj) == 0);
@@ -37,6 +39,7 @@ static_assert(sizeof(CompactEntry) == 16);
 static_assert(offsetof(CompactEntry, mip_fixed) == 4);
 static_assert(offsetof(CompactEntry, weight_fixed) == 8);
 static_assert(sizeof(CompactListHeader) == 16);  // compact.comp: four uints, then the entries
+static_assert(offsetof(CompactListHeader, dispatch) == 4);  // vkCmdDispatchIndirect reads it at offset 4
 
 static_assert(std::is_trivially_copyable_v<TextureGpu> && std::is_trivially_copyable_v<MeshGpu>);
 

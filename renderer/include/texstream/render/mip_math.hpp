@@ -18,15 +18,19 @@ inline AnisoLod anisotropic_lod(float dudx, float dvdx, float dudy, float dvdy, 
   const float py = std::sqrt(dudy * dudy + dvdy * dvdy);
   const float pmax = std::max(px, py);
   const float pmin = std::min(px, py);
-  float n = pmin > 0.0f ? std::min(std::ceil(pmax / pmin), max_aniso) : max_aniso;
+  // As the shader: ratios within 1/256 above an integer count as it (float noise must not double N).
+  float n = pmin > 0.0f ? std::min(std::ceil(pmax / pmin - 1.0f / 256.0f), max_aniso) : max_aniso;
   n = std::max(n, 1.0f);
-  return {pmax > 0.0f ? std::log2(pmax / n) : -64.0f, n};
+  float lod = pmax > 0.0f ? std::log2(pmax / n) : -64.0f;
+  // As the shader: non-finite footprints ask for the coarsest level (64 clamps to M_max), never NaN.
+  if (std::isnan(lod) || std::isinf(lod)) lod = std::isinf(lod) && lod < 0.0f ? -64.0f : 64.0f;
+  return {lod, std::isnan(n) ? max_aniso : n};
 }
 
 // Eq. 2 with c_w = min(w_clip / D, 1): w_clip = 1 / gl_FragCoord.w is the view depth in metres; D is the
 // foreground distance (see shaders/mip_math.glsl for why the paper's literal form needs a length scale).
 inline float distance_weight(float w_clip_m, float foreground_distance_m) {
-  const float c_w = std::min(w_clip_m / foreground_distance_m, 1.0f);
+  const float c_w = std::clamp(w_clip_m / foreground_distance_m, 0.0f, 1.0f);
   const float a = 1.0f - c_w;
   return a * a * a * a;
 }

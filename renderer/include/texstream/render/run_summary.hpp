@@ -32,6 +32,13 @@ struct RunSummary {
   uint64_t texture_count = 0;
   uint64_t streaming_cycles = 0;
   uint64_t evictions = 0;
+  // Adaptive controller (seed 000 §3.4): per-frame averages of its outputs and of t_w.
+  std::string controller_mode;
+  double avg_load_size_mb = 0;         // s, 10^6 bytes
+  double avg_mip_bias = 0;             // b, levels
+  double avg_weighted_latency_ms = 0;  // t_w (Eq. 5)
+  uint64_t load_time_limited_frames = 0;   // frames whose completion intake hit controller.load_time_ms
+  uint64_t controller_rejected_frames = 0; // frame latencies the controller refused (non-finite, negative)
 
   std::string to_json() const;
   std::string to_text() const;

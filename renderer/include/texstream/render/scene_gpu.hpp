@@ -31,7 +31,8 @@ struct SceneGpu {
   GpuBuffer indirect;             // VkDrawIndexedIndirectCommand[mesh_count], host-visible
   GpuBuffer mesh_meta;            // gpu::MeshMeta[mesh_count], device-local, reset by compact.comp
   GpuBuffer compacted;            // gpu::CompactListHeader + gpu::CompactEntry[capacity], device-local
-  GpuBuffer readback;             // same layout, host-visible: copied into only when a streaming cycle starts
+  GpuBuffer readback;             // same layout, host-visible: header + used prefix, written only when a
+                                  // streaming cycle starts (compact_copy.comp)
   GpuBuffer frame_uniforms;       // gpu::FrameUniforms, host-visible
 };
 

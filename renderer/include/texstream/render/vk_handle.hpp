@@ -51,5 +51,7 @@ using UniqueRenderPass = DeviceHandle<VkRenderPass, vkDestroyRenderPass>;
 using UniqueFramebuffer = DeviceHandle<VkFramebuffer, vkDestroyFramebuffer>;
 using UniqueCommandPool = DeviceHandle<VkCommandPool, vkDestroyCommandPool>;
 using UniqueFence = DeviceHandle<VkFence, vkDestroyFence>;
+using UniqueSemaphore = DeviceHandle<VkSemaphore, vkDestroySemaphore>;
+using UniqueSwapchain = DeviceHandle<VkSwapchainKHR, vkDestroySwapchainKHR>;
 
 }  // namespace texstream::render

@@ -5,8 +5,10 @@
 
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "texstream/common/result.hpp"
 
@@ -16,6 +18,11 @@ struct VulkanContextOptions {
   std::string device_substring;  // empty: the first device
   bool validation = false;       // VK_LAYER_KHRONOS_validation + debug messenger
   bool need_bc1 = false;         // textureCompressionBC (cache.format = bc1)
+  // Window mode: instance extensions the window system needs (glfwGetRequiredInstanceExtensions), and a test
+  // that the queue family can present (glfwGetPhysicalDevicePresentationSupport); non-empty adds
+  // VK_KHR_swapchain to the device.
+  std::vector<std::string> instance_extensions;
+  std::function<bool(VkInstance, VkPhysicalDevice, uint32_t)> can_present;
 };
 
 // Counts of validation messages; the messenger callback may run on any thread.
@@ -38,6 +45,8 @@ class VulkanContext {
   uint32_t queue_family() const { return queue_family_; }
   const VkPhysicalDeviceProperties& properties() const { return properties_; }
   std::string device_name() const { return properties_.deviceName; }
+  // samplerAnisotropy is enabled (the LOD probe's sampler uses it when the device has it).
+  bool sampler_anisotropy() const { return sampler_anisotropy_; }
 
   uint32_t validation_errors() const { return counters_->errors.load(std::memory_order_relaxed); }
   uint32_t validation_warnings() const { return counters_->warnings.load(std::memory_order_relaxed); }
@@ -54,6 +63,7 @@ class VulkanContext {
   VkDevice device_ = VK_NULL_HANDLE;
   VkQueue queue_ = VK_NULL_HANDLE;
   uint32_t queue_family_ = 0;
+  bool sampler_anisotropy_ = false;
   VkPhysicalDeviceProperties properties_{};
   VkPhysicalDeviceMemoryProperties memory_properties_{};
   std::unique_ptr<ValidationCounters> counters_ = std::make_unique<ValidationCounters>();

@@ -1,10 +1,15 @@
 #pragma once
 // Which cached mip goes first when the RAM cache is over budget. The cache owns the entries and the byte
 // accounting; a policy only orders keys. LRU is the default (seed 002 §4.4 uses LRU for the in-memory cache);
-// a later issue can plug in the discard priority p_d = f(l + 1) of seed 002 Eq. 4 behind the same interface.
+// LevelEvictionPolicy is the discard priority p_d = f(l + 1) of seed 002 Eq. 4 (server.cache_policy).
 // Called only with the cache's lock held, so implementations need no locking of their own.
+#include <cstdint>
 #include <functional>
+#include <memory>
 #include <optional>
+#include <string>
+
+#include "texstream/common/result.hpp"
 
 #include "texstream/server/mip_key.hpp"
 
@@ -18,6 +23,14 @@ class EvictionPolicy {
   virtual void on_erase(MipKey key) = 0;
   // The key to evict first among those for which `evictable` is true (pinned entries are not), or nullopt.
   virtual std::optional<MipKey> pick_victim(const std::function<bool(MipKey)>& evictable) = 0;
+  // The clock advanced to `now` (the server's streaming-cycle generation: the "frames" of Eq. 4). Policies
+  // that order by recency alone ignore it.
+  virtual void on_tick(uint64_t now) { (void)now; }
 };
+
+// server.cache_policy: "lru" or "level" (which needs each key's quadtree level, see level_eviction_policy.hpp).
+// Errors: kInvalidArgument naming the key and the value.
+Result<std::unique_ptr<EvictionPolicy>> make_eviction_policy(const std::string& name,
+                                                             std::function<uint32_t(MipKey)> level_of);
 
 }  // namespace texstream::server

@@ -56,6 +56,8 @@ class MipCache {
   bool admissible(uint64_t bytes) const { return budget_ > 0 && bytes <= budget_; }
 
   MipCacheStats stats() const;
+  // Forwards the streaming-cycle clock to the policy (Eq. 4's frame count); `now` never goes back.
+  void advance_clock(uint64_t now);
 
  private:
   const uint64_t budget_;

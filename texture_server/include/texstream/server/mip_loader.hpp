@@ -1,8 +1,14 @@
 #pragma once
-// Fills one staging slot with one mip: from the RAM cache, or from storage by reading exactly the mip's byte
-// range of the texture's DDS (seed 000 §3.5: never a whole file to get one mip). Checks the DDS header
-// against the scene's texture table first. Produces the completion record; errors are logged with the path.
-// Thread-safe (workers call it concurrently; the dispatcher calls serve_cached()).
+// Fills one staging slot with one mip: from the RAM cache, or from storage reading exactly that mip
+// (seed 000 §3.5: never a whole file to get one mip).
+//
+// Which file: texture_file_index.hpp (<id>.dds, else .tx / .tif / .exr with the same stem). How it is read:
+// - DDS whose encoding matches the texture table (BC1 blocks for a bc1 texture, R8G8B8A8 for rgba8): one
+//   pread of the mip's byte range; BC1 reaches the renderer as BC1 blocks, never decoded.
+// - Any other DDS encoding for an rgba8 texture, and TIFF / OpenEXR: that one level decoded by OpenImageIO
+//   into RGBA8 (oiio_mip_decoder.hpp). A bc1 texture is never encoded here: such a file is kCorrupt.
+// The file's extent of the asked mip must equal the texture table's, else kCorrupt. Errors are logged with
+// the path. Thread-safe (workers call load() concurrently; the dispatcher calls serve_cached()).
 #include <cstdint>
 #include <filesystem>
 #include <memory>
@@ -13,14 +19,17 @@
 #include "texstream/protocol/segment_layout.hpp"
 #include "texstream/server/mip_cache.hpp"
 #include "texstream/server/request_scheduler.hpp"
+#include "texstream/server/server_stats.hpp"
 #include "texstream/server/storage.hpp"
+#include "texstream/server/texture_file_index.hpp"
 
 namespace texstream::server {
 
 class MipLoader {
  public:
-  // `stats` is where the load counters go (the segment's ServerBlock; a plain one in tests).
-  MipLoader(std::filesystem::path scene_dir, Storage& storage, MipCache& cache, ServerBlock& stats);
+  // `block` gets the segment's load counters (ServerBlock); `stats` the server's detailed statistics.
+  MipLoader(std::filesystem::path scene_dir, Storage& storage, MipCache& cache, ServerBlock& block,
+            ServerStats& stats);
 
   // Reads the mip from storage into `slot` (and into the cache when it is admissible). `record` is the
   // texture's entry of the texture table, already validated; `slot` holds at least the mip's bytes.
@@ -31,13 +40,28 @@ class MipLoader {
                                 std::span<std::byte> slot);
 
  private:
+  struct Opened {
+    std::filesystem::path path;
+    TextureFileEntry entry;
+    std::unique_ptr<StorageFile> file;
+  };
+  // Finds and opens the texture's file; on failure returns the error completion in `error`.
+  bool open_texture(const LoadRequest& request, Opened& opened, CompletionRecord& error);
+  // Reads (or decodes) the mip into `target`; returns kOk or the failure's status (already logged).
+  CompletionStatus read_mip(const LoadRequest& request, const scene::TextureRecord& record, Opened& opened,
+                            std::span<std::byte> target);
   CompletionRecord fail(const LoadRequest& request, CompletionStatus status, const std::filesystem::path& path,
                         const std::string& why);
+  CompletionStatus fail_status(const LoadRequest& request, CompletionStatus status, const std::filesystem::path& path,
+                               const std::string& why);
+  void count_read(uint64_t bytes);
 
   std::filesystem::path scene_dir_;
   Storage& storage_;
   MipCache& cache_;
-  ServerBlock& stats_;
+  ServerBlock& block_;
+  ServerStats& stats_;
+  TextureFileIndex index_;
 };
 
 // The completion a request gets when it is answered without a payload.

@@ -23,6 +23,7 @@
 #include "texstream/server/mip_cache.hpp"
 #include "texstream/server/mip_loader.hpp"
 #include "texstream/server/request_scheduler.hpp"
+#include "texstream/server/server_stats.hpp"
 #include "texstream/server/slot_pool.hpp"
 #include "texstream/server/storage.hpp"
 #include "texstream/server/worker_pool.hpp"
@@ -48,13 +49,19 @@ class Server {
 
   // Serves until `stop` is set, the renderer dies, or the renderer breaks the ring protocol. Writes the
   // ServerBlock (pid, start time, attached = 1 while running, heartbeat every iteration, statistics).
-  RunOutcome run(const std::atomic<bool>& stop);
+  // When `print_stats` is given, the loop logs the statistics each time it finds the flag set (and clears
+  // it): a SIGUSR1 handler only sets the flag (async-signal-safe), the printing happens here. The statistics
+  // are logged once more when run() returns.
+  RunOutcome run(const std::atomic<bool>& stop, std::atomic<bool>* print_stats = nullptr);
 
   MipCacheStats cache_stats() const { return cache_.stats(); }
+  const ServerStats& stats() const { return stats_; }
+  // format_stats() of the current counters.
+  std::string stats_report() const;
 
  private:
   Server(Segment& segment, const std::filesystem::path& scene_dir, const ServerConfig& config, Storage& storage,
-         std::vector<scene::TextureRecord> textures);
+         std::vector<scene::TextureRecord> textures, std::unique_ptr<EvictionPolicy> policy);
 
   // One pass of the loop; returns true if anything happened (then the loop does not sleep).
   bool drain_requests();
@@ -65,6 +72,8 @@ class Server {
   void complete(const CompletionRecord& c);
   bool flush_completions();
   void idle_wait();
+  void update_gauges();
+  void record_latency(LatencyHistogram& histogram, uint64_t received_ns);
 
   Segment& segment_;
   std::filesystem::path scene_dir_;
@@ -72,6 +81,8 @@ class Server {
   std::vector<scene::TextureRecord> textures_;
   SpscRingConsumer<RequestRecord> requests_;
   SpscRingProducer<CompletionRecord> completions_;
+  ServerStats stats_;
+  std::unique_ptr<Storage> rate_limited_;  // server.rate_limit_mb_s > 0: wraps the storage given to create()
   MipCache cache_;
   MipLoader loader_;
   RequestScheduler scheduler_;
@@ -80,6 +91,7 @@ class Server {
   std::deque<CompletionRecord> overflow_;       // completions waiting for room in the ring
   std::vector<LoadRequest> cancelled_scratch_;  // reused each iteration: no allocation when warm
   std::vector<LoadResult> results_scratch_;
+  uint64_t clock_generation_ = 0;               // last generation forwarded to the cache policy (Eq. 4 clock)
   std::unique_ptr<WorkerPool> workers_;         // last member: its threads die before what they use
 };
 

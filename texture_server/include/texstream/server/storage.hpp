@@ -20,6 +20,8 @@ class StorageFile {
   // ends before offset + out.size() (a caller that needs all of them treats that as truncation). Errors:
   // kIo (with the path and the reason).
   virtual Result<uint64_t> read_at(std::span<std::byte> out, uint64_t offset) = 0;
+  // The object's size in bytes (OpenImageIO's readers seek relative to the end). Errors: kIo.
+  virtual Result<uint64_t> size() = 0;
 };
 
 // Thread-safe: workers open files concurrently.

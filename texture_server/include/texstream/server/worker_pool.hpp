@@ -4,6 +4,7 @@
 // (2 by default: the 2-core machine of DESIGN.md). The dispatcher submits a job only when a worker is idle,
 // so the scheduler's heap, not this queue, decides what runs next (a request still pending can be
 // superseded; one handed here has started).
+#include <atomic>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
@@ -27,6 +28,7 @@ struct LoadJob {
 struct LoadResult {
   CompletionRecord completion;
   uint32_t slot;  // the slot the job held, whatever its status
+  uint64_t received_ns;  // the request's, for the latency histogram
 };
 
 class WorkerPool {
@@ -42,6 +44,8 @@ class WorkerPool {
   // Appends every finished result to `out` (the dispatcher keeps `out` between calls: no allocation when warm).
   void take_results(std::vector<LoadResult>& out);
   uint32_t threads() const { return static_cast<uint32_t>(threads_.size()); }
+  // True when take_results() would return something (a lock-free peek for the dispatcher's spin).
+  bool results_ready() const { return ready_.load(std::memory_order_acquire) > 0; }
 
  private:
   void worker_main();
@@ -53,6 +57,7 @@ class WorkerPool {
   std::deque<LoadJob> jobs_;
   std::vector<LoadResult> results_;
   bool stopping_ = false;
+  std::atomic<uint32_t> ready_{0};  // results_.size(), readable without the lock
   std::vector<std::thread> threads_;
 };
 

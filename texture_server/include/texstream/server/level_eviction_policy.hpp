@@ -1,0 +1,53 @@
+#pragma once
+// Seed 002 Eq. 4, the level-aware discard priority: p_d = f · (l + 1), where f is the number of frames since
+// the tile was last used and l its quadtree level counting the root as zero. The entry with the largest p_d
+// goes first, so among entries unused for equally long the finer levels (large l: big, cheap to lose for a
+// while since a coarser level still draws) go before the coarse ones every texture needs first (seed 000
+// §3.5 loads coarsest first). Here a "frame" is the server's clock: the renderer's streaming-cycle
+// generation (on_tick); a mip's level l = mip_count - 1 - mip (the 1x1 mip is the root). Ties (e.g. f = 0 for
+// everything used in the current cycle) go least recently used first.
+//
+// One LRU list per level; within a level the tail has the largest f, so a victim is the best of ≤ 32 tails:
+// O(levels) per pick, O(1) otherwise. Called under the cache's lock (no locking of its own).
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <list>
+#include <unordered_map>
+
+#include "texstream/server/eviction_policy.hpp"
+
+namespace texstream::server {
+
+class LevelEvictionPolicy final : public EvictionPolicy {
+ public:
+  static constexpr uint32_t kMaxLevels = 32;
+  // `level_of(key)`: the mip's quadtree level l (0 = the coarsest, 1x1 mip). Values ≥ kMaxLevels are clamped.
+  explicit LevelEvictionPolicy(std::function<uint32_t(MipKey)> level_of);
+
+  void on_insert(MipKey key) override;
+  void on_access(MipKey key) override;
+  void on_erase(MipKey key) override;
+  void on_tick(uint64_t now) override;
+  std::optional<MipKey> pick_victim(const std::function<bool(MipKey)>& evictable) override;
+
+ private:
+  struct Node {
+    MipKey key;
+    uint64_t last_used;  // clock value of the last use (f = now - last_used)
+    uint64_t sequence;   // global use order: the tie break
+  };
+  struct Where {
+    uint32_t level;
+    std::list<Node>::iterator it;
+  };
+  void touch(const Where& w);
+
+  std::function<uint32_t(MipKey)> level_of_;
+  std::array<std::list<Node>, kMaxLevels> levels_;  // front = most recently used
+  std::unordered_map<MipKey, Where, MipKeyHash> where_;
+  uint64_t now_ = 0;
+  uint64_t sequence_ = 0;
+};
+
+}  // namespace texstream::server

@@ -1,0 +1,45 @@
+#include "texstream/server/server_stats.hpp"
+
+#include <fmt/format.h>
+
+namespace texstream::server {
+
+namespace {
+uint64_t get(const std::atomic<uint64_t>& v) { return v.load(std::memory_order_relaxed); }
+}  // namespace
+
+double read_amplification(const ServerStats& s) {
+  const uint64_t loaded = get(s.bytes_loaded);
+  return loaded == 0 ? 0.0 : static_cast<double>(get(s.bytes_read)) / static_cast<double>(loaded);
+}
+
+std::string format_stats(const ServerStats& s, const MipCacheStats& c) {
+  const uint64_t lookups = c.hits + c.misses;
+  const double hit_rate = lookups == 0 ? 0.0 : static_cast<double>(c.hits) / static_cast<double>(lookups);
+  std::string out;
+  out += fmt::format("RAM cache: {} hits, {} misses (hit rate {:.3f}), {} insertions, {} evictions, {} rejections; "
+                     "{} entries, {} of {} bytes\n",
+                     c.hits, c.misses, hit_rate, c.insertions, c.evictions, c.rejections, c.entries, c.bytes,
+                     c.budget_bytes);
+  out += fmt::format("storage: {} bytes read, {} bytes of mips loaded, read amplification {:.4f}; {} bytes served "
+                     "from the cache; rate-limit waits {} us\n",
+                     get(s.bytes_read), get(s.bytes_loaded), read_amplification(s), get(s.bytes_served_cached),
+                     get(s.rate_limit_wait_us));
+  out += fmt::format("completions: {} hits ok, {} loads ok, {} not found, {} corrupt, {} I/O errors, {} cancelled\n",
+                     get(s.hits_ok), get(s.loads_ok), get(s.not_found), get(s.corrupt), get(s.io_errors),
+                     get(s.cancelled));
+  out += fmt::format("queues (now/max): pending {}/{}, loads in flight {}/{}, completions waiting {}/{}\n",
+                     get(s.pending.now), get(s.pending.max), get(s.in_flight.now), get(s.in_flight.max),
+                     get(s.overflow.now), get(s.overflow.max));
+  for (const auto& [name, h] : {std::pair<const char*, const LatencyHistogram*>{"hit", &s.hit_latency},
+                                {"miss", &s.miss_latency}}) {
+    out += fmt::format("latency {:4} (request→completion, us): n={} mean={:.1f} p50={:.0f} p90={:.0f} p99={:.0f} "
+                       "max={}\n",
+                       name, h->count(), h->mean_us(), h->percentile_us(50), h->percentile_us(90),
+                       h->percentile_us(99), h->max_us());
+  }
+  if (!out.empty()) out.pop_back();
+  return out;
+}
+
+}  // namespace texstream::server

@@ -1,0 +1,767 @@
+// texstream-bench server [--quick] [--scene DIR] [--memory-minutes M]
+//
+// The texture server running in this process (a thread) against a real shared segment; the bench plays the
+// renderer (pushes requests, polls completions, releases slots). Everything is measured in one run, as
+// ratios against baselines measured in the same run (DESIGN.md "Determinism and measurement"):
+//   1. memcpy of exactly the hit set's mips, vs cache hits into staging slots        → hit_vs_memcpy
+//   2. plain sequential read() of whole texture files (page cache warm), vs misses   → miss_vs_read, read_amp
+//   3. request→completion latency p50/p99 (hits, misses) with a window of kLatencyWindow requests
+//   4. a realistic access trace (the scene's camera path, a renderer with a bounded GPU cache, Algorithm 1:
+//      one mip per texture per cycle, coarsest first) replayed through our server and through OpenImageIO's
+//      ImageCache with the same byte budget → hit rates, throughput ratio, renderer polling cost per frame
+//   5. LRU vs level-aware (seed 002 Eq. 4) hit rates on the same trace
+//   6. memory: a random workload over a texture set ≥ 4x the cache; peak RSS vs budget + staging + 64 MB
+// The scene is generated with texstream-gen (rgba8, so both caches hold the same bytes per mip) unless
+// --scene is given.
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <OpenImageIO/imagecache.h>
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <deque>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <optional>
+#include <random>
+#include <string>
+#include <thread>
+#include <unordered_map>
+#include <vector>
+
+#include "bench_registry.hpp"
+#include "bench_util.hpp"
+#include "texstream/common/camera_path.hpp"
+#include "texstream/common/config.hpp"
+#include "texstream/common/scene_format.hpp"
+#include "texstream/protocol/liveness.hpp"
+#include "texstream/protocol/segment.hpp"
+#include "texstream/server/level_eviction_policy.hpp"
+#include "texstream/server/lru_eviction_policy.hpp"
+#include "texstream/server/mip_cache.hpp"
+#include "texstream/server/posix_storage.hpp"
+#include "texstream/server/server.hpp"
+
+namespace fs = std::filesystem;
+
+namespace texstream::bench {
+namespace {
+
+using server::MipKey;
+
+// Requests outstanding while measuring latency: a renderer's cycle sends a batch and polls once per frame;
+// a small window measures service time rather than the queueing of a saturated pipeline.
+constexpr uint32_t kLatencyWindow = 4;
+// Staging pool of the bench's segment: the protocol defaults (config.hpp: 32 slots of 1 MiB).
+constexpr uint32_t kSlotCount = 32;
+constexpr uint64_t kSlotBytes = 1u << 20;
+
+struct Options {
+  bool quick = false;
+  fs::path scene;
+  double memory_minutes = -1;  // < 0: the default for the mode
+  uint32_t textures = 0;       // generated scene size (0: the default for the mode)
+};
+
+struct Request {
+  uint32_t texture;
+  uint32_t mip;
+  float priority;
+};
+using Cycle = std::vector<Request>;
+
+uint64_t now_ns() {
+  return static_cast<uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                   std::chrono::steady_clock::now().time_since_epoch())
+                                   .count());
+}
+
+uint64_t rss_bytes() {
+  std::ifstream f("/proc/self/statm");
+  uint64_t size = 0, resident = 0;
+  f >> size >> resident;
+  return resident * static_cast<uint64_t>(sysconf(_SC_PAGESIZE));
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// The renderer's side of one segment, with the server running in a thread of this process.
+class Harness {
+ public:
+  static std::unique_ptr<Harness> start(const fs::path& scene, const ServerConfig& config) {
+    static int counter = 0;
+    auto h = std::unique_ptr<Harness>(new Harness());
+    SegmentParams params;
+    params.slot_count = kSlotCount;
+    params.slot_bytes = kSlotBytes;
+    auto seg = Segment::create(fmt::format("texstream-bench-{}-{}", getpid(), counter++), params);
+    if (!seg.ok()) {
+      std::fprintf(stderr, "server bench: %s\n", seg.error().message.c_str());
+      return nullptr;
+    }
+    h->segment_ = std::move(seg).value();
+    h->requests_ = SpscRingProducer<RequestRecord>(h->segment_->request_control(), h->segment_->request_records(),
+                                                   h->segment_->header().request_capacity);
+    h->completions_ = SpscRingConsumer<CompletionRecord>(
+        h->segment_->completion_control(), h->segment_->completion_records(), h->segment_->header().completion_capacity);
+    auto server = server::Server::create(*h->segment_, scene, config, h->storage_);
+    if (!server.ok()) {
+      std::fprintf(stderr, "server bench: %s\n", server.error().message.c_str());
+      return nullptr;
+    }
+    h->server_ = std::move(server).value();
+    h->thread_ = std::thread([p = h.get()] { p->server_->run(p->stop_); });
+    return h;
+  }
+
+  ~Harness() {
+    stop_ = true;
+    futex_wake_all(segment_->renderer_block().doorbell);
+    if (thread_.joinable()) thread_.join();
+    server_.reset();
+  }
+
+  server::Server& server() { return *server_; }
+  uint32_t slots() const { return kSlotCount; }
+
+  // Pushes one load; false when the request ring is full.
+  bool push(uint32_t texture, uint32_t mip, uint64_t generation, float priority) {
+    RequestRecord r{};
+    r.kind = static_cast<uint32_t>(RequestKind::kLoad);
+    r.texture_id = texture;
+    r.mip_level = mip;
+    r.generation = generation;
+    r.priority = priority;
+    if (!requests_.try_push(r)) return false;
+    pushed_since_ring_ = true;
+    return true;
+  }
+
+  // The doorbell after a batch of pushes (the renderer's protocol: bump, then wake a sleeping server).
+  void ring() {
+    if (!pushed_since_ring_) return;
+    pushed_since_ring_ = false;
+    segment_->renderer_block().doorbell.v.fetch_add(1, std::memory_order_seq_cst);
+    if (segment_->server_block().sleeping.v.load(std::memory_order_seq_cst) == 1) {
+      futex_wake_all(segment_->renderer_block().doorbell);
+    }
+  }
+
+  // Pops every completion now waiting; calls on(c) for each, then hands kOk slots back. Returns how many.
+  template <class F>
+  uint32_t poll(F&& on) {
+    uint32_t n = 0;
+    flush_releases();
+    while (std::optional<CompletionRecord> c = completions_.try_pop()) {
+      ++n;
+      on(*c);
+      if (c->status == static_cast<uint32_t>(CompletionStatus::kOk)) releases_.push_back(c->slot);
+    }
+    flush_releases();
+    ring();
+    return n;
+  }
+
+ private:
+  Harness() = default;
+  void flush_releases() {
+    while (!releases_.empty()) {
+      RequestRecord r{};
+      r.kind = static_cast<uint32_t>(RequestKind::kReleaseSlot);
+      r.slot = releases_.front();
+      if (!requests_.try_push(r)) break;
+      pushed_since_ring_ = true;
+      releases_.pop_front();
+    }
+  }
+
+  std::unique_ptr<Segment> segment_;
+  SpscRingProducer<RequestRecord> requests_;
+  SpscRingConsumer<CompletionRecord> completions_;
+  server::PosixStorage storage_;
+  std::unique_ptr<server::Server> server_;
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+  std::deque<uint32_t> releases_;
+  bool pushed_since_ring_ = false;
+};
+
+struct StreamResult {
+  double seconds = 0;
+  uint64_t bytes = 0;       // payload bytes of kOk completions
+  uint64_t completions = 0;
+  uint64_t failures = 0;    // anything but kOk
+  std::vector<double> latency_us;
+  std::vector<double> poll_us;  // duration of each poll() that found completions (the renderer's per-frame cost)
+};
+
+// Streams `requests` in order with at most `window` outstanding (window ≤ slots); one generation.
+StreamResult stream(Harness& h, const std::vector<Request>& requests, uint32_t window, uint64_t generation,
+                    bool record_latency) {
+  StreamResult out;
+  std::unordered_map<uint64_t, uint64_t> pushed_at;  // key → push time
+  size_t next = 0;
+  uint32_t outstanding = 0;
+  const uint64_t t0 = now_ns();
+  uint32_t idle = 0;
+  while (next < requests.size() || outstanding > 0) {
+    while (next < requests.size() && outstanding < window) {
+      const Request& r = requests[next];
+      // Only a latency run keeps per-request push times (the bookkeeping would cost the renderer side of a
+      // throughput run as much as the server's own per-request work). Request lists hold no duplicates.
+      const uint64_t key = MipKey(TextureId(r.texture), MipLevel(r.mip)).value;
+      if (!h.push(r.texture, r.mip, generation, r.priority)) break;
+      if (record_latency) pushed_at.emplace(key, now_ns());
+      ++outstanding;
+      ++next;
+    }
+    h.ring();
+    const uint64_t p0 = now_ns();
+    const uint32_t got = h.poll([&](const CompletionRecord& c) {
+      if (record_latency) {
+        auto it = pushed_at.find(MipKey(TextureId(c.texture_id), MipLevel(c.mip_level)).value);
+        if (it != pushed_at.end()) {
+          out.latency_us.push_back(static_cast<double>(now_ns() - it->second) / 1e3);
+          pushed_at.erase(it);
+        }
+      }
+      --outstanding;
+      ++out.completions;
+      if (c.status == static_cast<uint32_t>(CompletionStatus::kOk)) {
+        out.bytes += c.byte_size;
+      } else {
+        ++out.failures;
+      }
+    });
+    if (got > 0) {
+      out.poll_us.push_back(static_cast<double>(now_ns() - p0) / 1e3);
+      idle = 0;
+    } else if (++idle > 64) {
+      std::this_thread::yield();  // 2 cores shared with the server's dispatcher and workers
+    }
+  }
+  out.seconds = static_cast<double>(now_ns() - t0) / 1e9;
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// Scene and workloads.
+
+struct Scene {
+  fs::path dir;
+  std::vector<scene::TextureRecord> textures;
+  scene::MeshData meshes;
+  std::optional<CameraPath> path;
+};
+
+uint64_t mip_size(const scene::TextureRecord& t, uint32_t mip) {
+  return mip_bytes(static_cast<TexelFormat>(t.format), t.width, t.height, mip);
+}
+uint64_t texture_size(const scene::TextureRecord& t) {
+  return mip_chain_offset(static_cast<TexelFormat>(t.format), t.width, t.height, t.mip_count);
+}
+
+// Every mip of textures [first, ...) until `budget` bytes, coarsest first per texture (Algorithm 1's order).
+std::vector<Request> all_mips_until(const Scene& s, uint32_t first, uint64_t budget, uint32_t* end = nullptr) {
+  std::vector<Request> out;
+  uint64_t bytes = 0;
+  uint32_t t = first;
+  for (; t < s.textures.size() && bytes < budget; ++t) {
+    const scene::TextureRecord& r = s.textures[t];
+    if (mip_size(r, 0) > kSlotBytes) continue;
+    for (uint32_t m = r.mip_count; m-- > 0;) out.push_back({t, m, 1.0f});
+    bytes += texture_size(r);
+  }
+  if (end) *end = t;
+  return out;
+}
+
+// A renderer's access trace along the camera path (see the file comment). Cycle = every 4th frame of 33 ms.
+std::vector<Cycle> build_trace(const Scene& s, uint32_t laps, uint64_t gpu_budget) {
+  std::vector<Cycle> trace;
+  const uint32_t n = static_cast<uint32_t>(s.textures.size());
+  std::vector<uint32_t> resident(n);  // resident finest mip; mip_count = nothing resident
+  std::vector<uint64_t> last_seen(n, 0);
+  for (uint32_t t = 0; t < n; ++t) resident[t] = s.textures[t].mip_count;
+  uint64_t gpu_bytes = 0;
+  // Screen: 960 px over a 60° FOV (config.hpp render defaults): the angle one pixel spans.
+  const double pixel_angle = 2.0 * std::tan(30.0 * M_PI / 180.0) / 960.0;
+  constexpr double kCycleS = 4 * 0.0333;
+  constexpr size_t kMaxPerCycle = 256;  // stream.max_requests_in_flight default
+  uint64_t cycle_no = 0;
+  for (uint32_t lap = 0; lap < laps; ++lap) {
+    for (double time = 0; time < s.path->duration_s(); time += kCycleS, ++cycle_no) {
+      const CameraPose pose = s.path->sample(time);
+      const double yaw = pose.yaw_deg * M_PI / 180.0;
+      const double fx = std::sin(yaw), fy = std::cos(yaw);
+      struct Want {
+        uint32_t texture;
+        uint32_t mip;
+        float priority;
+      };
+      std::vector<Want> wants;
+      for (const scene::MeshRecord& m : s.meshes.meshes) {
+        double c[3], size = 0;
+        for (int k = 0; k < 3; ++k) {
+          c[k] = m.origin[k] + 0.5 * (double(m.bounds_min[k]) + double(m.bounds_max[k])) - pose.position[k];
+          size = std::max(size, double(m.bounds_max[k]) - double(m.bounds_min[k]));
+        }
+        const double dist = std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+        const double horiz = std::hypot(c[0], c[1]);
+        if (horiz > 1.0 && (c[0] * fx + c[1] * fy) / horiz < std::cos(50.0 * M_PI / 180.0)) continue;  // off-screen
+        const scene::TextureRecord& t = s.textures[m.texture_id];
+        // The mip whose texel matches one pixel at this distance (mip 0 when closer).
+        const double texel_m = std::max(size, 1.0) / std::max(t.width, t.height);
+        const double level = std::log2(std::max(1.0, dist * pixel_angle / texel_m));
+        const uint32_t want = std::min(t.mip_count - 1, static_cast<uint32_t>(level));
+        last_seen[m.texture_id] = cycle_no;
+        if (resident[m.texture_id] > want) wants.push_back({m.texture_id, want, static_cast<float>(1.0 / (1.0 + dist))});
+      }
+      std::sort(wants.begin(), wants.end(), [](const Want& a, const Want& b) { return a.priority > b.priority; });
+      Cycle cycle;
+      for (const Want& w : wants) {
+        if (cycle.size() >= kMaxPerCycle) break;
+        const uint32_t mip = resident[w.texture] - 1;  // one mip per texture per cycle, coarsest first
+        cycle.push_back({w.texture, mip, w.priority});
+        gpu_bytes += mip_size(s.textures[w.texture], mip);
+        resident[w.texture] = mip;
+      }
+      // The GPU cache is bounded: drop the textures seen least recently until the budget holds.
+      if (gpu_bytes > gpu_budget) {
+        std::vector<uint32_t> order;
+        for (uint32_t t = 0; t < n; ++t)
+          if (resident[t] < s.textures[t].mip_count) order.push_back(t);
+        std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return last_seen[a] < last_seen[b]; });
+        for (uint32_t t : order) {
+          if (gpu_bytes <= gpu_budget * 3 / 4) break;
+          const scene::TextureRecord& r = s.textures[t];
+          gpu_bytes -= mip_chain_offset(static_cast<TexelFormat>(r.format), r.width, r.height, r.mip_count) -
+                       mip_chain_offset(static_cast<TexelFormat>(r.format), r.width, r.height, resident[t]);
+          resident[t] = r.mip_count;
+        }
+      }
+      if (!cycle.empty()) trace.push_back(std::move(cycle));
+    }
+  }
+  return trace;
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// Phases.
+
+double memcpy_gbps(const Scene& s, const std::vector<Request>& set, double seconds) {
+  // Sources: private copies of exactly the hit set's mips; destinations: slot-sized buffers, as the server has.
+  std::vector<std::vector<std::byte>> src;
+  for (const Request& r : set) src.emplace_back(mip_size(s.textures[r.texture], r.mip), std::byte{1});
+  std::vector<std::vector<std::byte>> dst(kSlotCount, std::vector<std::byte>(kSlotBytes, std::byte{0}));
+  uint64_t bytes = 0;
+  size_t i = 0;
+  Stopwatch sw;
+  while (sw.seconds() < seconds) {
+    for (size_t k = 0; k < src.size(); ++k, ++i) {
+      std::memcpy(dst[i % kSlotCount].data(), src[k].data(), src[k].size());
+      bytes += src[k].size();
+    }
+  }
+  return static_cast<double>(bytes) / sw.seconds() / 1e9;
+}
+
+// Plain sequential read() of whole files: what the miss path is compared with.
+double read_gbps(const Scene& s, uint32_t first, uint32_t end, uint64_t* bytes_out) {
+  std::vector<char> buf(1 << 20);
+  uint64_t bytes = 0;
+  Stopwatch sw;
+  for (uint32_t t = first; t < end; ++t) {
+    FILE* f = std::fopen(scene::texture_path(s.dir, TextureId(t)).c_str(), "rb");
+    if (!f) continue;
+    const int fd = fileno(f);
+    ssize_t n;
+    while ((n = ::read(fd, buf.data(), buf.size())) > 0) bytes += static_cast<uint64_t>(n);
+    std::fclose(f);
+  }
+  if (bytes_out) *bytes_out = bytes;
+  return static_cast<double>(bytes) / sw.seconds() / 1e9;
+}
+
+struct OiioResult {
+  double hit_rate = 0;
+  double seconds = 0;
+  uint64_t bytes = 0;
+  uint64_t failures = 0;
+};
+
+OiioResult replay_oiio(const Scene& s, const std::vector<Cycle>& trace, uint64_t budget) {
+  OIIO::ImageCache* ic = OIIO::ImageCache::create(/*shared=*/false);
+  ic->attribute("max_memory_MB", static_cast<float>(static_cast<double>(budget) / (1 << 20)));
+  ic->attribute("autotile", 0);  // our files are untiled DDS: one tile = one whole mip, as our cache holds
+  ic->attribute("max_open_files", 100);
+  std::vector<std::byte> buf(kSlotBytes);
+  std::vector<std::string> names(s.textures.size());
+  OiioResult out;
+  uint64_t lookups = 0, misses = 0;
+  int created_before = 0;
+  Stopwatch sw;
+  for (const Cycle& c : trace) {
+    for (const Request& r : c) {
+      std::string& name = names[r.texture];
+      if (name.empty()) name = scene::texture_path(s.dir, TextureId(r.texture)).string();
+      const Extent2D e = mip_extent(s.textures[r.texture].width, s.textures[r.texture].height, r.mip);
+      const bool ok = ic->get_pixels(OIIO::ustring(name), 0, static_cast<int>(r.mip), 0, static_cast<int>(e.width), 0,
+                                     static_cast<int>(e.height), 0, 1, 0, 4, OIIO::TypeDesc::UINT8, buf.data());
+      int created = 0;
+      ic->getattribute("stat:tiles_created", OIIO::TypeDesc::INT, &created);
+      ++lookups;
+      if (created != created_before) ++misses;
+      created_before = created;
+      if (ok) {
+        out.bytes += uint64_t{e.width} * e.height * 4;
+      } else {
+        ++out.failures;
+        (void)ic->geterror();
+      }
+    }
+  }
+  out.seconds = sw.seconds();
+  out.hit_rate = lookups == 0 ? 0 : 1.0 - static_cast<double>(misses) / static_cast<double>(lookups);
+  OIIO::ImageCache::destroy(ic, /*teardown=*/true);
+  return out;
+}
+
+struct OursResult {
+  double hit_rate = 0;
+  StreamResult stream;
+};
+
+OursResult replay_ours(const Scene& s, const std::vector<Cycle>& trace, ServerConfig config) {
+  OursResult out;
+  auto h = Harness::start(s.dir, config);
+  if (!h) return out;
+  const uint64_t t0 = now_ns();
+  uint64_t generation = 1;
+  for (const Cycle& c : trace) {
+    StreamResult r = stream(*h, c, h->slots(), generation++, false);
+    out.stream.bytes += r.bytes;
+    out.stream.completions += r.completions;
+    out.stream.failures += r.failures;
+    out.stream.poll_us.insert(out.stream.poll_us.end(), r.poll_us.begin(), r.poll_us.end());
+  }
+  out.stream.seconds = static_cast<double>(now_ns() - t0) / 1e9;
+  const server::MipCacheStats cs = h->server().cache_stats();
+  out.hit_rate = cs.hits + cs.misses == 0 ? 0 : static_cast<double>(cs.hits) / static_cast<double>(cs.hits + cs.misses);
+  std::printf("  our server's statistics after the trace:\n");
+  std::string report = h->server().stats_report();
+  size_t pos = 0;
+  while (pos < report.size()) {
+    const size_t nl = report.find('\n', pos);
+    std::printf("    %s\n", report.substr(pos, nl - pos).c_str());
+    if (nl == std::string::npos) break;
+    pos = nl + 1;
+  }
+  return out;
+}
+
+// The cache alone (no I/O) over the trace: the hit rate a policy gives with `budget` bytes.
+double simulate_policy(const Scene& s, const std::vector<Cycle>& trace, uint64_t budget, const std::string& name) {
+  auto policy = server::make_eviction_policy(name, [&s](MipKey k) {
+    const scene::TextureRecord& t = s.textures[k.texture().value];
+    return t.mip_count - 1 - std::min(k.mip().value, t.mip_count - 1);
+  });
+  server::MipCache cache(budget, std::move(policy).value());
+  uint64_t generation = 0;
+  for (const Cycle& c : trace) {
+    cache.advance_clock(++generation);
+    for (const Request& r : c) {
+      const MipKey key(TextureId(r.texture), MipLevel(r.mip));
+      if (cache.lookup(key)) continue;
+      auto mip = std::make_shared<server::CachedMip>();
+      mip->bytes.resize(mip_size(s.textures[r.texture], r.mip));
+      cache.insert(key, std::move(mip));
+    }
+  }
+  const server::MipCacheStats st = cache.stats();
+  return static_cast<double>(st.hits) / static_cast<double>(std::max<uint64_t>(1, st.hits + st.misses));
+}
+
+struct MemoryResult {
+  double peak_rss_mb = 0;
+  double start_rss_mb = 0;
+  double limit_mb = 0;
+  double set_mb = 0;
+  double cache_mb = 0;
+  uint64_t requests = 0;
+  double hit_rate = 0;
+};
+
+MemoryResult memory_run(const Scene& s, double seconds, uint64_t cache_budget) {
+  MemoryResult out;
+  out.cache_mb = static_cast<double>(cache_budget) / (1 << 20);
+  out.limit_mb = out.cache_mb + static_cast<double>(kSlotCount * kSlotBytes) / (1 << 20) + 64;
+  // A texture set at least 4x the cache.
+  std::vector<uint32_t> set;
+  uint64_t set_bytes = 0;
+  for (uint32_t t = 0; t < s.textures.size() && set_bytes < 4 * cache_budget; ++t) {
+    if (mip_size(s.textures[t], 0) > kSlotBytes) continue;
+    set.push_back(t);
+    set_bytes += texture_size(s.textures[t]);
+  }
+  out.set_mb = static_cast<double>(set_bytes) / (1 << 20);
+  ServerConfig config;
+  config.ram_cache_bytes = static_cast<int64_t>(cache_budget);
+  auto h = Harness::start(s.dir, config);
+  if (!h) return out;
+  out.start_rss_mb = static_cast<double>(rss_bytes()) / (1 << 20);
+  std::mt19937_64 rng(42);
+  uint64_t peak = rss_bytes();
+  Stopwatch sw, sample;
+  uint64_t generation = 1;
+  while (sw.seconds() < seconds) {
+    // Batches of random (texture, mip) requests, as cycles of a renderer that looks around at random.
+    std::vector<Request> batch;
+    for (int i = 0; i < 64; ++i) {
+      const uint32_t t = set[rng() % set.size()];
+      batch.push_back({t, static_cast<uint32_t>(rng() % s.textures[t].mip_count), 1.0f});
+    }
+    const StreamResult r = stream(*h, batch, h->slots(), generation++, false);
+    out.requests += r.completions;
+    if (sample.seconds() > 0.05) {
+      peak = std::max(peak, rss_bytes());
+      sample.reset();
+    }
+  }
+  peak = std::max(peak, rss_bytes());
+  out.peak_rss_mb = static_cast<double>(peak) / (1 << 20);
+  const server::MipCacheStats cs = h->server().cache_stats();
+  out.hit_rate = static_cast<double>(cs.hits) / static_cast<double>(std::max<uint64_t>(1, cs.hits + cs.misses));
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------------------------
+
+std::optional<Options> parse(const std::vector<std::string>& args) {
+  Options o;
+  for (size_t i = 0; i < args.size(); ++i) {
+    const std::string& a = args[i];
+    const bool has_value = i + 1 < args.size();
+    if (a == "--quick") {
+      o.quick = true;
+    } else if (a == "--scene" && has_value) {
+      o.scene = args[++i];
+    } else if (a == "--memory-minutes" && has_value) {
+      o.memory_minutes = std::atof(args[++i].c_str());
+    } else if (a == "--textures" && has_value) {
+      o.textures = static_cast<uint32_t>(std::atoi(args[++i].c_str()));
+    } else {
+      std::fprintf(stderr,
+                   "usage: texstream-bench server [--quick] [--scene DIR] [--memory-minutes M] [--textures N]\n"
+                   "unknown or incomplete argument '%s'\n",
+                   a.c_str());
+      return std::nullopt;
+    }
+  }
+  return o;
+}
+
+bool generate_scene(const fs::path& dir, uint32_t textures) {
+  const fs::path gen = fs::read_symlink("/proc/self/exe").parent_path() / "texstream-gen";
+  // fmt rather than operator+: GCC 12 -O3 warns falsely (-Wrestrict) on some std::string concatenations.
+  const std::string cmd = fmt::format("'{}' --out '{}' --textures {} --seed 7 --format rgba8 --threads 2 --force > /dev/null",
+                                      gen.string(), dir.string(), textures);
+  std::printf("generating a scene: %s\n", cmd.c_str());
+  std::fflush(stdout);
+  const int rc = std::system(cmd.c_str());
+  return rc == 0;
+}
+
+int run_server_bench(const std::vector<std::string>& args) {
+  const std::optional<Options> opt = parse(args);
+  if (!opt) return 2;
+  spdlog::set_level(spdlog::level::warn);  // the servers' info lines would drown the report
+  const Stopwatch total;
+  Scene s;
+  fs::path temp;
+  if (opt->scene.empty()) {
+    temp = fs::temp_directory_path() / fmt::format("texstream-bench-scene-{}", getpid());
+    const uint32_t n = opt->textures ? opt->textures : (opt->quick ? 3000 : 6000);
+    if (!generate_scene(temp, n)) {
+      std::fprintf(stderr, "server bench: texstream-gen failed (is it built next to texstream-bench?)\n");
+      return 1;
+    }
+    s.dir = temp;
+  } else {
+    s.dir = opt->scene;
+  }
+  struct Cleanup {
+    fs::path dir;
+    ~Cleanup() {
+      std::error_code ec;
+      if (!dir.empty()) fs::remove_all(dir, ec);
+    }
+  } cleanup{temp};
+  {
+    auto textures = scene::read_texture_table(s.dir);
+    auto meshes = scene::read_meshes(s.dir);
+    auto manifest = scene::read_manifest(s.dir);
+    if (!textures.ok() || !meshes.ok() || !manifest.ok()) {
+      std::fprintf(stderr, "server bench: cannot read scene '%s'\n", s.dir.c_str());
+      return 1;
+    }
+    s.textures = std::move(textures).value();
+    s.meshes = std::move(meshes).value();
+    auto path = CameraPath::load(s.dir / manifest->camera_path);
+    if (!path.ok()) {
+      std::fprintf(stderr, "server bench: %s\n", path.error().message.c_str());
+      return 1;
+    }
+    s.path = std::move(path).value();
+  }
+  uint64_t scene_bytes = 0;
+  for (const auto& t : s.textures) scene_bytes += texture_size(t);
+  std::printf("scene %s: %zu textures, %.1f MB of mips; 2 server workers, %u slots of %llu KiB\n", s.dir.c_str(),
+              s.textures.size(), static_cast<double>(scene_bytes) / 1e6, kSlotCount,
+              static_cast<unsigned long long>(kSlotBytes >> 10));
+  // Warm the page cache for everything (the issue measures misses from a warm OS page cache).
+  read_gbps(s, 0, static_cast<uint32_t>(s.textures.size()), nullptr);
+
+  // 6. Memory first, while the process holds nothing else.
+  const double memory_s = opt->memory_minutes >= 0 ? opt->memory_minutes * 60.0 : (opt->quick ? 4.0 : 30.0);
+  const uint64_t memory_budget = std::min<uint64_t>(32ull << 20, scene_bytes / 4);
+  const MemoryResult mem = memory_run(s, memory_s, memory_budget);
+  std::printf("\n[memory] %.0f s random workload over %.1f MB of textures (%.1fx the cache), %llu requests, hit rate "
+              "%.3f\n  RSS at start %.1f MB, peak %.1f MB; limit = cache %.1f + staging %.1f + 64 MB = %.1f MB -> %s\n",
+              memory_s, mem.set_mb, mem.set_mb / mem.cache_mb, static_cast<unsigned long long>(mem.requests),
+              mem.hit_rate, mem.start_rss_mb, mem.peak_rss_mb, mem.cache_mb,
+              static_cast<double>(kSlotCount * kSlotBytes) / (1 << 20), mem.limit_mb,
+              mem.peak_rss_mb <= mem.limit_mb ? "within" : "OVER");
+
+  // 1. Hits vs memcpy.
+  const double phase_s = opt->quick ? 1.5 : 5.0;
+  ServerConfig config;  // defaults: 2 workers, 256 MiB cache, LRU
+  const std::vector<Request> hit_set = all_mips_until(s, 0, 48ull << 20);
+  uint64_t hit_set_bytes = 0;
+  for (const Request& r : hit_set) hit_set_bytes += mip_size(s.textures[r.texture], r.mip);
+  const double memcpy_bw = memcpy_gbps(s, hit_set, phase_s);
+  double hit_bw = 0;
+  StreamResult hit_lat, miss_lat;
+  {
+    auto h = Harness::start(s.dir, config);
+    if (!h) return 1;
+    stream(*h, hit_set, h->slots(), 1, false);  // load them all once: misses
+    std::vector<Request> rounds;
+    uint64_t bytes = 0;
+    StreamResult acc;
+    Stopwatch sw;
+    uint64_t generation = 2;
+    while (sw.seconds() < phase_s) {
+      StreamResult r = stream(*h, hit_set, h->slots(), generation++, false);
+      acc.bytes += r.bytes;
+      acc.seconds += r.seconds;
+      acc.failures += r.failures;
+    }
+    bytes = acc.bytes;
+    hit_bw = static_cast<double>(bytes) / acc.seconds / 1e9;
+    hit_lat = stream(*h, hit_set, kLatencyWindow, generation++, true);
+    const server::MipCacheStats cs = h->server().cache_stats();
+    std::printf("\n[hits] %zu mips (%.1f MB) served from the RAM cache repeatedly: %.2f GB/s; memcpy of the same mips "
+                "into slot-sized buffers: %.2f GB/s -> ratio %.3f (goal >= 0.5); %llu hits, %llu failures\n",
+                hit_set.size(), static_cast<double>(hit_set_bytes) / 1e6, hit_bw, memcpy_bw, hit_bw / memcpy_bw,
+                static_cast<unsigned long long>(cs.hits), static_cast<unsigned long long>(acc.failures));
+  }
+
+  // 2. Misses vs read().
+  double miss_bw = 0, read_bw = 0, read_amp = 0;
+  {
+    uint32_t end = 0;
+    const uint32_t first = static_cast<uint32_t>(s.textures.size() / 2);  // not the hit set's textures
+    const std::vector<Request> miss_set = all_mips_until(s, first, opt->quick ? (64ull << 20) : (160ull << 20), &end);
+    uint64_t read_bytes = 0;
+    read_gbps(s, first, end, nullptr);  // warm
+    read_bw = read_gbps(s, first, end, &read_bytes);
+    auto h = Harness::start(s.dir, config);
+    if (!h) return 1;
+    const StreamResult r = stream(*h, miss_set, h->slots(), 1, false);
+    miss_bw = static_cast<double>(r.bytes) / r.seconds / 1e9;
+    read_amp = server::read_amplification(h->server().stats());
+    // Latency of misses: other textures, not cached yet.
+    uint32_t end2 = 0;
+    const std::vector<Request> lat_set = all_mips_until(s, end, 8ull << 20, &end2);
+    miss_lat = stream(*h, lat_set, kLatencyWindow, 2, true);
+    std::printf("\n[misses] %zu mips of %u textures (%.1f MB delivered, page cache warm): %.2f GB/s; plain sequential "
+                "read() of the same files (%.1f MB): %.2f GB/s -> ratio %.3f (goal >= 0.5); read amplification %.4f "
+                "(goal <= 1.1); %llu failures\n",
+                miss_set.size(), end - first, static_cast<double>(r.bytes) / 1e6, miss_bw,
+                static_cast<double>(read_bytes) / 1e6, read_bw, miss_bw / read_bw, read_amp,
+                static_cast<unsigned long long>(r.failures));
+  }
+  const double hit_p50 = percentile(hit_lat.latency_us, 50), hit_p99 = percentile(hit_lat.latency_us, 99);
+  const double miss_p50 = percentile(miss_lat.latency_us, 50), miss_p99 = percentile(miss_lat.latency_us, 99);
+  std::printf("\n[latency] request pushed -> completion polled, %u outstanding: hits p50 %.1f us p99 %.1f us (n=%zu); "
+              "misses p50 %.1f us p99 %.1f us (n=%zu)\n",
+              kLatencyWindow, hit_p50, hit_p99, hit_lat.latency_us.size(), miss_p50, miss_p99,
+              miss_lat.latency_us.size());
+
+  // 4./5. The realistic trace.
+  const uint64_t gpu_budget = std::max<uint64_t>(scene_bytes / 8, 4ull << 20);
+  const std::vector<Cycle> trace = build_trace(s, opt->quick ? 2 : 3, gpu_budget);
+  uint64_t trace_requests = 0, trace_bytes = 0;
+  std::unordered_map<uint64_t, uint64_t> distinct;
+  for (const Cycle& c : trace) {
+    for (const Request& r : c) {
+      ++trace_requests;
+      trace_bytes += mip_size(s.textures[r.texture], r.mip);
+      distinct[MipKey(TextureId(r.texture), MipLevel(r.mip)).value] = mip_size(s.textures[r.texture], r.mip);
+    }
+  }
+  uint64_t distinct_bytes = 0;
+  for (const auto& [k, v] : distinct) distinct_bytes += v;
+  const uint64_t trace_budget = distinct_bytes / 4;
+  std::printf("\n[trace] camera path x%u, renderer GPU cache %.1f MB: %zu cycles, %llu requests, %.1f MB requested, "
+              "%zu distinct mips (%.1f MB); both caches get %.1f MB\n",
+              opt->quick ? 2u : 3u, static_cast<double>(gpu_budget) / 1e6, trace.size(),
+              static_cast<unsigned long long>(trace_requests), static_cast<double>(trace_bytes) / 1e6, distinct.size(),
+              static_cast<double>(distinct_bytes) / 1e6, static_cast<double>(trace_budget) / 1e6);
+  ServerConfig trace_config;
+  trace_config.ram_cache_bytes = static_cast<int64_t>(trace_budget);
+  const OursResult ours = replay_ours(s, trace, trace_config);
+  const OiioResult oiio = replay_oiio(s, trace, trace_budget);
+  const double ours_bw = static_cast<double>(ours.stream.bytes) / ours.stream.seconds / 1e6;
+  const double oiio_bw = static_cast<double>(oiio.bytes) / oiio.seconds / 1e6;
+  std::printf("  ours (server, lru): hit rate %.3f, %.1f MB/s (%.2f s, %llu failures)\n"
+              "  OpenImageIO ImageCache (same budget, get_pixels per request): hit rate %.3f, %.1f MB/s (%.2f s, "
+              "%llu failures)\n  throughput ours / OpenImageIO = %.2f\n",
+              ours.hit_rate, ours_bw, ours.stream.seconds, static_cast<unsigned long long>(ours.stream.failures),
+              oiio.hit_rate, oiio_bw, oiio.seconds, static_cast<unsigned long long>(oiio.failures), ours_bw / oiio_bw);
+  std::printf("  renderer polling cost per frame (each poll that found completions, incl. slot releases): mean %.1f us, "
+              "p99 %.1f us over %zu polls\n",
+              mean(ours.stream.poll_us), percentile(ours.stream.poll_us, 99), ours.stream.poll_us.size());
+  std::printf("\n[policy] cache alone over the same trace (hit rate):\n");
+  for (const uint64_t budget : {distinct_bytes / 8, distinct_bytes / 4, distinct_bytes / 2}) {
+    std::printf("  budget %6.1f MB: lru %.3f  level (seed 002 Eq. 4) %.3f\n", static_cast<double>(budget) / 1e6,
+                simulate_policy(s, trace, budget, "lru"), simulate_policy(s, trace, budget, "level"));
+  }
+
+  std::printf("\ntotal %.1f s\n", total.seconds());
+  Summary()
+      .add("hit_vs_memcpy", hit_bw / memcpy_bw)
+      .add("miss_vs_read", miss_bw / read_bw)
+      .add("read_amp", read_amp)
+      .add("hit_p99_us", hit_p99)
+      .add("miss_p99_us", miss_p99)
+      .add("oiio_hit_rate", oiio.hit_rate)
+      .add("our_hit_rate", ours.hit_rate)
+      .add("oiio_throughput_ratio", ours_bw / oiio_bw)
+      .print();
+  return 0;
+}
+
+}  // namespace
+
+TEXSTREAM_BENCH_COMMAND(server, "Texture server: RAM-cache hits vs memcpy, misses vs read(), latency, vs OIIO ImageCache, memory",
+                        run_server_bench);
+
+}  // namespace texstream::bench

@@ -1,0 +1,287 @@
+// texstream-bench visibility [--quick] [--device lavapipe|gpu] [--scene DIR]
+//
+// Issue 5's figures, every one measured in this run with the renderer's own passes (render::ViewRenderer: broad
+// phase, depth pre-pass, main pass, wide pass, compaction, prefix read-back; no streaming), over views sampled
+// along the scene's camera path (the default fly-through):
+//   1. lod_within_1: per fragment, the metadata's anisotropic level (A_m) next to the device's textureQueryLod
+//      through a sampler with anisotropy A_m (the LOD_PROBE variant); fraction within 1 level, both clamped to
+//      the texture's [0, M_max] (the levels that can be requested).
+//   2. visible_set_exact: with tau = 0 and the off-screen FOV equal to the viewport's (the wide pass then adds
+//      nothing), the meshes with weight > 0 must be exactly the ids found in a mesh-id render of the same view.
+//   3. offset_psnr_db: the same view with the city centred at (0,0,0) and at (4e6, 5e6, 0): PSNR of the two
+//      pictures (inf when identical; reported as 999).
+//   4. feedback_cost_frac: frame GPU time with feedback (metadata + wide pass + compaction + prefix read-back,
+//      and the CPU merge + parallel sort of the list) against the same views without, alternated view by view:
+//      (on - off) / on.
+//   5. submitted_per_visible: meshes the broad phase submits (wide frustum) per mesh with weight > 0.
+// The scene is generated with texstream-gen into a temp dir unless --scene is given.
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <limits>
+#include <memory>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "bench_registry.hpp"
+#include "bench_util.hpp"
+#include "texstream/common/camera_path.hpp"
+#include "texstream/common/config.hpp"
+#include "texstream/render/scene_data.hpp"
+#include "texstream/render/view_renderer.hpp"
+#include "texstream/render/visibility_list.hpp"
+
+namespace fs = std::filesystem;
+
+namespace texstream::bench {
+
+namespace {
+
+// Views along the path: enough to cover the fly-through's street canyons, open squares and skyline.
+constexpr int kViewsQuick = 6;
+constexpr int kViewsFull = 24;
+// Cost: each view rendered this many times with and without feedback, alternating, to average out noise.
+constexpr int kCostRepeatsQuick = 3;
+constexpr int kCostRepeatsFull = 8;
+// The seed's test (seed 000 §4) offsets: a city at map coordinates 10^6..10^7 m.
+constexpr double kFarOffset[3] = {4.0e6, 5.0e6, 0.0};
+constexpr double kIdenticalPsnr = 999.0;  // stands for "infinite" (identical pictures) in the summary
+
+std::string arg_value(const std::vector<std::string>& args, const std::string& key, const std::string& fallback) {
+  for (size_t i = 0; i + 1 < args.size(); ++i)
+    if (args[i] == key) return args[i + 1];
+  return fallback;
+}
+
+bool generate_scene(const fs::path& dir, uint32_t textures) {
+  const fs::path gen = fs::read_symlink("/proc/self/exe").parent_path() / "texstream-gen";
+  const std::string cmd = gen.string() + " --out '" + dir.string() + "' --textures " + std::to_string(textures) +
+                          " --seed 1 --force > '" + (dir.string() + ".log") + "' 2>&1";
+  const int status = std::system(cmd.c_str());
+  return WIFEXITED(status) && WEXITSTATUS(status) == 0;
+}
+
+double psnr(const std::vector<uint8_t>& a, const std::vector<uint8_t>& b) {
+  if (a.size() != b.size() || a.empty()) return 0.0;
+  double se = 0;
+  size_t n = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    if (i % 4 == 3) continue;  // alpha is always 255
+    const double d = static_cast<double>(a[i]) - static_cast<double>(b[i]);
+    se += d * d;
+    ++n;
+  }
+  if (se == 0) return kIdenticalPsnr;
+  return 10.0 * std::log10(255.0 * 255.0 / (se / static_cast<double>(n)));
+}
+
+std::vector<CameraPose> views_along(const CameraPath& path, int count) {
+  std::vector<CameraPose> out;
+  const double d = path.duration_s();
+  for (int i = 0; i < count; ++i) out.push_back(path.sample(d * (i + 0.5) / count));
+  return out;
+}
+
+CameraPose shifted(CameraPose p, const std::array<double, 3>& by) {
+  for (int a = 0; a < 3; ++a) p.position[a] += by[a];
+  return p;
+}
+
+template <class T>
+T unwrap(Result<T> r, const char* what) {
+  if (!r) {
+    std::fprintf(stderr, "visibility bench: %s: %s\n", what, r.error().message.c_str());
+    std::exit(1);
+  }
+  return std::move(*r);
+}
+
+int run_visibility(const std::vector<std::string>& args) {
+  const bool quick = has_flag(args, "--quick");
+  const std::string device = arg_value(args, "--device", "lavapipe");
+  if (device != "lavapipe" && device != "gpu") {
+    std::fprintf(stderr, "visibility bench: --device must be lavapipe or gpu, not '%s'\n", device.c_str());
+    return 2;
+  }
+  spdlog::set_level(spdlog::level::warn);
+  // The profiles say which device and frame size: config/gpu.toml selects a non-lavapipe device by name.
+  const fs::path profile = fs::path(TEXSTREAM_VIS_CONFIG_DIR) / (device == "gpu" ? "gpu.toml" : "lavapipe.toml");
+  Config cfg = unwrap(load_config(profile, {}), "configuration");
+  if (quick && device == "lavapipe") {
+    cfg.render.width_px = 480;  // a quarter of the pixels: lavapipe shades on 2 CPU cores
+    cfg.render.height_px = 270;
+  }
+
+  fs::path scene_dir = arg_value(args, "--scene", "");
+  fs::path temp;
+  if (scene_dir.empty()) {
+    temp = fs::temp_directory_path() / ("texstream_vis_bench_" + std::to_string(::getpid()));
+    std::printf("generating a %d-texture city in %s\n", quick ? 2000 : 4000, temp.c_str());
+    std::fflush(stdout);
+    if (!generate_scene(temp, quick ? 2000 : 4000)) {
+      std::fprintf(stderr, "visibility bench: texstream-gen failed (is it built next to texstream-bench?)\n");
+      return 1;
+    }
+    scene_dir = temp;
+  }
+  const render::SceneData base = unwrap(render::SceneData::load(scene_dir), "scene");
+  const fs::path path_file = scene_dir / base.manifest.camera_path;
+  const CameraPath path = unwrap(CameraPath::load(path_file), "camera path");
+  const auto poses = views_along(path, quick ? kViewsQuick : kViewsFull);
+  std::printf("scene %s: %zu meshes, %zu textures; %zu views of %lldx%lld on %s\n", scene_dir.c_str(),
+              base.meshes.meshes.size(), base.textures.size(), poses.size(),
+              static_cast<long long>(cfg.render.width_px), static_cast<long long>(cfg.render.height_px),
+              device.c_str());
+  Stopwatch total;
+
+  // ---- 1. LOD against textureQueryLod ----
+  uint64_t lod_total = 0, lod_within = 0, lod_exact = 0;
+  double worst = 0;
+  {
+    render::ViewRendererOptions vo;
+    vo.lod_probe = true;
+    auto vr = unwrap(render::ViewRenderer::create(cfg, base, vo), "LOD probe renderer");
+    if (!vr->probe_is_anisotropic()) std::printf("note: device lacks samplerAnisotropy: probe is isotropic\n");
+    for (const auto& pose : poses) {
+      const auto v = unwrap(vr->render(pose, {true, false, false}), "LOD probe view");
+      for (const auto& s : v.probe) {
+        if (s.written == 0.0f) continue;
+        const float a = std::clamp(s.computed, 0.0f, s.mip_max);
+        const float b = std::clamp(s.queried, 0.0f, s.mip_max);
+        const float d = std::abs(a - b);
+        ++lod_total;
+        if (d <= 1.0f) ++lod_within;
+        if (d <= 0.01f) ++lod_exact;
+        worst = std::max(worst, static_cast<double>(d));
+      }
+    }
+  }
+  const double lod_frac = lod_total ? static_cast<double>(lod_within) / static_cast<double>(lod_total) : 0.0;
+  std::printf("lod: %llu fragments, %.4f within 1 level of textureQueryLod, %.4f within 0.01, worst %.2f levels\n",
+              static_cast<unsigned long long>(lod_total), lod_frac,
+              lod_total ? static_cast<double>(lod_exact) / static_cast<double>(lod_total) : 0.0, worst);
+
+  // ---- 2. visible set vs id buffer (tau = 0, no off-screen widening), and the viewport-only skipping ----
+  bool exact = true;
+  uint64_t misses = 0, extras = 0, id_visible_total = 0;
+  {
+    Config idc = cfg;
+    idc.stream.tau = 0;
+    idc.render.offscreen_fov_y_deg = idc.render.fov_y_deg;
+    idc.render.debug_view = "mesh_id";
+    auto vr = unwrap(render::ViewRenderer::create(idc, base), "id-buffer renderer");
+    for (const auto& pose : poses) {
+      const auto v = unwrap(vr->render(pose), "id-buffer view");
+      std::set<uint32_t> from_meta, from_ids;
+      for (const auto& e : v.entries)
+        if (e.weight_fixed > 0) from_meta.insert(e.mesh_id);
+      for (size_t i = 0; i + 3 < v.rgba.size(); i += 4) {
+        const int64_t id = render::decode_mesh_id(v.rgba[i], v.rgba[i + 1], v.rgba[i + 2]);
+        if (id >= 0) from_ids.insert(static_cast<uint32_t>(id));
+      }
+      for (uint32_t id : from_ids) misses += from_meta.count(id) ? 0 : 1;
+      for (uint32_t id : from_meta) extras += from_ids.count(id) ? 0 : 1;
+      id_visible_total += from_ids.size();
+      if (from_meta != from_ids) exact = false;
+    }
+  }
+  std::printf("visibility: %llu mesh-views in the id buffers; %llu missed by the metadata, %llu extra\n",
+              static_cast<unsigned long long>(id_visible_total), static_cast<unsigned long long>(misses),
+              static_cast<unsigned long long>(extras));
+
+  // ---- 3. large coordinates ----
+  double offset_psnr = 0;
+  {
+    const std::array<double, 3> to_zero{-base.manifest.origin[0], -base.manifest.origin[1], -base.manifest.origin[2]};
+    const std::array<double, 3> to_far{kFarOffset[0] - base.manifest.origin[0], kFarOffset[1] - base.manifest.origin[1],
+                                       kFarOffset[2] - base.manifest.origin[2]};
+    render::ViewRendererOptions near_o, far_o;
+    near_o.scene_offset = to_zero;
+    far_o.scene_offset = to_far;
+    std::vector<std::vector<uint8_t>> near_pics;
+    {
+      auto vr = unwrap(render::ViewRenderer::create(cfg, base, near_o), "offset (0,0,0) renderer");
+      for (const auto& pose : poses) near_pics.push_back(unwrap(vr->render(shifted(pose, to_zero)), "view").rgba);
+    }
+    auto vr = unwrap(render::ViewRenderer::create(cfg, base, far_o), "offset (4e6,5e6,0) renderer");
+    offset_psnr = kIdenticalPsnr;
+    for (size_t i = 0; i < poses.size(); ++i) {
+      const auto far_pic = unwrap(vr->render(shifted(poses[i], to_far)), "view").rgba;
+      offset_psnr = std::min(offset_psnr, psnr(near_pics[i], far_pic));
+    }
+  }
+  std::printf("large coordinates: worst PSNR between offset (0,0,0) and (4e6,5e6,0): %.2f dB\n", offset_psnr);
+
+  // ---- 4. cost, 5. skipping ----
+  double on_ms = 0, off_ms = 0, sort_ms = 0, broad_ms = 0;
+  uint64_t submitted = 0, visible = 0;
+  {
+    Config cc = cfg;
+    cc.stream.tau = 0;  // count every mesh that got a fragment for the skipping ratio
+    auto vr = unwrap(render::ViewRenderer::create(cc, base), "cost renderer");
+    const int repeats = quick ? kCostRepeatsQuick : kCostRepeatsFull;
+    for (const auto& pose : poses) unwrap(vr->render(pose, {true, true, false}), "warm-up");  // shader/JIT warm-up
+    for (int rep = 0; rep < repeats; ++rep) {
+      for (const auto& pose : poses) {
+        // Alternate the order so neither configuration always runs on a warmer cache.
+        const bool on_first = (rep % 2) == 0;
+        for (int k = 0; k < 2; ++k) {
+          const bool on = (k == 0) == on_first;
+          const auto v = unwrap(vr->render(pose, {on, on, false}), "cost view");
+          if (!on) {
+            off_ms += v.gpu_ms;
+            continue;
+          }
+          Stopwatch sw;
+          const auto candidates = render::build_candidates(v.entries, vr->scene().meshes.meshes);
+          const double s = sw.seconds() * 1e3;
+          on_ms += v.gpu_ms + s;
+          sort_ms += s;
+          if (rep == 0) {
+            submitted += v.submitted;
+            for (const auto& e : v.entries) visible += e.weight_fixed > 0 ? 1 : 0;
+            broad_ms += v.broad_phase_ms;
+          }
+        }
+      }
+    }
+  }
+  const double cost_frac = on_ms > 0 ? (on_ms - off_ms) / on_ms : 0.0;
+  const double per_visible = visible ? static_cast<double>(submitted) / static_cast<double>(visible) : 0.0;
+  std::printf("cost: frames with feedback %.2f ms, without %.2f ms (sum over views and repeats); merge + sort %.3f ms\n",
+              on_ms, off_ms, sort_ms);
+  std::printf("skipping: %llu meshes submitted after the broad phase, %llu with weight > 0 (%.1f%% visible); "
+              "broad phase %.3f ms per view\n",
+              static_cast<unsigned long long>(submitted), static_cast<unsigned long long>(visible),
+              submitted ? 100.0 * static_cast<double>(visible) / static_cast<double>(submitted) : 0.0,
+              poses.empty() ? 0.0 : broad_ms / static_cast<double>(poses.size()));
+  std::printf("elapsed %.1f s\n", total.seconds());
+  if (!temp.empty()) {
+    std::error_code ec;
+    fs::remove_all(temp, ec);
+    fs::remove(temp.string() + ".log", ec);
+  }
+
+  Summary s;
+  s.add("lod_within_1", lod_frac);
+  s.add_bool("visible_set_exact", exact);
+  s.add("offset_psnr_db", offset_psnr);
+  s.add("feedback_cost_frac", cost_frac);
+  s.add("submitted_per_visible", per_visible);
+  s.print();
+  return 0;
+}
+
+}  // namespace
+
+TEXSTREAM_BENCH_COMMAND(visibility, "GPU visibility: LOD accuracy, exact visible set, large coordinates, cost",
+                        run_visibility);
+
+}  // namespace texstream::bench
