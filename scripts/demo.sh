@@ -17,7 +17,7 @@ fi
 t2=$(date +%s)
 out=out/demo
 rm -rf "$out"
-build/bin/texstream-render --config config/default.toml --set scene.dir="$scene" --set render.output_dir="$out" "$@"
+build/bin/texstream-render --config config/lavapipe.toml --set scene.dir="$scene" --set render.output_dir="$out" "$@"
 t3=$(date +%s)
 echo "demo: bootstrap+build $((t1 - t0)) s, scene $((t2 - t1)) s, render $((t3 - t2)) s"
 echo "demo: frames and summary are in $(pwd)/$out"

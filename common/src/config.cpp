@@ -45,7 +45,8 @@ void visit_keys(Config& c, V&& v) {
   v("render", "width_px", c.render.width_px, "px", "Framebuffer width", Range{16, 16384});
   v("render", "height_px", c.render.height_px, "px", "Framebuffer height", Range{16, 16384});
   v("render", "frames", c.render.frames, "frames", "Headless: frames to render; 0 = the whole camera path", Range{0, 1e9});
-  v("render", "frame_time_ms", c.render.frame_time_ms, "ms", "Virtual time per frame along the camera path (lock-step)", Range{0.01, 10000});
+  v("render", "frame_time_ms", c.render.frame_time_ms, "ms", "Virtual time per frame along the camera path", Range{0.01, 10000});
+  v("render", "lockstep", c.render.lockstep, "bool", "Each frame first takes every answer to the previous streaming cycle, so a run depends on the frame index only (false: real time, never waits)", kAny);
   v("render", "camera_path", c.render.camera_path, "path", "Camera path file; empty: <scene>/camera_path.txt", kAny);
   v("render", "output_dir", c.render.output_dir, "path", "Folder for frames and the run summary", kAny);
   v("render", "write_every_frames", c.render.write_every_frames, "frames", "Write every Nth frame as PNG (0: only the last)", Range{0, 1e9});

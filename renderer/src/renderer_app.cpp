@@ -2,10 +2,13 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <memory>
+#include <thread>
 
 #include "texstream/common/camera_path.hpp"
 #include "texstream/render/adaptive_controller.hpp"
@@ -52,6 +55,7 @@ class LoadTimeSink final : public MipSink {
     }
     auto span = inner_.reserve(texture, mip, bytes);
     if (!span.empty()) ++taken_;
+    else no_room_ = true;
     return span;
   }
   void commit(TextureId texture, MipLevel mip, std::span<std::byte> data) override { inner_.commit(texture, mip, data); }
@@ -60,13 +64,53 @@ class LoadTimeSink final : public MipSink {
   }
   void failed(TextureId texture, MipLevel mip, CompletionStatus status) override { inner_.failed(texture, mip, status); }
   bool limited() const { return limited_; }
+  bool no_room() const { return no_room_; }  // the staging ring was full: the rest waits for the next frame
 
  private:
   MipSink& inner_;
   Clock::time_point deadline_;
   uint64_t taken_ = 0;
   bool limited_ = false;
+  bool no_room_ = false;
 };
+
+// Lock-step: commits (which place textures in cache regions) are applied in (texture, mip) order instead of
+// the server's completion order, which its worker threads make nondeterministic; otherwise a texture's region,
+// and so the last bit of some filtered texels, would differ between two runs of the same path.
+class OrderedCommitSink final : public MipSink {
+ public:
+  explicit OrderedCommitSink(MipSink& inner) : inner_(inner) {}
+  std::span<std::byte> reserve(TextureId texture, MipLevel mip, uint64_t bytes) override {
+    return inner_.reserve(texture, mip, bytes);
+  }
+  void commit(TextureId texture, MipLevel mip, std::span<std::byte> data) override {
+    pending_.push_back({texture, mip, data});
+  }
+  void reject(TextureId texture, MipLevel mip, std::span<std::byte> reserved) override {
+    inner_.reject(texture, mip, reserved);
+  }
+  void failed(TextureId texture, MipLevel mip, CompletionStatus status) override { inner_.failed(texture, mip, status); }
+  void flush() {
+    std::sort(pending_.begin(), pending_.end(), [](const Pending& a, const Pending& b) {
+      return a.texture != b.texture ? a.texture < b.texture : a.mip < b.mip;
+    });
+    for (const Pending& p : pending_) inner_.commit(p.texture, p.mip, p.data);
+    pending_.clear();
+  }
+
+ private:
+  struct Pending {
+    TextureId texture;
+    MipLevel mip;
+    std::span<std::byte> data;
+  };
+  MipSink& inner_;
+  std::vector<Pending> pending_;
+};
+
+// Lock-step (DESIGN "Determinism and measurement"): the longest a frame waits for the server to answer the
+// previous cycle before the run is declared stuck. Generous: a cold server on a loaded 2-core machine.
+constexpr std::chrono::seconds kLockstepTimeout{60};
 
 class Renderer {
  public:
@@ -257,11 +301,32 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   fu->cache = {cache_->layer_extent(), cache_->mip_levels(), 0, 0};
 
   // Completions that arrived since the last frame: validated by the client, copied into the staging ring.
-  // At most controller.load_time_ms of this frame goes to it (LoadTimeSink).
-  LoadTimeSink timed(*cache_, Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                                 std::chrono::duration<double, std::milli>(cfg_.controller.load_time_ms)));
-  client_->poll(timed, static_cast<size_t>(cfg_.stream.max_mips_per_cycle));
-  if (timed.limited()) ++load_time_limited_frames_;
+  // Real time: at most controller.load_time_ms of this frame goes to it (LoadTimeSink), and whatever has not
+  // arrived waits for a later frame. Lock-step: the frame first takes every answer to the previous cycle (or
+  // as many as the staging ring holds), so what it shows depends on the frame index only, not on timing.
+  Clock::duration waited{0};
+  if (cfg_.render.lockstep) {
+    const auto wait_start = Clock::now();
+    OrderedCommitSink ordered(*cache_);
+    LoadTimeSink all(ordered, Clock::time_point::max());
+    while (client_->stats().in_flight > 0) {
+      client_->poll(all, std::numeric_limits<size_t>::max());
+      if (all.no_room() || client_->stats().in_flight == 0) break;
+      if (Clock::now() - wait_start > kLockstepTimeout) {
+        return make_error(ErrorCode::kTimeout, "render.lockstep: " + std::to_string(client_->stats().in_flight) +
+                                                   " requests still unanswered after " +
+                                                   std::to_string(kLockstepTimeout.count()) + " s");
+      }
+      std::this_thread::sleep_for(std::chrono::microseconds(200));
+    }
+    ordered.flush();  // the whole frame's arrivals, in (texture, mip) order
+    waited = Clock::now() - wait_start;
+  } else {
+    LoadTimeSink timed(*cache_, Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                                   std::chrono::duration<double, std::milli>(cfg_.controller.load_time_ms)));
+    client_->poll(timed, static_cast<size_t>(cfg_.stream.max_mips_per_cycle));
+    if (timed.limited()) ++load_time_limited_frames_;
+  }
   const uint64_t in_flight = client_->stats().in_flight;
   rec.feedback = cfg_.render.feedback;  // off: no metadata, so no streaming cycle either
   rec.read_back_list = rec.feedback && static_cast<double>(in_flight) <=
@@ -299,7 +364,8 @@ Status Renderer::render_frame(uint64_t index, bool last) {
     TS_TRY(interactive_->present(passes_->colour().handle(), passes_->options().width, passes_->options().height, r));
   }
   if (rec.read_back_list) start_cycle();
-  latencies_ms_.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+  // Lock-step waits for the server are not frame latency: they would not exist in real time.
+  latencies_ms_.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0 - waited).count());
   // Δt of Eq. 4-7 is in seconds; the next cycle uses the s and b this frame leads to.
   controller_->on_frame(latencies_ms_.back() / 1e3);
   sum_load_mb_ += controller_->load_size_bytes() / 1e6;

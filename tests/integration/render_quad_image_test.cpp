@@ -169,7 +169,8 @@ TEST(RenderQuadImage, FinestMipMatchesTheTextureOnScreen) {
 
   const fs::path out = dir / "out";
   const std::string cmd = (kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
-                          " --set render.validation=true --set render.frames=60 --set render.write_every_frames=0" +
+                          " --set render.validation=true --set render.lockstep=true --set controller.mode=none" +
+                          " --set render.frames=60 --set render.write_every_frames=0" +
                           " --set render.width_px=" + std::to_string(kWidth) +
                           " --set render.height_px=" + std::to_string(kHeight) +
                           " --set render.fov_y_deg=" + std::to_string(kFovY) +

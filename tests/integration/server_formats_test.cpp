@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <fstream>
 #include <thread>
+#include <tuple>
 #include <vector>
 
 #include "texstream/common/scene_format.hpp"
@@ -45,7 +46,8 @@ enum Tex : uint32_t {
   kGarbageTif = 9,    // random bytes named .tif
   kDdsTruncated = 10, // DX10 BC1 cut inside mip 0
   kGreyTiff = 11,     // 16x16 one-channel .tif (maketx)
-  kCount = 12,
+  kScanlineCut = 12,  // 64x64 RGB scanline (untiled, uncompressed) .tif cut in half: OIIO 2.4 reads "ok"
+  kCount = 13,
 };
 
 float srgb_encode(float l) {
@@ -157,6 +159,7 @@ class ServerFormatsTest : public ::testing::Test {
         {32, 32, full_mip_count(32, 32), rgba},   {8, 8, 4, rgba},
         {64, 32, full_mip_count(64, 32), bc1},    {16, 16, 5, rgba},
         {16, 16, 5, bc1},                         {16, 16, 5, rgba},
+        {64, 64, full_mip_count(64, 64), rgba},
     };
     ASSERT_EQ(table_.size(), size_t{kCount});
     ASSERT_TRUE(scene::write_texture_table(dir_, table_).ok());
@@ -180,6 +183,21 @@ class ServerFormatsTest : public ::testing::Test {
     cut.resize(148 + 64);
     write_file(path(kDdsTruncated, TextureFileKind::kDds), cut);
     make_tx(path(kGreyTiff, TextureFileKind::kTif), 16, 16, 1, OIIO::TypeDesc::UINT8);
+    {
+      const fs::path p = path(kScanlineCut, TextureFileKind::kTif);
+      auto out = OIIO::ImageOutput::create(p.string());
+      ASSERT_TRUE(out);
+      OIIO::ImageSpec spec(64, 64, 3, OIIO::TypeDesc::UINT8);
+      spec.attribute("compression", "none");
+      ASSERT_TRUE(out->open(p.string(), spec));
+      std::vector<uint8_t> px(64 * 64 * 3);
+      for (size_t i = 0; i < px.size(); ++i) px[i] = static_cast<uint8_t>(i * 5);
+      ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, px.data()));
+      out->close();
+      std::vector<std::byte> bytes = read_file(p);
+      bytes.resize(bytes.size() / 2);
+      write_file(p, bytes);
+    }
 
     SegmentParams params;
     params.slot_count = 8;
@@ -369,15 +387,45 @@ TEST_F(ServerFormatsTest, BgraDdsIsDecodedToRgba8) {
   }
 }
 
+// A file cut at 2/3: the levels whose tiles survive may be served, but only with exactly the pixels of the
+// intact file; the others must be kCorrupt — never "ok" with wrong pixels (OIIO 2.4 returns true from
+// truncated TIFF reads; has_error() tells).
+TEST_F(ServerFormatsTest, TruncatedTiffAndExrGiveCorruptOrExactPixelsNeverWrongOnes) {
+  for (auto [t, intact, kind] : {std::tuple{kTiffTruncated, kTiff, TextureFileKind::kTx},
+                                 std::tuple{kExrTruncated, kExr, TextureFileKind::kExr}}) {
+    uint32_t corrupt = 0;
+    for (uint32_t mip = 0; mip < table_[t].mip_count; ++mip) {
+      int ch = 0;
+      const std::vector<float> ref = reference(intact, kind, mip, &ch);
+      load(t, mip, [&](const CompletionRecord& c) {
+        if (c.status == uint32_t(CompletionStatus::kCorrupt)) {
+          ++corrupt;
+          return;
+        }
+        const auto p = payload(c);
+        const Extent2D e = mip_extent(table_[t].width, table_[t].height, mip);
+        ASSERT_EQ(p.size(), size_t{e.width} * e.height * 4);
+        for (size_t i = 0; i < size_t{e.width} * e.height; ++i) {
+          const float v = kind == TextureFileKind::kExr ? srgb_encode(ref[i * ch]) : ref[i * ch];
+          ASSERT_NEAR(std::to_integer<int>(p[i * 4]), v * 255.0f, 1.0) << "texture " << t << " mip " << mip;
+        }
+      });
+    }
+    EXPECT_GT(corrupt, 0u) << "texture " << t << ": a file cut at 2/3 must fail somewhere";
+  }
+}
+
 TEST_F(ServerFormatsTest, ErrorsInEveryFormatAreCompletionsAndServingGoesOn) {
   EXPECT_EQ(status_of(kTiffMismatch, 0), CompletionStatus::kCorrupt);  // 64x32 in the file, 128x128 in the table
-  EXPECT_EQ(status_of(kTiffTruncated, 0), CompletionStatus::kCorrupt);
-  EXPECT_EQ(status_of(kExrTruncated, 0), CompletionStatus::kCorrupt);
   EXPECT_EQ(status_of(kMissing, 0), CompletionStatus::kNotFound);
   EXPECT_EQ(status_of(kBc1FromTiff, 0), CompletionStatus::kCorrupt);
   EXPECT_EQ(status_of(kGarbageTif, 0), CompletionStatus::kCorrupt);
   EXPECT_EQ(status_of(kDdsTruncated, 0), CompletionStatus::kCorrupt);   // 128 bytes of mip 0, 64 in the file
-  EXPECT_EQ(status_of(kBgraDds, 4), CompletionStatus::kIoError);        // beyond the table: dropped? no: see below
+  EXPECT_EQ(status_of(kScanlineCut, 0), CompletionStatus::kCorrupt);    // read_image says true; has_error() not
+  EXPECT_EQ(status_of(kScanlineCut, 1), CompletionStatus::kCorrupt);    // a plain TIFF has no mip 1
+  EXPECT_EQ(status_of(kDx10Bc1, 0), CompletionStatus::kOk);  // the others are still served
+  EXPECT_EQ(server_->stats().corrupt.load(), 6u);
+  EXPECT_EQ(server_->stats().not_found.load(), 1u);
 }
 
 }  // namespace

@@ -281,6 +281,37 @@ TEST_F(ServerStreamingTest, RepeatedRequestIsARamCacheHitThatReadsNothing) {
   EXPECT_EQ(server_->cache_stats().hits, 1u);
 }
 
+TEST_F(ServerStreamingTest, LevelPolicyServesExactlyAndKeepsTheBudget) {
+  ServerConfig config;
+  config.cache_policy = "level";
+  config.ram_cache_bytes = 40'000;  // less than texture kRgbaB's chain (87 380 bytes): evictions happen
+  start_server(config);
+  for (int round = 0; round < 2; ++round) {
+    for (uint32_t t : {uint32_t{kRgbaA}, uint32_t{kRgbaB}, uint32_t{kBc1}}) {
+      for (uint32_t mip = table_[t].mip_count; mip-- > 0;) {
+        load(t, mip, 10 + static_cast<uint64_t>(round));
+        auto c = next();
+        ASSERT_TRUE(c);
+        expect_payload(*c);
+        release(c->slot);
+        ASSERT_LE(server_->cache_stats().bytes, 40'000u);
+      }
+    }
+  }
+  const MipCacheStats s = server_->cache_stats();
+  EXPECT_GT(s.evictions, 0u);
+  EXPECT_GT(s.hits, 0u);
+}
+
+TEST_F(ServerStreamingTest, UnknownCachePolicyIsRefusedNamingTheKey) {
+  create_segment({});
+  ServerConfig config;
+  config.cache_policy = "mru";
+  auto server = Server::create(*segment_, dir_, config, posix_);
+  ASSERT_FALSE(server.ok());
+  EXPECT_NE(server.error().message.find("server.cache_policy"), std::string::npos);
+}
+
 TEST_F(ServerStreamingTest, ZeroCacheBudgetReadsAgain) {
   ServerConfig config;
   config.ram_cache_bytes = 0;

@@ -72,21 +72,15 @@ Result<std::unique_ptr<Server>> Server::create(Segment& segment, const std::file
   if (!(config.rate_limit_mb_s >= 0)) {
     return make_error(ErrorCode::kInvalidArgument, "server.rate_limit_mb_s must be >= 0");
   }
-  // Eq. 4's quadtree level: the texture's coarsest (1x1) mip is the root, l = 0.
-  const std::vector<scene::TextureRecord>* table = &textures.value();
-  Result<std::unique_ptr<EvictionPolicy>> policy =
-      make_eviction_policy(config.cache_policy, [table](MipKey key) {
-        const scene::TextureRecord& t = (*table)[key.texture().value];
-        return t.mip_count - 1 - std::min(key.mip().value, t.mip_count - 1);
-      });
-  if (!policy.ok()) return policy.error();
-  // The lambda points at the vector's heap buffer, which moving the vector into the Server keeps.
-  return std::unique_ptr<Server>(new Server(segment, scene_dir, config, storage, std::move(textures).value(),
-                                            std::move(policy).value()));
+  // Checked here so that the constructor, which builds the policy over its own texture table, cannot fail.
+  if (Result<std::unique_ptr<EvictionPolicy>> p = make_eviction_policy(config.cache_policy, {}); !p.ok()) {
+    return p.error();
+  }
+  return std::unique_ptr<Server>(new Server(segment, scene_dir, config, storage, std::move(textures).value()));
 }
 
 Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const ServerConfig& config, Storage& storage,
-               std::vector<scene::TextureRecord> textures, std::unique_ptr<EvictionPolicy> policy)
+               std::vector<scene::TextureRecord> textures)
     : segment_(segment),
       scene_dir_(scene_dir),
       config_(config),
@@ -96,7 +90,14 @@ Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const S
       rate_limited_(config.rate_limit_mb_s > 0
                         ? std::make_unique<RateLimitedStorage>(storage, config.rate_limit_mb_s, &stats_)
                         : nullptr),
-      cache_(static_cast<uint64_t>(config.ram_cache_bytes), std::move(policy)),
+      // Eq. 4's quadtree level over this server's texture table: a texture's coarsest (1x1) mip is the root.
+      cache_(static_cast<uint64_t>(config.ram_cache_bytes),
+             make_eviction_policy(config.cache_policy,
+                                  [this](MipKey key) {
+                                    const scene::TextureRecord& t = textures_[key.texture().value];
+                                    return t.mip_count - 1 - std::min(key.mip().value, t.mip_count - 1);
+                                  })
+                 .value()),
       loader_(scene_dir, rate_limited_ ? *rate_limited_ : storage, cache_, segment.server_block(), stats_),
       slots_(segment.slot_count()) {
   cancelled_scratch_.reserve(256);

@@ -10,9 +10,11 @@
 //      one mip per texture per cycle, coarsest first) replayed through our server and through OpenImageIO's
 //      ImageCache with the same byte budget → hit rates, throughput ratio, renderer polling cost per frame
 //   5. LRU vs level-aware (seed 002 Eq. 4) hit rates on the same trace
-//   6. memory: a random workload over a texture set ≥ 4x the cache; peak RSS vs budget + staging + 64 MB
+//   6. memory: the texstream-server process (not a thread: its own RSS) under a random workload over a
+//      texture set ≥ 4x the cache; peak RSS vs budget + staging + 64 MB
 // The scene is generated with texstream-gen (rgba8, so both caches hold the same bytes per mip) unless
 // --scene is given.
+#include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -83,8 +85,8 @@ uint64_t now_ns() {
                                    .count());
 }
 
-uint64_t rss_bytes() {
-  std::ifstream f("/proc/self/statm");
+uint64_t rss_bytes(pid_t pid) {
+  std::ifstream f(fmt::format("/proc/{}/statm", pid));
   uint64_t size = 0, resident = 0;
   f >> size >> resident;
   return resident * static_cast<uint64_t>(sysconf(_SC_PAGESIZE));
@@ -120,7 +122,50 @@ class Harness {
     return h;
   }
 
+  // The real texstream-server executable (next to this binary) as a child process instead of a thread: the
+  // memory phase measures the resident set of the server process alone.
+  static std::unique_ptr<Harness> start_process(const fs::path& scene, int64_t cache_bytes) {
+    static int counter = 0;
+    auto h = std::unique_ptr<Harness>(new Harness());
+    SegmentParams params;
+    params.slot_count = kSlotCount;
+    params.slot_bytes = kSlotBytes;
+    auto seg = Segment::create(fmt::format("texstream-bench-proc-{}-{}", getpid(), counter++), params);
+    if (!seg.ok()) return nullptr;
+    h->segment_ = std::move(seg).value();
+    h->requests_ = SpscRingProducer<RequestRecord>(h->segment_->request_control(), h->segment_->request_records(),
+                                                   h->segment_->header().request_capacity);
+    h->completions_ = SpscRingConsumer<CompletionRecord>(
+        h->segment_->completion_control(), h->segment_->completion_records(), h->segment_->header().completion_capacity);
+    const std::string exe = (fs::read_symlink("/proc/self/exe").parent_path() / "texstream-server").string();
+    std::vector<std::string> args{exe, "--segment", h->segment_->name(), "--scene", scene.string(), "--spawned",
+                                  "--set", fmt::format("server.ram_cache_bytes={}", cache_bytes),
+                                  "--set", "server.log_level=warn"};
+    h->pid_ = fork();
+    if (h->pid_ == 0) {
+      std::vector<char*> argv;
+      for (auto& a : args) argv.push_back(a.data());
+      argv.push_back(nullptr);
+      execv(exe.c_str(), argv.data());
+      _exit(127);
+    }
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (h->segment_->server_block().attached.v.load(std::memory_order_acquire) != 1) {
+      if (std::chrono::steady_clock::now() > deadline) {
+        std::fprintf(stderr, "server bench: %s did not attach within 10 s\n", exe.c_str());
+        return nullptr;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    return h;
+  }
+
   ~Harness() {
+    if (pid_ > 0) {
+      kill(pid_, SIGTERM);
+      waitpid(pid_, nullptr, 0);
+      return;
+    }
     stop_ = true;
     futex_wake_all(segment_->renderer_block().doorbell);
     if (thread_.joinable()) thread_.join();
@@ -128,6 +173,8 @@ class Harness {
   }
 
   server::Server& server() { return *server_; }
+  pid_t pid() const { return pid_; }
+  const ServerBlock& server_block() const { return segment_->server_block(); }
   uint32_t slots() const { return kSlotCount; }
 
   // Pushes one load; false when the request ring is full.
@@ -190,6 +237,7 @@ class Harness {
   std::thread thread_;
   std::deque<uint32_t> releases_;
   bool pushed_since_ring_ = false;
+  pid_t pid_ = 0;  // start_process(): the server child
 };
 
 struct StreamResult {
@@ -488,7 +536,24 @@ double simulate_policy(const Scene& s, const std::vector<Cycle>& trace, uint64_t
   return static_cast<double>(st.hits) / static_cast<double>(std::max<uint64_t>(1, st.hits + st.misses));
 }
 
+// RssAnon / RssFile / RssShmem of a process in MB (/proc/<pid>/status): where its resident set lies.
+std::string rss_breakdown(pid_t pid) {
+  std::ifstream f(fmt::format("/proc/{}/status", pid));
+  std::string line, out;
+  while (std::getline(f, line)) {
+    if (line.rfind("RssAnon:", 0) == 0 || line.rfind("RssFile:", 0) == 0 || line.rfind("RssShmem:", 0) == 0) {
+      const size_t colon = line.find(':');
+      out += fmt::format("{}{} {:.1f} MB", out.empty() ? "" : ", ", line.substr(0, colon),
+                         std::atof(line.c_str() + colon + 1) / 1024.0);
+    }
+  }
+  return out;
+}
+
 struct MemoryResult {
+  std::string start_breakdown;
+  std::string end_breakdown;
+  double end_anon_shmem_mb = 0;
   double peak_rss_mb = 0;
   double start_rss_mb = 0;
   double limit_mb = 0;
@@ -511,13 +576,13 @@ MemoryResult memory_run(const Scene& s, double seconds, uint64_t cache_budget) {
     set_bytes += texture_size(s.textures[t]);
   }
   out.set_mb = static_cast<double>(set_bytes) / (1 << 20);
-  ServerConfig config;
-  config.ram_cache_bytes = static_cast<int64_t>(cache_budget);
-  auto h = Harness::start(s.dir, config);
+  auto h = Harness::start_process(s.dir, static_cast<int64_t>(cache_budget));
   if (!h) return out;
-  out.start_rss_mb = static_cast<double>(rss_bytes()) / (1 << 20);
+  const pid_t pid = h->pid();
+  out.start_rss_mb = static_cast<double>(rss_bytes(pid)) / (1 << 20);
+  out.start_breakdown = rss_breakdown(pid);
   std::mt19937_64 rng(42);
-  uint64_t peak = rss_bytes();
+  uint64_t peak = rss_bytes(pid);
   Stopwatch sw, sample;
   uint64_t generation = 1;
   while (sw.seconds() < seconds) {
@@ -530,14 +595,16 @@ MemoryResult memory_run(const Scene& s, double seconds, uint64_t cache_budget) {
     const StreamResult r = stream(*h, batch, h->slots(), generation++, false);
     out.requests += r.completions;
     if (sample.seconds() > 0.05) {
-      peak = std::max(peak, rss_bytes());
+      peak = std::max(peak, rss_bytes(pid));
       sample.reset();
     }
   }
-  peak = std::max(peak, rss_bytes());
+  peak = std::max(peak, rss_bytes(pid));
   out.peak_rss_mb = static_cast<double>(peak) / (1 << 20);
-  const server::MipCacheStats cs = h->server().cache_stats();
-  out.hit_rate = static_cast<double>(cs.hits) / static_cast<double>(std::max<uint64_t>(1, cs.hits + cs.misses));
+  out.end_breakdown = rss_breakdown(pid);
+  const ServerBlock& b = h->server_block();
+  const uint64_t hits = b.ram_cache_hits.v.load(), misses = b.ram_cache_misses.v.load();
+  out.hit_rate = static_cast<double>(hits) / static_cast<double>(std::max<uint64_t>(1, hits + misses));
   return out;
 }
 
@@ -628,16 +695,22 @@ int run_server_bench(const std::vector<std::string>& args) {
   // Warm the page cache for everything (the issue measures misses from a warm OS page cache).
   read_gbps(s, 0, static_cast<uint32_t>(s.textures.size()), nullptr);
 
-  // 6. Memory first, while the process holds nothing else.
+  // 6. Memory: the real server process.
   const double memory_s = opt->memory_minutes >= 0 ? opt->memory_minutes * 60.0 : (opt->quick ? 4.0 : 30.0);
   const uint64_t memory_budget = std::min<uint64_t>(32ull << 20, scene_bytes / 4);
   const MemoryResult mem = memory_run(s, memory_s, memory_budget);
-  std::printf("\n[memory] %.0f s random workload over %.1f MB of textures (%.1fx the cache), %llu requests, hit rate "
-              "%.3f\n  RSS at start %.1f MB, peak %.1f MB; limit = cache %.1f + staging %.1f + 64 MB = %.1f MB -> %s\n",
+  std::printf("\n[memory] texstream-server process, %.0f s random workload over %.1f MB of textures (%.1fx the cache), "
+              "%llu requests, hit rate %.3f\n  server RSS at start %.1f MB, peak %.1f MB; limit = cache %.1f + staging %.1f + 64 MB = %.1f MB -> %s\n",
               memory_s, mem.set_mb, mem.set_mb / mem.cache_mb, static_cast<unsigned long long>(mem.requests),
               mem.hit_rate, mem.start_rss_mb, mem.peak_rss_mb, mem.cache_mb,
               static_cast<double>(kSlotCount * kSlotBytes) / (1 << 20), mem.limit_mb,
               mem.peak_rss_mb <= mem.limit_mb ? "within" : "OVER");
+  std::printf("  server at start: %s\n  server at end:   %s\n", mem.start_breakdown.c_str(), mem.end_breakdown.c_str());
+  // RssFile is the mapped code of the linked libraries (OpenImageIO pulls in dozens), shared and evictable;
+  // the growth under load is what the cache, the staging pool and the allocator add.
+  std::printf("  growth under load %.1f MB vs cache + staging + 64 MB = %.1f MB -> %s\n",
+              mem.peak_rss_mb - mem.start_rss_mb, mem.limit_mb,
+              mem.peak_rss_mb - mem.start_rss_mb <= mem.limit_mb ? "within" : "OVER");
 
   // 1. Hits vs memcpy.
   const double phase_s = opt->quick ? 1.5 : 5.0;

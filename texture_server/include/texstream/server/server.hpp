@@ -61,7 +61,7 @@ class Server {
 
  private:
   Server(Segment& segment, const std::filesystem::path& scene_dir, const ServerConfig& config, Storage& storage,
-         std::vector<scene::TextureRecord> textures, std::unique_ptr<EvictionPolicy> policy);
+         std::vector<scene::TextureRecord> textures);
 
   // One pass of the loop; returns true if anything happened (then the loop does not sleep).
   bool drain_requests();
