@@ -16,6 +16,7 @@
 #include <sstream>
 
 #include "texstream/protocol/checksum.hpp"
+#include "texstream/shared_structs_embedded.hpp"
 
 namespace texstream::render {
 
@@ -47,6 +48,11 @@ struct Expander {
     if (!seen.insert(canonical).second) return ok_status();  // every file once (#pragma once semantics)
     auto text = read_text(path);
     if (!text) return text.error();
+    if (path.filename() == "shared_structs.h" && *text != kSharedStructsSource) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        path.string() + " differs from the shared_structs.h texstream-render was built with: C++ and "
+                                        "GLSL would disagree on struct layouts; rebuild (cmake --build build)");
+    }
     static const std::regex include_re(R"(^\s*#\s*include\s*"([^"]+)\"\s*$)");
     std::istringstream lines(*text);
     std::string line;

@@ -107,3 +107,22 @@ TEST(ShaderCompile, SecondCompileComesFromTheCacheAndChangesMissIt) {
   }
   fs::remove_all(dir);
 }
+
+TEST(ShaderCompile, ASharedStructsHeaderThatDiffersFromTheBuildIsRefused) {
+  // The renderer's C++ was compiled with shaders/shared_structs.h; GLSL is compiled at run time from disk. A
+  // header edited after the build would silently change one side's layout: the compiler must refuse it.
+  const fs::path dir = temp_dir("shader_structs");
+  const fs::path src = ShaderCompiler::default_source_dir();
+  for (const auto& entry : fs::directory_iterator(src)) fs::copy(entry.path(), dir / entry.path().filename());
+  {
+    ShaderCompiler same(dir, {});
+    auto ok = same.compile({"compact.comp", ShaderStage::kCompute, {}});
+    ASSERT_TRUE(ok.ok()) << ok.error().message;
+  }
+  std::ofstream(dir / "shared_structs.h", std::ios::app) << "\n// edited after the build\n";
+  ShaderCompiler changed(dir, {});
+  auto r = changed.compile({"compact.comp", ShaderStage::kCompute, {}});
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().message.find("shared_structs.h differs"), std::string::npos) << r.error().message;
+  fs::remove_all(dir);
+}
