@@ -19,22 +19,38 @@ uint32_t CacheAllocator::region_extent(uint32_t width, uint32_t height) {
   return (1u << log) == e ? e : 2u << log;
 }
 
+void CacheAllocator::clear_layer(uint32_t layer, std::vector<TextureId>& evicted) {
+  Layer& l = layers_[layer];
+  for (TextureId t : l.textures) {
+    placed_.erase(t);
+    evicted.push_back(t);
+  }
+  // It stops being the open layer of its extent.
+  auto it = open_.find(l.extent);
+  if (it != open_.end() && it->second == layer) open_.erase(it);
+  l = Layer{};
+}
+
 uint32_t CacheAllocator::take_layer(uint32_t extent, std::vector<TextureId>& evicted) {
   const auto layer = static_cast<uint32_t>(assignments_ % layers_.size());
-  ++assignments_;
-  Layer& l = layers_[layer];
-  if (l.extent != 0) {
-    // Recycling the oldest layer: everything in it goes, and it stops being the open layer of its extent.
+  if (assignments_ - oldest_ == layers_.size()) {
+    // Every layer is live: the next in ring order is the oldest; recycling it evicts everything in it.
     ++recycled_;
-    for (TextureId t : l.textures) {
-      placed_.erase(t);
-      evicted.push_back(t);
-    }
-    auto it = open_.find(l.extent);
-    if (it != open_.end() && it->second == layer) open_.erase(it);
+    clear_layer(layer, evicted);
+    ++oldest_;
   }
-  l = Layer{extent, 0, {}};
+  ++assignments_;
+  layers_[layer] = Layer{extent, 0, {}};
   open_[extent] = layer;
+  return layer;
+}
+
+std::optional<uint32_t> CacheAllocator::evict_oldest(std::vector<TextureId>& evicted) {
+  if (assignments_ == oldest_) return std::nullopt;
+  const auto layer = static_cast<uint32_t>(oldest_ % layers_.size());
+  ++recycled_;
+  clear_layer(layer, evicted);
+  ++oldest_;
   return layer;
 }
 

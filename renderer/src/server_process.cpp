@@ -135,6 +135,7 @@ bool ServerProcess::spawn_if_due(SteadyTime now) {
   spawned_at_ = now;
   last_progress_ = now;
   last_heartbeat_ = 0;
+  attached_ = false;
   killing_ = false;
   kill_reason_.clear();
   if (err != 0) {
@@ -156,7 +157,7 @@ std::optional<ServerExit> ServerProcess::reap(SteadyTime now) {
   if (spawn_failure_) {
     ServerExit e = std::move(*spawn_failure_);
     spawn_failure_.reset();
-    record_death(now);
+    record_death(now, true);
     return e;
   }
   if (pid_ <= 0) return std::nullopt;
@@ -180,16 +181,24 @@ std::optional<ServerExit> ServerProcess::reap(SteadyTime now) {
   e.how = r < 0 ? std::string("vanished (waitpid: ") + std::strerror(errno) + ")" : describe_status(status);
   e.killed_by_us = killing_;
   e.kill_reason = kill_reason_;
+  const bool crash = !attached_ || killing_;
   pid_ = -1;
   watch_ = PidWatch();
   killing_ = false;
   kill_reason_.clear();
-  record_death(now);
+  attached_ = false;
+  record_death(now, crash);
   return e;
 }
 
-void ServerProcess::record_death(SteadyTime now) {
+void ServerProcess::record_death(SteadyTime now, bool crash) {
   ++deaths_total_;
+  if (!crash) {
+    // It had started and was working until something outside killed it: replace it at once.
+    next_spawn_at_ = now + policy_.first_delay;
+    return;
+  }
+  ++crashes_total_;
   recent_deaths_.push_back(now);
   while (!recent_deaths_.empty() && now - recent_deaths_.front() > policy_.crash_window) recent_deaths_.pop_front();
   const size_t n = recent_deaths_.size();
@@ -212,6 +221,13 @@ void ServerProcess::record_death(SteadyTime now) {
 bool ServerProcess::watch_heartbeat(uint64_t heartbeat, bool attached, bool work_outstanding,
                                     std::chrono::milliseconds timeout, SteadyTime now) {
   if (!serving()) return false;
+  if (attached && !attached_) {
+    attached_ = true;
+    if (colormap_only_) {
+      colormap_only_ = false;
+      spdlog::info("texstream-server pid {} attached: leaving colormap-only mode", pid_);
+    }
+  }
   // Only a stall while work waits counts: an idle server may legitimately sleep between doorbells.
   if (heartbeat != last_heartbeat_ || !work_outstanding) {
     last_heartbeat_ = heartbeat;

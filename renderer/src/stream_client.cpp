@@ -4,7 +4,11 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
+#include <cstdlib>
 #include <cstring>
+#include <fstream>
+#include <sstream>
 #include <spdlog/spdlog.h>
 #include <utility>
 
@@ -25,7 +29,98 @@ std::string mip_name(uint32_t texture, uint32_t mip) {
   return "texture " + std::to_string(texture) + " mip " + std::to_string(mip);
 }
 
+uint64_t elapsed_ns(std::chrono::steady_clock::time_point since) {
+  return static_cast<uint64_t>(
+      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - since).count());
+}
+
 }  // namespace
+
+void IpcTimeHistogram::add(uint64_t ns) {
+  const uint64_t b = ns / kBucketNs;
+  if (b < kBuckets) {
+    ++buckets_[b];
+  } else {
+    ++overflow_;
+  }
+  ++samples_;
+  total_ns_ += ns;
+  max_ns_ = std::max(max_ns_, ns);
+}
+
+double IpcTimeHistogram::quantile_us(double q) const {
+  if (samples_ == 0) return 0.0;
+  const auto rank = static_cast<uint64_t>(std::ceil(std::clamp(q, 0.0, 1.0) * static_cast<double>(samples_)));
+  uint64_t seen = 0;
+  const double max_us = static_cast<double>(max_ns_) / 1e3;
+  for (size_t i = 0; i < kBuckets; ++i) {
+    seen += buckets_[i];
+    if (seen >= std::max<uint64_t>(rank, 1)) {
+      return std::min(static_cast<double>((i + 1) * kBucketNs) / 1e3, max_us);
+    }
+  }
+  return max_us;
+}
+
+uint64_t IpcTimeHistogram::above(uint64_t ns) const {
+  uint64_t n = overflow_;
+  for (size_t i = ns / kBucketNs + 1; i < kBuckets; ++i) n += buckets_[i];
+  return n;
+}
+
+// Forwards to the renderer's sink; the time spent there is the renderer's, not IPC.
+class StreamClient::TimedSink final : public MipSink {
+ public:
+  TimedSink(StreamClient& owner, MipSink& inner) : owner_(owner), inner_(inner) {}
+  std::span<std::byte> reserve(TextureId texture, MipLevel mip, uint64_t bytes) override {
+    const auto t0 = std::chrono::steady_clock::now();
+    auto r = inner_.reserve(texture, mip, bytes);
+    owner_.sink_ns_ += elapsed_ns(t0);
+    return r;
+  }
+  void commit(TextureId texture, MipLevel mip, std::span<std::byte> data) override {
+    const auto t0 = std::chrono::steady_clock::now();
+    inner_.commit(texture, mip, data);
+    owner_.sink_ns_ += elapsed_ns(t0);
+  }
+  void reject(TextureId texture, MipLevel mip, std::span<std::byte> reserved) override {
+    const auto t0 = std::chrono::steady_clock::now();
+    inner_.reject(texture, mip, reserved);
+    owner_.sink_ns_ += elapsed_ns(t0);
+  }
+  void failed(TextureId texture, MipLevel mip, CompletionStatus status) override {
+    const auto t0 = std::chrono::steady_clock::now();
+    inner_.failed(texture, mip, status);
+    owner_.sink_ns_ += elapsed_ns(t0);
+  }
+
+ private:
+  StreamClient& owner_;
+  MipSink& inner_;
+};
+
+// One client call's time, less the sink's, added to the open frame's IPC time. Nested calls count once.
+class StreamClient::IpcScope {
+ public:
+  explicit IpcScope(StreamClient& c) : c_(c) {
+    if (c_.ipc_depth_++ == 0) {
+      c_.sink_ns_ = 0;
+      start_ = std::chrono::steady_clock::now();
+    }
+  }
+  ~IpcScope() {
+    if (--c_.ipc_depth_ == 0) {
+      const uint64_t total = elapsed_ns(start_);
+      c_.frame_ipc_ns_ += total > c_.sink_ns_ ? total - c_.sink_ns_ : 0;
+    }
+  }
+  IpcScope(const IpcScope&) = delete;
+  IpcScope& operator=(const IpcScope&) = delete;
+
+ private:
+  StreamClient& c_;
+  std::chrono::steady_clock::time_point start_{};
+};
 
 const char* to_string(RequestOutcome outcome) {
   switch (outcome) {
@@ -117,6 +212,14 @@ Result<std::unique_ptr<StreamClient>> StreamClient::start(const Config& config, 
 }
 
 StreamClient::~StreamClient() {
+  if (frame_open_) ipc_time_.add(frame_ipc_ns_);
+  frame_open_ = false;
+  // A diagnostic hook for texstream-chaos (tools/chaos): the renderer's summary.json does not carry these.
+  if (const char* file = std::getenv("TEXSTREAM_STREAM_STATS"); file && *file) {
+    std::ofstream out(file, std::ios::trunc);
+    out << stats_text();
+    if (!out) spdlog::warn("could not write stream statistics to '{}' ($TEXSTREAM_STREAM_STATS)", file);
+  }
   process_.reset();  // kill and reap the server before the segment (and its name) goes away
   segment_.reset();
 }
@@ -134,6 +237,7 @@ void StreamClient::attach_rings() {
 }
 
 void StreamClient::begin_cycle() {
+  IpcScope scope(*this);
   generation_ = Generation(generation_.value + 1);
   // release: a server that sees this generation also sees the requests pushed before it (ring release).
   segment_->renderer_block().generation.v.store(generation_.value, std::memory_order_release);
@@ -163,6 +267,7 @@ bool StreamClient::accepting_requests() const {
 }
 
 RequestOutcome StreamClient::try_request(TextureId texture, MipLevel mip, float priority) {
+  IpcScope scope(*this);
   if (texture.value >= shapes_.size()) return RequestOutcome::kUnknownTexture;
   if (mip.value >= shapes_[texture.value].mip_count) return RequestOutcome::kBadMip;
   if (!accepting_requests()) return RequestOutcome::kNoServer;
@@ -182,6 +287,11 @@ RequestOutcome StreamClient::try_request(TextureId texture, MipLevel mip, float 
   if (!requests_.try_push(r)) return RequestOutcome::kRingFull;  // a ring error: poll() restarts the server
   in_flight_.emplace(key(texture, mip), InFlight{generation_});
   ++stats_.requests_sent;
+  if (auto it = lost_.find(key(texture, mip)); it != lost_.end() && !it->second.resent) {
+    it->second.resent = true;
+    it->second.resent_at = now();
+    ++stats_.lost_resent;
+  }
   ring_doorbell();
   return RequestOutcome::kSent;
 }
@@ -248,6 +358,14 @@ void StreamClient::on_server_gone(MipSink& sink, const std::string& why) {
   lost.reserve(in_flight_.size());
   for (const auto& [k, f] : in_flight_) lost.push_back(k);
   std::sort(lost.begin(), lost.end());  // deterministic order for the sink
+  // Recovery accounting: a request sent again and lost again is overdue if its deadline already passed
+  // (the server it went to lived long enough to answer it); otherwise it waits for the next server.
+  const SteadyTime t = now();
+  for (auto& [k, l] : lost_) {
+    if (l.resent && t - l.resent_at > kRecoveryDeadline) ++stats_.unserved_after_restart;
+    l.resent = false;
+  }
+  for (uint64_t k : lost) lost_[k] = Lost{};
   in_flight_.clear();
   held_.reset();
   release_queue_.clear();
@@ -300,7 +418,13 @@ void StreamClient::supervise(MipSink& sink) {
   }
 }
 
-void StreamClient::poll(MipSink& sink, size_t max_mips) {
+void StreamClient::poll(MipSink& renderer_sink, size_t max_mips) {
+  // A poll starts the next frame's IPC sample (requests sent after it count with it).
+  if (frame_open_) ipc_time_.add(frame_ipc_ns_);
+  frame_ipc_ns_ = 0;
+  frame_open_ = true;
+  IpcScope scope(*this);
+  TimedSink sink(*this, renderer_sink);
   RendererBlock& rb = segment_->renderer_block();
   // relaxed: a progress counter only; we are its sole writer.
   rb.heartbeat.v.store(rb.heartbeat.v.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
@@ -342,6 +466,7 @@ void StreamClient::handle_record(const CompletionRecord& record, MipSink& sink, 
     if (auto it = in_flight_.find(key(TextureId(record.texture_id), MipLevel(record.mip_level)));
         it != in_flight_.end()) {
       in_flight_.erase(it);
+      note_answered(key(TextureId(record.texture_id), MipLevel(record.mip_level)));
       ++stats_.completions_rejected;
       sink.reject(TextureId(record.texture_id), MipLevel(record.mip_level), {});
     }
@@ -357,6 +482,7 @@ void StreamClient::handle_record(const CompletionRecord& record, MipSink& sink, 
     if (ok && release) release_slot(c.slot);
     if (asked) {
       in_flight_.erase(in_flight);
+      note_answered(key(c.texture, c.mip));
       ++stats_.completions_rejected;
       sink.reject(c.texture, c.mip, {});
     }
@@ -391,6 +517,7 @@ void StreamClient::handle_record(const CompletionRecord& record, MipSink& sink, 
   }
   if (!ok) {
     in_flight_.erase(in_flight);
+    note_answered(key(c.texture, c.mip));
     ++stats_.completions_failed[static_cast<uint32_t>(c.status)];
     sink.failed(c.texture, c.mip, c.status);
     return;
@@ -414,6 +541,7 @@ bool StreamClient::deliver(const CheckedCompletion& c, MipSink& sink) {
   const std::span<std::byte> src = segment_->slot(c.slot.value);
   std::memcpy(dst.data(), src.data(), c.byte_size);  // read the shared bytes once
   in_flight_.erase(key(c.texture, c.mip));
+  note_answered(key(c.texture, c.mip));
   const std::span<std::byte> payload = dst.first(c.byte_size);
   // The checksum is computed on our copy: the server may change the slot after we read it.
   if (payload_checksum(payload.data(), payload.size()) == c.checksum) {
@@ -423,13 +551,16 @@ bool StreamClient::deliver(const CheckedCompletion& c, MipSink& sink) {
   } else {
     protocol_error("payload checksum mismatch (" + mip_name(c.texture.value, c.mip.value) + ")");
     ++stats_.completions_rejected;
+    ++stats_.payload_checksum_failures;
     sink.reject(c.texture, c.mip, dst);
   }
   release_slot(c.slot);
   return true;
 }
 
-void StreamClient::restart_server(const std::string& why, MipSink& sink) {
+void StreamClient::restart_server(const std::string& why, MipSink& renderer_sink) {
+  IpcScope scope(*this);
+  TimedSink sink(*this, renderer_sink);
   if (process_) {
     process_->kill(why);  // the next poll reaps it, marks requests lost, resets and respawns
     return;
@@ -438,6 +569,23 @@ void StreamClient::restart_server(const std::string& why, MipSink& sink) {
   segment_->reset_after_server_death();
   attach_rings();
   broken_ = false;
+}
+
+void StreamClient::note_answered(uint64_t k) {
+  const auto it = lost_.find(k);
+  if (it == lost_.end() || !it->second.resent) return;
+  if (now() - it->second.resent_at <= kRecoveryDeadline) {
+    ++stats_.lost_answered_in_time;
+  } else {
+    ++stats_.unserved_after_restart;
+  }
+  lost_.erase(it);
+}
+
+uint64_t StreamClient::overdue_lost(SteadyTime t) const {
+  return static_cast<uint64_t>(std::count_if(lost_.begin(), lost_.end(), [&](const auto& e) {
+    return e.second.resent && t - e.second.resent_at > kRecoveryDeadline;
+  }));
 }
 
 bool StreamClient::in_flight(TextureId texture, MipLevel mip) const { return in_flight_.count(key(texture, mip)) != 0; }
@@ -452,7 +600,9 @@ StreamStats StreamClient::stats() const {
   s.server_ram_cache_misses = past_misses_ + sb.ram_cache_misses.v.load(std::memory_order_relaxed);
   s.server_bytes_read = past_bytes_read_ + sb.bytes_read.v.load(std::memory_order_relaxed);
   s.server_requests_cancelled = past_cancelled_ + sb.requests_cancelled.v.load(std::memory_order_relaxed);
+  s.unserved_after_restart += overdue_lost(now());
   if (process_) {
+    s.server_crashes = process_->crashes();
     s.server_restarts = process_->spawns() > 0 ? process_->spawns() - 1 : 0;
     switch (process_->state()) {
       case ServerState::kStopped:
@@ -464,6 +614,39 @@ StreamStats StreamClient::stats() const {
     s.server_state = broken_ ? StreamServerState::kBroken : StreamServerState::kExternal;
   }
   return s;
+}
+
+std::string StreamClient::stats_text() const {
+  const StreamStats s = stats();
+  std::ostringstream o;
+  o << "requests_sent " << s.requests_sent << "\n"
+    << "releases_sent " << s.releases_sent << "\n"
+    << "completions_ok " << s.completions_ok << "\n"
+    << "completions_rejected " << s.completions_rejected << "\n"
+    << "payload_checksum_failures " << s.payload_checksum_failures << "\n";
+  uint64_t failed = 0;
+  for (uint64_t f : s.completions_failed) failed += f;
+  o << "completions_failed " << failed << "\n"
+    << "requests_lost " << s.requests_lost << "\n"
+    << "bytes_received " << s.bytes_received << "\n"
+    << "protocol_errors " << s.protocol_errors << "\n"
+    << "server_restarts " << s.server_restarts << "\n"
+    << "server_deaths " << s.server_deaths << "\n"
+    << "server_crashes " << s.server_crashes << "\n"
+    << "lost_resent " << s.lost_resent << "\n"
+    << "lost_answered_in_time " << s.lost_answered_in_time << "\n"
+    << "unserved_after_restart " << s.unserved_after_restart << "\n"
+    << "in_flight " << s.in_flight << "\n"
+    << "server_state " << to_string(s.server_state) << "\n"
+    << "ipc_frames " << ipc_time_.samples() << "\n"
+    << "ipc_total_ms " << ipc_time_.total_ms() << "\n"
+    << "ipc_p50_us " << ipc_time_.quantile_us(0.5) << "\n"
+    << "ipc_p99_us " << ipc_time_.quantile_us(0.99) << "\n"
+    << "ipc_p999_us " << ipc_time_.quantile_us(0.999) << "\n"
+    << "ipc_p9999_us " << ipc_time_.quantile_us(0.9999) << "\n"
+    << "ipc_max_us " << static_cast<double>(ipc_time_.max_ns()) / 1e3 << "\n"
+    << "ipc_frames_over_1ms " << ipc_time_.above(1'000'000) << "\n";
+  return o.str();
 }
 
 }  // namespace texstream

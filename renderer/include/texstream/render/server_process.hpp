@@ -41,6 +41,12 @@ struct ServerCommand {
 // path and the key, if the file is not there or not executable.
 Result<std::filesystem::path> resolve_server_executable(const Config& config);
 
+// Two kinds of death (issue 9). A *crash* is a server that died before it attached (it could not even start:
+// bad scene, bad config, a broken binary), could not be spawned, or that we killed (hung, protocol
+// violation): these back off exponentially and, repeated, lead to colormap-only mode. A server that attached
+// and then died of an outside cause (SIGKILL, OOM killer) was working: it is replaced after first_delay and
+// does not count toward the back-off — a restart storm of 100 kills in 60 s must end in normal streaming
+// within 5 s, which exponential back-off towards colormap-only (30 s retries) would make impossible.
 struct RestartPolicy {
   std::chrono::milliseconds first_delay{50};    // first restart after a crash; doubles per recent crash
   std::chrono::milliseconds max_delay{5000};    // cap of the doubling
@@ -86,6 +92,8 @@ class ServerProcess {
   // Progress watchdog. `heartbeat` is ServerBlock.heartbeat, `attached` ServerBlock.attached. The server is
   // hung if its heartbeat has not moved for `timeout` (startup_grace before it attached) while
   // `work_outstanding`. A hung server is SIGKILLed (reap() then reports it). Returns true if it killed.
+  // Also records that the child attached (see RestartPolicy: its later death is not a crash), and ends
+  // colormap-only mode once a child has attached.
   bool watch_heartbeat(uint64_t heartbeat, bool attached, bool work_outstanding, std::chrono::milliseconds timeout,
                        SteadyTime now);
 
@@ -98,12 +106,16 @@ class ServerProcess {
   int pid() const { return pid_; }
   ServerState state() const;
   SteadyTime next_spawn_at() const { return next_spawn_at_; }
+  SteadyTime spawned_at() const { return spawned_at_; }
+  uint64_t crashes() const { return crashes_total_; }  // deaths that counted as crashes (see RestartPolicy)
   uint64_t spawns() const { return spawns_; }
   uint64_t deaths() const { return deaths_total_; }
   const ServerCommand& command() const { return command_; }
 
  private:
-  void record_death(SteadyTime now);
+  // `crash`: see RestartPolicy. A crash backs off (and may enter colormap-only); any other death restarts
+  // after first_delay.
+  void record_death(SteadyTime now, bool crash);
 
   ServerCommand command_;
   RestartPolicy policy_;
@@ -118,6 +130,8 @@ class ServerProcess {
   bool colormap_only_ = false;
   uint64_t spawns_ = 0;
   uint64_t deaths_total_ = 0;
+  uint64_t crashes_total_ = 0;
+  bool attached_ = false;  // the current child reported `attached` to watch_heartbeat
   uint64_t last_heartbeat_ = 0;
   SteadyTime last_progress_{};
 };

@@ -85,17 +85,45 @@ enum class StreamServerState : uint8_t {
 };
 const char* to_string(StreamServerState state);
 
+// Time the renderer's frame thread spends inside the client (poll, try_request, begin_cycle, restarts),
+// without the time spent in the MipSink's callbacks (the renderer's own work). One sample per "frame": from
+// one poll() to the next, so requests sent after a poll count with it. Issue 9 bounds it: no frame may be
+// blocked by IPC for more than 1 ms (p99.99). 10 µs buckets up to 20 ms; the maximum is kept exactly.
+class IpcTimeHistogram {
+ public:
+  static constexpr uint64_t kBucketNs = 10'000;
+  static constexpr size_t kBuckets = 2000;
+  void add(uint64_t ns);
+  uint64_t samples() const { return samples_; }
+  uint64_t max_ns() const { return max_ns_; }
+  double total_ms() const { return static_cast<double>(total_ns_) / 1e6; }
+  // Upper edge of the bucket holding quantile q (0..1), in µs; the exact maximum above the last bucket.
+  double quantile_us(double q) const;
+  uint64_t above(uint64_t ns) const;  // samples longer than ns (bucket resolution)
+
+ private:
+  std::vector<uint64_t> buckets_ = std::vector<uint64_t>(kBuckets, 0);
+  uint64_t overflow_ = 0, samples_ = 0, max_ns_ = 0, total_ns_ = 0;
+};
+
 struct StreamStats {
   uint64_t requests_sent = 0;
   uint64_t releases_sent = 0;
   uint64_t completions_ok = 0;                           // committed to the sink (checksum matched)
   uint64_t completions_rejected = 0;                     // kOk whose payload the checks refused
+  uint64_t payload_checksum_failures = 0;                // of those: copied, checksum did not match
   uint64_t completions_failed[kMaxCompletionStatus + 1] = {};  // by CompletionStatus value
   uint64_t requests_lost = 0;                            // in flight when the server died
   uint64_t bytes_received = 0;                           // payload bytes committed
   uint64_t protocol_errors = 0;
   uint64_t server_restarts = 0;                          // spawns after the first
   uint64_t server_deaths = 0;
+  uint64_t server_crashes = 0;                           // deaths counted as crashes (RestartPolicy)
+  // Recovery (issue 9): a request in flight when the server died, sent again to a later server, must be
+  // answered (any status) within kRecoveryDeadline of being sent again.
+  uint64_t lost_resent = 0;                              // lost requests sent again
+  uint64_t lost_answered_in_time = 0;
+  uint64_t unserved_after_restart = 0;                   // answered late, or still unanswered past the deadline
   uint64_t in_flight = 0;
   uint64_t slots_held = 0;                               // handed to us, not yet handed back
   uint64_t releases_queued = 0;                          // waiting for room in the request ring
@@ -120,6 +148,7 @@ struct StreamClientOptions {
 
 class StreamClient {
  public:
+  static constexpr std::chrono::milliseconds kRecoveryDeadline{2000};  // issue 9: served within 2 s of a restart
   // Removes stale "texstream-" segments, creates this one (protocol.segment_name or "texstream-<pid>",
   // sized from `config.protocol`), and spawns the server (unless options.spawn_server is false) with
   // `--scene scene_dir`, `--config config_file` (if not empty) and each override as `--set`.
@@ -152,6 +181,11 @@ class StreamClient {
   void poll(MipSink& sink, size_t max_mips);
 
   StreamStats stats() const;
+  const IpcTimeHistogram& ipc_time() const { return ipc_time_; }
+  // `key value` lines: every StreamStats counter and the IPC-time quantiles. Written by the destructor to
+  // $TEXSTREAM_STREAM_STATS when that is set (texstream-chaos reads it; the renderer's summary.json is
+  // written elsewhere).
+  std::string stats_text() const;
   bool in_flight(TextureId texture, MipLevel mip) const;
   const Segment& segment() const { return *segment_; }
   Segment& segment() { return *segment_; }
@@ -167,6 +201,15 @@ class StreamClient {
   struct InFlight {
     Generation generation;
   };
+  // A request lost with a dead server, until it is answered by a later one (or no longer wanted).
+  struct Lost {
+    bool resent = false;
+    SteadyTime resent_at{};
+  };
+  class TimedSink;   // forwards to the renderer's sink and measures the time spent there
+  class IpcScope;    // measures one client call into the current frame's IPC time
+  void note_answered(uint64_t k);
+  uint64_t overdue_lost(SteadyTime t) const;
 
   StreamClient() = default;
   SteadyTime now() const;
@@ -209,6 +252,12 @@ class StreamClient {
   StreamStats stats_;
   // ServerBlock counters of servers that have died (the block is zeroed by the reset).
   uint64_t past_hits_ = 0, past_misses_ = 0, past_bytes_read_ = 0, past_cancelled_ = 0;
+  std::unordered_map<uint64_t, Lost> lost_;
+  IpcTimeHistogram ipc_time_;
+  uint64_t frame_ipc_ns_ = 0;   // the open frame's client time so far
+  bool frame_open_ = false;
+  uint64_t sink_ns_ = 0;        // time inside the sink during the current client call
+  int ipc_depth_ = 0;           // nested client calls (poll → restart paths) count once
 };
 
 }  // namespace texstream
