@@ -15,6 +15,7 @@
 //      (on - off) / on.
 //   5. submitted_per_visible: meshes the broad phase submits (wide frustum) per mesh with weight > 0.
 // The scene is generated with texstream-gen into a temp dir unless --scene is given.
+#include <cstdlib>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -112,7 +113,10 @@ int run_visibility(const std::vector<std::string>& args) {
   }
   spdlog::set_level(spdlog::level::warn);
   // The profiles say which device and frame size: config/gpu.toml selects a non-lavapipe device by name.
-  const fs::path profile = fs::path(TEXSTREAM_VIS_CONFIG_DIR) / (device == "gpu" ? "gpu.toml" : "lavapipe.toml");
+  // The profiles live in config/; TEXSTREAM_CONFIG_DIR overrides the build-time path (a bundle run elsewhere).
+  const char* config_dir = std::getenv("TEXSTREAM_CONFIG_DIR");
+  const fs::path profile = fs::path(config_dir ? config_dir : TEXSTREAM_VIS_CONFIG_DIR) /
+                           (device == "gpu" ? "gpu.toml" : "lavapipe.toml");
   Config cfg = unwrap(load_config(profile, {}), "configuration");
   if (quick && device == "lavapipe") {
     cfg.render.width_px = 480;  // a quarter of the pixels: lavapipe shades on 2 CPU cores
