@@ -2,6 +2,7 @@
 // Small helpers every benchmark uses: percentiles, the summary line, and a monotonic stopwatch.
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <string>
 #include <utility>
@@ -32,7 +33,12 @@ class Summary {
  public:
   Summary& add(const std::string& key, double value) {
     char buf[64];
-    std::snprintf(buf, sizeof buf, "%.6g", value);
+    // Counts print as integers (stress_sequences=1000000, not 1e+06); everything else with 6 significant digits.
+    if (std::isfinite(value) && std::floor(value) == value && std::fabs(value) < 1e15) {
+      std::snprintf(buf, sizeof buf, "%.0f", value);
+    } else {
+      std::snprintf(buf, sizeof buf, "%.6g", value);
+    }
     items_.emplace_back(key, buf);
     return *this;
   }
