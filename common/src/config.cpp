@@ -77,6 +77,7 @@ void visit_keys(Config& c, V&& v) {
   v("cache", "format", c.cache.format, "name", "Texel format of the GPU cache: auto (the scene's), rgba8 or bc1", kAny);
   v("cache", "layer_extent_px", c.cache.layer_extent_px, "px", "Side of one cache layer = the largest texture extent it holds (power of two)", Range{4, 16384});
   v("cache", "layers", c.cache.layers, "layers", "Array layers of the cache image (bounds GPU memory)", Range{1, 2048});
+  v("cache", "memory_bytes", c.cache.memory_bytes, "bytes", "GPU memory for the cache's bound sparse pages (and mip tail); the oldest layer is evicted when full", Range{1 << 20, 1ll << 40});
 }
 
 using Value = std::variant<bool, int64_t, double, std::string>;

@@ -199,6 +199,7 @@ Status Renderer::set_up() {
   co.layer_extent = static_cast<uint32_t>(cfg_.cache.layer_extent_px);
   co.layers = static_cast<uint32_t>(cfg_.cache.layers);
   co.staging_bytes = static_cast<uint64_t>(cfg_.render.staging_bytes);
+  co.memory_bytes = static_cast<uint64_t>(cfg_.cache.memory_bytes);
   auto cache = TextureCache::create(*ctx_, co, scene_, *states_);
   if (!cache) return cache.error();
   cache_ = std::move(*cache);
@@ -341,6 +342,7 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
   bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
   TS_VK_TRY(vkBeginCommandBuffer(cmd_, &bi));
+  TS_TRY(cache_->prepare_uploads(serial_));  // this frame's sparse binds: one vkQueueBindSparse
   cache_->record_uploads(cmd_, serial_);
   passes_->record(cmd_, rec);
   if (write) capture_->record(cmd_, passes_->colour().handle());
@@ -349,6 +351,20 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   si.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
   si.commandBufferCount = 1;
   si.pCommandBuffers = &cmd_;
+  // The copies into the cache need the pages bound just before: a sparse bind is ordered with command
+  // buffers only through a semaphore.
+  const BindWait bind = cache_->bind_wait();
+  const VkPipelineStageFlags bind_stage = VK_PIPELINE_STAGE_ALL_COMMANDS_BIT;
+  VkTimelineSemaphoreSubmitInfo bind_ts{};
+  bind_ts.sType = VK_STRUCTURE_TYPE_TIMELINE_SEMAPHORE_SUBMIT_INFO;
+  bind_ts.waitSemaphoreValueCount = 1;
+  bind_ts.pWaitSemaphoreValues = &bind.value;
+  if (bind.value != 0) {
+    si.pNext = &bind_ts;
+    si.waitSemaphoreCount = 1;
+    si.pWaitSemaphores = &bind.semaphore;
+    si.pWaitDstStageMask = &bind_stage;
+  }
   VkFence fence = fence_.get();
   TS_VK_TRY(vkResetFences(device, 1, &fence));
   TS_VK_TRY(vkQueueSubmit(ctx_->queue(), 1, &si, fence));
@@ -445,6 +461,7 @@ Result<RunSummary> Renderer::run() {
   s.avg_weighted_latency_ms = sum_tw_ms_ / n;
   s.load_time_limited_frames = load_time_limited_frames_;
   s.controller_rejected_frames = controller_->frames_rejected();
+  TS_TRY(cache_->write_stats_json(output_dir_ / "cache.json"));  // budget checks, binds, thrash rate
   // Shut the server down and release the device before the validation counts are read: teardown is validated too.
   client_.reset();
   passes_.reset();

@@ -181,7 +181,10 @@ std::optional<ServerExit> ServerProcess::reap(SteadyTime now) {
   e.how = r < 0 ? std::string("vanished (waitpid: ") + std::strerror(errno) + ")" : describe_status(status);
   e.killed_by_us = killing_;
   e.kill_reason = kill_reason_;
-  const bool crash = !attached_ || killing_;
+  // SIGKILL that we did not send came from outside (OOM killer, an operator, texstream-chaos): the server did
+  // nothing wrong. Anything else it ended by itself (exit, SIGSEGV, SIGABRT, ...) or we killed it: a crash.
+  const bool outside_kill = r > 0 && WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL && !killing_;
+  const bool crash = !outside_kill;
   pid_ = -1;
   watch_ = PidWatch();
   killing_ = false;

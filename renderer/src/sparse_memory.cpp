@@ -89,7 +89,20 @@ Result<std::unique_ptr<SparseMemory>> SparseMemory::create(const VulkanContext& 
   for (const auto& r : reqs)
     if (r.formatProperties.aspectMask & VK_IMAGE_ASPECT_COLOR_BIT) colour = &r;
   if (!colour) return make_error(ErrorCode::kUnsupported, "sparse cache image has no colour-aspect requirements");
-  const VkExtent3D g = colour->formatProperties.imageGranularity;
+  // imageGranularity is "in texels or compressed texel blocks" (spec): lavapipe gives BC1 128x64, which is
+  // blocks (128 x 64 blocks x 8 bytes = one 64 KiB page), NVIDIA gives 512x256 texels. Decide by the page
+  // size, and keep texels (VkSparseImageMemoryBind offsets and extents are texels).
+  VkExtent3D g = colour->formatProperties.imageGranularity;
+  const bool bc1 = info.format == VK_FORMAT_BC1_RGBA_SRGB_BLOCK || info.format == VK_FORMAT_BC1_RGBA_UNORM_BLOCK;
+  const uint64_t block_bytes = bc1 ? 8 : 4, block_side = bc1 ? 4 : 1;
+  if (block_side > 1 && uint64_t{g.width} * g.height * block_bytes == m->page_bytes_) {
+    g.width *= block_side;
+    g.height *= block_side;
+  }
+  if (uint64_t{g.width} * g.height * block_bytes / (block_side * block_side) != m->page_bytes_) {
+    return make_error(ErrorCode::kUnsupported, "sparse page of " + std::to_string(m->page_bytes_) + " bytes does not match its " +
+                                                   std::to_string(g.width) + "x" + std::to_string(g.height) + " granularity");
+  }
   m->geometry_ = PageGeometry{info.extent, info.mip_levels, info.layers, g.width, g.height,
                               std::min(colour->imageMipTailFirstLod, info.mip_levels)};
 
@@ -189,6 +202,8 @@ Status SparseMemory::bind_tail(const std::vector<VkSparseImageMemoryRequirements
   bi.signalSemaphoreCount = 1;
   bi.pSignalSemaphores = &sem;
   TS_VK_TRY(vkQueueBindSparse(queue_, 1, &bi, VK_NULL_HANDLE));
+  // Once at start-up: the cache's first layout transition must not race the tail binding.
+  TS_VK_TRY(vkQueueWaitIdle(queue_));
   return ok_status();
 }
 
@@ -253,6 +268,15 @@ Status SparseMemory::submit(std::span<const PageBindOp> ops) {
   bi.pSignalSemaphores = &sem;
   TS_VK_TRY(vkQueueBindSparse(queue_, 1, &bi, VK_NULL_HANDLE));
   signal_value_ = value;
+  // Wait for the binds here: the frame's submission would wait for them anyway (its copies need the pages),
+  // and lavapipe returns from vkQueueBindSparse before binding, so only this makes the measured bind cost the
+  // real one. No GPU work is pending on this queue at this point (one frame in flight, already complete).
+  VkSemaphoreWaitInfo wi{};
+  wi.sType = VK_STRUCTURE_TYPE_SEMAPHORE_WAIT_INFO;
+  wi.semaphoreCount = 1;
+  wi.pSemaphores = &sem;
+  wi.pValues = &value;
+  TS_VK_TRY(vkWaitSemaphores(device_, &wi, UINT64_MAX));
   stats_.seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   ++stats_.calls;
   stats_.ops += ops.size();

@@ -285,7 +285,7 @@ RequestOutcome StreamClient::try_request(TextureId texture, MipLevel mip, float 
   r.generation = generation_.value;
   r.priority = priority;
   if (!requests_.try_push(r)) return RequestOutcome::kRingFull;  // a ring error: poll() restarts the server
-  in_flight_.emplace(key(texture, mip), InFlight{generation_});
+  in_flight_.emplace(key(texture, mip), InFlight{generation_, now()});
   ++stats_.requests_sent;
   if (auto it = lost_.find(key(texture, mip)); it != lost_.end() && !it->second.resent) {
     it->second.resent = true;
@@ -384,6 +384,7 @@ void StreamClient::on_server_gone(MipSink& sink, const std::string& why) {
 void StreamClient::supervise(MipSink& sink) {
   const bool ring_broken = requests_.error() != RingError::kNone || completions_.error() != RingError::kNone ||
                            !server_read_position().has_value();
+  expire_requests(sink, now());
   if (!process_) {
     if (ring_broken && !broken_) {
       protocol_error("a ring position of the external server is impossible; stopping until reset");
@@ -571,6 +572,29 @@ void StreamClient::restart_server(const std::string& why, MipSink& renderer_sink
   broken_ = false;
 }
 
+void StreamClient::expire_requests(MipSink& sink, SteadyTime t) {
+  // A scan at most every 1/8 of the timeout: the map may hold thousands of requests.
+  if (in_flight_.empty() || t < next_expiry_scan_) return;
+  next_expiry_scan_ = t + options_.request_timeout / 8;
+  std::vector<uint64_t> expired;
+  for (const auto& [k, f] : in_flight_)
+    if (t - f.sent_at > options_.request_timeout) expired.push_back(k);
+  if (expired.empty()) return;
+  std::sort(expired.begin(), expired.end());  // deterministic order for the sink
+  if (held_ && std::binary_search(expired.begin(), expired.end(), key(held_->texture, held_->mip))) {
+    std::erase(expired, key(held_->texture, held_->mip));  // answered; only the sink had no room
+  }
+  for (uint64_t k : expired) {
+    in_flight_.erase(k);
+    note_answered(k);
+    ++stats_.requests_timed_out;
+    sink.failed(TextureId(static_cast<uint32_t>(k >> 32)), MipLevel(static_cast<uint32_t>(k)),
+                CompletionStatus::kTimedOut);
+  }
+  protocol_error(std::to_string(expired.size()) + " request(s) unanswered for " +
+                 std::to_string(options_.request_timeout.count()) + " ms: failed as timed out");
+}
+
 void StreamClient::note_answered(uint64_t k) {
   const auto it = lost_.find(k);
   if (it == lost_.end() || !it->second.resent) return;
@@ -628,6 +652,7 @@ std::string StreamClient::stats_text() const {
   for (uint64_t f : s.completions_failed) failed += f;
   o << "completions_failed " << failed << "\n"
     << "requests_lost " << s.requests_lost << "\n"
+    << "requests_timed_out " << s.requests_timed_out << "\n"
     << "bytes_received " << s.bytes_received << "\n"
     << "protocol_errors " << s.protocol_errors << "\n"
     << "server_restarts " << s.server_restarts << "\n"

@@ -4,6 +4,9 @@
 
 #include <algorithm>
 #include <bit>
+#include <chrono>
+#include <fstream>
+#include <nlohmann/json.hpp>
 
 #include "texstream/render/gpu_structs.hpp"
 #include "texstream/render/one_shot.hpp"
@@ -41,6 +44,7 @@ TextureCache::TextureCache(const TextureCacheOptions& options, const SceneData& 
 
 Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& ctx, const TextureCacheOptions& options,
                                                            const SceneData& scene, TextureStates& states) {
+  const auto t0 = std::chrono::steady_clock::now();
   if (options.layer_extent == 0 || (options.layer_extent & (options.layer_extent - 1)) != 0) {
     return make_error(ErrorCode::kInvalidArgument, "cache.layer_extent_px = " + std::to_string(options.layer_extent) +
                                                        " is not a power of two");
@@ -63,16 +67,21 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
 
   std::unique_ptr<TextureCache> c(new TextureCache(options, scene, states));
   c->mip_levels_ = floor_log2(options.layer_extent) + 1;
-  GpuImageInfo info;
+  SparseImageInfo info;
   info.format = cache_vk_format(options.format);
-  info.width = info.height = options.layer_extent;
+  info.extent = options.layer_extent;
   info.mip_levels = c->mip_levels_;
   info.layers = options.layers;
-  info.usage = VK_IMAGE_USAGE_SAMPLED_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT;
-  info.view_type = VK_IMAGE_VIEW_TYPE_2D_ARRAY;
-  auto image = GpuImage::create(ctx, info);
-  if (!image) return image.error();
-  c->image_ = std::move(*image);
+  info.memory_bytes = options.memory_bytes;
+  auto sparse = SparseMemory::create(ctx, info);
+  if (!sparse) return sparse.error();
+  c->sparse_ = std::move(*sparse);
+  c->pages_ = std::make_unique<SparsePageTable>(c->sparse_->geometry(), c->sparse_->slot_count());
+  spdlog::info("texture cache: sparse {} layers of {}px, {} KiB pages of {}x{} texels, {} page slots ({} MiB budget{})",
+               options.layers, options.layer_extent, c->sparse_->page_bytes() >> 10,
+               c->sparse_->geometry().granularity_w, c->sparse_->geometry().granularity_h, c->sparse_->slot_count(),
+               options.memory_bytes >> 20,
+               c->sparse_->tail_bytes() ? fmt::format(", {} KiB mip tail", c->sparse_->tail_bytes() >> 10) : "");
 
   auto staging = GpuBuffer::create(ctx, options.staging_bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, MemoryUse::kHostVisible);
   if (!staging) return staging.error();
@@ -93,7 +102,7 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
   }
 
   // Every level of every layer starts in the layout the shader reads; copies move it to TRANSFER_DST and back.
-  VkImage img = c->image_.handle();
+  VkImage img = c->sparse_->image();
   const uint32_t levels = c->mip_levels_, layers = options.layers;
   TS_TRY(run_one_shot(ctx, [&](VkCommandBuffer cmd) {
     VkImageMemoryBarrier b{};
@@ -108,6 +117,7 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
     vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, 0, 0, nullptr,
                          0, nullptr, 1, &b);
   }));
+  c->stats_.create_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return c;
 }
 
@@ -142,16 +152,29 @@ void TextureCache::evict(TextureId texture) {
   Residency& r = residency_[texture.value];
   r.mask = 0;
   ++r.epoch;
+  r.evicted_before = true;
   ++stats_.evictions;
   table_.as<gpu::TextureGpu>()[texture.value].placement.y = gpu::kNotResident;
+  // Its pages: the submissions up to last_serial_ may still sample them, so they are unbound after those.
+  for (uint32_t mip = 0; r.bound != 0; ++mip) {
+    if (!(r.bound & (1u << mip))) continue;
+    r.bound &= ~(1u << mip);
+    pages_->release(r.region.layer, r.region.origin_x, r.region.origin_y, r.region.extent, mip, last_serial_);
+  }
   // Copies not yet recorded would write into a region that now belongs to another texture: drop them.
-  std::erase_if(queued_, [&](const Copy& c) {
+  auto drop = [&](const Copy& c) {
     if (c.texture != texture) return false;
     release_staging(c.staging);
     ++stats_.mips_dropped;
     return true;
-  });
+  };
+  std::erase_if(queued_, drop);
+  std::erase_if(ready_, drop);
   states_.invalidate(texture);
+}
+
+void TextureCache::evict_all(const std::vector<TextureId>& textures) {
+  for (TextureId e : textures) evict(e);
 }
 
 void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> data) {
@@ -173,7 +196,7 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
     // BC1 regions are at least one block wide so that the 4x4 level (one block) has a region of its own.
     const uint32_t w = std::max(rec.width, block_size(options_.format));
     auto placed = allocator_.allocate(texture, w, rec.height, evicted);
-    for (TextureId e : evicted) evict(e);
+    evict_all(evicted);
     if (!placed) {
       if (!unplaceable_logged_[texture.value]) {
         spdlog::warn("texture cache: {}", placed.error().message);
@@ -185,6 +208,8 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
       return;
     }
     region = *placed;
+    ++stats_.texture_loads;
+    if (residency_[texture.value].evicted_before) ++stats_.texture_reloads;
     auto& t = table_.as<gpu::TextureGpu>()[texture.value];
     t.placement.x = region->layer;
     t.region.x = region->origin_x;
@@ -199,12 +224,73 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
   queued_.push_back(Copy{texture, mip.value, alloc, residency_[texture.value].epoch, 0});
 }
 
+bool TextureCache::bind_pages_for(const Copy& c) {
+  Residency& r = residency_[c.texture.value];
+  if (r.epoch != c.epoch) return false;
+  if (r.bound & (1u << c.mip)) return true;
+  while (true) {
+    const auto region = allocator_.find(c.texture);
+    if (!region || r.epoch != c.epoch) return false;  // evicted while making room
+    if (pages_->acquire(region->layer, region->origin_x, region->origin_y, region->extent, c.mip)) {
+      TS_ASSERT(r.bound == 0 || (r.region.layer == region->layer && r.region.index == region->index),
+                "texture %u bound in two regions", c.texture.value);
+      r.region = *region;
+      r.bound |= 1u << c.mip;
+      return true;
+    }
+    // Seed §3.6: when the cache is full, the oldest layer goes. Its pages retire at last_serial_, which has
+    // completed by now in the renderer's one-frame-in-flight loop, so reclaim() frees their slots at once.
+    std::vector<TextureId> evicted;
+    if (!allocator_.evict_oldest(evicted)) return false;
+    ++stats_.budget_evicted_layers;
+    evict_all(evicted);
+    pages_->reclaim(completed_serial_);
+  }
+}
+
+Status TextureCache::prepare_uploads(uint64_t serial) {
+  TS_ASSERT(serial > last_serial_, "submission serials must increase (%llu after %llu)", (unsigned long long)serial,
+            (unsigned long long)last_serial_);
+  prepared_serial_ = serial;
+  bind_wait_ = BindWait{};
+  pages_->reclaim(completed_serial_);
+  // Copies in commit order. An eviction on the way drops copies of evicted textures from ready_ (evict());
+  // those still in `work` are recognised by their epoch.
+  std::vector<Copy> work = std::move(queued_);
+  queued_.clear();
+  for (const Copy& c : work) {
+    if (bind_pages_for(c)) {
+      ready_.push_back(c);
+    } else {
+      release_staging(c.staging);
+      ++stats_.mips_dropped;
+    }
+  }
+  const std::vector<PageBindOp> batch = pages_->take_batch();
+  if (!batch.empty()) {
+    TS_TRY(sparse_->submit(batch));
+    bind_wait_ = BindWait{sparse_->semaphore(), sparse_->signal_value()};
+  }
+  return ok_status();
+}
+
 uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
-  if (queued_.empty()) return 0;
+  if (prepared_serial_ != serial) {
+    if (auto st = prepare_uploads(serial); !st.ok()) {
+      spdlog::error("texture cache: {}", st.error().message);
+      for (const Copy& c : ready_) {
+        release_staging(c.staging);
+        states_.on_rejected(c.texture, MipLevel(c.mip));
+      }
+      ready_.clear();
+    }
+  }
+  last_serial_ = serial;
+  if (ready_.empty()) return 0;
   VkImageMemoryBarrier b{};
   b.sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER;
   b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
-  b.image = image_.handle();
+  b.image = sparse_->image();
   b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, mip_levels_, 0, options_.layers};
   // Earlier frames' fragment shaders read the image; the copies must wait for them (write-after-read).
   b.srcAccessMask = VK_ACCESS_SHADER_READ_BIT;
@@ -215,9 +301,9 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
                        nullptr, 1, &b);
 
   std::vector<VkBufferImageCopy> regions;
-  regions.reserve(queued_.size());
+  regions.reserve(ready_.size());
   const uint32_t block = block_size(options_.format);
-  for (Copy& c : queued_) {
+  for (Copy& c : ready_) {
     const scene::TextureRecord& rec = scene_.textures[c.texture.value];
     const auto region = allocator_.find(c.texture);
     TS_ASSERT(region.has_value(), "queued copy of texture %u without a region", c.texture.value);
@@ -234,7 +320,7 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
     c.serial = serial;
     in_flight_.push_back(c);
   }
-  vkCmdCopyBufferToImage(cmd, staging_.handle(), image_.handle(), VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
+  vkCmdCopyBufferToImage(cmd, staging_.handle(), sparse_->image(), VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
                          static_cast<uint32_t>(regions.size()), regions.data());
 
   b.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
@@ -243,8 +329,8 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
   b.newLayout = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
   vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, 0, 0, nullptr, 0,
                        nullptr, 1, &b);
-  const auto n = static_cast<uint32_t>(queued_.size());
-  queued_.clear();
+  const auto n = static_cast<uint32_t>(ready_.size());
+  ready_.clear();
   return n;
 }
 
@@ -265,6 +351,12 @@ void TextureCache::publish(TextureId texture) {
 }
 
 void TextureCache::on_submission_complete(uint64_t serial) {
+  completed_serial_ = std::max(completed_serial_, serial);
+  // The budget check of every frame (issue 6: bound pages x page size <= cache.memory_bytes).
+  ++stats_.frames;
+  const uint64_t bound = bound_bytes();
+  stats_.max_bound_bytes = std::max(stats_.max_bound_bytes, bound);
+  if (bound > options_.memory_bytes) ++stats_.budget_exceeded_frames;
   while (!in_flight_.empty() && in_flight_.front().serial <= serial) {
     const Copy c = in_flight_.front();
     in_flight_.pop_front();
@@ -286,6 +378,53 @@ uint64_t TextureCache::resident_textures() const {
   uint64_t n = 0;
   for (const auto& r : residency_) n += r.mask != 0;
   return n;
+}
+
+}  // namespace texstream::render
+
+namespace texstream::render {
+
+Status TextureCache::write_stats_json(const std::filesystem::path& file) const {
+  const SparseBindStats& b = sparse_->stats();
+  const PageTableStats& p = pages_->stats();
+  const PageGeometry& g = sparse_->geometry();
+  nlohmann::json j;
+  j["memory_budget_bytes"] = options_.memory_bytes;
+  j["page_bytes"] = sparse_->page_bytes();
+  j["page_texels"] = {g.granularity_w, g.granularity_h};
+  j["mip_tail_first_level"] = g.tail_first_level;
+  j["mip_tail_bytes"] = sparse_->tail_bytes();
+  j["page_slots"] = sparse_->slot_count();
+  j["allocated_bytes"] = sparse_->allocated_bytes();
+  j["image_virtual_bytes"] = sparse_->image_bytes();
+  j["create_seconds"] = stats_.create_seconds;
+  j["frames"] = stats_.frames;
+  j["budget_exceeded_frames"] = stats_.budget_exceeded_frames;
+  j["max_bound_bytes"] = stats_.max_bound_bytes;
+  j["bound_bytes"] = bound_bytes();
+  j["mips_uploaded"] = stats_.mips_uploaded;
+  j["mips_dropped"] = stats_.mips_dropped;
+  j["evictions"] = stats_.evictions;
+  j["budget_evicted_layers"] = stats_.budget_evicted_layers;
+  j["layers_recycled"] = allocator_.layers_recycled();
+  j["texture_loads"] = stats_.texture_loads;
+  j["texture_reloads"] = stats_.texture_reloads;
+  j["thrash_rate"] = stats_.texture_loads ? static_cast<double>(stats_.texture_reloads) /
+                                                static_cast<double>(stats_.texture_loads)
+                                          : 0.0;
+  j["bind_calls"] = b.calls;
+  j["bind_ops"] = b.ops;
+  j["bind_seconds"] = b.seconds;
+  j["bind_max_ops_per_call"] = b.max_ops_per_call;
+  j["bind_ops_per_call"] = b.ops_per_call;
+  j["pages_bound"] = p.pages_bound;
+  j["pages_unbound"] = p.pages_unbound;
+  j["pages_shared"] = p.pages_shared;
+  j["pages_revived"] = p.pages_revived;
+  std::ofstream out(file);
+  out << j.dump(1) << "\n";
+  if (!out) return make_error(ErrorCode::kIo, "cannot write " + file.string());
+  return ok_status();
 }
 
 }  // namespace texstream::render

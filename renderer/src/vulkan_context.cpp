@@ -120,13 +120,19 @@ Result<std::unique_ptr<VulkanContext>> VulkanContext::create(const VulkanContext
   std::vector<VkQueueFamilyProperties> families(family_count);
   vkGetPhysicalDeviceQueueFamilyProperties(ctx->physical_, &family_count, families.data());
   bool found = false;
-  for (uint32_t i = 0; i < family_count; ++i) {
-    if ((families[i].queueFlags & VK_QUEUE_GRAPHICS_BIT) && (families[i].queueFlags & VK_QUEUE_COMPUTE_BIT) &&
-        (!options.can_present || options.can_present(ctx->instance_, ctx->physical_, i))) {
-      ctx->queue_family_ = i;
-      found = true;
-      break;
+  // The texture cache binds its sparse pages on this queue (one queue: binds, copies and draws stay in one
+  // timeline), so prefer a family that also has VK_QUEUE_SPARSE_BINDING_BIT; TextureCache names the problem if
+  // the chosen one lacks it.
+  for (const bool need_sparse : {true, false}) {
+    for (uint32_t i = 0; i < family_count && !found; ++i) {
+      if ((families[i].queueFlags & VK_QUEUE_GRAPHICS_BIT) && (families[i].queueFlags & VK_QUEUE_COMPUTE_BIT) &&
+          (!need_sparse || (families[i].queueFlags & VK_QUEUE_SPARSE_BINDING_BIT)) &&
+          (!options.can_present || options.can_present(ctx->instance_, ctx->physical_, i))) {
+        ctx->queue_family_ = i;
+        found = true;
+      }
     }
+    if (found) break;
   }
   if (!found) {
     return make_error(ErrorCode::kUnsupported, options.can_present
@@ -151,6 +157,10 @@ Result<std::unique_ptr<VulkanContext>> VulkanContext::create(const VulkanContext
     features.samplerAnisotropy = VK_TRUE;
     ctx->sampler_anisotropy_ = true;
   }
+  // The texture cache is a sparse partially-resident image (seed 000 §3.6); SparseMemory::create reports a
+  // device without these features.
+  features.sparseBinding = supported.sparseBinding;
+  features.sparseResidencyImage2D = supported.sparseResidencyImage2D;
   if (options.need_bc1) {
     if (!supported.textureCompressionBC)
       return make_error(ErrorCode::kUnsupported, "cache.format = bc1 but the device lacks textureCompressionBC");
@@ -168,6 +178,24 @@ Result<std::unique_ptr<VulkanContext>> VulkanContext::create(const VulkanContext
   dci.queueCreateInfoCount = 1;
   dci.pQueueCreateInfos = &qci;
   dci.pEnabledFeatures = &features;
+  // Vulkan 1.2 core: the cache's sparse binds signal a timeline semaphore that the frame's submission waits on.
+  VkPhysicalDeviceVulkan12Features supported12{};
+  supported12.sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES;
+  VkPhysicalDeviceFeatures2 supported2{};
+  supported2.sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2;
+  supported2.pNext = &supported12;
+  vkGetPhysicalDeviceFeatures2(ctx->physical_, &supported2);
+  if (!supported12.timelineSemaphore) return make_error(ErrorCode::kUnsupported, "device lacks timelineSemaphore");
+  VkPhysicalDeviceVulkan12Features features12{};
+  features12.sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES;
+  features12.timelineSemaphore = VK_TRUE;
+  // Core and 1.2 features in one chain (pEnabledFeatures must then be null).
+  VkPhysicalDeviceFeatures2 features2{};
+  features2.sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2;
+  features2.features = features;
+  features2.pNext = &features12;
+  dci.pEnabledFeatures = nullptr;
+  dci.pNext = &features2;
   const char* swapchain_ext = VK_KHR_SWAPCHAIN_EXTENSION_NAME;
   if (options.can_present) {
     dci.enabledExtensionCount = 1;

@@ -1,10 +1,11 @@
 # texture_server unit tests: the RAM cache and its policies, the request scheduler, the slot pool, the rate
-# limiter, DDS layouts and texel conversion — no shared memory, no clock.
+# limiter, DDS layouts, texel conversion and the open-file cache — no shared memory, no clock.
 texstream_add_unit_test(server_unit_tests
   ${CMAKE_CURRENT_LIST_DIR}/server_mip_cache_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/server_level_eviction_policy_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/server_token_bucket_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/server_formats_unit_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/server_request_scheduler_test.cpp
-  ${CMAKE_CURRENT_LIST_DIR}/server_slot_pool_test.cpp)
+  ${CMAKE_CURRENT_LIST_DIR}/server_slot_pool_test.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/server_open_file_cache_test.cpp)
 target_link_libraries(server_unit_tests PRIVATE texstream::server)

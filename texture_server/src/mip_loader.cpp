@@ -90,6 +90,12 @@ CompletionRecord MipLoader::serve_cached(const LoadRequest& request, const scene
 bool MipLoader::open_texture(const LoadRequest& request, Opened& opened, CompletionRecord& error) {
   // A remembered file first: one open, no probing of the other suffixes.
   if (std::optional<TextureFileEntry> known = index_.find(request.texture)) {
+    if (std::optional<OpenTextureFile> kept = files_.take(request.texture)) {
+      opened.path = std::move(kept->path);
+      opened.entry = *known;
+      opened.file = std::move(kept->file);
+      return true;
+    }
     opened.path = texture_file_path(scene_dir_, request.texture, known->kind);
     Result<std::unique_ptr<StorageFile>> f = storage_.open(opened.path);
     if (f.ok()) {
@@ -99,6 +105,7 @@ bool MipLoader::open_texture(const LoadRequest& request, Opened& opened, Complet
     }
     index_.forget(request.texture);  // gone or renamed since: probe again below
   }
+  files_.take(request.texture);  // not remembered (forgotten after a failure): a kept file is stale, close it
   std::string tried;
   for (TextureFileKind kind : kTextureFileKinds) {
     const std::filesystem::path path = texture_file_path(scene_dir_, request.texture, kind);
@@ -209,7 +216,9 @@ CompletionRecord MipLoader::load(const LoadRequest& request, const scene::Textur
     target = keep->bytes;
   }
   const CompletionStatus status = read_mip(request, record, opened, target);
+  // Only a file that served its mip stays open; after a failure it is closed (it may have been replaced).
   if (status != CompletionStatus::kOk) return make_completion(request, status);
+  files_.give_back(request.texture, OpenTextureFile{std::move(opened.path), std::move(opened.file)});
 
   // The checksum is of the bytes we meant to hand over (equal to the slot's unless the renderer wrote into a
   // slot it does not own, which the renderer's own check then catches).

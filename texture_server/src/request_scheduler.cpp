@@ -37,6 +37,10 @@ std::optional<LoadRequest> RequestScheduler::add(const LoadRequest& request) {
 }
 
 void RequestScheduler::supersede_older_than(Generation generation, std::vector<LoadRequest>& cancelled) {
+  // add() refuses generations older than the newest seen, so after a pass for `generation` nothing older can
+  // be pending: the dispatcher calls this after every batch it drains, and the scan is O(pending).
+  if (generation <= superseded_through_) return;
+  superseded_through_ = generation;
   for (auto it = pending_.begin(); it != pending_.end();) {
     if (it->second.request.generation < generation) {
       cancelled.push_back(it->second.request);

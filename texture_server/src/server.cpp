@@ -103,11 +103,17 @@ Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const S
   cancelled_scratch_.reserve(256);
   results_scratch_.reserve(64);
   ShmAtomic<uint32_t>* doorbell = &segment_.renderer_block().doorbell;
+  const ShmAtomic<uint32_t>* sleeping = &segment_.server_block().sleeping;
   workers_ = std::make_unique<WorkerPool>(
       static_cast<uint32_t>(config.worker_threads),
       [this](const LoadJob& job) { return loader_.load(job.request, job.record, job.slot, segment_.slot(job.slot)); },
-      // FUTEX_WAKE does not write the word: the renderer stays its only writer. It only cuts the dispatcher's nap.
-      [doorbell] { futex_wake_all(*doorbell); });
+      // Only a sleeping dispatcher is woken: a wake per result was a syscall per miss, mostly for a dispatcher
+      // that was awake anyway. The pool published the result (seq_cst) before this seq_cst load, and
+      // idle_wait() stores `sleeping` (seq_cst) before it looks at results_ready(): one of the two sees the
+      // other. FUTEX_WAKE does not write the word: the renderer stays its only writer.
+      [doorbell, sleeping] {
+        if (sleeping->v.load(std::memory_order_seq_cst) == 1) futex_wake_all(*doorbell);
+      });
 }
 
 Server::~Server() {
@@ -337,7 +343,7 @@ void Server::idle_wait() {
   // here bumped the doorbell after our read, so futex_wait returns at once instead of sleeping on it.
   block.sleeping.v.store(1, std::memory_order_seq_cst);  // pairs with the renderer's seq_cst load of sleeping
   const uint32_t seen = renderer.doorbell.v.load(std::memory_order_seq_cst);  // pairs with its bump (release+)
-  if (requests_.size() == 0) futex_wait(renderer.doorbell, seen, timeout);
+  if (requests_.size() == 0 && !workers_->results_ready()) futex_wait(renderer.doorbell, seen, timeout);
   block.sleeping.v.store(0, std::memory_order_relaxed);  // relaxed: a late 0 costs the renderer one wake call
 }
 

@@ -49,7 +49,8 @@ void WorkerPool::worker_main() {
     {
       std::lock_guard lock(mutex_);
       results_.push_back({completion, job.slot, job.request.received_ns});
-      ready_.store(static_cast<uint32_t>(results_.size()), std::memory_order_release);  // pairs with results_ready()
+      // seq_cst: pairs with results_ready() and orders before on_result_'s load of the sleeping flag.
+      ready_.store(static_cast<uint32_t>(results_.size()), std::memory_order_seq_cst);
     }
     if (on_result_) on_result_();
   }

@@ -48,6 +48,7 @@
 #include "texstream/server/level_eviction_policy.hpp"
 #include "texstream/server/lru_eviction_policy.hpp"
 #include "texstream/server/mip_cache.hpp"
+#include "texstream/server/mip_loader.hpp"
 #include "texstream/server/posix_storage.hpp"
 #include "texstream/server/server.hpp"
 
@@ -70,6 +71,11 @@ struct Options {
   fs::path scene;
   double memory_minutes = -1;  // < 0: the default for the mode
   uint32_t textures = 0;       // generated scene size (0: the default for the mode)
+  // --phases memory,hits,misses,trace: run only these (profiling one phase); skipped phases report 0.
+  std::string phases = "memory,hits,misses,trace";
+  bool runs(const char* phase) const {
+    return ("," + phases + ",").find(std::string(",") + phase + ",") != std::string::npos;
+  }
 };
 
 struct Request {
@@ -621,11 +627,14 @@ std::optional<Options> parse(const std::vector<std::string>& args) {
       o.scene = args[++i];
     } else if (a == "--memory-minutes" && has_value) {
       o.memory_minutes = std::atof(args[++i].c_str());
+    } else if (a == "--phases" && has_value) {
+      o.phases = args[++i];
     } else if (a == "--textures" && has_value) {
       o.textures = static_cast<uint32_t>(std::atoi(args[++i].c_str()));
     } else {
       std::fprintf(stderr,
                    "usage: texstream-bench server [--quick] [--scene DIR] [--memory-minutes M] [--textures N]\n"
+                   "                              [--phases memory,hits,misses,trace]\n"
                    "unknown or incomplete argument '%s'\n",
                    a.c_str());
       return std::nullopt;
@@ -696,32 +705,34 @@ int run_server_bench(const std::vector<std::string>& args) {
   read_gbps(s, 0, static_cast<uint32_t>(s.textures.size()), nullptr);
 
   // 6. Memory: the real server process.
-  const double memory_s = opt->memory_minutes >= 0 ? opt->memory_minutes * 60.0 : (opt->quick ? 4.0 : 30.0);
-  const uint64_t memory_budget = std::min<uint64_t>(32ull << 20, scene_bytes / 4);
-  const MemoryResult mem = memory_run(s, memory_s, memory_budget);
-  std::printf("\n[memory] texstream-server process, %.0f s random workload over %.1f MB of textures (%.1fx the cache), "
-              "%llu requests, hit rate %.3f\n  server RSS at start %.1f MB, peak %.1f MB; limit = cache %.1f + staging %.1f + 64 MB = %.1f MB -> %s\n",
-              memory_s, mem.set_mb, mem.set_mb / mem.cache_mb, static_cast<unsigned long long>(mem.requests),
-              mem.hit_rate, mem.start_rss_mb, mem.peak_rss_mb, mem.cache_mb,
-              static_cast<double>(kSlotCount * kSlotBytes) / (1 << 20), mem.limit_mb,
-              mem.peak_rss_mb <= mem.limit_mb ? "within" : "OVER");
-  std::printf("  server at start: %s\n  server at end:   %s\n", mem.start_breakdown.c_str(), mem.end_breakdown.c_str());
-  // RssFile is the mapped code of the linked libraries (OpenImageIO pulls in dozens), shared and evictable;
-  // the growth under load is what the cache, the staging pool and the allocator add.
-  std::printf("  growth under load %.1f MB vs cache + staging + 64 MB = %.1f MB -> %s\n",
-              mem.peak_rss_mb - mem.start_rss_mb, mem.limit_mb,
-              mem.peak_rss_mb - mem.start_rss_mb <= mem.limit_mb ? "within" : "OVER");
+  if (opt->runs("memory")) {
+    const double memory_s = opt->memory_minutes >= 0 ? opt->memory_minutes * 60.0 : (opt->quick ? 4.0 : 30.0);
+    const uint64_t memory_budget = std::min<uint64_t>(32ull << 20, scene_bytes / 4);
+    const MemoryResult mem = memory_run(s, memory_s, memory_budget);
+    std::printf("\n[memory] texstream-server process, %.0f s random workload over %.1f MB of textures (%.1fx the cache), "
+                "%llu requests, hit rate %.3f\n  server RSS at start %.1f MB, peak %.1f MB; limit = cache %.1f + staging %.1f + 64 MB = %.1f MB -> %s\n",
+                memory_s, mem.set_mb, mem.set_mb / mem.cache_mb, static_cast<unsigned long long>(mem.requests),
+                mem.hit_rate, mem.start_rss_mb, mem.peak_rss_mb, mem.cache_mb,
+                static_cast<double>(kSlotCount * kSlotBytes) / (1 << 20), mem.limit_mb,
+                mem.peak_rss_mb <= mem.limit_mb ? "within" : "OVER");
+    std::printf("  server at start: %s\n  server at end:   %s\n", mem.start_breakdown.c_str(), mem.end_breakdown.c_str());
+    // RssFile is the mapped code of the linked libraries (OpenImageIO pulls in dozens), shared and evictable;
+    // the growth under load is what the cache, the staging pool and the allocator add.
+    std::printf("  growth under load %.1f MB vs cache + staging + 64 MB = %.1f MB -> %s\n",
+                mem.peak_rss_mb - mem.start_rss_mb, mem.limit_mb,
+                mem.peak_rss_mb - mem.start_rss_mb <= mem.limit_mb ? "within" : "OVER");
+  }
 
   // 1. Hits vs memcpy.
   const double phase_s = opt->quick ? 1.5 : 5.0;
   ServerConfig config;  // defaults: 2 workers, 256 MiB cache, LRU
-  const std::vector<Request> hit_set = all_mips_until(s, 0, 48ull << 20);
-  uint64_t hit_set_bytes = 0;
-  for (const Request& r : hit_set) hit_set_bytes += mip_size(s.textures[r.texture], r.mip);
-  const double memcpy_bw = memcpy_gbps(s, hit_set, phase_s);
-  double hit_bw = 0;
+  double memcpy_bw = 0, hit_bw = 0;
   StreamResult hit_lat, miss_lat;
-  {
+  if (opt->runs("hits")) {
+    const std::vector<Request> hit_set = all_mips_until(s, 0, 48ull << 20);
+    uint64_t hit_set_bytes = 0;
+    for (const Request& r : hit_set) hit_set_bytes += mip_size(s.textures[r.texture], r.mip);
+    memcpy_bw = memcpy_gbps(s, hit_set, phase_s);
     auto h = Harness::start(s.dir, config);
     if (!h) return 1;
     stream(*h, hit_set, h->slots(), 1, false);  // load them all once: misses
@@ -748,7 +759,7 @@ int run_server_bench(const std::vector<std::string>& args) {
 
   // 2. Misses vs read().
   double miss_bw = 0, read_bw = 0, read_amp = 0;
-  {
+  if (opt->runs("misses")) {
     uint32_t end = 0;
     const uint32_t first = static_cast<uint32_t>(s.textures.size() / 2);  // not the hit set's textures
     const std::vector<Request> miss_set = all_mips_until(s, first, opt->quick ? (64ull << 20) : (160ull << 20), &end);
@@ -764,12 +775,35 @@ int run_server_bench(const std::vector<std::string>& args) {
     uint32_t end2 = 0;
     const std::vector<Request> lat_set = all_mips_until(s, end, 8ull << 20, &end2);
     miss_lat = stream(*h, lat_set, kLatencyWindow, 2, true);
+    // Diagnostic: the same misses through MipLoader alone on this thread (no rings, dispatcher or workers):
+    // separates the cost of a load itself from the cost of the pipeline around it.
+    double loader_bw = 0;
+    {
+      ServerBlock block{};
+      server::ServerStats stats;
+      server::MipCache cache(static_cast<uint64_t>(config.ram_cache_bytes),
+                             server::make_eviction_policy("lru", nullptr).value());
+      server::PosixStorage storage;
+      server::MipLoader loader(s.dir, storage, cache, block, stats);
+      std::vector<std::byte> slot(kSlotBytes);
+      uint64_t bytes = 0;
+      Stopwatch lw;
+      for (const Request& q : miss_set) {
+        const server::LoadRequest lr{TextureId(q.texture), MipLevel(q.mip), Generation(1), q.priority, 0};
+        const CompletionRecord c = loader.load(lr, s.textures[q.texture], 0, slot);
+        if (c.status == static_cast<uint32_t>(CompletionStatus::kOk)) bytes += c.byte_size;
+      }
+      loader_bw = static_cast<double>(bytes) / lw.seconds() / 1e9;
+    }
     std::printf("\n[misses] %zu mips of %u textures (%.1f MB delivered, page cache warm): %.2f GB/s; plain sequential "
                 "read() of the same files (%.1f MB): %.2f GB/s -> ratio %.3f (goal >= 0.5); read amplification %.4f "
                 "(goal <= 1.1); %llu failures\n",
                 miss_set.size(), end - first, static_cast<double>(r.bytes) / 1e6, miss_bw,
                 static_cast<double>(read_bytes) / 1e6, read_bw, miss_bw / read_bw, read_amp,
                 static_cast<unsigned long long>(r.failures));
+    std::printf("  (diagnostic) the same misses through the loader alone on one thread, no rings: %.2f GB/s, %.2f us "
+                "per mip\n",
+                loader_bw, static_cast<double>(r.bytes) / 1e3 / loader_bw / static_cast<double>(miss_set.size()));
   }
   const double hit_p50 = percentile(hit_lat.latency_us, 50), hit_p99 = percentile(hit_lat.latency_us, 99);
   const double miss_p50 = percentile(miss_lat.latency_us, 50), miss_p99 = percentile(miss_lat.latency_us, 99);
@@ -779,16 +813,18 @@ int run_server_bench(const std::vector<std::string>& args) {
               miss_lat.latency_us.size());
 
   // 4./5. The realistic trace.
-  const uint64_t gpu_budget = std::max<uint64_t>(scene_bytes / 8, 4ull << 20);
-  const std::vector<Cycle> trace = build_trace(s, opt->quick ? 2 : 3, gpu_budget);
-  uint64_t trace_requests = 0, trace_bytes = 0;
-  std::unordered_map<uint64_t, uint64_t> distinct;
-  for (const Cycle& c : trace) {
-    for (const Request& r : c) {
-      ++trace_requests;
-      trace_bytes += mip_size(s.textures[r.texture], r.mip);
-      distinct[MipKey(TextureId(r.texture), MipLevel(r.mip)).value] = mip_size(s.textures[r.texture], r.mip);
-    }
+  double oiio_hit_rate = 0, our_hit_rate = 0, throughput_ratio = 0;
+  if (opt->runs("trace")) {
+    const uint64_t gpu_budget = std::max<uint64_t>(scene_bytes / 8, 4ull << 20);
+    const std::vector<Cycle> trace = build_trace(s, opt->quick ? 2 : 3, gpu_budget);
+    uint64_t trace_requests = 0, trace_bytes = 0;
+    std::unordered_map<uint64_t, uint64_t> distinct;
+    for (const Cycle& c : trace) {
+      for (const Request& r : c) {
+        ++trace_requests;
+        trace_bytes += mip_size(s.textures[r.texture], r.mip);
+        distinct[MipKey(TextureId(r.texture), MipLevel(r.mip)).value] = mip_size(s.textures[r.texture], r.mip);
+      }
   }
   uint64_t distinct_bytes = 0;
   for (const auto& [k, v] : distinct) distinct_bytes += v;
@@ -817,17 +853,21 @@ int run_server_bench(const std::vector<std::string>& args) {
     std::printf("  budget %6.1f MB: lru %.3f  level (seed 002 Eq. 4) %.3f\n", static_cast<double>(budget) / 1e6,
                 simulate_policy(s, trace, budget, "lru"), simulate_policy(s, trace, budget, "level"));
   }
+  oiio_hit_rate = oiio.hit_rate;
+  our_hit_rate = ours.hit_rate;
+  throughput_ratio = ours_bw / oiio_bw;
+  }
 
   std::printf("\ntotal %.1f s\n", total.seconds());
   Summary()
-      .add("hit_vs_memcpy", hit_bw / memcpy_bw)
-      .add("miss_vs_read", miss_bw / read_bw)
+      .add("hit_vs_memcpy", memcpy_bw > 0 ? hit_bw / memcpy_bw : 0)
+      .add("miss_vs_read", read_bw > 0 ? miss_bw / read_bw : 0)
       .add("read_amp", read_amp)
       .add("hit_p99_us", hit_p99)
       .add("miss_p99_us", miss_p99)
-      .add("oiio_hit_rate", oiio.hit_rate)
-      .add("our_hit_rate", ours.hit_rate)
-      .add("oiio_throughput_ratio", ours_bw / oiio_bw)
+      .add("oiio_hit_rate", oiio_hit_rate)
+      .add("our_hit_rate", our_hit_rate)
+      .add("oiio_throughput_ratio", throughput_ratio)
       .print();
   return 0;
 }

@@ -9,7 +9,6 @@
 
 #include <cerrno>
 #include <cstring>
-#include <fstream>
 #include <sstream>
 #include <thread>
 
@@ -84,10 +83,29 @@ std::optional<ExitStatus> ChildProcess::wait_for(std::chrono::milliseconds timeo
   }
 }
 
+std::optional<std::string> read_whole_file(const std::filesystem::path& file) {
+  const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return std::nullopt;
+  std::string out;
+  char buf[65536];
+  while (true) {
+    const ssize_t n = ::read(fd, buf, sizeof buf);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) {
+      ::close(fd);
+      return std::nullopt;
+    }
+    if (n == 0) break;
+    out.append(buf, static_cast<size_t>(n));
+  }
+  ::close(fd);
+  return out;
+}
+
 std::optional<ProcInfo> read_proc(pid_t pid) {
-  std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
-  std::string line;
-  if (!std::getline(in, line)) return std::nullopt;
+  const auto text = read_whole_file("/proc/" + std::to_string(pid) + "/stat");
+  if (!text) return std::nullopt;
+  const std::string& line = *text;
   // "pid (comm) state ppid ...": comm may hold spaces and parentheses, so split at the last ')'.
   const size_t open = line.find('(');
   const size_t close = line.rfind(')');
@@ -128,8 +146,7 @@ std::vector<ProcInfo> children_of(pid_t parent) {
 std::vector<pid_t> processes_with_arg(const std::string& needle) {
   std::vector<pid_t> out;
   for_each_pid([&](pid_t pid) {
-    std::ifstream in("/proc/" + std::to_string(pid) + "/cmdline", std::ios::binary);
-    const std::string cmdline((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string cmdline = read_whole_file("/proc/" + std::to_string(pid) + "/cmdline").value_or("");
     if (cmdline.find(needle) == std::string::npos) return;
     if (auto p = read_proc(pid); p && p->state != 'Z') out.push_back(pid);
   });

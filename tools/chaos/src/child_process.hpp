@@ -48,6 +48,8 @@ struct ProcInfo {
   std::string comm;   // at most 15 characters (TASK_COMM_LEN)
 };
 std::optional<ProcInfo> read_proc(pid_t pid);
+// The whole file (small files: /proc entries, texture files); nullopt if it cannot be read.
+std::optional<std::string> read_whole_file(const std::filesystem::path& file);
 std::vector<ProcInfo> children_of(pid_t parent);
 // Pids whose command line contains `needle` (e.g. a segment name), excluding zombies.
 std::vector<pid_t> processes_with_arg(const std::string& needle);

@@ -83,6 +83,7 @@ struct CacheConfig {
   std::string format = "auto";          // auto (the scene's format), rgba8 or bc1: the texel format of the GPU cache
   int64_t layer_extent_px = 512;        // side of one cache layer; the largest texture extent it can hold
   int64_t layers = 64;                  // array layers of the cache image (GPU memory bound)
+  int64_t memory_bytes = 128ll << 20;   // GPU memory the cache's bound sparse pages may use (never exceeded)
 };
 
 struct Config {

@@ -41,12 +41,12 @@ struct ServerCommand {
 // path and the key, if the file is not there or not executable.
 Result<std::filesystem::path> resolve_server_executable(const Config& config);
 
-// Two kinds of death (issue 9). A *crash* is a server that died before it attached (it could not even start:
-// bad scene, bad config, a broken binary), could not be spawned, or that we killed (hung, protocol
-// violation): these back off exponentially and, repeated, lead to colormap-only mode. A server that attached
-// and then died of an outside cause (SIGKILL, OOM killer) was working: it is replaced after first_delay and
-// does not count toward the back-off — a restart storm of 100 kills in 60 s must end in normal streaming
-// within 5 s, which exponential back-off towards colormap-only (30 s retries) would make impossible.
+// Two kinds of death (issue 9). A *crash* is a server that ended by itself (any exit, SIGSEGV, SIGABRT...),
+// could not be spawned, or that we killed (hung, protocol violation): crashes back off exponentially and,
+// repeated, lead to colormap-only mode. A SIGKILL we did not send came from outside (OOM killer, an operator,
+// texstream-chaos): that server did nothing wrong, so it is replaced after first_delay and does not count
+// toward the back-off — a restart storm of 100 kills in 60 s must end in normal streaming within 5 s, which
+// exponential back-off towards colormap-only (30 s retries) would make impossible.
 struct RestartPolicy {
   std::chrono::milliseconds first_delay{50};    // first restart after a crash; doubles per recent crash
   std::chrono::milliseconds max_delay{5000};    // cap of the doubling
@@ -92,8 +92,7 @@ class ServerProcess {
   // Progress watchdog. `heartbeat` is ServerBlock.heartbeat, `attached` ServerBlock.attached. The server is
   // hung if its heartbeat has not moved for `timeout` (startup_grace before it attached) while
   // `work_outstanding`. A hung server is SIGKILLed (reap() then reports it). Returns true if it killed.
-  // Also records that the child attached (see RestartPolicy: its later death is not a crash), and ends
-  // colormap-only mode once a child has attached.
+  // Also ends colormap-only mode once a child has attached (it works again).
   bool watch_heartbeat(uint64_t heartbeat, bool attached, bool work_outstanding, std::chrono::milliseconds timeout,
                        SteadyTime now);
 
@@ -131,7 +130,7 @@ class ServerProcess {
   uint64_t spawns_ = 0;
   uint64_t deaths_total_ = 0;
   uint64_t crashes_total_ = 0;
-  bool attached_ = false;  // the current child reported `attached` to watch_heartbeat
+  bool attached_ = false;  // the current child reported `attached` to watch_heartbeat (ends colormap-only)
   uint64_t last_heartbeat_ = 0;
   SteadyTime last_progress_{};
 };

@@ -21,6 +21,7 @@
 //
 // Levels at or past `tail_first_level` live in the mip tail (devices that have one: not lavapipe): those are
 // bound once for the whole image at start-up, and this table ignores them.
+#include <cstddef>
 #include <cstdint>
 #include <unordered_map>
 #include <unordered_set>

@@ -114,6 +114,7 @@ struct StreamStats {
   uint64_t payload_checksum_failures = 0;                // of those: copied, checksum did not match
   uint64_t completions_failed[kMaxCompletionStatus + 1] = {};  // by CompletionStatus value
   uint64_t requests_lost = 0;                            // in flight when the server died
+  uint64_t requests_timed_out = 0;                       // unanswered for StreamClientOptions::request_timeout
   uint64_t bytes_received = 0;                           // payload bytes committed
   uint64_t protocol_errors = 0;
   uint64_t server_restarts = 0;                          // spawns after the first
@@ -144,6 +145,11 @@ struct StreamClientOptions {
   RestartPolicy restart;
   // Clock for back-off and the heartbeat watchdog (tests inject a virtual one). Default: steady_clock.
   std::function<SteadyTime()> clock;
+  // A request unanswered this long is failed locally (kTimedOut) and its in-flight place freed, so a server
+  // that keeps its heartbeat but drops or garbles answers cannot fill stream.max_requests_in_flight forever.
+  // A late answer is then refused as unsolicited (its slot handed back). 10 s: far above a queue of 64
+  // one-MiB misses at server.rate_limit_mb_s = 10. (A config key protocol.request_timeout_ms is proposed.)
+  std::chrono::milliseconds request_timeout{10000};
 };
 
 class StreamClient {
@@ -200,7 +206,9 @@ class StreamClient {
  private:
   struct InFlight {
     Generation generation;
+    SteadyTime sent_at{};
   };
+  void expire_requests(MipSink& sink, SteadyTime t);
   // A request lost with a dead server, until it is answered by a later one (or no longer wanted).
   struct Lost {
     bool resent = false;
@@ -258,6 +266,7 @@ class StreamClient {
   bool frame_open_ = false;
   uint64_t sink_ns_ = 0;        // time inside the sink during the current client call
   int ipc_depth_ = 0;           // nested client calls (poll → restart paths) count once
+  SteadyTime next_expiry_scan_{};
 };
 
 }  // namespace texstream

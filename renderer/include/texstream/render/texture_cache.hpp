@@ -61,6 +61,7 @@ struct TextureCacheStats {
   uint64_t max_bound_bytes = 0;        // most bytes bound at the end of any frame (pages + mip tail)
   uint64_t texture_loads = 0;          // textures placed in a region (first mip or again after an eviction)
   uint64_t texture_reloads = 0;        // of those, textures that had been evicted before (thrashing)
+  double create_seconds = 0;           // TextureCache::create (image, table of every texture, first barrier)
 };
 
 // What the frame's queue submission must wait for: the sparse binds recorded with its uploads.
@@ -115,6 +116,7 @@ class TextureCache final : public MipSink {
     uint32_t bound = 0;  // bit L: the pages under the region at mip L hold a reference for this texture
     uint32_t epoch = 0;  // bumped on eviction: copies of an older epoch publish nothing
     bool evicted_before = false;
+    CacheRegion region;  // valid while `bound` != 0 (the allocator forgets it when the layer goes)
   };
   struct Copy {
     TextureId texture;

@@ -15,7 +15,9 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <type_traits>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "texstream/server/eviction_policy.hpp"
@@ -23,10 +25,34 @@
 
 namespace texstream::server {
 
+// An allocator whose resize() leaves new elements default-initialised (for bytes: not written). A payload is
+// always overwritten by a read or a copy right after it is sized; zeroing it first was one more full pass over
+// every byte a miss delivers (measured with texstream-bench server: misses were 0.05-0.08x plain read()).
+template <class T>
+struct DefaultInitAllocator : std::allocator<T> {
+  using value_type = T;
+  template <class U>
+  struct rebind {
+    using other = DefaultInitAllocator<U>;
+  };
+  DefaultInitAllocator() = default;
+  template <class U>
+  DefaultInitAllocator(const DefaultInitAllocator<U>&) noexcept {}
+  template <class U>
+  void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    std::construct_at(p, std::forward<Args>(args)...);
+  }
+};
+using PayloadBytes = std::vector<std::byte, DefaultInitAllocator<std::byte>>;
+
 // One cached mip: the payload exactly as it is handed to the renderer, and its checksum (so a hit does not
 // hash again).
 struct CachedMip {
-  std::vector<std::byte> bytes;
+  PayloadBytes bytes;
   uint64_t checksum = 0;
 };
 

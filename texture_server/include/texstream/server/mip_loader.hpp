@@ -18,6 +18,7 @@
 #include "texstream/protocol/records.hpp"
 #include "texstream/protocol/segment_layout.hpp"
 #include "texstream/server/mip_cache.hpp"
+#include "texstream/server/open_file_cache.hpp"
 #include "texstream/server/request_scheduler.hpp"
 #include "texstream/server/server_stats.hpp"
 #include "texstream/server/storage.hpp"
@@ -45,7 +46,8 @@ class MipLoader {
     TextureFileEntry entry;
     std::unique_ptr<StorageFile> file;
   };
-  // Finds and opens the texture's file; on failure returns the error completion in `error`.
+  // Finds and opens the texture's file (or takes it from files_); on failure returns the error completion in
+  // `error`.
   bool open_texture(const LoadRequest& request, Opened& opened, CompletionRecord& error);
   // Reads (or decodes) the mip into `target`; returns kOk or the failure's status (already logged).
   CompletionStatus read_mip(const LoadRequest& request, const scene::TextureRecord& record, Opened& opened,
@@ -62,6 +64,7 @@ class MipLoader {
   ServerBlock& block_;
   ServerStats& stats_;
   TextureFileIndex index_;
+  OpenFileCache files_;  // files of recent misses, kept open for the texture's next mips
 };
 
 // The completion a request gets when it is answered without a payload.

@@ -75,6 +75,7 @@ class RequestScheduler {
   std::vector<HeapNode> heap_;
   uint64_t next_sequence_ = 0;
   Generation newest_{0};
+  Generation superseded_through_{0};  // supersede_older_than() has run for this generation
 };
 
 }  // namespace texstream::server

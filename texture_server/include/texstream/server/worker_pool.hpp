@@ -44,8 +44,9 @@ class WorkerPool {
   // Appends every finished result to `out` (the dispatcher keeps `out` between calls: no allocation when warm).
   void take_results(std::vector<LoadResult>& out);
   uint32_t threads() const { return static_cast<uint32_t>(threads_.size()); }
-  // True when take_results() would return something (a lock-free peek for the dispatcher's spin).
-  bool results_ready() const { return ready_.load(std::memory_order_acquire) > 0; }
+  // True when take_results() would return something (a lock-free peek for the dispatcher's spin). seq_cst,
+  // as the store in worker_main: the dispatcher's sleeping-flag handshake (server.cpp) needs a total order.
+  bool results_ready() const { return ready_.load(std::memory_order_seq_cst) > 0; }
 
  private:
   void worker_main();

@@ -1,0 +1,34 @@
+// libFuzzer: completion validation. Input = a CompletionRecord (64 bytes), the segment's slot count and size,
+// and a texture shape. Invariants: a record that passes check_completion names a slot in range with a size
+// that fits it; one that also passes check_against_texture has exactly the mip's size and extent.
+#include <cstdint>
+#include <cstring>
+
+#include "texstream/protocol/completion_check.hpp"
+
+using namespace texstream;
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  struct Input {
+    CompletionRecord record;
+    uint32_t slot_count;
+    uint32_t slot_bytes_kib;
+    uint32_t width, height, mip_count, format;
+  } in{};
+  if (size < sizeof in) return 0;
+  std::memcpy(&in, data, sizeof in);
+  const uint32_t slot_count = 1u + in.slot_count % 16384;
+  const uint64_t slot_bytes = (1u + in.slot_bytes_kib % 65536) * uint64_t{1024};
+  auto c = check_completion(in.record, slot_count, slot_bytes);
+  if (!c) return 0;
+  if (c->status == CompletionStatus::kOk) {
+    if (c->slot.value >= slot_count || c->byte_size > slot_bytes) __builtin_trap();
+  }
+  const TextureShape shape{1u + in.width % 16384, 1u + in.height % 16384, 1u + in.mip_count % 16,
+                           static_cast<TexelFormat>(in.format % 4)};
+  if (check_against_texture(*c, shape).ok() && c->status == CompletionStatus::kOk) {
+    if (c->mip.value >= shape.mip_count) __builtin_trap();
+    if (c->byte_size != mip_bytes(shape.format, shape.width, shape.height, c->mip.value)) __builtin_trap();
+  }
+  return 0;
+}

@@ -1,0 +1,157 @@
+// The sparse cache in texstream-render (issue 6), with the real server, lavapipe and the validation layer.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#define STB_IMAGE_IMPLEMENTATION
+#define STBI_ONLY_PNG
+#include <stb_image.h>
+
+#include "texstream/common/camera_path.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+const fs::path kBin = TEXSTREAM_BIN_DIR;
+
+fs::path fresh_dir(const std::string& name) {
+  fs::path d = fs::temp_directory_path() / ("texstream_cache_it_" + name + "_" + std::to_string(::getpid()));
+  fs::remove_all(d);
+  fs::create_directories(d);
+  return d;
+}
+
+int run(const std::string& cmd, const fs::path& log) {
+  const int status = std::system((cmd + " > '" + log.string() + "' 2>&1").c_str());
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+fs::path make_scene(const fs::path& dir, const std::string& format, int textures) {
+  const fs::path scene = dir / "scene";
+  EXPECT_EQ(run((kBin / "texstream-gen").string() + " --out " + scene.string() + " --textures " +
+                    std::to_string(textures) + " --seed 3 --threads 1 --format " + format,
+                dir / "gen.log"),
+            0)
+      << slurp(dir / "gen.log");
+  return scene;
+}
+
+std::string render_cmd(const fs::path& scene, const fs::path& out, const std::string& sets) {
+  return (kBin / "texstream-render").string() + " --config " + (fs::path(TEXSTREAM_SOURCE_DIR) / "config/test.toml").string() +
+         " --set scene.dir=" + scene.string() + " --set render.output_dir=" + out.string() + " " + sets;
+}
+
+class CacheThrash : public ::testing::TestWithParam<std::string> {};
+
+}  // namespace
+
+// A budget of 4 MiB (64 pages) against a fly-through that sees hundreds of textures: layers are evicted for the
+// budget every few frames, yet no frame ends with more bytes bound than the budget, and nothing is invalid.
+TEST_P(CacheThrash, BoundPagesNeverExceedTheBudget) {
+  const std::string format = GetParam();
+  const fs::path dir = fresh_dir("thrash_" + format);
+  const fs::path scene = make_scene(dir, format, 600);
+  const fs::path out = dir / "out";
+  const uint64_t budget = 4ull << 20;
+  const int rc = run(render_cmd(scene, out, "--set cache.memory_bytes=" + std::to_string(budget) +
+                                                " --set render.frames=40 --set render.write_every_frames=0"),
+                     dir / "render.log");
+  const std::string log = slurp(dir / "render.log");
+  ASSERT_EQ(rc, 0) << log;
+  const auto cache = nlohmann::json::parse(slurp(out / "cache.json"));
+  const auto summary = nlohmann::json::parse(slurp(out / "summary.json"));
+  EXPECT_EQ(summary["validation_errors"].get<int>(), 0) << log;
+  EXPECT_EQ(cache["frames"].get<uint64_t>(), 40u);
+  EXPECT_EQ(cache["budget_exceeded_frames"].get<uint64_t>(), 0u);
+  EXPECT_LE(cache["max_bound_bytes"].get<uint64_t>(), budget);
+  EXPECT_LE(cache["allocated_bytes"].get<uint64_t>(), budget);
+  EXPECT_GT(cache["max_bound_bytes"].get<uint64_t>(), budget / 2) << "the budget was never under pressure";
+  EXPECT_GT(cache["budget_evicted_layers"].get<uint64_t>(), 0u) << "no thrashing: the test does not test";
+  EXPECT_GT(cache["pages_unbound"].get<uint64_t>(), 0u);
+  EXPECT_GT(cache["pages_shared"].get<uint64_t>(), 0u) << "small regions should share pages";
+  EXPECT_GT(summary["mips_streamed"].get<int>(), 0);
+  // One vkQueueBindSparse per frame at most.
+  EXPECT_LE(cache["bind_calls"].get<uint64_t>(), 40u);
+  fs::remove_all(dir);
+}
+
+INSTANTIATE_TEST_SUITE_P(Formats, CacheThrash, ::testing::Values("rgba8", "bc1"));
+
+TEST(CacheBudget, TooSmallForOneLayerTextureIsANamedError) {
+  const fs::path dir = fresh_dir("small");
+  const fs::path scene = make_scene(dir, "rgba8", 20);
+  // 1 MiB = 16 pages; a 512 texture needs 16 + 4 + 8 x 1 = 28 pages with every level.
+  const int rc = run(render_cmd(scene, dir / "out", "--set cache.memory_bytes=1048576 --set render.frames=2"),
+                     dir / "render.log");
+  const std::string log = slurp(dir / "render.log");
+  EXPECT_NE(rc, 0);
+  EXPECT_NE(log.find("cache.memory_bytes"), std::string::npos) << log;
+  fs::remove_all(dir);
+}
+
+namespace {
+std::vector<unsigned char> load_rgb(const fs::path& f, int& w, int& h) {
+  int n = 0;
+  unsigned char* p = stbi_load(f.string().c_str(), &w, &h, &n, 3);
+  if (!p) return {};
+  std::vector<unsigned char> v(p, p + static_cast<size_t>(w) * h * 3);
+  stbi_image_free(p);
+  return v;
+}
+}  // namespace
+
+// A static view streamed for N frames against the same view after 3N frames: converged (PSNR >= 45 dB), and
+// the converged frame differs from frame 0 (the colormap only), so the comparison is not vacuous.
+TEST(CacheConvergence, StaticViewConvergesToTheLongRun) {
+  const fs::path dir = fresh_dir("converge");
+  const fs::path scene = make_scene(dir, "rgba8", 300);
+  auto path = texstream::CameraPath::load(scene / "camera_path.txt");
+  ASSERT_TRUE(path.ok());
+  const auto p = path->keys().front().pose;
+  {
+    std::ofstream f(dir / "still.txt");
+    f.precision(17);
+    f << "0 " << p.position[0] << " " << p.position[1] << " " << p.position[2] << " " << p.yaw_deg << " " << p.pitch_deg
+      << "\n";
+  }
+  const std::string common = "--set render.camera_path=" + (dir / "still.txt").string() +
+                             " --set cache.memory_bytes=268435456 --set render.validation=false";
+  ASSERT_EQ(run(render_cmd(scene, dir / "a", common + " --set render.frames=16 --set render.write_every_frames=15"),
+                dir / "a.log"),
+            0)
+      << slurp(dir / "a.log");
+  ASSERT_EQ(run(render_cmd(scene, dir / "b", common + " --set render.frames=48"), dir / "b.log"), 0) << slurp(dir / "b.log");
+  int w0, h0, w1, h1, w2, h2;
+  const auto first = load_rgb(dir / "a/frames/frame_00000.png", w0, h0);
+  const auto a = load_rgb(dir / "a/frames/frame_00015.png", w1, h1);
+  const auto b = load_rgb(dir / "b/frames/frame_00047.png", w2, h2);
+  ASSERT_FALSE(a.empty() || b.empty() || first.empty());
+  ASSERT_EQ(a.size(), b.size());
+  auto mse = [](const std::vector<unsigned char>& x, const std::vector<unsigned char>& y) {
+    double s = 0;
+    for (size_t i = 0; i < x.size(); ++i) s += (double(x[i]) - double(y[i])) * (double(x[i]) - double(y[i]));
+    return s / double(x.size());
+  };
+  const double m = mse(a, b);
+  const double psnr = m == 0 ? 100.0 : 10.0 * std::log10(255.0 * 255.0 / m);
+  EXPECT_GE(psnr, 45.0) << "MSE " << m;
+  EXPECT_GT(mse(first, b), 1.0) << "frame 0 already equals the converged frame: nothing was streamed";
+  fs::remove_all(dir);
+}

@@ -1,0 +1,213 @@
+#include "corrupt_corpus.hpp"
+
+#include "child_process.hpp"
+
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstring>
+#include <fstream>
+#include <functional>
+#include <random>
+
+namespace texstream::chaos {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// DDS_HEADER field offsets in the file ("DDS " magic first; Microsoft's DDS_HEADER / DDS_PIXELFORMAT).
+constexpr size_t kOffSize = 4, kOffHeight = 12, kOffWidth = 16, kOffMipCount = 28, kOffPfFlags = 80,
+                 kOffFourCc = 84;
+
+using Bytes = std::vector<std::byte>;
+
+void put_u32(Bytes& b, size_t off, uint32_t v) {
+  if (off + 4 <= b.size()) std::memcpy(b.data() + off, &v, 4);
+}
+
+Result<Bytes> read_all(const fs::path& p) {
+  const auto text = read_whole_file(p);
+  if (!text) return make_error(ErrorCode::kNotFound, "cannot read '" + p.string() + "'");
+  Bytes b(text->size());
+  std::memcpy(b.data(), text->data(), text->size());
+  return b;
+}
+
+Status write_all(const fs::path& p, const Bytes& b) {
+  fs::create_directories(p.parent_path());
+  std::ofstream out(p, std::ios::binary | std::ios::trunc);
+  out.write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
+  if (!out) return make_error(ErrorCode::kIo, "cannot write '" + p.string() + "'");
+  return ok_status();
+}
+
+// One mutation: edits the file bytes (or the file itself) and fills in the case's expectations.
+struct Mutation {
+  std::string name;
+  std::function<void(Bytes&, CorruptCase&)> apply;
+  enum Kind { kBytes, kMissing, kDirectory, kUnreadable } kind = kBytes;
+};
+
+std::vector<Mutation> mutations_for(const scene::TextureRecord& t, std::mt19937_64& rng) {
+  const auto f = static_cast<TexelFormat>(t.format);
+  std::vector<Mutation> m;
+  // Truncation at every mip boundary, and one byte short of each (the header end is boundary 0).
+  for (uint32_t level = 0; level <= t.mip_count; ++level) {
+    const uint64_t end = scene::dds_mip_offset(f, t.width, t.height, level);
+    for (uint64_t cut : {end, end - 1}) {
+      if (level == t.mip_count && cut == end) continue;  // the whole file: not a truncation
+      // Mip l lies in [off(l), off(l+1)): it is intact iff off(l+1) <= cut.
+      uint32_t first_bad = 0;
+      while (first_bad < t.mip_count && scene::dds_mip_offset(f, t.width, t.height, first_bad + 1) <= cut) ++first_bad;
+      m.push_back({"truncated at " + std::to_string(cut) + " bytes", [cut, first_bad](Bytes& b, CorruptCase& c) {
+                     b.resize(cut);
+                     if (cut < scene::kDdsHeaderBytes) c.all_must_fail = true;
+                     c.first_failing_mip = first_bad;
+                   }});
+    }
+  }
+  for (uint64_t cut : {0ull, 3ull, 4ull, 64ull, 127ull}) {
+    m.push_back({"truncated inside the header at " + std::to_string(cut) + " bytes", [cut](Bytes& b, CorruptCase& c) {
+                   b.resize(cut);
+                   c.all_must_fail = true;
+                 }});
+  }
+  auto header = [&](std::string name, size_t off, uint32_t v, bool must_fail) {
+    m.push_back({std::move(name), [off, v, must_fail](Bytes& b, CorruptCase& c) {
+                   put_u32(b, off, v);
+                   c.all_must_fail = must_fail;
+                 }});
+  };
+  header("bad magic", 0, 0x20534444u ^ 0x01010101u, true);
+  header("header size 0", kOffSize, 0, true);
+  header("header size 0xffffffff", kOffSize, 0xffffffffu, true);
+  header("header size 200", kOffSize, 200, true);
+  header("width 0", kOffWidth, 0, true);
+  header("height 0", kOffHeight, 0, true);
+  header("width 0x7fffffff", kOffWidth, 0x7fffffffu, true);
+  header("height 0xffffffff", kOffHeight, 0xffffffffu, true);
+  header("width 65536", kOffWidth, 65536, true);
+  header("width doubled (not the table's extent)", kOffWidth, t.width * 2, true);
+  header("mip count 0xffffffff", kOffMipCount, 0xffffffffu, false);  // may be refused, or read as "levels present"
+  header("mip count 0", kOffMipCount, 0, false);                      // legacy files: 0 means one level
+  header("mip count 1 more than possible", kOffMipCount, t.mip_count + 1, false);
+  header("pixel-format flags 0", kOffPfFlags, 0, f == TexelFormat::kBc1);
+  header("unknown FourCC 'XYZW'", kOffFourCc, 0x575a5958u, f == TexelFormat::kBc1);
+  header("FourCC DXT5", kOffFourCc, 0x35545844u, f == TexelFormat::kBc1);  // a bc1 texture is never re-encoded
+  for (int i = 0; i < 6; ++i) {
+    const size_t bit = std::uniform_int_distribution<size_t>(0, scene::kDdsHeaderBytes * 8 - 1)(rng);
+    m.push_back({"bit flip in the header (bit " + std::to_string(bit) + ")", [bit](Bytes& b, CorruptCase&) {
+                   b[bit / 8] ^= static_cast<std::byte>(1u << (bit % 8));
+                 }});
+  }
+  const uint64_t data_bytes = scene::dds_file_bytes(f, t.width, t.height, t.mip_count) - scene::kDdsHeaderBytes;
+  for (int i = 0; i < 4; ++i) {
+    const uint64_t bit = std::uniform_int_distribution<uint64_t>(0, data_bytes * 8 - 1)(rng);
+    m.push_back({"bit flip in the texel data (bit " + std::to_string(bit) + ")", [bit](Bytes& b, CorruptCase&) {
+                   b[scene::kDdsHeaderBytes + bit / 8] ^= static_cast<std::byte>(1u << (bit % 8));
+                 }});
+  }
+  m.push_back({"texel data zeroed", [](Bytes& b, CorruptCase&) {
+                 std::fill(b.begin() + static_cast<std::ptrdiff_t>(scene::kDdsHeaderBytes), b.end(), std::byte{0});
+               }});
+  m.push_back({"whole file zero bytes", [](Bytes& b, CorruptCase& c) {
+                 std::fill(b.begin(), b.end(), std::byte{0});
+                 c.all_must_fail = true;
+               }});
+  m.push_back({"1 MiB of trailing garbage", [&rng](Bytes& b, CorruptCase&) {
+                 for (int i = 0; i < (1 << 20); ++i) b.push_back(static_cast<std::byte>(rng()));
+               }});
+  m.push_back({"random bytes with a valid magic", [&rng](Bytes& b, CorruptCase&) {
+                 for (size_t i = 4; i < b.size(); ++i) b[i] = static_cast<std::byte>(rng());
+               }});
+  m.push_back({"missing file", {}, Mutation::kMissing});
+  m.push_back({"a directory in place of the file", {}, Mutation::kDirectory});
+  m.push_back({"unreadable (chmod 000)", {}, Mutation::kUnreadable});
+  return m;
+}
+
+}  // namespace
+
+bool permissions_stop_reads(const fs::path& dir) {
+  const fs::path probe = dir / (".perm-probe-" + std::to_string(::getpid()));
+  { std::ofstream(probe) << "x"; }
+  ::chmod(probe.c_str(), 0);
+  const bool stopped = ::access(probe.c_str(), R_OK) != 0;
+  fs::remove(probe);
+  return stopped;
+}
+
+Result<Corpus> make_corrupt_corpus(const fs::path& scene_dir, const fs::path& out_dir, const CorpusOptions& o) {
+  std::error_code ec;
+  if (fs::equivalent(scene_dir, out_dir, ec)) {
+    return make_error(ErrorCode::kInvalidArgument, "corpus folder '" + out_dir.string() + "' is the source scene");
+  }
+  auto table = scene::read_texture_table(scene_dir);
+  if (!table) return table.error();
+  fs::create_directories(out_dir);
+  for (const char* f : {"scene.json", "meshes.bin", "textures.bin", "colormap.bin", "camera_path.txt"}) {
+    if (fs::exists(scene_dir / f)) fs::copy_file(scene_dir / f, out_dir / f, fs::copy_options::overwrite_existing);
+  }
+  Corpus corpus;
+  corpus.table = *table;
+  const bool can_unread = permissions_stop_reads(out_dir);
+  if (!can_unread) corpus.skipped = "unreadable files: chmod 000 does not stop reads here (running as root)";
+
+  std::mt19937_64 rng(o.seed);
+  size_t next = 0;  // index into the mutation list, which depends on each texture's shape
+  bool exhausted = false;
+  for (uint32_t id = 0; id < table->size(); ++id) {
+    const fs::path src = scene::texture_path(scene_dir, TextureId(id));
+    const fs::path dst = scene::texture_path(out_dir, TextureId(id));
+    auto bytes = read_all(src);
+    if (!bytes) return bytes.error();
+    const bool room = o.max_cases == 0 || corpus.cases.size() < o.max_cases;
+    std::vector<Mutation> list = mutations_for((*table)[id], rng);
+    if (!can_unread) std::erase_if(list, [](const Mutation& m) { return m.kind == Mutation::kUnreadable; });
+    if (next >= list.size()) {
+      exhausted = !o.repeat;
+      next = 0;
+    }
+    if (!room || exhausted) {
+      TS_TRY(write_all(dst, *bytes));
+      corpus.intact.push_back(id);
+      continue;
+    }
+    const Mutation& mu = list[next++];
+    CorruptCase c;
+    c.texture = id;
+    c.mutation = mu.name;
+    c.file = dst;
+    fs::create_directories(dst.parent_path());
+    switch (mu.kind) {
+      case Mutation::kBytes: {
+        const Bytes before = *bytes;
+        mu.apply(*bytes, c);
+        c.header_changed = bytes->size() < scene::kDdsHeaderBytes ||
+                           !std::equal(bytes->begin(), bytes->begin() + scene::kDdsHeaderBytes, before.begin());
+        TS_TRY(write_all(dst, *bytes));
+        break;
+      }
+      case Mutation::kMissing:
+        fs::remove(dst);
+        c.all_must_fail = true;
+        break;
+      case Mutation::kDirectory:
+        fs::create_directories(dst);
+        c.all_must_fail = true;
+        break;
+      case Mutation::kUnreadable:
+        TS_TRY(write_all(dst, *bytes));
+        ::chmod(dst.c_str(), 0);
+        c.all_must_fail = true;
+        c.unreadable = true;
+        break;
+    }
+    corpus.cases.push_back(std::move(c));
+  }
+  return corpus;
+}
+
+}  // namespace texstream::chaos
