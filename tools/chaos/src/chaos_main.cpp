@@ -15,9 +15,9 @@ int main(int argc, char** argv) {
   int kills = -1;
   double minutes = -1;
   std::string scene, bin_dir, work_dir;
-  app.add_flag("--quick", quick, "CI size: 20 kills over about 45 s, a 1500-texture scene");
+  app.add_flag("--quick", quick, "CI size: 20 kills paced over about 60 s, a 1500-texture scene");
   app.add_option("--kills", kills, "SIGKILLs to send (default 1000, quick 20)")->check(CLI::Range(1, 1000000));
-  app.add_option("--minutes", minutes, "length of the kill phase (default 30, quick 0.75)")->check(CLI::Range(0.05, 1440.0));
+  app.add_option("--minutes", minutes, "length of the kill phase (default 30, quick 1)")->check(CLI::Range(0.05, 1440.0));
   app.add_option("--scene", scene, "scene folder (default: texstream-gen into the work folder)");
   app.add_option("--textures", o.textures, "textures of the generated scene")->check(CLI::Range(50u, 1000000u));
   app.add_option("--seed", o.seed, "seed of the scene and of the kill schedule");
@@ -29,7 +29,7 @@ int main(int argc, char** argv) {
   o.quick = quick;
   if (quick) o.textures = std::min<uint32_t>(o.textures, 1500);
   o.kills = kills > 0 ? kills : (quick ? 20 : 1000);
-  o.minutes = minutes > 0 ? minutes : (quick ? 0.75 : 30.0);
+  o.minutes = minutes > 0 ? minutes : (quick ? 1.0 : 30.0);
   o.scene = scene;
   o.bin_dir = bin_dir;
   o.work_dir = work_dir;
