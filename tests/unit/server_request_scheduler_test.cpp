@@ -94,5 +94,36 @@ TEST(RequestSchedulerTest, ManyPriorityRaisesKeepTheHeapBoundedAndCorrect) {
   EXPECT_EQ(n, 9);
 }
 
+TEST(RequestSchedulerTest, AMipAskedAgainAfterBeingSupersededTakesItsNewPriority) {
+  RequestScheduler s;
+  ASSERT_FALSE(s.add(req(1, 0, 1, 9)));  // leaves a heap node at priority 9
+  std::vector<LoadRequest> cancelled;
+  ASSERT_FALSE(s.add(req(2, 0, 2, 5)));
+  s.supersede_older_than(Generation(2), cancelled);  // removes (1, 0); its node stays in the heap
+  ASSERT_EQ(cancelled.size(), 1u);
+  ASSERT_FALSE(s.add(req(1, 0, 2, 1)));  // asked again, now the least urgent
+  EXPECT_EQ(s.pop()->texture.value, 2u);  // not (1, 0) at its old priority 9
+  EXPECT_EQ(s.pop()->texture.value, 1u);
+  EXPECT_TRUE(s.empty());
+  EXPECT_FALSE(s.pop());
+}
+
+TEST(RequestSchedulerTest, SupersedingTwiceForTheSameGenerationCancelsNothingNew) {
+  RequestScheduler s;
+  ASSERT_FALSE(s.add(req(1, 0, 1, 1)));
+  ASSERT_FALSE(s.add(req(2, 0, 2, 1)));
+  std::vector<LoadRequest> cancelled;
+  s.supersede_older_than(Generation(2), cancelled);
+  EXPECT_EQ(cancelled.size(), 1u);
+  ASSERT_FALSE(s.add(req(3, 0, 2, 1)));
+  s.supersede_older_than(Generation(2), cancelled);
+  EXPECT_EQ(cancelled.size(), 1u);
+  EXPECT_EQ(s.size(), 2u);
+  ASSERT_FALSE(s.add(req(4, 0, 3, 1)));
+  s.supersede_older_than(Generation(3), cancelled);  // a newer generation scans again
+  EXPECT_EQ(cancelled.size(), 3u);
+  EXPECT_EQ(s.size(), 1u);
+}
+
 }  // namespace
 }  // namespace texstream::server

@@ -15,7 +15,8 @@ std::optional<LoadRequest> RequestScheduler::add(const LoadRequest& request) {
   const MipKey key = request.key();
   auto it = pending_.find(key);
   if (it == pending_.end()) {
-    Pending p{request, next_sequence_++, 0};
+    const uint64_t sequence = next_sequence_++;
+    Pending p{request, sequence, sequence};
     pending_.emplace(key, p);
     push_node(p);
     compact_heap();
@@ -29,7 +30,7 @@ std::optional<LoadRequest> RequestScheduler::add(const LoadRequest& request) {
   p.request.generation = request.generation;
   if (raise) {
     p.request.priority = request.priority;
-    ++p.version;
+    p.version = next_sequence_++;
     push_node(p);
     compact_heap();
   }

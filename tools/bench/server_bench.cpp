@@ -775,6 +775,19 @@ int run_server_bench(const std::vector<std::string>& args) {
     uint32_t end2 = 0;
     const std::vector<Request> lat_set = all_mips_until(s, end, 8ull << 20, &end2);
     miss_lat = stream(*h, lat_set, kLatencyWindow, 2, true);
+    // Diagnostic: the same misses against a server whose cache is already at its budget (32 MiB, filled with
+    // other textures), so every insert evicts and reuses freed memory: the cost of a miss in a server that has
+    // been running, without the first touch of never-used cache memory that the cold run above pays.
+    double steady_bw = 0;
+    {
+      ServerConfig steady = config;
+      steady.ram_cache_bytes = 32ll << 20;
+      auto hs = Harness::start(s.dir, steady);
+      if (!hs) return 1;
+      stream(*hs, all_mips_until(s, 0, 40ull << 20), hs->slots(), 1, false);
+      const StreamResult rs = stream(*hs, miss_set, hs->slots(), 2, false);
+      steady_bw = static_cast<double>(rs.bytes) / rs.seconds / 1e9;
+    }
     // Diagnostic: the same misses through MipLoader alone on this thread (no rings, dispatcher or workers):
     // separates the cost of a load itself from the cost of the pipeline around it.
     double loader_bw = 0;
@@ -801,6 +814,9 @@ int run_server_bench(const std::vector<std::string>& args) {
                 miss_set.size(), end - first, static_cast<double>(r.bytes) / 1e6, miss_bw,
                 static_cast<double>(read_bytes) / 1e6, read_bw, miss_bw / read_bw, read_amp,
                 static_cast<unsigned long long>(r.failures));
+    std::printf("  (diagnostic) the same misses with the cache already full (steady state, 32 MiB): %.2f GB/s -> "
+                "ratio %.3f\n",
+                steady_bw, steady_bw / read_bw);
     std::printf("  (diagnostic) the same misses through the loader alone on one thread, no rings: %.2f GB/s, %.2f us "
                 "per mip\n",
                 loader_bw, static_cast<double>(r.bytes) / 1e3 / loader_bw / static_cast<double>(miss_set.size()));

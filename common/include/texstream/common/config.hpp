@@ -32,7 +32,7 @@ struct ServerConfig {
   int64_t ram_cache_bytes = 256ll << 20;
   double idle_wait_ms = 20;             // futex wait between doorbells (also paces the heartbeat)
   std::string log_level = "info";       // trace, debug, info, warn, error
-  std::string cache_policy = "lru";     // RAM cache eviction: lru, or level (seed 002 Eq. 4 discard priority)
+  std::string cache_policy = "level";   // RAM cache eviction: level (seed 002 Eq. 4 discard priority) or lru
   double rate_limit_mb_s = 0;           // storage read rate cap in MB/s (0: unlimited), seed 002 §3.3
 };
 
@@ -82,7 +82,7 @@ struct ControllerConfig {
 struct CacheConfig {
   std::string format = "auto";          // auto (the scene's format), rgba8 or bc1: the texel format of the GPU cache
   int64_t layer_extent_px = 512;        // side of one cache layer; the largest texture extent it can hold
-  int64_t layers = 64;                  // array layers of the cache image (GPU memory bound)
+  int64_t layers = 512;                 // array layers of the sparse cache image: virtual space only; memory_bytes bounds memory
   int64_t memory_bytes = 128ll << 20;   // GPU memory the cache's bound sparse pages may use (never exceeded)
 };
 

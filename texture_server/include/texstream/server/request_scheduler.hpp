@@ -50,13 +50,16 @@ class RequestScheduler {
   struct Pending {
     LoadRequest request;
     uint64_t sequence;  // arrival order: FIFO among equal priorities
-    uint32_t version;   // bumped when the priority is raised; older heap nodes are then stale
+    // Unique across the scheduler's life (drawn from next_sequence_), renewed when the priority is raised:
+    // a heap node whose version differs is stale. Per-entry counters starting at 0 let a node left behind by
+    // a removed entry pass for the node of a later request for the same mip, serving it at the old priority.
+    uint64_t version;
   };
   struct HeapNode {
     float priority;
     uint64_t sequence;
     MipKey key;
-    uint32_t version;
+    uint64_t version;
   };
   struct NodeLess {
     bool operator()(const HeapNode& a, const HeapNode& b) const {
