@@ -12,6 +12,7 @@
 #include <cstring>
 #include <random>
 #include <thread>
+#include <vector>
 
 #include "chaos_test_support.hpp"
 #include "texstream/protocol/checksum.hpp"
@@ -95,7 +96,13 @@ class HostileServer {
       const uint64_t bytes = mip_bytes(s.format, e);
       const uint32_t slot = next_slot++ % slots;  // ignores ownership on purpose
       std::span<std::byte> dst = seg_->slot(slot);
-      for (uint64_t i = 0; i < bytes && i < dst.size(); ++i) dst[i] = pattern(r->texture_id, r->mip_level, i);
+      // The checksum is of the bytes the server means to send, computed before they reach the slot: a flip by
+      // the scribbler between fill and checksum would otherwise make a consistent lie that no receiver can
+      // detect (the checksum guards against changes after publication, not against a server lying about both).
+      const uint64_t n = std::min<uint64_t>(bytes, dst.size());
+      intended_.resize(n);
+      for (uint64_t i = 0; i < n; ++i) intended_[i] = pattern(r->texture_id, r->mip_level, i);
+      std::memcpy(dst.data(), intended_.data(), n);
       CompletionRecord c{};
       c.status = static_cast<uint32_t>(CompletionStatus::kOk);
       c.slot = slot;
@@ -106,7 +113,7 @@ class HostileServer {
       c.format = static_cast<uint32_t>(s.format);
       c.width = e.width;
       c.height = e.height;
-      c.checksum = payload_checksum(dst.data(), std::min<uint64_t>(bytes, dst.size()));
+      c.checksum = payload_checksum(intended_.data(), n);
       const int attack = static_cast<int>(rng_() % 14);
       ++attacks[attack];
       switch (attack) {
@@ -132,6 +139,7 @@ class HostileServer {
 
  private:
   std::mt19937_64 rng_;
+  std::vector<std::byte> intended_;  // the payload as meant, reused between answers
   std::unique_ptr<Segment> seg_;
   SpscRingConsumer<RequestRecord> requests_;
   SpscRingProducer<CompletionRecord> completions_;
