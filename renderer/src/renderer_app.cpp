@@ -15,6 +15,7 @@
 #include "texstream/render/broad_phase.hpp"
 #include "texstream/render/camera.hpp"
 #include "texstream/render/frame_capture.hpp"
+#include "texstream/render/frame_constants.hpp"
 #include "texstream/render/interactive_session.hpp"
 #include "texstream/render/gpu_structs.hpp"
 #include "texstream/render/scene_data.hpp"
@@ -121,7 +122,6 @@ class Renderer {
   Status set_up();
   Status render_frame(uint64_t index, bool last);
   void start_cycle();
-  gpu::PassConstants wide_pass_constants(const Camera& cam) const;
 
   const RenderRun& run_;
   const Config& cfg_;
@@ -258,21 +258,6 @@ Status Renderer::set_up() {
   return ok_status();
 }
 
-gpu::PassConstants Renderer::wide_pass_constants(const Camera& cam) const {
-  const auto& o = passes_->options();
-  const double t_view = std::tan(cfg_.render.fov_y_deg * M_PI / 360.0);
-  const double t_wide = std::tan(cfg_.render.offscreen_fov_y_deg * M_PI / 360.0);
-  // One wide-pass pixel spans `ratio` viewport pixels per axis: its mip level is log2(ratio) coarser than the
-  // viewport would need, and it stands for ratio^2 viewport pixels of W = 1 each (seed 000 §3.2).
-  const double ratio = (t_wide / o.wide_height) / (t_view / o.height);
-  gpu::PassConstants pc{};
-  const glm::mat4 vp = cam.wide_proj * cam.view;
-  std::memcpy(pc.view_proj.m, &vp[0][0], sizeof pc.view_proj.m);
-  const auto bound = static_cast<float>(t_view / t_wide);  // the viewport's |ndc| extent inside the wide pass
-  pc.pass = {static_cast<float>(-std::log2(ratio)), static_cast<float>(ratio * ratio), bound, bound};
-  return pc;
-}
-
 Status Renderer::render_frame(uint64_t index, bool last) {
   const auto t0 = Clock::now();
   const double time_s = static_cast<double>(index) * cfg_.render.frame_time_ms / 1000.0;
@@ -285,21 +270,15 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   broad_phase_->query(Frustum::from_matrix(cam.wide_proj * cam.view), cam.position, visible_);
   FrameRecording rec;
   rec.draw_count = scene_gpu_->write_draws(scene_, visible_, cam.position);
-  const glm::mat4 vp = cam.proj * cam.view;
-  std::memcpy(rec.main.view_proj.m, &vp[0][0], sizeof rec.main.view_proj.m);
-  rec.main.pass = {0.0f, 1.0f, 2.0f, 2.0f};
-  rec.wide = wide_pass_constants(cam);
-
-  auto* fu = scene_gpu_->frame_uniforms.as<gpu::FrameUniforms>();
-  const float a_m = static_cast<float>(cfg_.stream.max_anisotropy);
-  fu->camera_forward = {cam.forward.x, cam.forward.y, cam.forward.z, 0.0f};
-  // A_s = A_m / 2 (seed 000 §3.2), at least one tap.
-  fu->params = {a_m, std::max(1.0f, std::floor(a_m / 2.0f)), static_cast<float>(cfg_.stream.foreground_distance_m),
-                static_cast<float>(cfg_.render.headlight_ambient)};
-  const double tau_fixed = std::min(cfg_.stream.tau * gpu::kWeightFixedScale, 4294967295.0);
-  fu->flags = {(cfg_.stream.colormap_blend ? gpu::kFlagColormapBlend : 0u) | gpu::kFlagLighting,
-               scene_gpu_->mesh_count, static_cast<uint32_t>(std::ceil(tau_fixed)), scene_gpu_->compact_capacity};
-  fu->cache = {cache_->layer_extent(), cache_->mip_levels(), 0, 0};
+  rec.main = main_pass_constants(cam);
+  const auto& po = passes_->options();
+  rec.wide = wide_pass_constants(cam, cfg_.render.fov_y_deg, cfg_.render.offscreen_fov_y_deg, po.height,
+                                 po.wide_height);
+  // The same constants the offline ViewRenderer uses (frame_constants.hpp); ScenePasses::record adds the
+  // view mode and the feedback bit.
+  *scene_gpu_->frame_uniforms.as<gpu::FrameUniforms>() =
+      frame_uniforms(cam, cfg_, scene_gpu_->mesh_count, scene_gpu_->compact_capacity, cache_->layer_extent(),
+                     cache_->mip_levels());
 
   // Completions that arrived since the last frame: validated by the client, copied into the staging ring.
   // Real time: at most controller.load_time_ms of this frame goes to it (LoadTimeSink), and whatever has not

@@ -1,7 +1,7 @@
 #pragma once
 // The per-frame GPU constants of the scene passes, computed from a camera and the configuration: the main and
-// wide passes' push constants and the frame uniforms. Used by the offline ViewRenderer (tests, benchmark); the
-// frame loop in renderer_app.cpp computes the same values inline.
+// wide passes' push constants and the frame uniforms. One definition for the frame loop (renderer_app.cpp) and
+// the offline ViewRenderer (tests, benchmark).
 #include "texstream/common/config.hpp"
 #include "texstream/render/camera.hpp"
 #include "texstream/render/gpu_structs.hpp"
