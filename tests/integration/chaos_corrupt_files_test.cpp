@@ -32,7 +32,7 @@ using Clock = std::chrono::steady_clock;
 std::vector<std::byte> read_file(const fs::path& p) {
   const std::string text = chaos::read_whole_file(p).value_or("");
   std::vector<std::byte> b(text.size());
-  std::memcpy(b.data(), text.data(), text.size());
+  if (!text.empty()) std::memcpy(b.data(), text.data(), text.size());  // data() of an empty vector may be null
   return b;
 }
 

@@ -31,7 +31,7 @@ Result<Bytes> read_all(const fs::path& p) {
   const auto text = read_whole_file(p);
   if (!text) return make_error(ErrorCode::kNotFound, "cannot read '" + p.string() + "'");
   Bytes b(text->size());
-  std::memcpy(b.data(), text->data(), text->size());
+  if (!text->empty()) std::memcpy(b.data(), text->data(), text->size());  // an empty vector's data() may be null
   return b;
 }
 
