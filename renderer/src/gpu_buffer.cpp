@@ -1,5 +1,7 @@
 #include "texstream/render/gpu_buffer.hpp"
 
+#include <utility>
+
 #include "texstream/render/vk_check.hpp"
 #include "texstream/render/vulkan_context.hpp"
 
@@ -23,17 +25,11 @@ Result<GpuBuffer> GpuBuffer::create(const VulkanContext& ctx, VkDeviceSize size,
   VkMemoryRequirements req;
   vkGetBufferMemoryRequirements(device, buffer, &req);
   const bool host = use == MemoryUse::kHostVisible;
-  auto type = host ? ctx.find_memory_type(req.memoryTypeBits,
-                                          VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT, 0)
-                   : ctx.find_memory_type(req.memoryTypeBits, 0, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
-  if (!type) return type.error();
-  VkMemoryAllocateInfo mai{};
-  mai.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;
-  mai.allocationSize = req.size;
-  mai.memoryTypeIndex = *type;
-  VkDeviceMemory memory = VK_NULL_HANDLE;
-  TS_VK_TRY(vkAllocateMemory(device, &mai, nullptr, &memory));
-  b.memory_ = UniqueMemory(device, memory);
+  auto mem = host ? ctx.allocate(req, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT, 0)
+                  : ctx.allocate(req, 0, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+  if (!mem) return mem.error();
+  b.memory_ = std::move(*mem);
+  VkDeviceMemory memory = b.memory_.get();
   TS_VK_TRY(vkBindBufferMemory(device, buffer, memory, 0));
   if (host) TS_VK_TRY(vkMapMemory(device, memory, 0, VK_WHOLE_SIZE, 0, &b.mapped_));
   return b;

@@ -1,5 +1,7 @@
 #include "texstream/render/gpu_image.hpp"
 
+#include <utility>
+
 #include "texstream/render/vk_check.hpp"
 #include "texstream/render/vulkan_context.hpp"
 
@@ -27,15 +29,10 @@ Result<GpuImage> GpuImage::create(const VulkanContext& ctx, const GpuImageInfo& 
 
   VkMemoryRequirements req;
   vkGetImageMemoryRequirements(device, image, &req);
-  auto type = ctx.find_memory_type(req.memoryTypeBits, 0, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
-  if (!type) return type.error();
-  VkMemoryAllocateInfo mai{};
-  mai.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;
-  mai.allocationSize = req.size;
-  mai.memoryTypeIndex = *type;
-  VkDeviceMemory memory = VK_NULL_HANDLE;
-  TS_VK_TRY(vkAllocateMemory(device, &mai, nullptr, &memory));
-  img.memory_ = UniqueMemory(device, memory);
+  auto mem = ctx.allocate(req, 0, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+  if (!mem) return mem.error();
+  img.memory_ = std::move(*mem);
+  VkDeviceMemory memory = img.memory_.get();
   TS_VK_TRY(vkBindImageMemory(device, image, memory, 0));
 
   VkImageViewCreateInfo vci{};

@@ -233,4 +233,17 @@ Result<uint32_t> VulkanContext::find_memory_type(uint32_t type_bits, VkMemoryPro
   return make_error(ErrorCode::kUnsupported, "no Vulkan memory type with the required properties");
 }
 
+Result<UniqueMemory> VulkanContext::allocate(const VkMemoryRequirements& req, VkMemoryPropertyFlags required,
+                                             VkMemoryPropertyFlags preferred) const {
+  auto type = find_memory_type(req.memoryTypeBits, required, preferred);
+  if (!type) return type.error();
+  VkMemoryAllocateInfo mai{};
+  mai.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;
+  mai.allocationSize = req.size;
+  mai.memoryTypeIndex = *type;
+  VkDeviceMemory memory = VK_NULL_HANDLE;
+  TS_VK_TRY(vkAllocateMemory(device_, &mai, nullptr, &memory));
+  return UniqueMemory(device_, memory);
+}
+
 }  // namespace texstream::render

@@ -1,5 +1,7 @@
 // The sparse cache in texstream-render (issue 6), with the real server, lavapipe and the validation layer.
 #include <gtest/gtest.h>
+
+#include "process_test_support.hpp"
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -23,25 +25,10 @@ namespace fs = std::filesystem;
 namespace {
 
 const fs::path kBin = TEXSTREAM_BIN_DIR;
+using texstream::test::slurp;
+int run(const std::string& cmd, const fs::path& log) { return texstream::test::run_logged(cmd, log); }
 
-fs::path fresh_dir(const std::string& name) {
-  fs::path d = fs::temp_directory_path() / ("texstream_cache_it_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
-}
-
-int run(const std::string& cmd, const fs::path& log) {
-  const int status = std::system((cmd + " > '" + log.string() + "' 2>&1").c_str());
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+fs::path fresh_dir(const std::string& name) { return texstream::test::fresh_dir("texstream_cache_it_", name); }
 
 fs::path make_scene(const fs::path& dir, const std::string& format, int textures) {
   const fs::path scene = dir / "scene";

@@ -116,15 +116,15 @@ TEST(ChaosCorruptFiles, TheRealServerRefusesEveryDamagedMipByNameAndKeepsServing
     auto client = std::move(*started);
     RecordingSink sink;
     // Every (texture, mip), damaged and intact interleaved; a request goes out again if its server died.
-    std::vector<std::pair<uint32_t, uint32_t>> todo;
+    std::vector<std::pair<uint32_t, uint32_t>> wanted;
     for (uint32_t t = 0; t < source.textures.size(); ++t)
-      for (uint32_t m = 0; m < source.textures[t].mip_count; ++m) todo.emplace_back(t, m);
+      for (uint32_t m = 0; m < source.textures[t].mip_count; ++m) wanted.emplace_back(t, m);
     const auto t0 = Clock::now();
     size_t next = 0;
-    while (sink.answers.size() < todo.size() && Clock::now() - t0 < 60s) {
+    while (sink.answers.size() < wanted.size() && Clock::now() - t0 < 60s) {
       client->begin_cycle();
-      for (size_t n = 0; n < todo.size() && client->stats().in_flight < 48; ++n) {
-        const auto& [t, m] = todo[(next + n) % todo.size()];
+      for (size_t n = 0; n < wanted.size() && client->stats().in_flight < 48; ++n) {
+        const auto& [t, m] = wanted[(next + n) % wanted.size()];
         if (sink.answers.count({t, m}) || client->in_flight(TextureId(t), MipLevel(m))) continue;
         const auto out = client->try_request(TextureId(t), MipLevel(m), 1.0f);
         if (to_send_result(out) == SendResult::kStop) break;

@@ -6,6 +6,8 @@
 // colormap no weight at mip 0, so neither may change a texel. On failure, actual, expected and diff PNGs are
 // written next to the test output and their paths printed.
 #include <gtest/gtest.h>
+
+#include "process_test_support.hpp"
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -31,6 +33,8 @@ using namespace texstream;
 namespace {
 
 const fs::path kBin = TEXSTREAM_BIN_DIR;
+using texstream::test::slurp;
+int run(const std::string& cmd, const fs::path& log) { return texstream::test::run_logged(cmd, log); }
 constexpr uint32_t kTex = 256;        // texture side
 constexpr int kWidth = 960, kHeight = 540;
 constexpr double kFovY = 60.0;
@@ -127,18 +131,6 @@ void write_scene(const fs::path& dir) {
   man.bounds_min = {kCamX - half, kCamY + kDistance, kCamZ - half};
   man.bounds_max = {kCamX + half, kCamY + kDistance, kCamZ + half};
   ASSERT_TRUE(scene::write_manifest(dir, man).ok());
-}
-
-int run(const std::string& cmd, const fs::path& log) {
-  const int status = std::system((cmd + " > '" + log.string() + "' 2>&1").c_str());
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
 }
 
 // Bilinear sample of mip 0 at texel coordinates (tx, ty) (texel centres at +0.5), edges clamped.

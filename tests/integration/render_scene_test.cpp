@@ -2,6 +2,8 @@
 // layer: exit code 0, zero validation errors, the PNGs it promised, textures resident. Plus the error paths of
 // the command line.
 #include <gtest/gtest.h>
+
+#include "process_test_support.hpp"
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -18,26 +20,10 @@ namespace fs = std::filesystem;
 namespace {
 
 const fs::path kBin = TEXSTREAM_BIN_DIR;
+using texstream::test::slurp;
+int run(const std::string& cmd, const fs::path& log) { return texstream::test::run_logged(cmd, log); }
 
-fs::path fresh_dir(const std::string& name) {
-  fs::path d = fs::temp_directory_path() / ("texstream_render_it_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
-}
-
-// Runs `cmd` with stdout+stderr into `log`; returns the exit code (-1 if it did not exit normally).
-int run(const std::string& cmd, const fs::path& log) {
-  const int status = std::system((cmd + " > '" + log.string() + "' 2>&1").c_str());
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+fs::path fresh_dir(const std::string& name) { return texstream::test::fresh_dir("texstream_render_it_", name); }
 
 class RenderScene : public ::testing::TestWithParam<std::string> {};
 

@@ -7,6 +7,8 @@
 //     (tau = 0, no off-screen widening); the same view at (0,0,0) and (4e6,5e6,0) gives PSNR >= 60 dB;
 //   - the window mode under Xvfb renders the asked frames and exits 0.
 #include <gtest/gtest.h>
+
+#include "process_test_support.hpp"
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -28,6 +30,8 @@ using namespace texstream::render;
 namespace {
 
 const fs::path kBin = TEXSTREAM_BIN_DIR;
+using texstream::test::slurp;
+int run(const std::string& cmd, const fs::path& log) { return texstream::test::run_logged(cmd, log); }
 constexpr double kX = 392000.0, kY = 5820000.0, kZ = 40.0;  // map coordinates on purpose
 constexpr uint32_t kTex = 512;                               // texture side: mip_max = 9
 constexpr int kW = 480, kH = 270;
@@ -97,24 +101,7 @@ ViewResult render_one(const Config& cfg, SceneData scene, const CameraPose& pose
   return v.ok() ? std::move(*v) : ViewResult{};
 }
 
-int run(const std::string& cmd, const fs::path& log) {
-  const int status = std::system((cmd + " > '" + log.string() + "' 2>&1").c_str());
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-fs::path fresh_dir(const std::string& name) {
-  fs::path d = fs::temp_directory_path() / ("texstream_vis_it_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
-}
+fs::path fresh_dir(const std::string& name) { return texstream::test::fresh_dir("texstream_vis_it_", name); }
 
 }  // namespace
 

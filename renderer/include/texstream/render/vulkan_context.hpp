@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "texstream/common/result.hpp"
+#include "texstream/render/vk_handle.hpp"
 
 namespace texstream::render {
 
@@ -54,6 +55,9 @@ class VulkanContext {
   // A memory type index among `type_bits` that has all of `required`; prefers one that also has `preferred`.
   Result<uint32_t> find_memory_type(uint32_t type_bits, VkMemoryPropertyFlags required,
                                     VkMemoryPropertyFlags preferred) const;
+  // One dedicated allocation for `req` in such a memory type (buffers and images that own their memory).
+  Result<UniqueMemory> allocate(const VkMemoryRequirements& req, VkMemoryPropertyFlags required,
+                                VkMemoryPropertyFlags preferred) const;
 
  private:
   VulkanContext() = default;
