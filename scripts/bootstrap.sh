@@ -15,6 +15,8 @@ PACKAGES=(
   libtbb-dev libxxhash-dev libcurl4-openssl-dev libstb-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   xvfb xauth
+  nginx python3-matplotlib
+  clang libclang-rt-14-dev
 )
 BACKPORTS_PACKAGES=(mesa-vulkan-drivers)
 
