@@ -23,7 +23,7 @@ struct ProtocolConfig {
   int64_t completion_ring_capacity = 1024;
   int64_t staging_slot_count = 32;
   int64_t staging_slot_bytes = 1 << 20; // one 512x512 RGBA8 mip
-  double heartbeat_timeout_ms = 1500;   // a peer whose heartbeat has not moved for this long is hung
+  double heartbeat_timeout_ms = 1400;   // hung after this long without progress; + one watchdog poll stays < 1.5 s (issue 9)
 };
 
 struct ServerConfig {
