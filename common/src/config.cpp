@@ -38,6 +38,7 @@ void visit_keys(Config& c, V&& v) {
   v("server", "log_level", c.server.log_level, "level", "trace, debug, info, warn or error", kAny);
   v("server", "cache_policy", c.server.cache_policy, "name", "RAM cache eviction: level (seed 002 Eq. 4 discard priority; measured higher hit rates than lru at every budget) or lru", kAny);
   v("server", "rate_limit_mb_s", c.server.rate_limit_mb_s, "MB/s", "Cap on storage reads (0: unlimited), seed 002 §3.3", Range{0, 1e6});
+  v("server", "remote_fetches_in_flight", c.server.remote_fetches_in_flight, "fetches", "Concurrent fetches from a remote or slow origin (threads; one connection each); RAM and disk-cache hits are served meanwhile. Seed 002 used 1; texstream-bench storage measured mips/s over a 20-30 ms origin rising from 1 to 8 (4: most of the gain, few threads and slots)", Range{1, 16});
 
   v("render", "device", c.render.device, "name", "Substring of the Vulkan device name to use; empty: the first device", kAny);
   v("render", "validation", c.render.validation, "bool", "Enable the Khronos validation layer", kAny);
@@ -57,6 +58,9 @@ void visit_keys(Config& c, V&& v) {
   v("render", "headlight_ambient", c.render.headlight_ambient, "fraction", "Headlight: camera-facing surfaces keep all their colour, edge-on ones this fraction (1 = unlit)", Range{0, 1});
   v("render", "debug_view", c.render.debug_view, "name", "none, mip (displayed mip as grey), weight (heat map) or mesh_id", kAny);
   v("render", "feedback", c.render.feedback, "bool", "Visibility metadata pass and compaction (off only to measure their cost)", kAny);
+  v("render", "preload_all", c.render.preload_all, "bool", "Before frame 0, load every mip of every texture through the server and wait (the cache must hold the scene): reference frames and the all-resident baseline", kAny);
+  v("render", "blocking_loads", c.render.blocking_loads, "bool", "Blocking baseline (seed 002 §2): each frame loads the full mip chain of every texture the last visibility list named before drawing", kAny);
+  v("render", "reference_dir", c.render.reference_dir, "path", "Output folder of a preload_all run of the same path and size; non-empty: each frame's MSE, PSNR and SSIM against its frames/frame_NNNNN.png go to frames.csv", kAny);
   v("render", "staging_bytes", c.render.staging_bytes, "bytes", "Host-visible staging ring for uploads into the cache", Range{1 << 20, 1ll << 34});
 
   v("stream", "tau", c.stream.tau, "weight", "Mesh weight cutoff τ for compaction (seed 000 §3.3, Table 2)", Range{0, 1e12});
@@ -78,6 +82,24 @@ void visit_keys(Config& c, V&& v) {
   v("cache", "layer_extent_px", c.cache.layer_extent_px, "px", "Side of one cache layer = the largest texture extent it holds (power of two)", Range{4, 16384});
   v("cache", "layers", c.cache.layers, "layers", "Array layers of the sparse cache image; they cost address space only (lavapipe: 2 GiB, ~1.4 MB per 512² RGBA8 layer), cache.memory_bytes bounds memory. Too few layers recycle textures long before memory is full", Range{1, 2048});
   v("cache", "memory_bytes", c.cache.memory_bytes, "bytes", "GPU memory for the cache's bound sparse pages (and mip tail); the oldest layer is evicted when full", Range{1 << 20, 1ll << 40});
+  v("storage", "origin", c.storage.origin, "path/URL", "Where texture files come from: empty = scene.dir; a folder; or an http(s):// base URL (textures/... fetched with range requests)", kAny);
+  v("storage", "disk_cache_dir", c.storage.disk_cache_dir, "path", "Disk cache of fetched ranges for a remote or slow origin (empty: none); one server per folder (flock)", kAny);
+  v("storage", "disk_cache_bytes", c.storage.disk_cache_bytes, "bytes", "Byte budget of the disk cache", Range{1 << 20, 1ll << 44});
+  v("storage", "disk_cache_policy", c.storage.disk_cache_policy, "name", "Disk cache eviction: lru or fifo (seed 002's)", kAny);
+  v("storage", "connect_timeout_ms", c.storage.connect_timeout_ms, "ms", "http origin: connect timeout", Range{1, 600000});
+  v("storage", "request_timeout_ms", c.storage.request_timeout_ms, "ms", "http origin: longest time for one range request", Range{1, 3600000});
+  v("storage", "low_speed_bytes_s", c.storage.low_speed_bytes_s, "bytes/s", "http origin: a transfer slower than this for low_speed_time_s is aborted (slowloris stall); 0: off", Range{0, 1e12});
+  v("storage", "low_speed_time_s", c.storage.low_speed_time_s, "s", "http origin: see low_speed_bytes_s", Range{1, 3600});
+  v("storage", "retries", c.storage.retries, "attempts", "http origin: extra attempts after a transient failure (connect error, 5xx, timeout)", Range{0, 10});
+  v("storage", "retry_backoff_ms", c.storage.retry_backoff_ms, "ms", "http origin: back-off before the first retry, doubled for each next one", Range{0, 60000});
+  v("storage", "slow_enabled", c.storage.slow_enabled, "bool", "Wrap the origin in the slow-storage emulation (tests, benchmarks)", kAny);
+  v("storage", "slow_latency_ms", c.storage.slow_latency_ms, "ms", "Slow storage: added latency per read", Range{0, 60000});
+  v("storage", "slow_jitter_ms", c.storage.slow_jitter_ms, "ms", "Slow storage: uniform extra latency in [0, this) per read", Range{0, 60000});
+  v("storage", "slow_bandwidth_mb_s", c.storage.slow_bandwidth_mb_s, "MB/s", "Slow storage: bandwidth cap shared by all reads (0: unlimited)", Range{0, 1e6});
+  v("storage", "slow_stall_probability", c.storage.slow_stall_probability, "probability", "Slow storage: chance that a read stalls for slow_stall_ms", Range{0, 1});
+  v("storage", "slow_stall_ms", c.storage.slow_stall_ms, "ms", "Slow storage: length of a stall", Range{0, 600000});
+  v("storage", "slow_failure_rate", c.storage.slow_failure_rate, "probability", "Slow storage: chance that a read fails with an I/O error", Range{0, 1});
+  v("storage", "slow_seed", c.storage.slow_seed, "seed", "Slow storage: seed of its random draws (same seed, same reads: same delays and failures)", Range{0, 9e15});
 }
 
 using Value = std::variant<bool, int64_t, double, std::string>;
@@ -224,6 +246,9 @@ Status Config::validate() const {
   if (!levels.count(server.log_level)) return bad("server.log_level", "must be one of trace, debug, info, warn, error");
   static const std::set<std::string> policies{"lru", "level"};
   if (!policies.count(server.cache_policy)) return bad("server.cache_policy", "must be lru or level, not '" + server.cache_policy + "'");
+  if (storage.disk_cache_policy != "lru" && storage.disk_cache_policy != "fifo") {
+    return bad("storage.disk_cache_policy", "must be lru or fifo, not '" + storage.disk_cache_policy + "'");
+  }
   static const std::set<std::string> views{"none", "mip", "weight", "mesh_id"};
   if (!views.count(render.debug_view)) return bad("render.debug_view", "must be none, mip, weight or mesh_id");
   static const std::set<std::string> modes{"adaptive", "none", "fixed"};

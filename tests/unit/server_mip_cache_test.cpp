@@ -1,6 +1,8 @@
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <memory>
+#include <random>
 #include <vector>
 
 #include "texstream/server/lru_eviction_policy.hpp"
@@ -118,6 +120,102 @@ TEST(MipCacheTest, ReinsertingAKeyKeepsOneEntry) {
   EXPECT_EQ(s.entries, 1u);
   EXPECT_EQ(s.bytes, 100u);
   EXPECT_EQ(cache.lookup(key(1))->checksum, 1u);
+}
+
+TEST(MipCacheTest, CopyIntoCopiesTouchesAndCountsLikeLookup) {
+  MipCache cache = make_cache(300);
+  std::vector<std::byte> dst(200, std::byte{0});
+  EXPECT_FALSE(cache.copy_into(key(1), dst).has_value());
+  ASSERT_TRUE(cache.insert(key(1), mip_of(100, 1)));
+  ASSERT_TRUE(cache.insert(key(2), mip_of(100, 2)));
+  ASSERT_TRUE(cache.insert(key(3), mip_of(100, 3)));
+  const std::optional<CachedCopy> hit = cache.copy_into(key(1), dst);
+  ASSERT_TRUE(hit.has_value());
+  EXPECT_EQ(hit->bytes, 100u);
+  EXPECT_EQ(hit->checksum, 1u);
+  EXPECT_EQ(dst[0], std::byte{1});
+  EXPECT_EQ(dst[99], std::byte{1});
+  EXPECT_EQ(dst[100], std::byte{0});  // nothing past the mip is written
+  // The copy touched 1: the LRU victim is now 2.
+  ASSERT_TRUE(cache.insert(key(4), mip_of(100, 4)));
+  EXPECT_TRUE(cache.contains(key(1)));
+  EXPECT_FALSE(cache.contains(key(2)));
+  const MipCacheStats s = cache.stats();
+  EXPECT_EQ(s.hits, 1u);
+  EXPECT_EQ(s.misses, 1u);
+}
+
+MipCache make_arena_cache(uint64_t budget) {
+  return MipCache(budget, std::make_unique<LruEvictionPolicy>(), MipCacheOptions{true, ArenaPrefault::kNone});
+}
+
+TEST(MipCacheTest, ArenaPayloadsComeFromTheArenaAndSmallOnesFromTheHeap) {
+  MipCache cache = make_arena_cache(64 << 10);
+  auto big = cache.make_payload(16 << 10);
+  ASSERT_NE(big, nullptr);
+  EXPECT_TRUE(big->bytes.in_arena());
+  EXPECT_EQ(big->bytes.size(), 16u << 10);
+  auto small = cache.make_payload(100);
+  ASSERT_NE(small, nullptr);
+  EXPECT_FALSE(small->bytes.in_arena());
+  EXPECT_EQ(cache.make_payload((64 << 10) + 1), nullptr);  // over the budget: not admissible
+  EXPECT_EQ(cache.stats().arena_in_use_bytes, 16u << 10);
+  big.reset();  // a payload never inserted goes back to the arena
+  EXPECT_EQ(cache.stats().arena_in_use_bytes, 0u);
+  MipCache heap_only = make_cache(64 << 10);
+  auto h = heap_only.make_payload(16 << 10);
+  ASSERT_NE(h, nullptr);
+  EXPECT_FALSE(h->bytes.in_arena());
+  EXPECT_EQ(heap_only.stats().arena_bytes, 0u);
+}
+
+// A miss's whole life with the arena: payload, fill, insert, hit; when the arena is full make_payload evicts
+// in policy order, and the budget and the arena's capacity both hold throughout.
+TEST(MipCacheTest, ArenaMissesEvictInPolicyOrderAndNeverOverflow) {
+  constexpr uint64_t kBudget = 256 << 10;
+  MipCache cache = make_arena_cache(kBudget);
+  std::mt19937 rng(5);
+  std::vector<std::byte> dst(64 << 10);
+  for (uint32_t i = 0; i < 3000; ++i) {
+    const MipKey k = key(rng() % 200, 0);
+    if (cache.copy_into(k, dst)) {
+      ASSERT_EQ(dst[0], static_cast<std::byte>(k.texture().value & 0xff));
+      continue;
+    }
+    const uint64_t bytes = uint64_t{4096} << (k.texture().value % 5);  // 4..64 KiB, as mips are
+    std::shared_ptr<CachedMip> p = cache.make_payload(bytes);
+    ASSERT_NE(p, nullptr) << "nothing is pinned, so the arena must find room";
+    std::memset(p->bytes.data(), static_cast<int>(k.texture().value & 0xff), bytes);
+    p->checksum = k.texture().value;
+    ASSERT_TRUE(cache.insert(k, std::move(p)));
+    const MipCacheStats s = cache.stats();
+    ASSERT_LE(s.bytes, kBudget);
+    ASSERT_LE(s.arena_in_use_bytes, s.arena_bytes);
+    // Powers of two >= 4 KiB: no rounding, so the arena holds exactly its entries' bytes; what the arena's
+    // fragmentation pushed to the heap stays within its share of the budget.
+    ASSERT_LE(s.arena_in_use_bytes, s.bytes);
+    ASSERT_LE(s.bytes - s.arena_in_use_bytes, kBudget / 8);
+  }
+  const MipCacheStats s = cache.stats();
+  EXPECT_GT(s.hits, 0u);
+  EXPECT_GT(s.evictions, 0u);
+  EXPECT_EQ(s.arena_fallbacks, 0u);
+}
+
+TEST(MipCacheTest, ArenaFullOfPinnedEntriesGivesNoPayloadInsteadOfOverflowing) {
+  MipCache cache = make_arena_cache(16 << 10);
+  std::vector<std::shared_ptr<const CachedMip>> pins;
+  for (uint32_t i = 0; i < 4; ++i) {
+    auto p = cache.make_payload(4096);
+    ASSERT_NE(p, nullptr);
+    ASSERT_TRUE(cache.insert(key(i), p));
+    pins.push_back(std::move(p));  // held outside the cache: pinned
+  }
+  EXPECT_EQ(cache.make_payload(4096), nullptr);
+  EXPECT_EQ(cache.stats().arena_fallbacks, 1u);
+  pins.pop_back();  // key(3) unpinned: it can go
+  EXPECT_NE(cache.make_payload(4096), nullptr);
+  EXPECT_FALSE(cache.contains(key(3)));
 }
 
 }  // namespace

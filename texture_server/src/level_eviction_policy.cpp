@@ -13,15 +13,24 @@ void LevelEvictionPolicy::touch(const Where& w) {
   list.splice(list.begin(), list, w.it);
 }
 
-void LevelEvictionPolicy::on_insert(MipKey key) {
+PolicyNode* LevelEvictionPolicy::on_insert(MipKey key) {
   if (auto it = where_.find(key); it != where_.end()) {
     touch(it->second);
-    return;
+    return node_of(*it);
   }
   const uint32_t level = std::min(level_of_(key), kMaxLevels - 1);
   std::list<Node>& list = levels_[level];
   list.push_front(Node{key, now_, ++sequence_});
-  where_.emplace(key, Where{level, list.begin()});
+  return node_of(*where_.emplace(key, Where{level, list.begin()}).first);
+}
+
+void LevelEvictionPolicy::touch(PolicyNode* node) { touch(element_of(node).second); }
+
+void LevelEvictionPolicy::erase(PolicyNode* node) {
+  WhereMap::value_type& e = element_of(node);
+  levels_[e.second.level].erase(e.second.it);
+  const MipKey key = e.first;  // a copy: erase() must not read the key of the element it frees
+  where_.erase(key);
 }
 
 void LevelEvictionPolicy::on_access(MipKey key) {

@@ -2,13 +2,24 @@
 
 namespace texstream::server {
 
-void LruEvictionPolicy::on_insert(MipKey key) {
+PolicyNode* LruEvictionPolicy::on_insert(MipKey key) {
   if (auto it = where_.find(key); it != where_.end()) {
     order_.splice(order_.begin(), order_, it->second);
-    return;
+    return node_of(*it);
   }
   order_.push_front(key);
-  where_.emplace(key, order_.begin());
+  return node_of(*where_.emplace(key, order_.begin()).first);
+}
+
+void LruEvictionPolicy::touch(PolicyNode* node) {
+  order_.splice(order_.begin(), order_, element_of(node).second);
+}
+
+void LruEvictionPolicy::erase(PolicyNode* node) {
+  Where::value_type& e = element_of(node);
+  order_.erase(e.second);
+  const MipKey key = e.first;  // a copy: erase() must not read the key of the element it frees
+  where_.erase(key);
 }
 
 void LruEvictionPolicy::on_access(MipKey key) {

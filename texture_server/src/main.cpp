@@ -27,8 +27,8 @@
 #include "texstream/common/config.hpp"
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
-#include "texstream/server/posix_storage.hpp"
 #include "texstream/server/server.hpp"
+#include "texstream/server/storage_stack.hpp"
 
 namespace {
 
@@ -144,10 +144,17 @@ int main(int argc, char** argv) {
     spdlog::error("{}", segment.error().message);
     return kExitSegment;
   }
-  texstream::server::PosixStorage storage;
+  // The storage tiers ([storage]: origin, slow-storage emulation, disk cache) live as long as the process:
+  // the disk cache's lock and index survive from one renderer to the next.
+  auto stack = texstream::server::make_storage_stack(config->storage, config->scene.dir);
+  if (!stack.ok()) {
+    spdlog::error("{}", stack.error().message);
+    return kExitBadArguments;
+  }
+  spdlog::info("storage: {}", (*stack)->describe());
   std::unique_ptr<texstream::Segment> current = std::move(segment).value();
   for (;;) {
-    auto server = texstream::server::Server::create(*current, config->scene.dir, config->server, storage);
+    auto server = texstream::server::Server::create(*current, (*stack)->scene_dir, config->server, (*stack)->storage());
     if (!server.ok()) {
       spdlog::error("{}", server.error().message);
       return kExitBadArguments;

@@ -45,6 +45,18 @@ CompletionStatus status_of(ErrorCode code) {
   }
 }
 
+// A failed storage read: a missing object (http 404) is kNotFound, an origin that did not answer in time
+// kTimedOut (the renderer asks again); anything else — refused connections, 5xx, a wrong Content-Range,
+// truncated bodies — kIoError, which the renderer retries a bounded number of times. Never kCorrupt: the
+// file itself was not shown to be bad.
+CompletionStatus read_status(ErrorCode code) {
+  switch (code) {
+    case ErrorCode::kNotFound: return CompletionStatus::kNotFound;
+    case ErrorCode::kTimeout: return CompletionStatus::kTimedOut;
+    default: return CompletionStatus::kIoError;
+  }
+}
+
 std::string extent_text(Extent2D e) { return std::to_string(e.width) + "x" + std::to_string(e.height); }
 
 }  // namespace
@@ -77,14 +89,12 @@ void MipLoader::count_read(uint64_t bytes) {
 
 CompletionRecord MipLoader::serve_cached(const LoadRequest& request, const scene::TextureRecord& record,
                                          uint32_t slot_index, std::span<std::byte> slot) {
-  const std::shared_ptr<const CachedMip> hit = cache_.lookup(request.key());  // pinned while we copy
+  // One lookup, copied under the cache's lock: no pin, no allocation.
+  const std::optional<CachedCopy> hit = cache_.copy_into(request.key(), slot);
   if (!hit) return CompletionRecord{};
-  TS_ASSERT(hit->bytes.size() <= slot.size(), "cached mip of %zu bytes does not fit a slot of %zu", hit->bytes.size(),
-            slot.size());
-  std::memcpy(slot.data(), hit->bytes.data(), hit->bytes.size());
   block_.ram_cache_hits.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: a statistic, read for reports
-  stats_.add(stats_.bytes_served_cached, hit->bytes.size());
-  return ok_completion(request, record, slot_index, hit->bytes.size(), hit->checksum);
+  stats_.add(stats_.bytes_served_cached, hit->bytes);
+  return ok_completion(request, record, slot_index, hit->bytes, hit->checksum);
 }
 
 bool MipLoader::open_texture(const LoadRequest& request, Opened& opened, CompletionRecord& error) {
@@ -129,7 +139,7 @@ bool MipLoader::open_texture(const LoadRequest& request, Opened& opened, Complet
 }
 
 CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::TextureRecord& record, Opened& opened,
-                                     std::span<std::byte> target) {
+                                     std::span<std::byte> target, bool local_only) {
   const TexelFormat format = static_cast<TexelFormat>(record.format);  // validated with the texture table
   const uint32_t level = request.mip.value;
   const Extent2D expected = mip_extent(record.width, record.height, level);
@@ -139,8 +149,9 @@ CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::Te
   if (opened.entry.kind == TextureFileKind::kDds) {
     if (!opened.entry.dds) {
       std::array<std::byte, kDdsMaxHeaderBytes> header{};
+      if (local_only && !opened.file->local(0, header.size())) return CompletionStatus::kUnfilled;
       Result<uint64_t> got = opened.file->read_at(header, 0);
-      if (!got.ok()) return fail_status(request, CompletionStatus::kIoError, path, got.error().message);
+      if (!got.ok()) return fail_status(request, read_status(got.error().code), path, got.error().message);
       count_read(*got);
       Result<DdsLayout> layout = parse_dds_layout(std::span(header).first(*got), path.string());
       if (!layout.ok()) return fail_status(request, CompletionStatus::kCorrupt, path, layout.error().message);
@@ -168,8 +179,9 @@ CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::Te
     if (!decode) {
       // Exactly the mip's byte range.
       const uint64_t offset = dds.mip_offset(level);
+      if (local_only && !opened.file->local(offset, target.size())) return CompletionStatus::kUnfilled;
       Result<uint64_t> got = opened.file->read_at(target, offset);
-      if (!got.ok()) return fail_status(request, CompletionStatus::kIoError, path, got.error().message);
+      if (!got.ok()) return fail_status(request, read_status(got.error().code), path, got.error().message);
       count_read(*got);
       if (*got != target.size()) {
         index_.forget(request.texture);  // the file may have been replaced: look again next time
@@ -187,6 +199,8 @@ CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::Te
                            " but the file holds decoded texels (only rgba8 textures may come from " +
                            suffix_of(opened.entry.kind) + " files)");
   }
+  // OpenImageIO reads ranges of its own choosing: a remote file is decoded on a remote-fetch worker only.
+  if (local_only && opened.file->remote()) return CompletionStatus::kUnfilled;
   DecodeOutcome outcome;
   const Status decoded = decode_mip_rgba8(*opened.file, path, level, expected, target, outcome);
   count_read(outcome.bytes_read);
@@ -195,12 +209,13 @@ CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::Te
 }
 
 CompletionRecord MipLoader::load(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot_index,
-                                 std::span<std::byte> slot) {
+                                 std::span<std::byte> slot, bool local_only) {
   const TexelFormat format = static_cast<TexelFormat>(record.format);  // validated with the texture table
   const uint64_t bytes = mip_bytes(format, record.width, record.height, request.mip.value);
   TS_ASSERT(bytes <= slot.size(), "mip of %llu bytes does not fit a slot of %zu (the dispatcher checks this)",
             static_cast<unsigned long long>(bytes), slot.size());
-  block_.ram_cache_misses.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
+  // A local-only attempt that finds the mip remote comes back as a remote fetch: count the miss once, there.
+  if (!local_only) block_.ram_cache_misses.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
 
   Opened opened;
   CompletionRecord error{};
@@ -211,11 +226,15 @@ CompletionRecord MipLoader::load(const LoadRequest& request, const scene::Textur
   std::shared_ptr<CachedMip> keep;
   std::span<std::byte> target = slot.first(bytes);
   if (cache_.admissible(bytes)) {
-    keep = std::make_shared<CachedMip>();
-    keep->bytes.resize(bytes);
-    target = keep->bytes;
+    keep = cache_.make_payload(bytes);  // warm arena memory (may evict); nullptr: into the slot, not cached
+    if (keep) target = keep->bytes;
   }
-  const CompletionStatus status = read_mip(request, record, opened, target);
+  const CompletionStatus status = read_mip(request, record, opened, target, local_only);
+  if (status == CompletionStatus::kUnfilled) {  // nothing was read: the file is as good as before
+    files_.give_back(request.texture, OpenTextureFile{std::move(opened.path), std::move(opened.file)});
+    return make_completion(request, status);
+  }
+  if (local_only) block_.ram_cache_misses.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
   // Only a file that served its mip stays open; after a failure it is closed (it may have been replaced).
   if (status != CompletionStatus::kOk) return make_completion(request, status);
   files_.give_back(request.texture, OpenTextureFile{std::move(opened.path), std::move(opened.file)});

@@ -19,6 +19,9 @@ namespace {
 // dispatcher's last check and its futex_wait (the doorbell word, which workers do not write, has not changed),
 // so this bounds the cost of that race. 1 ms against loads of 0.1–10 ms.
 constexpr std::chrono::microseconds kBusyWait{1000};
+// The same race with only remote fetches in flight costs a late remote result at most this long: 10 ms
+// against fetches of 20 ms to seconds, and 100 instead of 1000 wake-ups per second while a slow link trickles.
+constexpr std::chrono::microseconds kRemoteBusyWait{10000};
 
 // Loads handed to the pool per worker. With 1, every miss costs a dispatcher round trip (worker result →
 // futex wake → dispatcher → condition variable → worker) before the worker starts its next read: measured
@@ -30,6 +33,11 @@ constexpr uint32_t kJobsPerWorker = 2;
 // a batch pushes again within microseconds, and a futex sleep + wake costs two syscalls and a context switch
 // per batch. Bounded so an idle server costs nothing.
 constexpr std::chrono::microseconds kSpinBeforeSleep{50};
+
+// Remote loads that may wait for a remote-fetch worker. They hold no staging slot and live at most until the
+// renderer's next batch; this bounds the queue's memory against a renderer that floods one cycle. 256 = the
+// default stream.max_requests_in_flight: one whole cycle of requests.
+constexpr size_t kRemotePendingLimit = 256;
 
 uint64_t steady_now_ns() {
   return static_cast<uint64_t>(
@@ -58,6 +66,10 @@ Result<std::unique_ptr<Server>> Server::create(Segment& segment, const std::file
     return make_error(ErrorCode::kInvalidArgument, "server.ram_cache_bytes must be >= 0");
   }
   if (!(config.idle_wait_ms > 0)) return make_error(ErrorCode::kInvalidArgument, "server.idle_wait_ms must be > 0");
+  if (config.remote_fetches_in_flight < 1 || config.remote_fetches_in_flight > 16) {
+    return make_error(ErrorCode::kInvalidArgument, "server.remote_fetches_in_flight must be in [1, 16], not " +
+                                                       std::to_string(config.remote_fetches_in_flight));
+  }
   Result<std::vector<scene::TextureRecord>> textures = scene::read_texture_table(scene_dir);
   if (!textures.ok()) return textures.error();
   // read_texture_table validates extents and mip counts; the format is re-checked here because everything
@@ -82,6 +94,7 @@ Result<std::unique_ptr<Server>> Server::create(Segment& segment, const std::file
 Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const ServerConfig& config, Storage& storage,
                std::vector<scene::TextureRecord> textures)
     : segment_(segment),
+      storage_(storage),
       scene_dir_(scene_dir),
       config_(config),
       textures_(std::move(textures)),
@@ -97,27 +110,45 @@ Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const S
                                     const scene::TextureRecord& t = textures_[key.texture().value];
                                     return t.mip_count - 1 - std::min(key.mip().value, t.mip_count - 1);
                                   })
-                 .value()),
+                 .value(),
+             // Misses read into a warm arena of the budget, pre-faulted at idle priority (cache_arena.hpp).
+             MipCacheOptions{.arena = true, .prefault = ArenaPrefault::kBackground}),
       loader_(scene_dir, rate_limited_ ? *rate_limited_ : storage, cache_, segment.server_block(), stats_),
       slots_(segment.slot_count()) {
   cancelled_scratch_.reserve(256);
   results_scratch_.reserve(64);
   ShmAtomic<uint32_t>* doorbell = &segment_.renderer_block().doorbell;
   const ShmAtomic<uint32_t>* sleeping = &segment_.server_block().sleeping;
+  // Only a sleeping dispatcher is woken: a wake per result was a syscall per miss, mostly for a dispatcher
+  // that was awake anyway. The pool published the result (seq_cst) before this seq_cst load, and
+  // idle_wait() stores `sleeping` (seq_cst) before it looks at results_ready(): one of the two sees the
+  // other. FUTEX_WAKE does not write the word: the renderer stays its only writer.
+  auto wake = [doorbell, sleeping] {
+    if (sleeping->v.load(std::memory_order_seq_cst) == 1) futex_wake_all(*doorbell);
+  };
   workers_ = std::make_unique<WorkerPool>(
       static_cast<uint32_t>(config.worker_threads),
-      [this](const LoadJob& job) { return loader_.load(job.request, job.record, job.slot, segment_.slot(job.slot)); },
-      // Only a sleeping dispatcher is woken: a wake per result was a syscall per miss, mostly for a dispatcher
-      // that was awake anyway. The pool published the result (seq_cst) before this seq_cst load, and
-      // idle_wait() stores `sleeping` (seq_cst) before it looks at results_ready(): one of the two sees the
-      // other. FUTEX_WAKE does not write the word: the renderer stays its only writer.
-      [doorbell, sleeping] {
-        if (sleeping->v.load(std::memory_order_seq_cst) == 1) futex_wake_all(*doorbell);
-      });
+      [this](const LoadJob& job) {
+        return loader_.load(job.request, job.record, job.slot, segment_.slot(job.slot), /*local_only=*/true);
+      },
+      wake);
+  remote_workers_ = std::make_unique<WorkerPool>(
+      static_cast<uint32_t>(config.remote_fetches_in_flight),
+      [this](const LoadJob& job) {
+        return loader_.load(job.request, job.record, job.slot, segment_.slot(job.slot), /*local_only=*/false);
+      },
+      wake);
 }
 
 Server::~Server() {
-  workers_.reset();  // join before the members the workers use go away
+  // A remote fetch can take up to storage.request_timeout_ms: cut transfers short, then join before the
+  // members the workers use go away. Only then: with nothing remote in flight the storage is not touched
+  // (a caller may already have destroyed a storage it no longer reads through).
+  const bool remote_busy = remote_in_flight_ > 0;
+  if (remote_busy) storage_.cancel_all();
+  remote_workers_.reset();
+  workers_.reset();
+  if (remote_busy) storage_.resume();
 }
 
 RunOutcome Server::run(const std::atomic<bool>& stop, std::atomic<bool>* print_stats) {
@@ -151,6 +182,7 @@ RunOutcome Server::run(const std::atomic<bool>& stop, std::atomic<bool>* print_s
     bool busy = flush_completions();
     busy |= drain_requests();
     busy |= collect_results();
+    busy |= dispatch_remote();  // first: a slot freed by a remote result goes to the next remote fetch
     busy |= dispatch();
     busy |= flush_completions();
     if (requests_.error() != RingError::kNone || completions_.error() != RingError::kNone) {
@@ -210,6 +242,7 @@ bool Server::drain_requests() {
   // for again are stale (seed 002 §4.3: the server must not get bogged down processing old requests).
   cancelled_scratch_.clear();
   scheduler_.supersede_older_than(scheduler_.newest_generation(), cancelled_scratch_);
+  remote_pending_.supersede_older_than(scheduler_.newest_generation(), cancelled_scratch_);
   for (const LoadRequest& c : cancelled_scratch_) {
     segment_.server_block().requests_cancelled.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
     stats_.add(stats_.cancelled, 1);
@@ -262,19 +295,67 @@ void Server::handle_release(const RequestRecord& r) {
 bool Server::collect_results() {
   results_scratch_.clear();
   workers_->take_results(results_scratch_);
-  for (const LoadResult& r : results_scratch_) {
+  const size_t local_results = results_scratch_.size();
+  remote_workers_->take_results(results_scratch_);
+  for (size_t i = 0; i < results_scratch_.size(); ++i) {
+    const LoadResult& r = results_scratch_[i];
+    if (i >= local_results) {
+      TS_ASSERT(remote_in_flight_ > 0, "a remote-fetch result with no fetch in flight");
+      --remote_in_flight_;
+      finish(r);
+      continue;
+    }
     TS_ASSERT(loads_in_flight_ > 0, "a worker result with no load in flight");
     --loads_in_flight_;
-    if (r.completion.status == static_cast<uint32_t>(CompletionStatus::kOk)) {
-      slots_.hand_to_renderer(r.slot);
-      stats_.add(stats_.loads_ok, 1);
-      record_latency(stats_.miss_latency, r.received_ns);
-    } else {
-      slots_.release_unused(r.slot);
+    if (r.completion.status != static_cast<uint32_t>(CompletionStatus::kUnfilled)) {
+      finish(r);
+      continue;
     }
-    complete(r.completion);
+    // The mip is not on this machine. A free remote-fetch worker takes it (keeping the slot); with all of
+    // them busy it waits in the remote queue without its slot, or — queue full — the renderer is told to
+    // ask again later (seed 002 §4.3: the server must not get bogged down in old requests).
+    if (remote_in_flight_ < remote_workers_->threads() && remote_pending_.empty()) {
+      ++remote_in_flight_;
+      remote_fetches_.fetch_add(1, std::memory_order_relaxed);
+      remote_workers_->submit(LoadJob{r.request, textures_[r.request.texture.value], r.slot});
+      continue;
+    }
+    slots_.release_unused(r.slot);
+    if (remote_pending_.size() >= kRemotePendingLimit || r.request.generation.value < scheduler_.newest_generation().value) {
+      // Full, or already stale (a newer batch came while the local worker looked): ask again later.
+      unfilled_.fetch_add(1, std::memory_order_relaxed);
+      complete(r.completion);
+      continue;
+    }
+    if (const std::optional<LoadRequest> dup = remote_pending_.add(r.request)) {
+      stats_.add(stats_.cancelled, 1);
+      complete(make_completion(*dup, CompletionStatus::kCancelled));
+    }
   }
   return !results_scratch_.empty();
+}
+
+bool Server::dispatch_remote() {
+  bool any = false;
+  while (!remote_pending_.empty() && remote_in_flight_ < remote_workers_->threads() && slots_.free_count() > 0) {
+    const LoadRequest request = *remote_pending_.pop();
+    ++remote_in_flight_;
+    remote_fetches_.fetch_add(1, std::memory_order_relaxed);
+    remote_workers_->submit(LoadJob{request, textures_[request.texture.value], *slots_.acquire()});
+    any = true;
+  }
+  return any;
+}
+
+void Server::finish(const LoadResult& r) {
+  if (r.completion.status == static_cast<uint32_t>(CompletionStatus::kOk)) {
+    slots_.hand_to_renderer(r.slot);
+    stats_.add(stats_.loads_ok, 1);
+    record_latency(stats_.miss_latency, r.received_ns);
+  } else {
+    slots_.release_unused(r.slot);
+  }
+  complete(r.completion);
 }
 
 bool Server::dispatch() {
@@ -328,7 +409,7 @@ void Server::idle_wait() {
   // Spin briefly first (see kSpinBeforeSleep); any new request or worker result ends the spin.
   const auto spin_end = std::chrono::steady_clock::now() + kSpinBeforeSleep;
   while (std::chrono::steady_clock::now() < spin_end) {
-    if (requests_.size() > 0 || workers_->results_ready()) return;
+    if (requests_.size() > 0 || workers_->results_ready() || remote_workers_->results_ready()) return;
     std::this_thread::yield();
   }
   ServerBlock& block = segment_.server_block();
@@ -336,14 +417,18 @@ void Server::idle_wait() {
   const auto idle = std::chrono::microseconds(static_cast<int64_t>(config_.idle_wait_ms * 1000.0));
   // Loads in flight or completions waiting for ring space: nap briefly (workers also wake us).
   const bool short_nap = loads_in_flight_ > 0 || !overflow_.empty();
-  const auto timeout = short_nap ? std::min(idle, kBusyWait) : idle;
+  const auto timeout = short_nap                ? std::min(idle, kBusyWait)
+                       : remote_in_flight_ > 0 ? std::min(idle, kRemoteBusyWait)
+                                               : idle;
   // The renderer pushes, bumps the doorbell, then (seq_cst) reads `sleeping` and wakes us if it is 1. We
   // store `sleeping` and read the doorbell, both seq_cst (a store-load pair no weaker order keeps; seq_cst
   // operations rather than a fence so that TSan sees them), and only then re-check the ring: a push we miss
   // here bumped the doorbell after our read, so futex_wait returns at once instead of sleeping on it.
   block.sleeping.v.store(1, std::memory_order_seq_cst);  // pairs with the renderer's seq_cst load of sleeping
   const uint32_t seen = renderer.doorbell.v.load(std::memory_order_seq_cst);  // pairs with its bump (release+)
-  if (requests_.size() == 0 && !workers_->results_ready()) futex_wait(renderer.doorbell, seen, timeout);
+  if (requests_.size() == 0 && !workers_->results_ready() && !remote_workers_->results_ready()) {
+    futex_wait(renderer.doorbell, seen, timeout);
+  }
   block.sleeping.v.store(0, std::memory_order_relaxed);  // relaxed: a late 0 costs the renderer one wake call
 }
 

@@ -48,7 +48,7 @@ void WorkerPool::worker_main() {
     const CompletionRecord completion = work_(job);
     {
       std::lock_guard lock(mutex_);
-      results_.push_back({completion, job.slot, job.request.received_ns});
+      results_.push_back({completion, job.slot, job.request.received_ns, job.request});
       // seq_cst: pairs with results_ready() and orders before on_result_'s load of the sleeping flag.
       ready_.store(static_cast<uint32_t>(results_.size()), std::memory_order_seq_cst);
     }

@@ -34,6 +34,7 @@ struct ServerConfig {
   std::string log_level = "info";       // trace, debug, info, warn, error
   std::string cache_policy = "level";   // RAM cache eviction: level (seed 002 Eq. 4 discard priority) or lru
   double rate_limit_mb_s = 0;           // storage read rate cap in MB/s (0: unlimited), seed 002 §3.3
+  int64_t remote_fetches_in_flight = 4; // bound on concurrent fetches from a remote/slow origin (seed 002: 1)
 };
 
 struct RenderConfig {
@@ -56,6 +57,9 @@ struct RenderConfig {
   int64_t staging_bytes = 32ll << 20;   // host-visible staging ring for uploads into the cache
   std::string debug_view = "none";      // none, mip (displayed mip as grey), weight (heat map), mesh_id
   bool feedback = true;                 // visibility metadata pass + compaction (off: for cost measurements)
+  bool preload_all = false;             // load every mip of every texture before frame 0: no streaming (reference frames)
+  bool blocking_loads = false;          // each frame loads the full chain of every visible texture before drawing
+  std::string reference_dir;            // a preload_all run's output folder: per-frame MSE/PSNR/SSIM against its frames
 };
 
 struct StreamConfig {
@@ -86,6 +90,28 @@ struct CacheConfig {
   int64_t memory_bytes = 128ll << 20;   // GPU memory the cache's bound sparse pages may use (never exceeded)
 };
 
+// Where texture bytes come from and the tiers in front of it (issue 4, seed 002 §3.2 Meta-texture Server).
+struct StorageConfig {
+  std::string origin;                     // empty: scene.dir on the local file system; else a path or http(s):// URL
+  std::string disk_cache_dir;             // empty: no disk cache
+  int64_t disk_cache_bytes = 1ll << 30;   // byte budget of the disk cache
+  std::string disk_cache_policy = "lru";  // lru or fifo (seed 002)
+  int64_t connect_timeout_ms = 2000;      // http: TCP/TLS connect
+  int64_t request_timeout_ms = 10000;     // http: one whole range request
+  int64_t low_speed_bytes_s = 1024;       // http: slower than this for low_speed_time_s aborts (slowloris)
+  int64_t low_speed_time_s = 3;
+  int64_t retries = 2;                    // http: extra attempts after a transient failure
+  int64_t retry_backoff_ms = 50;          // http: first back-off, doubled per retry
+  bool slow_enabled = false;              // wrap the origin in the slow-storage emulation below
+  double slow_latency_ms = 0;
+  double slow_jitter_ms = 0;
+  double slow_bandwidth_mb_s = 0;         // 0: unlimited
+  double slow_stall_probability = 0;
+  double slow_stall_ms = 0;
+  double slow_failure_rate = 0;
+  int64_t slow_seed = 1;
+};
+
 struct Config {
   SceneConfig scene;
   ProtocolConfig protocol;
@@ -94,6 +120,7 @@ struct Config {
   StreamConfig stream;
   ControllerConfig controller;
   CacheConfig cache;
+  StorageConfig storage;
 
   // Relations between fields (filament validateConfig style); messages name the keys.
   Status validate() const;

@@ -3,6 +3,9 @@
 // accounting; a policy only orders keys. LRU is the default (seed 002 §4.4 uses LRU for the in-memory cache);
 // LevelEvictionPolicy is the discard priority p_d = f(l + 1) of seed 002 Eq. 4 (server.cache_policy).
 // Called only with the cache's lock held, so implementations need no locking of their own.
+//
+// Handles: on_insert() returns the policy's own node for the key (stable until the key is erased), which the
+// cache keeps in its entry, so that a hit touches the policy without a second hash lookup (touch()).
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -15,12 +18,19 @@
 
 namespace texstream::server {
 
+// Opaque: what a policy's on_insert() returns; only that policy looks inside.
+struct PolicyNode;
+
 class EvictionPolicy {
  public:
   virtual ~EvictionPolicy() = default;
-  virtual void on_insert(MipKey key) = 0;
+  // Starts tracking `key` (or touches it if tracked) and returns its node.
+  virtual PolicyNode* on_insert(MipKey key) = 0;
   virtual void on_access(MipKey key) = 0;
   virtual void on_erase(MipKey key) = 0;
+  // on_access() / on_erase() through the node on_insert() returned for the key (no lookup).
+  virtual void touch(PolicyNode* node) = 0;
+  virtual void erase(PolicyNode* node) = 0;
   // The key to evict first among those for which `evictable` is true (pinned entries are not), or nullopt.
   virtual std::optional<MipKey> pick_victim(const std::function<bool(MipKey)>& evictable) = 0;
   // The clock advanced to `now` (the server's streaming-cycle generation: the "frames" of Eq. 4). Policies

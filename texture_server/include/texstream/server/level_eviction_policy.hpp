@@ -25,9 +25,11 @@ class LevelEvictionPolicy final : public EvictionPolicy {
   // `level_of(key)`: the mip's quadtree level l (0 = the coarsest, 1x1 mip). Values ≥ kMaxLevels are clamped.
   explicit LevelEvictionPolicy(std::function<uint32_t(MipKey)> level_of);
 
-  void on_insert(MipKey key) override;
+  PolicyNode* on_insert(MipKey key) override;
   void on_access(MipKey key) override;
   void on_erase(MipKey key) override;
+  void touch(PolicyNode* node) override;
+  void erase(PolicyNode* node) override;
   void on_tick(uint64_t now) override;
   std::optional<MipKey> pick_victim(const std::function<bool(MipKey)>& evictable) override;
 
@@ -41,11 +43,15 @@ class LevelEvictionPolicy final : public EvictionPolicy {
     uint32_t level;
     std::list<Node>::iterator it;
   };
+  using WhereMap = std::unordered_map<MipKey, Where, MipKeyHash>;
+  // A node is the address of a where_ element (unordered_map never moves its elements).
+  static PolicyNode* node_of(WhereMap::value_type& e) { return reinterpret_cast<PolicyNode*>(&e); }
+  static WhereMap::value_type& element_of(PolicyNode* n) { return *reinterpret_cast<WhereMap::value_type*>(n); }
   void touch(const Where& w);
 
   std::function<uint32_t(MipKey)> level_of_;
   std::array<std::list<Node>, kMaxLevels> levels_;  // front = most recently used
-  std::unordered_map<MipKey, Where, MipKeyHash> where_;
+  WhereMap where_;
   uint64_t now_ = 0;
   uint64_t sequence_ = 0;
 };

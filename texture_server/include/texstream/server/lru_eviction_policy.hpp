@@ -10,14 +10,21 @@ namespace texstream::server {
 
 class LruEvictionPolicy final : public EvictionPolicy {
  public:
-  void on_insert(MipKey key) override;
+  PolicyNode* on_insert(MipKey key) override;
   void on_access(MipKey key) override;
   void on_erase(MipKey key) override;
+  void touch(PolicyNode* node) override;
+  void erase(PolicyNode* node) override;
   std::optional<MipKey> pick_victim(const std::function<bool(MipKey)>& evictable) override;
 
  private:
+  using Where = std::unordered_map<MipKey, std::list<MipKey>::iterator, MipKeyHash>;
+  // A node is the address of a where_ element (unordered_map never moves its elements).
+  static PolicyNode* node_of(Where::value_type& e) { return reinterpret_cast<PolicyNode*>(&e); }
+  static Where::value_type& element_of(PolicyNode* n) { return *reinterpret_cast<Where::value_type*>(n); }
+
   std::list<MipKey> order_;  // front = most recently used
-  std::unordered_map<MipKey, std::list<MipKey>::iterator, MipKeyHash> where_;
+  Where where_;
 };
 
 }  // namespace texstream::server

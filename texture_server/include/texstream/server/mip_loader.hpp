@@ -34,8 +34,11 @@ class MipLoader {
 
   // Reads the mip from storage into `slot` (and into the cache when it is admissible). `record` is the
   // texture's entry of the texture table, already validated; `slot` holds at least the mip's bytes.
+  // `local_only`: when a read it needs would go to a remote or slow origin (StorageFile::local() is false),
+  // nothing is read and the completion is kUnfilled (not logged, not counted as a failure): the server then
+  // hands the load to its bounded remote-fetch workers, or answers kUnfilled so the renderer asks again.
   CompletionRecord load(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot_index,
-                        std::span<std::byte> slot);
+                        std::span<std::byte> slot, bool local_only = false);
   // Copies a cached mip into `slot`. Returns a kOk record, or a record with status 0 on a cache miss.
   CompletionRecord serve_cached(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot_index,
                                 std::span<std::byte> slot);
@@ -51,7 +54,7 @@ class MipLoader {
   bool open_texture(const LoadRequest& request, Opened& opened, CompletionRecord& error);
   // Reads (or decodes) the mip into `target`; returns kOk or the failure's status (already logged).
   CompletionStatus read_mip(const LoadRequest& request, const scene::TextureRecord& record, Opened& opened,
-                            std::span<std::byte> target);
+                            std::span<std::byte> target, bool local_only);
   CompletionRecord fail(const LoadRequest& request, CompletionStatus status, const std::filesystem::path& path,
                         const std::string& why);
   CompletionStatus fail_status(const LoadRequest& request, CompletionStatus status, const std::filesystem::path& path,

@@ -7,7 +7,10 @@
 //
 // OpenImageIO 2.4 returns true from reads of truncated JPEG and TIFF files with wrong pixels (DESIGN.md), so a
 // read succeeds only if it returned true AND has_error() is false AND the proxy saw no I/O error.
-// Thread-safe: each call opens its own ImageInput (single-threaded: the server's workers bound the CPU).
+// Out of process: OpenImageIO runs in texstream-decode helpers (decode_helper_pool.hpp), started on the first
+// decode; their reads come back to this process and go through `file`. A helper that crashes or hangs on a
+// file fails that decode (kCorrupt / kTimeout naming the file) and is replaced on the next one.
+// Thread-safe: concurrent calls use separate helpers (each decode is single-threaded: the workers bound CPU).
 #include <cstdint>
 #include <filesystem>
 #include <span>

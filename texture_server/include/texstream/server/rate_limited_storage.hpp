@@ -17,6 +17,8 @@ class RateLimitedStorage final : public Storage {
   // `stats` (may be null) receives the time spent waiting.
   RateLimitedStorage(Storage& inner, double megabytes_per_s, ServerStats* stats);
   Result<std::unique_ptr<StorageFile>> open(const std::filesystem::path& path) override;
+  void cancel_all() override { inner_.cancel_all(); }
+  void resume() override { inner_.resume(); }
 
  private:
   Storage& inner_;

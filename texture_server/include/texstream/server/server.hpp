@@ -5,8 +5,18 @@
 // owns the staging slots, serves RAM-cache hits itself and hands misses to a small worker pool.
 //
 // Every valid kLoad gets exactly one completion: kOk (the slot is the renderer's until its kReleaseSlot),
-// kNotFound, kCorrupt, kIoError, or kCancelled (coalesced with a duplicate or superseded by a newer
-// generation before it started). Invalid records are logged and dropped. A full completion ring never blocks
+// kNotFound, kCorrupt, kIoError, kTimedOut (a remote origin did not answer in time), kCancelled (coalesced
+// with a duplicate or superseded by a newer generation before it started), or kUnfilled (it needs a remote
+// fetch and the queue of waiting remote fetches is full: the renderer asks again in a later cycle, seed 002
+// §4.3's feedback path).
+//
+// Bimodal access (seed 002 §3.2, issue 4): a miss first goes to the local workers, which read only what is on
+// this machine (local files, disk-cache entries). One that needs the remote or slow origin is handed to a
+// separate pool of server.remote_fetches_in_flight threads, so slow fetches never occupy the workers that
+// serve disk hits, and the dispatcher serves RAM hits throughout. While those threads are busy, remote loads
+// wait in their own priority queue without a staging slot (at most kRemotePendingLimit, then kUnfilled); like
+// the main queue it is cut back to the renderer's newest cycle whenever a new batch arrives (kCancelled:
+// stale), so a slow link never builds up a backlog the renderer no longer wants. Invalid records are logged and dropped. A full completion ring never blocks
 // and never drops: completions wait in a local queue.
 #include <atomic>
 #include <cstdint>
@@ -55,6 +65,9 @@ class Server {
   RunOutcome run(const std::atomic<bool>& stop, std::atomic<bool>* print_stats = nullptr);
 
   MipCacheStats cache_stats() const { return cache_.stats(); }
+  // Remote fetches started and loads answered kUnfilled so far (read after run() returned, or as a statistic).
+  uint64_t remote_fetches() const { return remote_fetches_.load(std::memory_order_relaxed); }
+  uint64_t unfilled() const { return unfilled_.load(std::memory_order_relaxed); }
   const ServerStats& stats() const { return stats_; }
   // format_stats() of the current counters.
   std::string stats_report() const;
@@ -68,6 +81,8 @@ class Server {
   void handle_load(const RequestRecord& r);
   void handle_release(const RequestRecord& r);
   bool collect_results();
+  void finish(const LoadResult& r);
+  bool dispatch_remote();
   bool dispatch();
   void complete(const CompletionRecord& c);
   bool flush_completions();
@@ -76,6 +91,7 @@ class Server {
   void record_latency(LatencyHistogram& histogram, uint64_t received_ns);
 
   Segment& segment_;
+  Storage& storage_;
   std::filesystem::path scene_dir_;
   ServerConfig config_;
   std::vector<scene::TextureRecord> textures_;
@@ -86,13 +102,18 @@ class Server {
   MipCache cache_;
   MipLoader loader_;
   RequestScheduler scheduler_;
+  RequestScheduler remote_pending_;      // remote loads waiting for a remote-fetch worker (no slot held)
   SlotPool slots_;
-  uint32_t loads_in_flight_ = 0;
+  uint32_t loads_in_flight_ = 0;         // jobs of the local workers
+  uint32_t remote_in_flight_ = 0;        // jobs of the remote-fetch workers (≤ server.remote_fetches_in_flight)
+  std::atomic<uint64_t> remote_fetches_{0};
+  std::atomic<uint64_t> unfilled_{0};
   std::deque<CompletionRecord> overflow_;       // completions waiting for room in the ring
   std::vector<LoadRequest> cancelled_scratch_;  // reused each iteration: no allocation when warm
   std::vector<LoadResult> results_scratch_;
   uint64_t clock_generation_ = 0;               // last generation forwarded to the cache policy (Eq. 4 clock)
-  std::unique_ptr<WorkerPool> workers_;         // last member: its threads die before what they use
+  std::unique_ptr<WorkerPool> workers_;         // last members: their threads die before what they use
+  std::unique_ptr<WorkerPool> remote_workers_;
 };
 
 }  // namespace texstream::server

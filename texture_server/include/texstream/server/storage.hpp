@@ -1,7 +1,8 @@
 #pragma once
 // Where texture bytes come from. The server reads through this interface only, so a test can inject faults
-// (missing files, short reads, I/O errors, delays) and a later issue can add an http(s) origin, a disk cache
-// or a slow-storage emulation behind the same two calls (DESIGN.md "Texture server": tiers).
+// (missing files, short reads, I/O errors, delays), and the tiers stack behind the same calls (DESIGN.md
+// "Texture server": tiers): PosixStorage or HttpStorage (origin), SlowStorage (emulation), CachingStorage
+// (disk cache); storage_stack.hpp builds the stack from the [storage] configuration.
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
@@ -22,6 +23,17 @@ class StorageFile {
   virtual Result<uint64_t> read_at(std::span<std::byte> out, uint64_t offset) = 0;
   // The object's size in bytes (OpenImageIO's readers seek relative to the end). Errors: kIo.
   virtual Result<uint64_t> size() = 0;
+  // True when the object lives on a far or slow origin (http, slow-storage emulation): reads may take long,
+  // so the server runs them on its bounded remote-fetch workers, never on the workers that serve local reads
+  // (seed 002 §3.2: access time is bimodal; a slow fetch must not hold up a fast hit).
+  virtual bool remote() const { return false; }
+  // True when read_at(offset, bytes) would be answered on this machine (a local file, a disk-cache entry)
+  // without waiting for a remote origin. A hint: the read may still go remote (an entry evicted meanwhile).
+  virtual bool local(uint64_t offset, uint64_t bytes) {
+    (void)offset;
+    (void)bytes;
+    return !remote();
+  }
 };
 
 // Thread-safe: workers open files concurrently.
@@ -30,6 +42,12 @@ class Storage {
   virtual ~Storage() = default;
   // Errors: kNotFound when there is no such object, kIo for any other failure; messages name the path.
   virtual Result<std::unique_ptr<StorageFile>> open(const std::filesystem::path& path) = 0;
+  // Makes reads in progress (a slow http transfer, a retry back-off, an emulated stall) end soon with an
+  // error, and new ones fail at once, until resume(): a server that stops joins its remote-fetch workers
+  // without waiting out storage.request_timeout_ms, and the process may serve the next renderer after
+  // resume(). Wrappers forward both to what they wrap.
+  virtual void cancel_all() {}
+  virtual void resume() {}
 };
 
 }  // namespace texstream::server

@@ -29,6 +29,7 @@ struct LoadResult {
   CompletionRecord completion;
   uint32_t slot;  // the slot the job held, whatever its status
   uint64_t received_ns;  // the request's, for the latency histogram
+  LoadRequest request;   // the job's request (a local attempt that found the mip remote is handed on with it)
 };
 
 class WorkerPool {

@@ -1,0 +1,104 @@
+#pragma once
+// The local disk cache of ranges fetched from a remote or slow origin: seed 002 §3.2's third tier, the one the
+// Meta-texture Server tends. Keys are "<relative path>@<offset>+<length>" (the server always reads the same
+// ranges of a file: the DDS header and each mip's byte range), values the bytes the origin returned.
+//
+// On disk, in `dir`:
+//   lock            flock(LOCK_EX | LOCK_NB) for the cache's life, holding the owner's pid: a second server on
+//                   the same folder is refused with a message naming the folder and that pid (sharing a folder
+//                   safely would need cross-process index updates; refusing is simpler and cannot corrupt).
+//   entries/*.bin   one file per entry: magic, payload length, XXH3-64 checksum of key + payload, key, payload.
+//                   Written to a temporary name and renamed, so a reader never sees a half-written entry under
+//                   its name; the checksum still guards against torn writes after a crash and bit rot. Every
+//                   read verifies it: a corrupt entry is deleted and reported as a miss, never served.
+//   index           an append-only journal ("I seq size key", "T seq key" for LRU touches, "E key"), each line
+//                   ending in its own checksum. Replayed at open (so the cache survives a restart, LRU order
+//                   included); a torn or corrupt line ends the replay there. Entries whose files are missing or
+//                   the wrong size are dropped, files no line names are deleted, and the journal is rewritten
+//                   compactly (temporary file + rename).
+// Eviction keeps the total payload bytes within the budget: LRU (a hit refreshes an entry) or FIFO (seed
+// 002's: insertion order only). Thread-safe: workers read and insert concurrently; file I/O runs outside the
+// lock.
+#include <atomic>
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <span>
+#include <string>
+#include <unordered_map>
+
+#include "texstream/common/result.hpp"
+
+namespace texstream::server {
+
+enum class DiskCachePolicy { kLru, kFifo };
+// "lru" or "fifo"; errors name storage.disk_cache_policy.
+Result<DiskCachePolicy> parse_disk_cache_policy(const std::string& name);
+
+struct DiskCacheCounters {
+  std::atomic<uint64_t> hits{0};
+  std::atomic<uint64_t> misses{0};
+  std::atomic<uint64_t> bytes_hit{0};
+  std::atomic<uint64_t> inserts{0};
+  std::atomic<uint64_t> bytes_inserted{0};
+  std::atomic<uint64_t> evictions{0};
+  std::atomic<uint64_t> corrupt_dropped{0};  // entries whose checksum, key or size did not match
+};
+
+class DiskCache {
+ public:
+  // Creates `dir` if needed, takes its lock and loads the index. Errors: kInvalidArgument when another process
+  // holds the folder (names it and its pid), kIo for file-system failures (naming the path).
+  static Result<std::unique_ptr<DiskCache>> open(const std::filesystem::path& dir, uint64_t budget_bytes,
+                                                 DiskCachePolicy policy);
+  ~DiskCache();
+  DiskCache(const DiskCache&) = delete;
+  DiskCache& operator=(const DiskCache&) = delete;
+
+  static std::string key_of(const std::string& relative_path, uint64_t offset, uint64_t length);
+
+  // Copies the entry into `out` (which must hold it) and returns its length; nullopt on a miss or a corrupt
+  // entry (dropped). LRU: refreshes the entry.
+  std::optional<uint64_t> read(const std::string& key, std::span<std::byte> out);
+  bool contains(const std::string& key) const;
+  // Stores `data` under `key` (replacing an older entry) and evicts down to the budget. Data larger than the
+  // budget, or a key with a newline or tab, is not stored. A write failure is logged and the entry skipped.
+  void insert(const std::string& key, std::span<const std::byte> data);
+
+  uint64_t bytes() const;
+  size_t entries() const;
+  uint64_t budget() const { return budget_; }
+  const DiskCacheCounters& counters() const { return counters_; }
+  const std::filesystem::path& dir() const { return dir_; }
+
+ private:
+  struct Entry {
+    uint64_t seq;   // position in order_: insertion (FIFO) or last use (LRU)
+    uint64_t size;  // payload bytes
+  };
+  DiskCache(std::filesystem::path dir, uint64_t budget, DiskCachePolicy policy, int lock_fd);
+  Status load_index();
+  Status rewrite_index_locked();
+  void append_locked(const std::string& line);
+  void erase_locked(const std::string& key, bool journal);
+  void evict_locked();
+  std::filesystem::path entry_path(const std::string& key) const;
+
+  const std::filesystem::path dir_;
+  const uint64_t budget_;
+  const DiskCachePolicy policy_;
+  const int lock_fd_;
+  mutable std::mutex mutex_;
+  std::unordered_map<std::string, Entry> entries_;
+  std::map<uint64_t, std::string> order_;  // seq → key, oldest first
+  uint64_t next_seq_ = 1;
+  uint64_t bytes_ = 0;
+  int journal_fd_ = -1;
+  uint64_t journal_lines_ = 0;
+  DiskCacheCounters counters_;
+};
+
+}  // namespace texstream::server
