@@ -1,7 +1,9 @@
 #version 450
 // Main pass: shades with the texture cache (only resident mips) and the City Colormap (Eq. 8), and writes the
-// per-mesh visibility metadata (Eq. 1-3). It runs after a depth pre-pass with an EQUAL depth test, so only the
-// fragments that end up in the image run it: a mesh gets metadata exactly when it has a visible pixel.
+// per-mesh visibility metadata (Eq. 1-3). It runs in the subpass after the depth pre-pass with an EQUAL depth
+// test, so only the fragments that end up in the image run it, and of those only the pixel's owner (the mesh id
+// the pre-pass wrote, prepass.frag) goes on: coplanar surfaces both pass EQUAL, yet one pixel has one owner. A
+// mesh gets metadata exactly when it owns a pixel, which is what the mesh-id view shows.
 // Variants:
 //   WIDE_PASS  the small off-screen pass at the wider FOV: metadata only, W = 1 per viewport pixel, and only
 //              outside the viewport (seed 000 §3.2);
@@ -24,6 +26,7 @@ layout(location = 3) in vec4 in_clip;
 
 #ifndef WIDE_PASS
 layout(location = 0) out vec4 out_colour;
+layout(input_attachment_index = 0, set = 0, binding = kBindingOwner) uniform usubpassInput owner_id;
 #endif
 
 #ifdef LOD_PROBE
@@ -53,10 +56,12 @@ void main() {
   float mip_max = float(tex.placement.w - 1u);
   bool resident = tex.placement.y != kNotResident;
   bool feedback = (frame.flags.x & kFlagFeedback) != 0u;
+#ifndef WIDE_PASS
+  // Not the pixel's owner (a coplanar surface drawn later): neither colour nor metadata. After the derivatives,
+  // which need the whole quad.
+  if (subpassLoad(owner_id).x != in_mesh + 1u) discard;
+#endif
 
-  // ---- visibility metadata ----
-  AnisoLod meta = anisotropic_lod(dx, dy, frame.params.x);
-  float wanted = clamp(meta.lod + pc.pass.x, 0.0, mip_max);
 #ifdef WIDE_PASS
   vec2 ndc = in_clip.xy / in_clip.w;
   if (all(lessThanEqual(abs(ndc), pc.pass.zw))) return;  // inside the viewport: the main pass counts it
@@ -124,18 +129,20 @@ void main() {
   vec2 st = (vec2(tex.region.xy) + in_uv * extent) / float(frame.cache.x);
   vec2 queried = textureQueryLod(probe_image, st);
   uint pixel = uint(gl_FragCoord.y) * frame.view.y + uint(gl_FragCoord.x);
-  probe[pixel] = LodProbeSample(meta.lod, queried.y, mip_max, 1.0);
+  probe[pixel] = LodProbeSample(anisotropic_lod(dx, dy, frame.params.x).lod, queried.y, mip_max, 1.0);
 #endif
 #endif
 
   if (!feedback) return;
+  // ---- visibility metadata ----
+  AnisoLod meta = anisotropic_lod(dx, dy, frame.params.x);
+  float wanted = clamp(meta.lod + pc.pass.x, 0.0, mip_max);
+  uint mip_fixed = uint(wanted * float(kMipFixedScale));
+  uint weight_fixed = uint(weight * float(kWeightFixedScale) + 0.5);
   // Most fragments of a mesh do not lower its minimum: a plain read first skips their atomic (a stale read
   // only lets an unneeded atomicMin through, never skips a needed one, since the value only decreases).
-  uint mip_fixed = uint(wanted * float(kMipFixedScale));
   if (mip_fixed < mesh_meta[in_mesh].mip_fixed) atomicMin(mesh_meta[in_mesh].mip_fixed, mip_fixed);
   // Saturating sum (kWeightSaturate): the plain read may be stale, which only lets a bounded number of
   // in-flight fragments add past the threshold (see shared_structs.h).
-  if (mesh_meta[in_mesh].weight_fixed < kWeightSaturate) {
-    atomicAdd(mesh_meta[in_mesh].weight_fixed, uint(weight * float(kWeightFixedScale) + 0.5));
-  }
+  if (mesh_meta[in_mesh].weight_fixed < kWeightSaturate) atomicAdd(mesh_meta[in_mesh].weight_fixed, weight_fixed);
 }

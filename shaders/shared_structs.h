@@ -29,6 +29,11 @@ TS_CONST kBindingCompacted = 5;    // buffer CompactList: meshes with weight >= 
 TS_CONST kBindingReadback = 6;     // buffer CompactList, host-visible: the used prefix of the compacted list
 TS_CONST kBindingLodProbe = 7;     // buffer LodProbeSample[width * height] (LOD_PROBE variant only; else 1 entry)
 TS_CONST kBindingProbeSampler = 8; // sampler2DArray: the cache image through a sampler with anisotropy A_m
+TS_CONST kBindingOwner = 9;        // usubpassInput: the depth pre-pass's id buffer (mesh id + 1, 0 = none)
+TS_CONST kBindingDraws = 10;       // buffer: the frame's VkDrawIndexedIndirectCommand list (compact.comp reads ids)
+// 32-bit words per VkDrawIndexedIndirectCommand, and the word holding firstInstance (= the mesh id).
+TS_CONST kDrawWords = 5u;
+TS_CONST kDrawMeshWord = 4u;
 
 // TextureGpu.placement.y when no mip of the texture is resident: the shader draws the colormap colour.
 TS_CONST kNotResident = 0xffffffffu;
@@ -65,7 +70,7 @@ struct FrameUniforms {
                         // w: capacity of the compacted list (entries)
   uvec4 cache;          // x: cache layer extent (px), y: cache mip count, z, w: 0
   uvec4 view;           // x: debug view (kDebugView*), y: viewport width (px, row pitch of the LOD probe),
-                        // z, w: 0
+                        // z: draws in the frame's indirect list (compact.comp's invocations), w: 0
 };
 
 // One fragment of the LOD_PROBE variant (tests and texstream-bench visibility): the metadata's level next to
@@ -115,7 +120,7 @@ struct CompactEntry {
 // Head of the compacted list buffer (compact.comp declares the same four words, then CompactEntry[]).
 struct CompactListHeader {
   uint count;           // atomic counter; may exceed the capacity (entries past it are dropped)
-  uint dispatch[3];     // VkDispatchIndirectCommand of the prefix copy (compact_args.comp writes it)
+  uint reserved[3];     // 0; keeps the entries 16-byte aligned
 };
 }  // namespace texstream::gpu
 #undef TS_CONST

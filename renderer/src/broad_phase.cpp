@@ -179,4 +179,23 @@ void BroadPhase::query(const Frustum& frustum, const std::array<double, 3>& came
   if (stats) *stats = total;
 }
 
+ViewportSplit BroadPhase::split_by_viewport(const Frustum& viewport, const std::array<double, 3>& camera,
+                                           std::vector<uint32_t>& ids) const {
+  std::vector<uint32_t> straddle, outside;
+  uint32_t inside = 0;
+  for (uint32_t id : ids) {
+    if (id >= mesh_bounds_.size()) continue;  // not a mesh of this tree: dropped, as query() never returns it
+    switch (classify(viewport, mesh_bounds_[id], camera)) {
+      case Frustum::Side::kInside: ids[inside++] = id; break;  // inside <= position read: in-place is safe
+      case Frustum::Side::kIntersects: straddle.push_back(id); break;
+      case Frustum::Side::kOutside: outside.push_back(id); break;
+    }
+  }
+  ids.resize(inside);
+  ids.insert(ids.end(), straddle.begin(), straddle.end());
+  const auto main_end = static_cast<uint32_t>(ids.size());
+  ids.insert(ids.end(), outside.begin(), outside.end());
+  return ViewportSplit{main_end, inside};
+}
+
 }  // namespace texstream::render

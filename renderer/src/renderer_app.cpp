@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <thread>
 
 #include "texstream/common/camera_path.hpp"
@@ -16,6 +17,8 @@
 #include "texstream/render/camera.hpp"
 #include "texstream/render/frame_capture.hpp"
 #include "texstream/render/frame_constants.hpp"
+#include "texstream/render/frame_log.hpp"
+#include "texstream/render/frame_measurement.hpp"
 #include "texstream/render/interactive_session.hpp"
 #include "texstream/render/gpu_structs.hpp"
 #include "texstream/render/scene_data.hpp"
@@ -113,6 +116,20 @@ class OrderedCommitSink final : public MipSink {
 // previous cycle before the run is declared stuck. Generous: a cold server on a loaded 2-core machine.
 constexpr std::chrono::seconds kLockstepTimeout{60};
 
+// load_fully(): this many rounds in a row that send requests but publish no mip end the load with an error
+// instead of spinning (a server that answers everything with retryable failures, a cache that evicts what it
+// just loaded). A healthy round publishes at least one mip; 64 rounds is far beyond any retry burst.
+constexpr uint32_t kMaxFruitlessLoadRounds = 64;
+
+bool same_pose(const CameraPose& a, const CameraPose& b) {
+  return a.position[0] == b.position[0] && a.position[1] == b.position[1] && a.position[2] == b.position[2] &&
+         a.yaw_deg == b.yaw_deg && a.pitch_deg == b.pitch_deg;
+}
+
+double ms_between(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
 class Renderer {
  public:
   explicit Renderer(const RenderRun& run) : run_(run), cfg_(run.config) {}
@@ -122,6 +139,18 @@ class Renderer {
   Status set_up();
   Status render_frame(uint64_t index, bool last);
   void start_cycle();
+  std::vector<StreamCandidate> read_candidates();
+  // Submits cmd_ (recorded) after the cache's sparse binds, waits for it and publishes its uploads.
+  Status submit_and_wait();
+  // A submission that only carries the uploads committed so far (no drawing).
+  Status upload_now();
+  // Loads the whole mip chain (down to level 0) of every texture in `wanted`, waiting for the server and
+  // uploading as it goes: render.preload_all before frame 0 and render.blocking_loads each frame. With
+  // `no_evictions`, an eviction on the way is an error (the preload must fit the cache); otherwise the load
+  // stops at the first eviction (a visible set larger than the cache cannot be made fully resident).
+  Status load_fully(std::vector<StreamCandidate> wanted, bool no_evictions);
+  // frames.csv: the frame's streaming counters and, with render.reference_dir, its image error.
+  Status record_frame(uint64_t index, double time_s, const CameraPose& pose, double latency_ms, double waited_ms);
 
   const RenderRun& run_;
   const Config& cfg_;
@@ -137,6 +166,8 @@ class Renderer {
   std::unique_ptr<FrameCapture> capture_;
   std::unique_ptr<BroadPhase> broad_phase_;
   std::unique_ptr<StreamClient> client_;
+  // After client_: destroyed first, so the in-process server's thread is gone before the segment.
+  std::unique_ptr<InProcessServer> in_process_;
   std::unique_ptr<InteractiveSession> interactive_;  // render.window = true only
   UniqueCommandPool pool_;
   VkCommandBuffer cmd_ = VK_NULL_HANDLE;
@@ -151,6 +182,13 @@ class Renderer {
   std::unique_ptr<AdaptiveController> controller_;
   double sum_load_mb_ = 0, sum_bias_ = 0, sum_tw_ms_ = 0;  // per-frame sums for the run summary
   uint64_t load_time_limited_frames_ = 0;
+  // Per-frame measurements (frame_log.hpp).
+  std::vector<FrameRecord> frames_;
+  Clock::time_point run_start_{};
+  Clock::duration excluded_{0};  // measurement and PNG time: not part of wall_s
+  uint64_t prev_mips_ = 0, prev_bytes_ = 0, prev_hits_ = 0, prev_misses_ = 0;
+  std::optional<CameraPose> prev_pose_;
+  std::unique_ptr<FrameMeasurement> measure_;  // render.reference_dir set: every frame captured and compared
 };
 
 Status Renderer::set_up() {
@@ -252,10 +290,166 @@ Status Renderer::set_up() {
   TS_VK_TRY(vkCreateFence(device, &fci, nullptr, &fence));
   fence_ = UniqueFence(device, fence);
 
-  auto client = StreamClient::start(cfg_, scene_.shapes(), scene_.dir, run_.config_file, run_.overrides);
+  if (cfg_.render.preload_all && cfg_.render.blocking_loads) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "render.preload_all and render.blocking_loads: choose one (both are baselines of their own)");
+  }
+  if (!cfg_.render.reference_dir.empty()) {
+    auto measure = FrameMeasurement::open(cfg_.render.reference_dir, output_dir_, po.width, po.height);
+    if (!measure) return measure.error();
+    measure_ = std::move(*measure);
+  }
+
+  StreamClientOptions so;
+  so.spawn_server = !run_.in_process_server;
+  auto client = StreamClient::start(cfg_, scene_.shapes(), scene_.dir, run_.config_file, run_.overrides, so);
   if (!client) return client.error();
   client_ = std::move(*client);
+  if (run_.in_process_server) {
+    in_process_ = run_.in_process_server(cfg_);
+    if (!in_process_) return make_error(ErrorCode::kInvalidArgument, "in-process server: the factory made none");
+    TS_TRY(in_process_->start(client_->segment().name()));
+    spdlog::info("texture server runs in this process (segment '{}')", client_->segment().name());
+  }
+  if (cfg_.render.preload_all) {
+    // Every texture, its whole chain: the reference frames and the all-resident baseline.
+    std::vector<StreamCandidate> all;
+    all.reserve(scene_.textures.size());
+    for (uint32_t t = 0; t < scene_.textures.size(); ++t) all.push_back({TextureId(t), 0.0f, 1.0f});
+    const auto t0 = Clock::now();
+    TS_TRY(load_fully(std::move(all), true));
+    spdlog::info("render.preload_all: {} mips ({:.1f} MB) of {} textures resident in {:.2f} s",
+                 cache_->stats().mips_uploaded, static_cast<double>(cache_->stats().bytes_uploaded) / 1e6,
+                 cache_->resident_textures(), ms_between(t0, Clock::now()) / 1e3);
+  }
   return ok_status();
+}
+
+Status Renderer::submit_and_wait() {
+  VkSubmitInfo si{};
+  si.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
+  si.commandBufferCount = 1;
+  si.pCommandBuffers = &cmd_;
+  // The copies into the cache need the pages bound just before: a sparse bind is ordered with command
+  // buffers only through a semaphore.
+  const BindWait bind = cache_->bind_wait();
+  const VkPipelineStageFlags bind_stage = VK_PIPELINE_STAGE_ALL_COMMANDS_BIT;
+  VkTimelineSemaphoreSubmitInfo bind_ts{};
+  bind_ts.sType = VK_STRUCTURE_TYPE_TIMELINE_SEMAPHORE_SUBMIT_INFO;
+  bind_ts.waitSemaphoreValueCount = 1;
+  bind_ts.pWaitSemaphoreValues = &bind.value;
+  if (bind.value != 0) {
+    si.pNext = &bind_ts;
+    si.waitSemaphoreCount = 1;
+    si.pWaitSemaphores = &bind.semaphore;
+    si.pWaitDstStageMask = &bind_stage;
+  }
+  VkDevice device = ctx_->device();
+  VkFence fence = fence_.get();
+  TS_VK_TRY(vkResetFences(device, 1, &fence));
+  TS_VK_TRY(vkQueueSubmit(ctx_->queue(), 1, &si, fence));
+  TS_VK_TRY(vkWaitForFences(device, 1, &fence, VK_TRUE, UINT64_MAX));
+  cache_->on_submission_complete(serial_);
+  return ok_status();
+}
+
+Status Renderer::upload_now() {
+  ++serial_;
+  TS_VK_TRY(vkResetCommandBuffer(cmd_, 0));
+  VkCommandBufferBeginInfo bi{};
+  bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
+  bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  TS_VK_TRY(vkBeginCommandBuffer(cmd_, &bi));
+  TS_TRY(cache_->prepare_uploads(serial_));
+  cache_->record_uploads(cmd_, serial_);
+  TS_VK_TRY(vkEndCommandBuffer(cmd_));
+  return submit_and_wait();
+}
+
+Status Renderer::load_fully(std::vector<StreamCandidate> wanted, bool no_evictions) {
+  // Desired level 0 and no bias: Algorithm 1 then refines each texture one level per round, coarsest first,
+  // until its base level is resident (Final). Each round waits for every answer before the next, so the
+  // state machine sees the previous level published first.
+  for (StreamCandidate& c : wanted) c.desired_mip = 0.0f;
+  const uint64_t evictions_before = cache_->stats().evictions;
+  uint32_t fruitless = 0;
+  auto idle_since = Clock::now();
+  for (;;) {
+    const uint64_t published_before = cache_->stats().mips_uploaded;
+    client_->begin_cycle();
+    ++cycles_;
+    // A round asks for at most half the staging ring, so all its answers are held and committed at once
+    // (in texture order) below: which answers share a poll is timing, and must not decide cache regions.
+    const uint64_t round_cap = static_cast<uint64_t>(cfg_.render.staging_bytes) / 2;
+    uint64_t round_bytes = 0;
+    auto client_send = client_->sender();
+    auto send = [&](const MipRequest& r) {
+      if (round_bytes > 0 && round_bytes + r.bytes > round_cap) return SendResult::kStop;
+      const SendResult sr = client_send(r);
+      if (sr == SendResult::kSent) round_bytes += r.bytes;
+      return sr;
+    };
+    const auto result = states_->run_cycle(wanted, std::numeric_limits<uint64_t>::max(), 0.0f, send,
+                                           static_cast<size_t>(cfg_.stream.max_mips_per_cycle));
+    if (result.sent.empty() && client_->stats().in_flight == 0) {
+      // Nothing to send: either every wanted texture is complete (or broken), or the server takes no
+      // requests right now (starting, restarting after a crash): then wait for it, within the timeout.
+      const auto incomplete = std::count_if(wanted.begin(), wanted.end(), [&](const StreamCandidate& c) {
+        const TextureStateView v = states_->view(c.texture);
+        return !v.broken && v.resident != 0u;
+      });
+      if (incomplete == 0) return ok_status();
+      if (Clock::now() - idle_since > kLockstepTimeout) {
+        return make_error(ErrorCode::kTimeout,
+                          std::to_string(incomplete) + " textures still incomplete and the server takes no requests (" +
+                              to_string(client_->stats().server_state) + ") after " +
+                              std::to_string(kLockstepTimeout.count()) + " s");
+      }
+      client_->poll(*cache_, 0);  // supervision: reap, restart
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      continue;
+    }
+    idle_since = Clock::now();
+    auto last_progress = Clock::now();
+    uint64_t answered = client_->stats().completions_ok;
+    OrderedCommitSink ordered(*cache_);  // arrival order must not decide cache regions (reruns identical)
+    while (client_->stats().in_flight > 0) {
+      LoadTimeSink all(ordered, Clock::time_point::max());
+      client_->poll(all, std::numeric_limits<size_t>::max());
+      if (all.no_room()) {  // only if one mip is above half the ring: upload to free it
+        ordered.flush();
+        TS_TRY(upload_now());
+      }
+      if (client_->stats().completions_ok != answered) {
+        answered = client_->stats().completions_ok;
+        last_progress = Clock::now();
+      } else if (Clock::now() - last_progress > kLockstepTimeout) {
+        return make_error(ErrorCode::kTimeout, std::to_string(client_->stats().in_flight) +
+                                                   " requests unanswered for " +
+                                                   std::to_string(kLockstepTimeout.count()) + " s while loading "
+                                                   "whole mip chains");
+      } else if (client_->stats().in_flight > 0) {
+        std::this_thread::sleep_for(std::chrono::microseconds(200));
+      }
+    }
+    ordered.flush();
+    TS_TRY(upload_now());
+    if (cache_->stats().evictions != evictions_before) {
+      if (no_evictions) {
+        return make_error(ErrorCode::kResourceExhausted,
+                          "render.preload_all: the cache evicted textures while loading the whole scene; raise "
+                          "cache.memory_bytes (now " + std::to_string(cfg_.cache.memory_bytes) +
+                              ") and cache.layers (now " + std::to_string(cfg_.cache.layers) + ")");
+      }
+      return ok_status();  // the visible set does not fit: draw with what is resident
+    }
+    fruitless = cache_->stats().mips_uploaded == published_before ? fruitless + 1 : 0;
+    if (fruitless >= kMaxFruitlessLoadRounds) {
+      return make_error(ErrorCode::kTimeout, std::to_string(kMaxFruitlessLoadRounds) +
+                                                 " load rounds in a row published no mip (" +
+                                                 std::to_string(result.sent.size()) + " requests in the last)");
+    }
+  }
 }
 
 Status Renderer::render_frame(uint64_t index, bool last) {
@@ -264,12 +458,17 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   CameraLens lens{cfg_.render.fov_y_deg, cfg_.render.offscreen_fov_y_deg,
                   static_cast<double>(cfg_.render.width_px) / static_cast<double>(cfg_.render.height_px),
                   cfg_.render.near_m, cfg_.render.far_m};
-  const Camera cam = make_camera(interactive_ ? interactive_->next_pose() : path_->sample(time_s), lens);
+  const CameraPose pose = interactive_ ? interactive_->next_pose() : path_->sample(time_s);
+  const Camera cam = make_camera(pose, lens);
 
   // Broad phase over the wide frustum: the wide pass needs those meshes too.
   broad_phase_->query(Frustum::from_matrix(cam.wide_proj * cam.view), cam.position, visible_);
   FrameRecording rec;
-  rec.draw_count = scene_gpu_->write_draws(scene_, visible_, cam.position);
+  // Inside / straddling / outside the viewport's frustum: the main pass draws the first two runs, the wide
+  // pass the last two (a mesh wholly inside the viewport adds nothing the main pass does not already count).
+  const ViewportSplit split =
+      broad_phase_->split_by_viewport(Frustum::from_matrix(cam.proj * cam.view), cam.position, visible_);
+  scene_gpu_->write_draws(scene_, visible_, cam.position, split, rec);
   rec.main = main_pass_constants(cam);
   const auto& po = passes_->options();
   rec.wide = wide_pass_constants(cam, cfg_.render.fov_y_deg, cfg_.render.offscreen_fov_y_deg, po.height,
@@ -314,7 +513,6 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   const bool write = last || (cfg_.render.write_every_frames > 0 &&
                               index % static_cast<uint64_t>(cfg_.render.write_every_frames) == 0);
 
-  VkDevice device = ctx_->device();
   ++serial_;
   TS_VK_TRY(vkResetCommandBuffer(cmd_, 0));
   VkCommandBufferBeginInfo bi{};
@@ -324,31 +522,11 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   TS_TRY(cache_->prepare_uploads(serial_));  // this frame's sparse binds: one vkQueueBindSparse
   cache_->record_uploads(cmd_, serial_);
   passes_->record(cmd_, rec);
-  if (write) capture_->record(cmd_, passes_->colour().handle());
+  // Every frame is captured when it is measured against a reference (the copy is part of every measured
+  // configuration alike, so ratios between them are unaffected).
+  if (write || measure_) capture_->record(cmd_, passes_->colour().handle());
   TS_VK_TRY(vkEndCommandBuffer(cmd_));
-  VkSubmitInfo si{};
-  si.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
-  si.commandBufferCount = 1;
-  si.pCommandBuffers = &cmd_;
-  // The copies into the cache need the pages bound just before: a sparse bind is ordered with command
-  // buffers only through a semaphore.
-  const BindWait bind = cache_->bind_wait();
-  const VkPipelineStageFlags bind_stage = VK_PIPELINE_STAGE_ALL_COMMANDS_BIT;
-  VkTimelineSemaphoreSubmitInfo bind_ts{};
-  bind_ts.sType = VK_STRUCTURE_TYPE_TIMELINE_SEMAPHORE_SUBMIT_INFO;
-  bind_ts.waitSemaphoreValueCount = 1;
-  bind_ts.pWaitSemaphoreValues = &bind.value;
-  if (bind.value != 0) {
-    si.pNext = &bind_ts;
-    si.waitSemaphoreCount = 1;
-    si.pWaitSemaphores = &bind.semaphore;
-    si.pWaitDstStageMask = &bind_stage;
-  }
-  VkFence fence = fence_.get();
-  TS_VK_TRY(vkResetFences(device, 1, &fence));
-  TS_VK_TRY(vkQueueSubmit(ctx_->queue(), 1, &si, fence));
-  TS_VK_TRY(vkWaitForFences(device, 1, &fence, VK_TRUE, UINT64_MAX));
-  cache_->on_submission_complete(serial_);
+  TS_TRY(submit_and_wait());
   if (interactive_) {
     InteractiveReadout r;
     r.frame_latency_ms = latencies_ms_.empty() ? 0.0 : latencies_ms_.back();
@@ -358,7 +536,13 @@ Status Renderer::render_frame(uint64_t index, bool last) {
     r.load_size_mb = static_cast<double>(load_bytes_) / 1e6;
     TS_TRY(interactive_->present(passes_->colour().handle(), passes_->options().width, passes_->options().height, r));
   }
-  if (rec.read_back_list) start_cycle();
+  if (rec.read_back_list) {
+    if (cfg_.render.blocking_loads) {
+      TS_TRY(load_fully(read_candidates(), false));  // the next frame draws every named texture complete
+    } else {
+      start_cycle();
+    }
+  }
   // Lock-step waits for the server are not frame latency: they would not exist in real time.
   latencies_ms_.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0 - waited).count());
   // Δt of Eq. 4-7 is in seconds; the next cycle uses the s and b this frame leads to.
@@ -367,15 +551,54 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   sum_bias_ += controller_->mip_bias();
   sum_tw_ms_ += controller_->weighted_latency_s() * 1e3;
 
+  const auto measure_start = Clock::now();
+  TS_TRY(record_frame(index, time_s, pose, latencies_ms_.back(), std::chrono::duration<double, std::milli>(waited).count()));
   if (write) {
     char name[32];
     std::snprintf(name, sizeof name, "frame_%05llu.png", static_cast<unsigned long long>(index));
     TS_TRY(capture_->write_png(output_dir_ / "frames" / name));
   }
+  excluded_ += Clock::now() - measure_start;
   return ok_status();
 }
 
-void Renderer::start_cycle() {
+Status Renderer::record_frame(uint64_t index, double time_s, const CameraPose& pose, double latency_ms,
+                              double waited_ms) {
+  const auto now = Clock::now();
+  const TextureCacheStats& cs = cache_->stats();
+  const StreamStats ss = client_->stats();
+  FrameRecord f;
+  f.index = index;
+  f.time_s = time_s;
+  f.wall_s = std::chrono::duration<double>(now - run_start_ - excluded_).count();
+  f.latency_ms = latency_ms;
+  f.waited_ms = waited_ms;
+  f.tw_ms = controller_->weighted_latency_s() * 1e3;
+  f.load_size_mb = controller_->load_size_bytes() / 1e6;
+  f.mip_bias = controller_->mip_bias();
+  f.mips = cs.mips_uploaded - prev_mips_;
+  f.bytes = cs.bytes_uploaded - prev_bytes_;
+  prev_mips_ = cs.mips_uploaded;
+  prev_bytes_ = cs.bytes_uploaded;
+  f.bound_pages = cache_->page_bytes() ? cache_->bound_bytes() / cache_->page_bytes() : 0;
+  const uint64_t hits = ss.server_ram_cache_hits - std::min(prev_hits_, ss.server_ram_cache_hits);
+  const uint64_t misses = ss.server_ram_cache_misses - std::min(prev_misses_, ss.server_ram_cache_misses);
+  prev_hits_ = ss.server_ram_cache_hits;
+  prev_misses_ = ss.server_ram_cache_misses;
+  f.server_hit_rate = hits + misses ? static_cast<double>(hits) / static_cast<double>(hits + misses)
+                                    : std::numeric_limits<double>::quiet_NaN();
+  f.in_flight = ss.in_flight;
+  f.camera_still = prev_pose_ && same_pose(*prev_pose_, pose);
+  prev_pose_ = pose;
+  constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+  f.mse = f.psnr_db = f.ssim = f.popin_mse = kNaN;
+  if (measure_) TS_TRY(measure_->add(capture_->pixels().first(size_t{capture_->width()} * capture_->height() * 4)));
+  frames_.push_back(f);
+  return ok_status();
+}
+
+
+std::vector<StreamCandidate> Renderer::read_candidates() {
   const auto* header = scene_gpu_->readback.as<gpu::CompactListHeader>();
   const uint32_t count = std::min(header->count, scene_gpu_->compact_capacity);
   const auto* entries = reinterpret_cast<const gpu::CompactEntry*>(scene_gpu_->readback.bytes().data() +
@@ -383,7 +606,11 @@ void Renderer::start_cycle() {
   uint64_t skipped = 0;
   const auto candidates = build_candidates({entries, count}, scene_.meshes.meshes, &skipped);
   if (skipped) spdlog::warn("visibility list: {} entries with a bad mesh id skipped", skipped);
+  return candidates;
+}
 
+void Renderer::start_cycle() {
+  const auto candidates = read_candidates();
   client_->begin_cycle();
   ++cycles_;
   // stream.max_mips_per_cycle caps the requests of one cycle on top of the load size s.
@@ -411,6 +638,12 @@ Result<RunSummary> Renderer::run() {
   // Window mode with render.frames = 0 runs until the window is closed.
   if (interactive_ && cfg_.render.frames == 0) frames = UINT64_MAX;
   uint64_t rendered = 0;
+  run_start_ = Clock::now();
+  // Per-frame deltas start here: the preload (render.preload_all) is not frame 0's streaming.
+  prev_mips_ = cache_->stats().mips_uploaded;
+  prev_bytes_ = cache_->stats().bytes_uploaded;
+  prev_hits_ = client_->stats().server_ram_cache_hits;
+  prev_misses_ = client_->stats().server_ram_cache_misses;
   for (uint64_t i = 0; i < frames && !(interactive_ && interactive_->closed()); ++i, ++rendered)
     TS_TRY(render_frame(i, i + 1 == frames));
   frames = rendered;
@@ -441,7 +674,14 @@ Result<RunSummary> Renderer::run() {
   s.load_time_limited_frames = load_time_limited_frames_;
   s.controller_rejected_frames = controller_->frames_rejected();
   TS_TRY(cache_->write_stats_json(output_dir_ / "cache.json"));  // budget checks, binds, thrash rate
+  if (measure_) {
+    TS_TRY(measure_->measure(frames_));
+    measure_.reset();  // removes the spill file
+  }
+  TS_TRY(write_frame_log(output_dir_ / "frames.csv", frames_));
   // Shut the server down and release the device before the validation counts are read: teardown is validated too.
+  if (in_process_) in_process_->stop();  // before the client unmaps the segment it serves
+  in_process_.reset();
   client_.reset();
   passes_.reset();
   capture_.reset();

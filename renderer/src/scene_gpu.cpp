@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <vector>
 
+#include "texstream/render/broad_phase.hpp"
 #include "texstream/render/one_shot.hpp"
+#include "texstream/render/scene_passes.hpp"
 #include "texstream/render/scene_data.hpp"
 #include "texstream/render/vulkan_context.hpp"
 
@@ -28,17 +30,18 @@ Result<SceneGpu> SceneGpu::create(const VulkanContext& ctx, const SceneData& sce
   TS_TRY(make(g.vertices, vbytes, VK_BUFFER_USAGE_VERTEX_BUFFER_BIT | kDst, MemoryUse::kDeviceLocal));
   TS_TRY(make(g.indices, ibytes, VK_BUFFER_USAGE_INDEX_BUFFER_BIT | kDst, MemoryUse::kDeviceLocal));
   TS_TRY(make(g.meshes, n * sizeof(gpu::MeshGpu), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible));
-  TS_TRY(make(g.indirect, n * sizeof(VkDrawIndexedIndirectCommand), VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
-              MemoryUse::kHostVisible));
+  // Also a storage buffer: compact.comp reads the frame's mesh ids from it.
+  TS_TRY(make(g.indirect, n * sizeof(VkDrawIndexedIndirectCommand),
+              VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT | VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible));
   TS_TRY(make(g.mesh_meta, n * sizeof(gpu::MeshMeta), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst,
               MemoryUse::kDeviceLocal));
   const VkDeviceSize list_bytes = sizeof(gpu::CompactListHeader) + n * sizeof(gpu::CompactEntry);
-  // The list header doubles as the indirect dispatch of the prefix copy (compact_args.comp).
   TS_TRY(make(g.compacted, list_bytes,
-              VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT | kDst,
+              VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst,
               MemoryUse::kDeviceLocal));
-  // Written by compact_copy.comp: only the header and the used prefix, only when a streaming cycle starts.
-  TS_TRY(make(g.readback, list_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible));
+  // Written by compact.comp (COMPACT_TO_HOST): only the header and the used prefix, only when a streaming cycle
+  // starts.
+  TS_TRY(make(g.readback, list_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst, MemoryUse::kHostVisible));
   TS_TRY(make(g.frame_uniforms, sizeof(gpu::FrameUniforms), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT,
               MemoryUse::kHostVisible));
 
@@ -52,10 +55,29 @@ Result<SceneGpu> SceneGpu::create(const VulkanContext& ctx, const SceneData& sce
   return g;
 }
 
+void SceneGpu::write_draws(const SceneData& scene, std::span<const uint32_t> visible,
+                           const std::array<double, 3>& camera, const ViewportSplit& split, FrameRecording& rec) {
+  const size_t main_end = std::min<size_t>(split.main_end, visible.size());
+  const size_t wide_begin = std::min<size_t>(split.wide_begin, main_end);
+  // Draws written before each boundary = the boundary in draw positions (write_draws skips empty meshes).
+  const uint32_t before_wide = write_draws(scene, visible.first(wide_begin), camera);
+  auto* draws = indirect.as<VkDrawIndexedIndirectCommand>();
+  const uint32_t both = write_draws_at(scene, visible.subspan(wide_begin, main_end - wide_begin), camera,
+                                       draws + before_wide);
+  const uint32_t wide_only = write_draws_at(scene, visible.subspan(main_end), camera, draws + before_wide + both);
+  rec.wide_first = before_wide;
+  rec.main_count = before_wide + both;
+  rec.draw_count = before_wide + both + wide_only;
+}
+
 uint32_t SceneGpu::write_draws(const SceneData& scene, std::span<const uint32_t> visible,
                                const std::array<double, 3>& camera) {
+  return write_draws_at(scene, visible, camera, indirect.as<VkDrawIndexedIndirectCommand>());
+}
+
+uint32_t SceneGpu::write_draws_at(const SceneData& scene, std::span<const uint32_t> visible,
+                                  const std::array<double, 3>& camera, VkDrawIndexedIndirectCommand* draws) {
   auto* mesh_out = meshes.as<gpu::MeshGpu>();
-  auto* draws = indirect.as<VkDrawIndexedIndirectCommand>();
   uint32_t count = 0;
   for (uint32_t id : visible) {
     const scene::MeshRecord& m = scene.meshes.meshes[id];

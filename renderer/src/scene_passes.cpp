@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cstddef>
+#include <span>
 #include <vector>
 
 #include "texstream/common/scene_format.hpp"
@@ -21,6 +22,12 @@ constexpr VkFormat kColourFormat = VK_FORMAT_R8G8B8A8_SRGB;
 constexpr VkFormat kDebugColourFormat = VK_FORMAT_R8G8B8A8_UNORM;
 // Reversed-Z wants float depth: precision is then nearly uniform in log-distance over near..far = 1..20000 m.
 constexpr VkFormat kDepthFormat = VK_FORMAT_D32_SFLOAT;
+// The pre-pass's id buffer: mesh id + 1 per pixel (0 = no mesh); 32 bits hold any mesh count.
+constexpr VkFormat kOwnerFormat = VK_FORMAT_R32_UINT;
+// compact.comp reads the mesh id of each draw from the indirect list as 32-bit words.
+static_assert(sizeof(VkDrawIndexedIndirectCommand) == gpu::kDrawWords * sizeof(uint32_t));
+static_assert(offsetof(VkDrawIndexedIndirectCommand, firstInstance) == gpu::kDrawMeshWord * sizeof(uint32_t));
+
 constexpr VkShaderStageFlags kAllStages =
     VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT | VK_SHADER_STAGE_COMPUTE_BIT;
 
@@ -36,69 +43,109 @@ Result<UniqueShaderModule> make_module(const VulkanContext& ctx, ShaderCompiler&
   return UniqueShaderModule(ctx.device(), m);
 }
 
-Result<UniqueRenderPass> make_render_pass(VkDevice device, bool with_colour, VkFormat colour_format) {
-  std::vector<VkAttachmentDescription> atts;
-  if (with_colour) {
-    VkAttachmentDescription c{};
-    c.format = colour_format;
-    c.samples = VK_SAMPLE_COUNT_1_BIT;
-    c.loadOp = VK_ATTACHMENT_LOAD_OP_CLEAR;
-    c.storeOp = VK_ATTACHMENT_STORE_OP_STORE;
-    c.stencilLoadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
-    c.stencilStoreOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
-    c.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
-    c.finalLayout = VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL;  // frame capture copies it out
-    atts.push_back(c);
-  }
-  VkAttachmentDescription d{};
-  d.format = kDepthFormat;
-  d.samples = VK_SAMPLE_COUNT_1_BIT;
-  d.loadOp = VK_ATTACHMENT_LOAD_OP_CLEAR;
-  d.storeOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
-  d.stencilLoadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
-  d.stencilStoreOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
-  d.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
-  d.finalLayout = VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL;
-  atts.push_back(d);
+VkAttachmentDescription attachment(VkFormat format, VkAttachmentStoreOp store, VkImageLayout final_layout) {
+  VkAttachmentDescription a{};
+  a.format = format;
+  a.samples = VK_SAMPLE_COUNT_1_BIT;
+  a.loadOp = VK_ATTACHMENT_LOAD_OP_CLEAR;
+  a.storeOp = store;
+  a.stencilLoadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
+  a.stencilStoreOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
+  a.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+  a.finalLayout = final_layout;
+  return a;
+}
 
-  VkAttachmentReference colour_ref{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
-  VkAttachmentReference depth_ref{with_colour ? 1u : 0u, VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL};
-  VkSubpassDescription sub{};
-  sub.pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
-  sub.colorAttachmentCount = with_colour ? 1 : 0;
-  sub.pColorAttachments = with_colour ? &colour_ref : nullptr;
-  sub.pDepthStencilAttachment = &depth_ref;
-
-  // In: the previous frame's use of the same attachments (and its capture copy) must be done before we clear.
-  // Out: the capture copy reads the colour after the pass.
-  std::array<VkSubpassDependency, 2> deps{};
-  deps[0].srcSubpass = VK_SUBPASS_EXTERNAL;
-  deps[0].dstSubpass = 0;
-  deps[0].srcStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT |
-                         VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
-  deps[0].dstStageMask = VK_PIPELINE_STAGE_EARLY_FRAGMENT_TESTS_BIT | VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
-  deps[0].srcAccessMask = VK_ACCESS_TRANSFER_READ_BIT | VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT |
-                          VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
-  deps[0].dstAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_READ_BIT | VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT |
-                          VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
-  deps[1].srcSubpass = 0;
-  deps[1].dstSubpass = VK_SUBPASS_EXTERNAL;
-  deps[1].srcStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
-  deps[1].dstStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT;
-  deps[1].srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
-  deps[1].dstAccessMask = VK_ACCESS_TRANSFER_READ_BIT;
-
+Result<UniqueRenderPass> finish_render_pass(VkDevice device, std::span<const VkAttachmentDescription> atts,
+                                            std::span<const VkSubpassDescription> subs,
+                                            std::span<const VkSubpassDependency> deps) {
   VkRenderPassCreateInfo ci{};
   ci.sType = VK_STRUCTURE_TYPE_RENDER_PASS_CREATE_INFO;
   ci.attachmentCount = static_cast<uint32_t>(atts.size());
   ci.pAttachments = atts.data();
-  ci.subpassCount = 1;
-  ci.pSubpasses = &sub;
-  ci.dependencyCount = with_colour ? 2 : 1;
+  ci.subpassCount = static_cast<uint32_t>(subs.size());
+  ci.pSubpasses = subs.data();
+  ci.dependencyCount = static_cast<uint32_t>(deps.size());
   ci.pDependencies = deps.data();
   VkRenderPass rp = VK_NULL_HANDLE;
   TS_VK_TRY(vkCreateRenderPass(device, &ci, nullptr, &rp));
   return UniqueRenderPass(device, rp);
+}
+
+// The main pass: subpass 0 is the depth pre-pass, which also writes the owner id (kOwnerFormat); subpass 1
+// shades with an EQUAL depth test and reads the owner id as an input attachment (scene.frag).
+// Attachments: 0 colour, 1 depth, 2 owner id.
+Result<UniqueRenderPass> make_main_pass(VkDevice device, VkFormat colour_format) {
+  const std::array<VkAttachmentDescription, 3> atts{
+      attachment(colour_format, VK_ATTACHMENT_STORE_OP_STORE, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL),  // captured
+      attachment(kDepthFormat, VK_ATTACHMENT_STORE_OP_DONT_CARE, VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL),
+      attachment(kOwnerFormat, VK_ATTACHMENT_STORE_OP_DONT_CARE, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL),
+  };
+  const VkAttachmentReference colour_ref{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
+  const VkAttachmentReference depth_ref{1, VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL};
+  const VkAttachmentReference owner_out{2, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
+  const VkAttachmentReference owner_in{2, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
+  std::array<VkSubpassDescription, 2> subs{};
+  subs[0].pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
+  subs[0].colorAttachmentCount = 1;
+  subs[0].pColorAttachments = &owner_out;
+  subs[0].pDepthStencilAttachment = &depth_ref;
+  subs[1].pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
+  subs[1].inputAttachmentCount = 1;
+  subs[1].pInputAttachments = &owner_in;
+  subs[1].colorAttachmentCount = 1;
+  subs[1].pColorAttachments = &colour_ref;
+  subs[1].pDepthStencilAttachment = &depth_ref;
+
+  // In: the previous frame's use of the same attachments (and its capture copy) must be done before we clear.
+  // Between: the shading subpass tests against the pre-pass's depth and reads its owner id at the same pixel.
+  // Out: the capture copy reads the colour after the pass.
+  std::array<VkSubpassDependency, 4> deps{};
+  deps[0].srcSubpass = VK_SUBPASS_EXTERNAL;
+  deps[0].dstSubpass = 0;
+  deps[0].srcStageMask = VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT | VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT;
+  deps[0].dstStageMask = VK_PIPELINE_STAGE_EARLY_FRAGMENT_TESTS_BIT | VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[0].srcAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT | VK_ACCESS_INPUT_ATTACHMENT_READ_BIT;
+  deps[0].dstAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_READ_BIT | VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT |
+                          VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  deps[1].srcSubpass = VK_SUBPASS_EXTERNAL;
+  deps[1].dstSubpass = 1;
+  deps[1].srcStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[1].dstStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[1].srcAccessMask = VK_ACCESS_TRANSFER_READ_BIT | VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  deps[1].dstAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  deps[2].srcSubpass = 0;
+  deps[2].dstSubpass = 1;
+  deps[2].srcStageMask = VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT | VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[2].dstStageMask = VK_PIPELINE_STAGE_EARLY_FRAGMENT_TESTS_BIT | VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT;
+  deps[2].srcAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT | VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  deps[2].dstAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_READ_BIT | VK_ACCESS_INPUT_ATTACHMENT_READ_BIT;
+  deps[2].dependencyFlags = VK_DEPENDENCY_BY_REGION_BIT;
+  deps[3].srcSubpass = 1;
+  deps[3].dstSubpass = VK_SUBPASS_EXTERNAL;
+  deps[3].srcStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[3].dstStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT;
+  deps[3].srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  deps[3].dstAccessMask = VK_ACCESS_TRANSFER_READ_BIT;
+  return finish_render_pass(device, atts, subs, deps);
+}
+
+// The wide pass: depth only, one subpass.
+Result<UniqueRenderPass> make_wide_pass(VkDevice device) {
+  const std::array<VkAttachmentDescription, 1> atts{
+      attachment(kDepthFormat, VK_ATTACHMENT_STORE_OP_DONT_CARE, VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL)};
+  const VkAttachmentReference depth_ref{0, VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL};
+  std::array<VkSubpassDescription, 1> subs{};
+  subs[0].pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
+  subs[0].pDepthStencilAttachment = &depth_ref;
+  std::array<VkSubpassDependency, 1> deps{};
+  deps[0].srcSubpass = VK_SUBPASS_EXTERNAL;
+  deps[0].dstSubpass = 0;
+  deps[0].srcStageMask = VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT;
+  deps[0].dstStageMask = VK_PIPELINE_STAGE_EARLY_FRAGMENT_TESTS_BIT;
+  deps[0].srcAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT;
+  deps[0].dstAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_READ_BIT | VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT;
+  return finish_render_pass(device, atts, subs, deps);
 }
 
 Result<UniqueFramebuffer> make_framebuffer(VkDevice device, VkRenderPass pass, std::vector<VkImageView> views,
@@ -144,6 +191,20 @@ Result<std::unique_ptr<ScenePasses>> ScenePasses::create(const VulkanContext& ct
                                                          const ScenePassesOptions& options, const SceneGpu& scene,
                                                          const TextureCache& cache) {
   std::unique_ptr<ScenePasses> p(new ScenePasses(options, scene));
+  p->device_ = ctx.device();
+  if (options.timestamps) {
+    if (ctx.properties().limits.timestampComputeAndGraphics != VK_TRUE) {
+      return make_error(ErrorCode::kUnsupported, "device '" + ctx.device_name() + "' has no timestamps on its queue");
+    }
+    p->timestamp_period_ns_ = ctx.properties().limits.timestampPeriod;
+    VkQueryPoolCreateInfo qi{};
+    qi.sType = VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO;
+    qi.queryType = VK_QUERY_TYPE_TIMESTAMP;
+    qi.queryCount = kTimestampCount;
+    VkQueryPool pool = VK_NULL_HANDLE;
+    TS_VK_TRY(vkCreateQueryPool(ctx.device(), &qi, nullptr, &pool));
+    p->timestamps_ = UniqueQueryPool(ctx.device(), pool);
+  }
   TS_TRY(p->create_targets(ctx));
   TS_TRY(p->create_descriptors(ctx, cache));
   TS_TRY(p->create_pipelines(ctx, compiler));
@@ -167,19 +228,25 @@ Status ScenePasses::create_targets(const VulkanContext& ctx) {
   auto depth = GpuImage::create(ctx, di);
   if (!depth) return depth.error();
   depth_ = std::move(*depth);
+  GpuImageInfo oi = ci;
+  oi.format = kOwnerFormat;
+  oi.usage = VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_INPUT_ATTACHMENT_BIT;
+  auto owner = GpuImage::create(ctx, oi);
+  if (!owner) return owner.error();
+  owner_ = std::move(*owner);
   di.width = options_.wide_width;
   di.height = options_.wide_height;
   auto wide = GpuImage::create(ctx, di);
   if (!wide) return wide.error();
   wide_depth_ = std::move(*wide);
 
-  auto main_pass = make_render_pass(device, true, colour_format());
+  auto main_pass = make_main_pass(device, colour_format());
   if (!main_pass) return main_pass.error();
   main_pass_ = std::move(*main_pass);
-  auto wide_pass = make_render_pass(device, false, colour_format());
+  auto wide_pass = make_wide_pass(device);
   if (!wide_pass) return wide_pass.error();
   wide_pass_ = std::move(*wide_pass);
-  auto main_fb = make_framebuffer(device, main_pass_.get(), {colour_.view(), depth_.view()}, options_.width,
+  auto main_fb = make_framebuffer(device, main_pass_.get(), {colour_.view(), depth_.view(), owner_.view()}, options_.width,
                                   options_.height);
   if (!main_fb) return main_fb.error();
   main_fb_ = std::move(*main_fb);
@@ -223,7 +290,7 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
   TS_VK_TRY(vkCreateSampler(device, &si, nullptr, &probe_sampler));
   probe_sampler_ = UniqueSampler(device, probe_sampler);
 
-  const std::array<VkDescriptorSetLayoutBinding, 9> bindings{{
+  const std::array<VkDescriptorSetLayoutBinding, 11> bindings{{
       {gpu::kBindingFrame, VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1, kAllStages, nullptr},
       {gpu::kBindingMeshes, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
       {gpu::kBindingTextures, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
@@ -233,6 +300,8 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
       {gpu::kBindingReadback, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
       {gpu::kBindingLodProbe, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
       {gpu::kBindingProbeSampler, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr},
+      {gpu::kBindingOwner, VK_DESCRIPTOR_TYPE_INPUT_ATTACHMENT, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr},
+      {gpu::kBindingDraws, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr},
   }};
   VkDescriptorSetLayoutCreateInfo li{};
   li.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO;
@@ -242,9 +311,10 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
   TS_VK_TRY(vkCreateDescriptorSetLayout(device, &li, nullptr, &set_layout));
   set_layout_ = UniqueDescriptorSetLayout(device, set_layout);
 
-  const std::array<VkDescriptorPoolSize, 3> sizes{{{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1},
-                                                   {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 6},
-                                                   {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2}}};
+  const std::array<VkDescriptorPoolSize, 4> sizes{{{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1},
+                                                   {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 7},
+                                                   {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2},
+                                                   {VK_DESCRIPTOR_TYPE_INPUT_ATTACHMENT, 1}}};
   VkDescriptorPoolCreateInfo pi{};
   pi.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
   pi.maxSets = 1;
@@ -260,7 +330,7 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
   ai.pSetLayouts = &set_layout;
   TS_VK_TRY(vkAllocateDescriptorSets(device, &ai, &set_));
 
-  constexpr size_t kBuffers = 7;
+  constexpr size_t kBuffers = 8;
   const std::array<VkDescriptorBufferInfo, kBuffers> buffers{{
       {scene_.frame_uniforms.handle(), 0, VK_WHOLE_SIZE},
       {scene_.meshes.handle(), 0, VK_WHOLE_SIZE},
@@ -269,15 +339,17 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
       {scene_.compacted.handle(), 0, VK_WHOLE_SIZE},
       {scene_.readback.handle(), 0, VK_WHOLE_SIZE},
       {probe_.handle(), 0, VK_WHOLE_SIZE},
+      {scene_.indirect.handle(), 0, VK_WHOLE_SIZE},
   }};
   const VkDescriptorImageInfo image{sampler_.get(), cache.image_view(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
   const VkDescriptorImageInfo probe_image{probe_sampler_.get(), cache.image_view(),
                                           VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
-  std::array<VkWriteDescriptorSet, kBuffers + 2> writes{};
+  const VkDescriptorImageInfo owner_image{VK_NULL_HANDLE, owner_.view(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
+  std::array<VkWriteDescriptorSet, kBuffers + 3> writes{};
   const std::array<uint32_t, kBuffers> buffer_bindings{gpu::kBindingFrame,     gpu::kBindingMeshes,
                                                        gpu::kBindingTextures,  gpu::kBindingMeshMeta,
                                                        gpu::kBindingCompacted, gpu::kBindingReadback,
-                                                       gpu::kBindingLodProbe};
+                                                       gpu::kBindingLodProbe,  gpu::kBindingDraws};
   for (size_t i = 0; i < kBuffers; ++i) {
     writes[i] = {};
     writes[i].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
@@ -297,6 +369,14 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
     w.descriptorType = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
     w.pImageInfo = k == 0 ? &image : &probe_image;
   }
+  VkWriteDescriptorSet& ow = writes[kBuffers + 2];
+  ow = {};
+  ow.sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
+  ow.dstSet = set_;
+  ow.dstBinding = gpu::kBindingOwner;
+  ow.descriptorCount = 1;
+  ow.descriptorType = VK_DESCRIPTOR_TYPE_INPUT_ATTACHMENT;
+  ow.pImageInfo = &owner_image;
   vkUpdateDescriptorSets(device, static_cast<uint32_t>(writes.size()), writes.data(), 0, nullptr);
 
   VkPushConstantRange range{kAllStages, 0, sizeof(gpu::PassConstants)};
@@ -320,14 +400,14 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
   if (options_.lod_probe) main_defines.push_back("LOD_PROBE");
   auto frag = make_module(ctx, compiler, {"scene.frag", ShaderStage::kFragment, main_defines});
   if (!frag) return frag.error();
+  auto prepass = make_module(ctx, compiler, {"prepass.frag", ShaderStage::kFragment, {}});
+  if (!prepass) return prepass.error();
   auto wide_frag = make_module(ctx, compiler, {"scene.frag", ShaderStage::kFragment, {"WIDE_PASS"}});
   if (!wide_frag) return wide_frag.error();
   auto comp = make_module(ctx, compiler, {"compact.comp", ShaderStage::kCompute, {}});
   if (!comp) return comp.error();
-  auto args = make_module(ctx, compiler, {"compact_args.comp", ShaderStage::kCompute, {}});
-  if (!args) return args.error();
-  auto copy = make_module(ctx, compiler, {"compact_copy.comp", ShaderStage::kCompute, {}});
-  if (!copy) return copy.error();
+  auto to_host = make_module(ctx, compiler, {"compact.comp", ShaderStage::kCompute, {"COMPACT_TO_HOST"}});
+  if (!to_host) return to_host.error();
 
   VkVertexInputBindingDescription vb{0, sizeof(scene::Vertex), VK_VERTEX_INPUT_RATE_VERTEX};
   const std::array<VkVertexInputAttributeDescription, 3> va{{
@@ -371,14 +451,12 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
   dy.dynamicStateCount = static_cast<uint32_t>(dyn.size());
   dy.pDynamicStates = dyn.data();
 
-  // fs = VK_NULL_HANDLE: the depth-only pre-pass (no fragment stage, colour writes masked).
-  auto graphics = [&](VkShaderModule fs, VkRenderPass pass, bool colour, VkCompareOp compare, bool depth_write,
-                      UniquePipeline& out) -> Status {
+  // `colour_mask` 0: the subpass has no colour attachment.
+  auto graphics = [&](VkShaderModule fs, VkRenderPass pass, uint32_t subpass, VkColorComponentFlags colour_mask,
+                      VkCompareOp compare, bool depth_write, UniquePipeline& out) -> Status {
     ds.depthCompareOp = compare;
     ds.depthWriteEnable = depth_write ? VK_TRUE : VK_FALSE;
-    cba.colorWriteMask = fs == VK_NULL_HANDLE ? 0u
-                                              : VK_COLOR_COMPONENT_R_BIT | VK_COLOR_COMPONENT_G_BIT |
-                                                    VK_COLOR_COMPONENT_B_BIT | VK_COLOR_COMPONENT_A_BIT;
+    cba.colorWriteMask = colour_mask;
     std::array<VkPipelineShaderStageCreateInfo, 2> stages{};
     stages[0] = {};
     stages[0].sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
@@ -390,11 +468,11 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
     stages[1].stage = VK_SHADER_STAGE_FRAGMENT_BIT;
     stages[1].module = fs;
     stages[1].pName = "main";
-    cb.attachmentCount = colour ? 1 : 0;
-    cb.pAttachments = colour ? &cba : nullptr;
+    cb.attachmentCount = colour_mask != 0 ? 1 : 0;
+    cb.pAttachments = colour_mask != 0 ? &cba : nullptr;
     VkGraphicsPipelineCreateInfo gi{};
     gi.sType = VK_STRUCTURE_TYPE_GRAPHICS_PIPELINE_CREATE_INFO;
-    gi.stageCount = fs == VK_NULL_HANDLE ? 1u : 2u;
+    gi.stageCount = 2;
     gi.pStages = stages.data();
     gi.pVertexInputState = &vi;
     gi.pInputAssemblyState = &ia;
@@ -406,17 +484,22 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
     gi.pDynamicState = &dy;
     gi.layout = layout_.get();
     gi.renderPass = pass;
-    gi.subpass = 0;
+    gi.subpass = subpass;
     VkPipeline p = VK_NULL_HANDLE;
     TS_VK_TRY(vkCreateGraphicsPipelines(device, VK_NULL_HANDLE, 1, &gi, nullptr, &p));
     out = UniquePipeline(device, p);
     return ok_status();
   };
-  // Reversed Z: nearer is larger. The pre-pass resolves visibility; the shading draw keeps only the fragments
-  // whose depth equals the winner's (bit-identical through `invariant gl_Position`).
-  TS_TRY(graphics(VK_NULL_HANDLE, main_pass_.get(), true, VK_COMPARE_OP_GREATER, true, prepass_pipeline_));
-  TS_TRY(graphics(frag->get(), main_pass_.get(), true, VK_COMPARE_OP_EQUAL, false, main_pipeline_));
-  TS_TRY(graphics(wide_frag->get(), wide_pass_.get(), false, VK_COMPARE_OP_GREATER, true, wide_pipeline_));
+  // Reversed Z: nearer is larger. The pre-pass resolves visibility and writes each pixel's owner (GREATER: the
+  // first-drawn of equally near fragments keeps it); the shading draw keeps only the fragments whose depth
+  // equals the winner's (bit-identical through `invariant gl_Position`) and, in scene.frag, whose mesh owns
+  // the pixel.
+  constexpr VkColorComponentFlags kRgba =
+      VK_COLOR_COMPONENT_R_BIT | VK_COLOR_COMPONENT_G_BIT | VK_COLOR_COMPONENT_B_BIT | VK_COLOR_COMPONENT_A_BIT;
+  TS_TRY(graphics(prepass->get(), main_pass_.get(), 0, VK_COLOR_COMPONENT_R_BIT, VK_COMPARE_OP_GREATER, true,
+                  prepass_pipeline_));
+  TS_TRY(graphics(frag->get(), main_pass_.get(), 1, kRgba, VK_COMPARE_OP_EQUAL, false, main_pipeline_));
+  TS_TRY(graphics(wide_frag->get(), wide_pass_.get(), 0, 0, VK_COMPARE_OP_GREATER, true, wide_pipeline_));
 
   auto compute = [&](VkShaderModule module, UniquePipeline& out) -> Status {
     VkComputePipelineCreateInfo ci{};
@@ -433,90 +516,113 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
     return ok_status();
   };
   TS_TRY(compute(comp->get(), compact_pipeline_));
-  TS_TRY(compute(args->get(), compact_args_pipeline_));
-  TS_TRY(compute(copy->get(), compact_copy_pipeline_));
+  TS_TRY(compute(to_host->get(), compact_to_host_pipeline_));
   return ok_status();
 }
 
 void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const {
+  const uint32_t main_count = std::min(frame.main_count, frame.draw_count);
+  const uint32_t wide_first = std::min(frame.wide_first, frame.draw_count);
   // The fields of the frame uniforms that describe these passes (the caller fills the rest before record()).
   auto* fu = scene_.frame_uniforms.as<gpu::FrameUniforms>();
   fu->flags.x = frame.feedback ? (fu->flags.x | gpu::kFlagFeedback) : (fu->flags.x & ~gpu::kFlagFeedback);
-  fu->view = {options_.debug_view, options_.width, 0, 0};
+  fu->view = {options_.debug_view, options_.width, frame.draw_count, 0};
+  if (timestamps_) {
+    vkCmdResetQueryPool(cmd, timestamps_.get(), 0, kTimestampCount);
+    vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, timestamps_.get(), 0);
+  }
 
   // The previous submission's compaction wrote the sparse metadata and the list counter; this frame's fragment
   // atomics and the counter reset come after it (submission order + this barrier).
   memory_barrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_SHADER_READ_BIT,
                  VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
                  VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT);
-  if (frame.feedback) vkCmdFillBuffer(cmd, scene_.compacted.handle(), 0, sizeof(gpu::CompactListHeader), 0);
+  // The list this frame compacts into: straight into the host-visible read-back list when a streaming cycle
+  // is about to start (compact.comp with COMPACT_TO_HOST), else the device-local one.
+  const GpuBuffer& list = frame.read_back_list ? scene_.readback : scene_.compacted;
+  if (frame.feedback) vkCmdFillBuffer(cmd, list.handle(), 0, sizeof(gpu::CompactListHeader), 0);
 
   const VkDeviceSize zero = 0;
-  auto draw_pass = [&](VkRenderPass pass, VkFramebuffer fb, uint32_t w, uint32_t h, VkPipeline prepass,
-                       VkPipeline pipeline, const gpu::PassConstants& pc, bool colour) {
-    std::array<VkClearValue, 2> clears{};
+  auto begin_pass = [&](VkRenderPass pass, VkFramebuffer fb, uint32_t w, uint32_t h, bool main) {
+    std::array<VkClearValue, 3> clears{};
     // Sky colour in linear light (the attachment is sRGB); the id view clears to 0 = "no mesh". Depth 0 is
-    // "infinitely far" with reversed Z.
+    // "infinitely far" with reversed Z; owner 0 is "no mesh".
     clears[0].color = {{0.45f, 0.6f, 0.8f, 1.0f}};
     if (options_.debug_view == gpu::kDebugViewMeshId) clears[0].color = {{0.0f, 0.0f, 0.0f, 1.0f}};
-    clears[colour ? 1 : 0].depthStencil = {0.0f, 0};
+    clears[main ? 1 : 0].depthStencil = {0.0f, 0};
+    clears[2].color.uint32[0] = 0;
     VkRenderPassBeginInfo bi{};
     bi.sType = VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO;
     bi.renderPass = pass;
     bi.framebuffer = fb;
     bi.renderArea = {{0, 0}, {w, h}};
-    bi.clearValueCount = colour ? 2 : 1;
+    bi.clearValueCount = main ? 3 : 1;
     bi.pClearValues = clears.data();
     vkCmdBeginRenderPass(cmd, &bi, VK_SUBPASS_CONTENTS_INLINE);
     const VkViewport viewport{0, 0, static_cast<float>(w), static_cast<float>(h), 0, 1};
     const VkRect2D scissor{{0, 0}, {w, h}};
     vkCmdSetViewport(cmd, 0, 1, &viewport);
     vkCmdSetScissor(cmd, 0, 1, &scissor);
-    if (frame.draw_count > 0) {
-      vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, layout_.get(), 0, 1, &set_, 0, nullptr);
-      vkCmdPushConstants(cmd, layout_.get(), kAllStages, 0, sizeof pc, &pc);
-      VkBuffer vb = scene_.vertices.handle();
-      vkCmdBindVertexBuffers(cmd, 0, 1, &vb, &zero);
-      vkCmdBindIndexBuffer(cmd, scene_.indices.handle(), 0, VK_INDEX_TYPE_UINT32);
-      // Every surviving mesh in one multi-draw indirect call per pipeline (seed 001: few calls).
-      for (VkPipeline p : {prepass, pipeline}) {
-        if (p == VK_NULL_HANDLE) continue;
-        vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, p);
-        vkCmdDrawIndexedIndirect(cmd, scene_.indirect.handle(), 0, frame.draw_count,
-                                 sizeof(VkDrawIndexedIndirectCommand));
-      }
-    }
-    vkCmdEndRenderPass(cmd);
   };
-  draw_pass(main_pass_.get(), main_fb_.get(), options_.width, options_.height, prepass_pipeline_.get(),
-            main_pipeline_.get(), frame.main, true);
+  // Draws [first, first + count) of the indirect list in one multi-draw indirect call (seed 001: few calls).
+  auto draw = [&](VkPipeline pipeline, const gpu::PassConstants& pc, uint32_t first, uint32_t count) {
+    if (count == 0) return;
+    vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, layout_.get(), 0, 1, &set_, 0, nullptr);
+    vkCmdPushConstants(cmd, layout_.get(), kAllStages, 0, sizeof pc, &pc);
+    VkBuffer vb = scene_.vertices.handle();
+    vkCmdBindVertexBuffers(cmd, 0, 1, &vb, &zero);
+    vkCmdBindIndexBuffer(cmd, scene_.indices.handle(), 0, VK_INDEX_TYPE_UINT32);
+    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline);
+    vkCmdDrawIndexedIndirect(cmd, scene_.indirect.handle(), VkDeviceSize{first} * sizeof(VkDrawIndexedIndirectCommand),
+                             count, sizeof(VkDrawIndexedIndirectCommand));
+  };
+  // Main pass: the pre-pass (depth + owner id), then the shading subpass over the same draws.
+  begin_pass(main_pass_.get(), main_fb_.get(), options_.width, options_.height, true);
+  draw(prepass_pipeline_.get(), frame.main, 0, main_count);
+  vkCmdNextSubpass(cmd, VK_SUBPASS_CONTENTS_INLINE);
+  draw(main_pipeline_.get(), frame.main, 0, main_count);
+  vkCmdEndRenderPass(cmd);
+  if (timestamps_) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps_.get(), 1);
+  timestamps_written_ = 2;
   if (!frame.feedback) return;
-  draw_pass(wide_pass_.get(), wide_fb_.get(), options_.wide_width, options_.wide_height, VK_NULL_HANDLE,
-            wide_pipeline_.get(), frame.wide, false);
+  // Wide pass: only the draws that reach outside the viewport's frustum can have a fragment outside it.
+  begin_pass(wide_pass_.get(), wide_fb_.get(), options_.wide_width, options_.wide_height, false);
+  draw(wide_pipeline_.get(), frame.wide, wide_first, frame.draw_count - wide_first);
+  vkCmdEndRenderPass(cmd);
+  if (timestamps_) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps_.get(), 2);
 
-  // Compaction reads what both passes' fragment shaders wrote and the cleared counter.
+  // Compaction reads what both passes' fragment shaders wrote and the cleared counter. One invocation per draw
+  // of this frame (the only meshes that can have metadata), not per mesh of the scene.
   memory_barrier(cmd, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
                  VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
                  VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
   vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, layout_.get(), 0, 1, &set_, 0, nullptr);
-  vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, compact_pipeline_.get());
-  const uint32_t groups = (scene_.mesh_count + gpu::kCompactWorkgroupSize - 1) / gpu::kCompactWorkgroupSize;
+  vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE,
+                    frame.read_back_list ? compact_to_host_pipeline_.get() : compact_pipeline_.get());
+  const uint32_t groups = (frame.draw_count + gpu::kCompactWorkgroupSize - 1) / gpu::kCompactWorkgroupSize;
   if (groups > 0) vkCmdDispatch(cmd, groups, 1, 1);
-
   if (frame.read_back_list) {
-    // The final count -> the copy's group count (written into the list header), then the used prefix only.
-    memory_barrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
-                   VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
-    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, compact_args_pipeline_.get());
-    vkCmdDispatch(cmd, 1, 1, 1);
-    memory_barrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
-                   VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
-                   VK_ACCESS_INDIRECT_COMMAND_READ_BIT | VK_ACCESS_SHADER_READ_BIT);
-    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, compact_copy_pipeline_.get());
-    vkCmdDispatchIndirect(cmd, scene_.compacted.handle(), offsetof(gpu::CompactListHeader, dispatch));
     memory_barrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT, VK_PIPELINE_STAGE_HOST_BIT,
                    VK_ACCESS_HOST_READ_BIT);
   }
+  if (timestamps_) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps_.get(), 3);
+  timestamps_written_ = 4;
+}
+
+PassTimes ScenePasses::read_pass_times() const {
+  PassTimes t;
+  if (!timestamps_) return t;
+  std::array<uint64_t, kTimestampCount> v{};
+  // Only the queries the last frame wrote (feedback off: the rest stay zero, those passes took no time).
+  if (timestamps_written_ < 2) return t;
+  if (vkGetQueryPoolResults(device_, timestamps_.get(), 0, timestamps_written_, sizeof v, v.data(), sizeof(uint64_t),
+                            VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT) != VK_SUCCESS)
+    return t;
+  auto ms = [&](int a, int b) { return v[b] > v[a] ? static_cast<double>(v[b] - v[a]) * timestamp_period_ns_ * 1e-6 : 0.0; };
+  t.main_ms = ms(0, 1);
+  t.wide_ms = ms(1, 2);
+  t.compact_ms = ms(2, 3);
+  return t;
 }
 
 }  // namespace texstream::render

@@ -150,6 +150,7 @@ void TextureCache::failed(TextureId texture, MipLevel mip, CompletionStatus stat
 
 void TextureCache::evict(TextureId texture) {
   Residency& r = residency_[texture.value];
+  if (r.mask != 0) --resident_count_;
   r.mask = 0;
   ++r.epoch;
   r.evicted_before = true;
@@ -267,6 +268,12 @@ Status TextureCache::prepare_uploads(uint64_t serial) {
     }
   }
   const std::vector<PageBindOp> batch = pages_->take_batch();
+  // Copies come at most one per ready mip: counting them now keeps the trace frame whole.
+  trace_open_ = trace_entries_ + batch.size() + ready_.size() <= kTraceEntries && (!batch.empty() || !ready_.empty());
+  if (trace_open_) {
+    trace_.push_back(UploadTraceFrame{batch, {}});
+    trace_entries_ += batch.size() + ready_.size();
+  }
   if (!batch.empty()) {
     TS_TRY(sparse_->submit(batch));
     bind_wait_ = BindWait{sparse_->semaphore(), sparse_->signal_value()};
@@ -317,6 +324,11 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
     // BC1: whole blocks (the payload holds them: mip_bytes rounds up), inside the region by the check in commit.
     r.imageExtent = {(e.width + block - 1) / block * block, (e.height + block - 1) / block * block, 1};
     regions.push_back(r);
+    if (trace_open_) {
+      trace_.back().copies.push_back({region->layer, c.mip, static_cast<uint32_t>(r.imageOffset.x),
+                                      static_cast<uint32_t>(r.imageOffset.y), r.imageExtent.width,
+                                      r.imageExtent.height});
+    }
     c.serial = serial;
     in_flight_.push_back(c);
   }
@@ -331,6 +343,7 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
                        nullptr, 1, &b);
   const auto n = static_cast<uint32_t>(ready_.size());
   ready_.clear();
+  trace_open_ = false;
   return n;
 }
 
@@ -366,6 +379,7 @@ void TextureCache::on_submission_complete(uint64_t serial) {
       ++stats_.mips_dropped;
       continue;
     }
+    if (r.mask == 0) ++resident_count_;
     r.mask |= 1u << c.mip;
     publish(c.texture);
     ++stats_.mips_uploaded;
@@ -375,9 +389,9 @@ void TextureCache::on_submission_complete(uint64_t serial) {
 }
 
 uint64_t TextureCache::resident_textures() const {
-  uint64_t n = 0;
-  for (const auto& r : residency_) n += r.mask != 0;
-  return n;
+  // Counted as masks change, not by a pass over every texture: the frame loop asks every frame, and a scene
+  // can have millions of textures.
+  return resident_count_;
 }
 
 }  // namespace texstream::render
@@ -417,6 +431,26 @@ Status TextureCache::write_stats_json(const std::filesystem::path& file) const {
   j["bind_seconds"] = b.seconds;
   j["bind_max_ops_per_call"] = b.max_ops_per_call;
   j["bind_ops_per_call"] = b.ops_per_call;
+  j["bind_call_seconds"] = b.call_seconds;
+  // The image the binds went to and the first frames' bind ops ([layer, mip, x, y, slot], slot -1 = unbind) and
+  // copy regions, for the bind-cost benchmark's replay.
+  const SparseImageInfo& si = sparse_->info();
+  j["sparse_image"] = {{"vk_format", static_cast<int64_t>(si.format)}, {"extent", si.extent},
+                       {"mip_levels", si.mip_levels},           {"layers", si.layers},
+                       {"memory_bytes", si.memory_bytes},       {"pages_per_block", sparse_->pages_per_block()}};
+  nlohmann::json trace = nlohmann::json::array();
+  for (const UploadTraceFrame& f : trace_) {
+    nlohmann::json binds = nlohmann::json::array(), copies = nlohmann::json::array();
+    for (const PageBindOp& op : f.binds)
+      binds.push_back({op.page.layer, op.page.mip, op.page.x, op.page.y, op.bind ? static_cast<int64_t>(op.slot) : -1});
+    for (const auto& c : f.copies) {
+      nlohmann::json row = nlohmann::json::array();
+      for (uint32_t v : c) row.push_back(static_cast<int64_t>(v));  // signed: GCC 12 misreads the unsigned path
+      copies.push_back(std::move(row));
+    }
+    trace.push_back({{"binds", std::move(binds)}, {"copies", std::move(copies)}});
+  }
+  j["upload_trace"] = std::move(trace);
   j["pages_bound"] = p.pages_bound;
   j["pages_unbound"] = p.pages_unbound;
   j["pages_shared"] = p.pages_shared;

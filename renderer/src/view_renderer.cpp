@@ -113,6 +113,7 @@ Result<std::unique_ptr<ViewRenderer>> ViewRenderer::create(const Config& cfg, Sc
   po.debug_view = *view;
   po.lod_probe = options.lod_probe;
   po.probe_anisotropy = static_cast<float>(cfg.stream.max_anisotropy);
+  po.timestamps = options.timestamps;
   auto passes = ScenePasses::create(*m.ctx, *m.compiler, po, *m.gpu, *m.cache);
   if (!passes) return passes.error();
   m.passes = std::move(*passes);
@@ -154,12 +155,17 @@ Result<ViewResult> ViewRenderer::render(const CameraPose& pose, const ViewReques
   out.height = m.passes->options().height;
 
   const auto t0 = Clock::now();
+  // The wide frustum for both passes, then split by the viewport's: each pass draws only what it can see.
   m.broad_phase->query(Frustum::from_matrix(cam.wide_proj * cam.view), cam.position, m.visible, &out.broad_phase);
+  const ViewportSplit split =
+      m.broad_phase->split_by_viewport(Frustum::from_matrix(cam.proj * cam.view), cam.position, m.visible);
   out.broad_phase_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
   out.submitted = m.visible.size();
 
   FrameRecording rec;
-  rec.draw_count = m.gpu->write_draws(m.scene, m.visible, cam.position);
+  m.gpu->write_draws(m.scene, m.visible, cam.position, split, rec);
+  out.main_draws = rec.main_count;
+  out.wide_draws = rec.draw_count - rec.wide_first;
   rec.main = main_pass_constants(cam);
   rec.wide = wide_pass_constants(cam, r.fov_y_deg, r.offscreen_fov_y_deg, out.height, m.passes->options().wide_height);
   rec.feedback = request.feedback;
@@ -192,6 +198,7 @@ Result<ViewResult> ViewRenderer::render(const CameraPose& pose, const ViewReques
   TS_VK_TRY(vkWaitForFences(device, 1, &fence, VK_TRUE, UINT64_MAX));
   out.gpu_ms = std::chrono::duration<double, std::milli>(Clock::now() - t1).count();
   m.cache->on_submission_complete(m.serial);
+  out.pass_times = m.passes->read_pass_times();
 
   if (rec.read_back_list) {
     const auto* header = m.gpu->readback.as<gpu::CompactListHeader>();

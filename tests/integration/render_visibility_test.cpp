@@ -18,6 +18,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <set>
+#include <vector>
 #include <sstream>
 
 #include "texstream/common/config.hpp"
@@ -90,6 +91,37 @@ SceneData plane_scene(double distance, double side, double tilt_deg, bool uv_con
 }
 
 const CameraPose kLookNorth{{kX, kY, kZ}, 0, 0};
+
+// Camera-facing quads of side `side` m, all in the plane `distance` m north of the camera, the i-th shifted
+// east by x_shift[i] m: quads with the same shift coincide (every fragment ties in depth).
+SceneData coplanar_scene(double distance, double side, const std::vector<double>& x_shift) {
+  SceneData s = plane_scene(distance, side, 0);
+  const scene::MeshRecord first = s.meshes.meshes[0];
+  s.meshes.meshes.clear();
+  for (double dx : x_shift) {
+    scene::MeshRecord m = first;  // same vertices and indices: bit-identical depths
+    m.origin[0] += dx;
+    s.meshes.meshes.push_back(m);
+  }
+  s.manifest.mesh_count = static_cast<uint32_t>(x_shift.size());
+  return s;
+}
+
+std::set<uint32_t> weighted_set(const ViewResult& v) {
+  std::set<uint32_t> out;
+  for (const auto& e : v.entries)
+    if (e.weight_fixed > 0) out.insert(e.mesh_id);
+  return out;
+}
+
+std::set<uint32_t> id_buffer_set(const ViewResult& v) {
+  std::set<uint32_t> out;
+  for (size_t i = 0; i + 3 < v.rgba.size(); i += 4) {
+    const int64_t id = decode_mesh_id(v.rgba[i], v.rgba[i + 1], v.rgba[i + 2]);
+    if (id >= 0) out.insert(static_cast<uint32_t>(id));
+  }
+  return out;
+}
 
 ViewResult render_one(const Config& cfg, SceneData scene, const CameraPose& pose = kLookNorth) {
   auto vr = ViewRenderer::create(cfg, std::move(scene));
@@ -170,6 +202,35 @@ TEST(RenderVisibility, EightKWideTargetDoesNotWrapTheWeight) {
   EXPECT_LE(v.entries[0].mip_fixed, 9u * gpu::kMipFixedScale);
 }
 
+// Coplanar surfaces tie in depth, so both pass the shading pass's EQUAL test; only the pixel's owner (the
+// pre-pass's first-drawn fragment) may count. Meshes 0 and 1 coincide, mesh 2 overlaps half of them: exactly
+// two meshes are visible (one of 0/1, and 2), in the metadata as in the id buffer. Letting every fragment that
+// passes EQUAL write metadata (the old rule) gives three.
+TEST(RenderVisibility, CoplanarSurfacesCountOnlyTheirOwner) {
+  Config cfg = base_config();
+  cfg.render.debug_view = "mesh_id";
+  const ViewResult v = render_one(cfg, coplanar_scene(20.0, 10.0, {0.0, 0.0, 5.0}));
+  const std::set<uint32_t> meta = weighted_set(v), ids = id_buffer_set(v);
+  EXPECT_EQ(meta, ids);
+  EXPECT_EQ(ids.size(), 2u);
+  EXPECT_EQ(meta.size(), 2u);
+  EXPECT_EQ(ids.count(2), 1u);
+  EXPECT_EQ(ids.count(0) + ids.count(1), 1u);
+}
+
+// Several fully coincident quads: the id buffer shows one of them, and that one alone has metadata (the owner
+// rule decides the colour and the metadata together).
+TEST(RenderVisibility, CoincidentMeshesTheShownOneIsTheCountedOne) {
+  Config cfg = base_config();
+  cfg.render.debug_view = "mesh_id";
+  for (int copies : {2, 5}) {
+    const ViewResult v = render_one(cfg, coplanar_scene(15.0, 8.0, std::vector<double>(copies, 0.0)));
+    const std::set<uint32_t> meta = weighted_set(v), ids = id_buffer_set(v);
+    EXPECT_EQ(ids.size(), 1u) << copies << " coincident quads";
+    EXPECT_EQ(meta, ids) << copies << " coincident quads";
+  }
+}
+
 class RenderVisibilityCity : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
@@ -227,13 +288,7 @@ TEST_F(RenderVisibilityCity, WeightedSetEqualsTheIdBufferSet) {
   for (const auto& pose : poses_) {
     auto v = (*vr)->render(pose);
     ASSERT_TRUE(v.ok()) << v.error().message;
-    std::set<uint32_t> meta, ids;
-    for (const auto& e : v->entries)
-      if (e.weight_fixed > 0) meta.insert(e.mesh_id);
-    for (size_t i = 0; i + 3 < v->rgba.size(); i += 4) {
-      const int64_t id = decode_mesh_id(v->rgba[i], v->rgba[i + 1], v->rgba[i + 2]);
-      if (id >= 0) ids.insert(static_cast<uint32_t>(id));
-    }
+    const std::set<uint32_t> meta = weighted_set(*v), ids = id_buffer_set(*v);
     EXPECT_EQ(meta, ids);
     if (ids.empty()) continue;  // a view of the small city's outskirts may see nothing
     ++views_with_meshes;

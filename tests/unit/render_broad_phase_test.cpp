@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 
 #include "texstream/render/broad_phase.hpp"
 #include "texstream/render/camera.hpp"
@@ -74,6 +75,40 @@ TEST(BroadPhase, MeshContainingTheCameraIsKept) {
   std::vector<uint32_t> out;
   bp.query(Frustum::from_matrix(cam.wide_proj * cam.view), cam.position, out);
   EXPECT_EQ(out, std::vector<uint32_t>{0});
+}
+
+// The wide query's survivors split by the viewport's frustum: inside (main pass only), straddling (both
+// passes), outside but in the wide frustum (wide pass only). Main FOV 60 deg vertical at 16:9 is about 45.7 deg
+// to each side; the wide one (75 deg) about 53.8 deg.
+TEST(BroadPhase, SplitByViewportOrdersInsideStraddlingOutside) {
+  auto at_angle = [](double deg, double dist) {
+    const double r = deg * M_PI / 180.0;
+    return mesh_at(kX + dist * std::sin(r), kY + dist * std::cos(r), 0);
+  };
+  std::vector<scene::MeshRecord> meshes{
+      at_angle(0, 50),     // 0: straight ahead: inside
+      at_angle(45.7, 80),  // 1: on the viewport's right edge: straddles
+      at_angle(50, 100),   // 2: between the viewport's and the wide FOV's edge: outside the viewport
+      at_angle(-10, 200),  // 3: ahead, a little left: inside
+      at_angle(-50, 100),  // 4: left, between the two edges: outside the viewport
+      at_angle(180, 50),   // 5: behind: not even in the wide frustum
+  };
+  BroadPhase bp(meshes);
+  const Camera cam = make_camera(CameraPose{{kX, kY, 0}, 0, 0}, CameraLens{60, 75, 16.0 / 9.0, 1, 20000});
+  std::vector<uint32_t> ids;
+  bp.query(Frustum::from_matrix(cam.wide_proj * cam.view), cam.position, ids);
+  ASSERT_EQ(ids.size(), 5u);
+  const ViewportSplit split = bp.split_by_viewport(Frustum::from_matrix(cam.proj * cam.view), cam.position, ids);
+  ASSERT_EQ(ids.size(), 5u);
+  EXPECT_EQ(split.wide_begin, 2u);
+  EXPECT_EQ(split.main_end, 3u);
+  std::vector<uint32_t> inside(ids.begin(), ids.begin() + split.wide_begin);
+  std::sort(inside.begin(), inside.end());
+  EXPECT_EQ(inside, (std::vector<uint32_t>{0, 3}));
+  EXPECT_EQ(ids[2], 1u);
+  std::vector<uint32_t> outside(ids.begin() + split.main_end, ids.end());
+  std::sort(outside.begin(), outside.end());
+  EXPECT_EQ(outside, (std::vector<uint32_t>{2, 4}));
 }
 
 namespace {

@@ -22,7 +22,7 @@ TEST(SharedStructs, SizesAndOffsets) {
   EXPECT_EQ(sizeof(FrameUniforms), 80u);
   EXPECT_EQ(offsetof(FrameUniforms, view), 64u);
   EXPECT_EQ(sizeof(LodProbeSample), 16u);
-  EXPECT_EQ(offsetof(CompactListHeader, dispatch), 4u);
+  EXPECT_EQ(offsetof(CompactListHeader, reserved), 4u);
   EXPECT_EQ(sizeof(PassConstants), 80u);
   EXPECT_LE(sizeof(PassConstants), 128u);  // Vulkan's guaranteed push-constant size
 }

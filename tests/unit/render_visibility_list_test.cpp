@@ -31,3 +31,29 @@ TEST(VisibilityList, MergesMeshesOfOneTextureAndSortsByWeight) {
   EXPECT_EQ(c[2].texture, TextureId(1));
   EXPECT_FLOAT_EQ(c[2].weight, 0.5f);
 }
+
+// The compaction's atomics write entries in any order; the merged list must not depend on it. Weights chosen so
+// that float sums round differently by order: (2^24 + 1) + 1 = 2^24 but (1 + 1) + 2^24 = 2^24 + 2 in float;
+// the fixed-point sum is exact either way, and ties with texture 1's single 2^24 + 2.
+TEST(VisibilityList, MergedWeightsDoNotDependOnEntryOrder) {
+  std::vector<scene::MeshRecord> meshes(6);
+  for (uint32_t i = 0; i < 3; ++i) meshes[i].texture_id = 0;      // texture 0: one big and two tiny meshes
+  for (uint32_t i = 3; i < 6; ++i) meshes[i].texture_id = 1;      // texture 1: the same sum in one mesh
+  const uint32_t one = gpu::kWeightFixedScale;  // weight 1.0 in fixed point
+  const uint32_t big = (1u << 24) * one;         // weight 2^24
+  const std::vector<gpu::CompactEntry> entries{
+      {0, 0, big, 0}, {1, 0, one, 0}, {2, 0, one, 0}, {3, 0, big + 2 * one, 0},
+  };
+  const auto first = build_candidates(entries, meshes);
+  const std::vector<gpu::CompactEntry> reversed(entries.rbegin(), entries.rend());
+  const auto second = build_candidates(reversed, meshes);
+  ASSERT_EQ(first.size(), 2u);
+  ASSERT_EQ(second.size(), 2u);
+  for (size_t i = 0; i < 2; ++i) {
+    EXPECT_EQ(first[i].texture, second[i].texture);
+    EXPECT_EQ(first[i].weight, second[i].weight);
+  }
+  // Equal sums: the tie goes to the lower texture id, whatever the order.
+  EXPECT_EQ(first[0].texture, TextureId(0));
+  EXPECT_FLOAT_EQ(first[0].weight, 16777218.0f);
+}

@@ -21,6 +21,12 @@ struct BroadPhaseStats {
   uint64_t meshes_tested = 0;  // mesh boxes classified (only in leaves that straddle the frustum)
 };
 
+// Where the runs of BroadPhase::split_by_viewport end, as positions in the id list it reordered.
+struct ViewportSplit {
+  uint32_t main_end = 0;    // ids [0, main_end) touch the viewport's frustum: the main pass draws them
+  uint32_t wide_begin = 0;  // ids [wide_begin, size) reach outside it: the wide pass draws them
+};
+
 class BroadPhase {
  public:
   // A leaf holds at most this many meshes: testing 16 boxes costs about as much as descending one level
@@ -38,6 +44,14 @@ class BroadPhase {
   // `parallel` false forces one thread (tests compare both).
   void query(const Frustum& frustum, const std::array<double, 3>& camera, std::vector<uint32_t>& out,
              BroadPhaseStats* stats = nullptr, bool parallel = true) const;
+
+  // Reorders `ids` (meshes the wide frustum kept, from query()) into three runs, each in its previous order:
+  // meshes entirely inside `viewport` (only the main pass can see them), meshes straddling it (both passes),
+  // meshes entirely outside it (only the wide pass). A mesh inside the viewport's frustum has no fragment
+  // outside the viewport in the wide pass, so leaving it out there changes no metadata; one outside it has
+  // no fragment in the viewport. One box test per id.
+  ViewportSplit split_by_viewport(const Frustum& viewport, const std::array<double, 3>& camera,
+                                  std::vector<uint32_t>& ids) const;
 
   size_t node_count() const { return nodes_.size(); }
   uint32_t depth() const { return depth_; }

@@ -39,7 +39,7 @@ static_assert(sizeof(CompactEntry) == 16);
 static_assert(offsetof(CompactEntry, mip_fixed) == 4);
 static_assert(offsetof(CompactEntry, weight_fixed) == 8);
 static_assert(sizeof(CompactListHeader) == 16);  // compact.comp: four uints, then the entries
-static_assert(offsetof(CompactListHeader, dispatch) == 4);  // vkCmdDispatchIndirect reads it at offset 4
+static_assert(offsetof(CompactListHeader, reserved) == 4);
 
 static_assert(std::is_trivially_copyable_v<TextureGpu> && std::is_trivially_copyable_v<MeshGpu>);
 

@@ -13,6 +13,8 @@
 namespace texstream::render {
 
 class VulkanContext;
+struct FrameRecording;
+struct ViewportSplit;
 struct SceneData;
 
 struct SceneGpu {
@@ -22,6 +24,10 @@ struct SceneGpu {
   // float (no jitter at map coordinates), and one VkDrawIndexedIndirectCommand with firstInstance = mesh id.
   // Returns the number of draws written.
   uint32_t write_draws(const SceneData& scene, std::span<const uint32_t> visible, const std::array<double, 3>& camera);
+  // The same for a list reordered by BroadPhase::split_by_viewport; fills the draw ranges of `rec` (draw_count,
+  // main_count, wide_first), which account for meshes without indices (never drawn).
+  void write_draws(const SceneData& scene, std::span<const uint32_t> visible, const std::array<double, 3>& camera,
+                   const ViewportSplit& split, FrameRecording& rec);
 
   uint32_t mesh_count = 0;
   uint32_t compact_capacity = 0;  // entries of the compacted list (= mesh count: every mesh fits)
@@ -32,8 +38,12 @@ struct SceneGpu {
   GpuBuffer mesh_meta;            // gpu::MeshMeta[mesh_count], device-local, reset by compact.comp
   GpuBuffer compacted;            // gpu::CompactListHeader + gpu::CompactEntry[capacity], device-local
   GpuBuffer readback;             // same layout, host-visible: header + used prefix, written only when a
-                                  // streaming cycle starts (compact_copy.comp)
+                                  // streaming cycle starts (compact.comp, COMPACT_TO_HOST)
   GpuBuffer frame_uniforms;       // gpu::FrameUniforms, host-visible
+
+ private:
+  uint32_t write_draws_at(const SceneData& scene, std::span<const uint32_t> visible,
+                          const std::array<double, 3>& camera, VkDrawIndexedIndirectCommand* draws);
 };
 
 }  // namespace texstream::render

@@ -1,15 +1,19 @@
 #pragma once
 // Everything one frame records on the GPU, in order:
-//   1. the main pass: colour (R8G8B8A8_SRGB; UNORM for debug views) + reversed-Z depth. A depth-only pre-pass
-//      draws every mesh the broad phase kept (one multi-draw indirect), then the shading draw (the same
-//      indirect list) runs with an EQUAL depth test and no depth writes, so only the fragments that end up
-//      visible shade and write visibility metadata (scene.frag): a mesh hidden behind a later-drawn one gets
-//      none, whatever the draw order;
+//   1. the main pass: colour (R8G8B8A8_SRGB; UNORM for debug views) + reversed-Z depth. Subpass 0, the
+//      pre-pass, draws the meshes in the viewport's frustum (one multi-draw indirect) writing depth and the
+//      pixel's owner (mesh id + 1, R32_UINT, prepass.frag); subpass 1 draws the same list with an EQUAL depth
+//      test and no depth writes, and only the owner's fragment shades and writes visibility metadata
+//      (scene.frag): a mesh hidden behind a later-drawn one gets none, whatever the draw order, and of two
+//      coplanar surfaces only the first drawn counts (the one the id view shows);
 //   2. the wide pass: a small depth-only render at the off-screen FOV whose fragments outside the viewport
-//      add metadata at W = 1 per viewport pixel (scene.frag with WIDE_PASS; seed 000 §3.2);
-//   3. compaction of the metadata (compact.comp, seed 000 §3.3), and, only when a streaming cycle is about
-//      to start, a copy of the used prefix of the compacted list to host memory (compact_args.comp computes
-//      the indirect dispatch of compact_copy.comp from the final count).
+//      add metadata at W = 1 per viewport pixel (scene.frag with WIDE_PASS; seed 000 §3.2). It draws only the
+//      meshes that reach outside the viewport's frustum (FrameRecording::wide_first): a mesh inside it has no
+//      fragment outside the viewport, so it can neither add metadata there nor hide a mesh there;
+//   3. compaction of the metadata (compact.comp, seed 000 §3.3): one invocation per draw of the frame (the
+//      only meshes that can have metadata), so its cost follows the view, not the scene. When a streaming
+//      cycle is about to start (FrameRecording::read_back_list) it compacts straight into the host-visible
+//      read-back list, so only the used prefix crosses to the host, in the same dispatch.
 // With feedback off (render.feedback = false, or FrameRecording::feedback) steps 2 and 3 and the metadata
 // writes are skipped: the same frame without visibility, to measure what visibility costs.
 // One descriptor set and one pipeline layout serve every pipeline.
@@ -39,16 +43,34 @@ struct ScenePassesOptions {
   uint32_t debug_view = 0;     // gpu::kDebugView*; any other than none renders into a UNORM target
   bool lod_probe = false;      // main pass compiled with LOD_PROBE: per-pixel metadata level vs textureQueryLod
   float probe_anisotropy = 16; // A_m of the probe sampler (clamped to the device's maxSamplerAnisotropy)
+  bool timestamps = false;     // GPU timestamps around the passes (read_pass_times)
 };
+
+// GPU time of the passes of the last recorded frame (ScenePassesOptions::timestamps; zeros otherwise).
+struct PassTimes {
+  double main_ms = 0;     // pre-pass + shading subpass (with the metadata writes when feedback is on)
+  double wide_ms = 0;     // the wide pass
+  double compact_ms = 0;  // compaction and, when asked, the prefix copy for the read-back
+};
+
+using UniqueQueryPool = DeviceHandle<VkQueryPool, vkDestroyQueryPool>;
 
 // Parses render.debug_view (none, mip, weight, mesh_id) into gpu::kDebugView*.
 Result<uint32_t> debug_view_from_string(const std::string& name);
 
+// All draws of the list (the default of FrameRecording::main_count).
+inline constexpr uint32_t kAllDraws = 0xffffffffu;
+
 struct FrameRecording {
-  uint32_t draw_count = 0;
+  uint32_t draw_count = 0;      // draws written by SceneGpu::write_draws
+  // The list split by BroadPhase::split_by_viewport: draws [0, main_count) touch the viewport's frustum (the
+  // main pass draws them), draws [wide_first, draw_count) reach outside it (the wide pass draws them). The
+  // defaults draw every mesh in both passes (exact too, only slower).
+  uint32_t main_count = kAllDraws;
+  uint32_t wide_first = 0;
   gpu::PassConstants main{};
   gpu::PassConstants wide{};
-  bool read_back_list = false;  // copy the used prefix of the compacted list to SceneGpu::readback
+  bool read_back_list = false;  // compact into SceneGpu::readback (host-visible) instead of SceneGpu::compacted
   bool feedback = true;         // metadata writes, wide pass, compaction (false: only the picture)
 };
 
@@ -58,6 +80,8 @@ class ScenePasses {
                                                      const ScenePassesOptions& options, const SceneGpu& scene,
                                                      const TextureCache& cache);
   void record(VkCommandBuffer cmd, const FrameRecording& frame) const;
+  // After the recorded frame's submission completed.
+  PassTimes read_pass_times() const;
 
   const GpuImage& colour() const { return colour_; }  // TRANSFER_SRC_OPTIMAL after record()
   VkFormat colour_format() const;
@@ -68,6 +92,8 @@ class ScenePasses {
   bool probe_is_anisotropic() const { return probe_anisotropic_; }
 
  private:
+  static constexpr uint32_t kTimestampCount = 4;  // start, after main, after wide, after compaction
+
   ScenePasses(const ScenePassesOptions& options, const SceneGpu& scene) : options_(options), scene_(scene) {}
   Status create_targets(const VulkanContext& ctx);
   Status create_descriptors(const VulkanContext& ctx, const TextureCache& cache);
@@ -75,8 +101,13 @@ class ScenePasses {
 
   ScenePassesOptions options_;
   const SceneGpu& scene_;
+  VkDevice device_ = VK_NULL_HANDLE;
+  UniqueQueryPool timestamps_;
+  double timestamp_period_ns_ = 1;
+  mutable uint32_t timestamps_written_ = 0;  // by the last record(): 2 without feedback, 4 with
   GpuImage colour_;
   GpuImage depth_;
+  GpuImage owner_;  // the pre-pass's id buffer (input attachment of the shading subpass)
   GpuImage wide_depth_;
   UniqueRenderPass main_pass_;
   UniqueRenderPass wide_pass_;
@@ -94,8 +125,7 @@ class ScenePasses {
   UniquePipeline main_pipeline_;
   UniquePipeline wide_pipeline_;
   UniquePipeline compact_pipeline_;
-  UniquePipeline compact_args_pipeline_;
-  UniquePipeline compact_copy_pipeline_;
+  UniquePipeline compact_to_host_pipeline_;
 };
 
 }  // namespace texstream::render

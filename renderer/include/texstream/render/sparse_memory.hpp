@@ -39,7 +39,8 @@ struct SparseImageInfo {
 struct SparseBindStats {
   uint64_t calls = 0;            // vkQueueBindSparse calls
   uint64_t ops = 0;              // page binds + unbinds submitted
-  double seconds = 0;            // building the bind arrays + the calls
+  double seconds = 0;            // building the bind arrays + the calls (and the waits for them)
+  double call_seconds = 0;       // of which the calls and waits alone
   uint64_t max_ops_per_call = 0;
   std::vector<uint32_t> ops_per_call;  // one entry per call (the bind-cost benchmark replays these sizes)
 };
@@ -63,6 +64,8 @@ class SparseMemory {
   uint64_t tail_bytes() const { return tail_bytes_; }
   uint64_t allocated_bytes() const { return allocated_bytes_; }  // device memory allocated so far (<= budget)
   uint64_t image_bytes() const { return image_bytes_; }          // the image's virtual size
+  const SparseImageInfo& info() const { return info_; }
+  uint32_t pages_per_block() const { return pages_per_block_; }
 
   // One vkQueueBindSparse for the whole batch (nothing when it is empty). On success the semaphore reaches
   // signal_value() once the binds have executed.

@@ -19,6 +19,7 @@
 // Frame-thread only; every method runs between frames, when no submitted work reads the texture table.
 #include <vulkan/vulkan.h>
 
+#include <array>
 #include <cstdint>
 #include <deque>
 #include <filesystem>
@@ -69,6 +70,15 @@ struct BindWait {
   VkSemaphore semaphore = VK_NULL_HANDLE;  // timeline
   uint64_t value = 0;                      // 0: nothing to wait for
 };
+
+// What the first frames did to the image, for the bind-cost benchmark's replay (cache.json "upload_trace"):
+// per frame the page ops of its vkQueueBindSparse and the regions its copies wrote. Whole frames only, up to
+// kTraceEntries ops + regions in all, so long runs keep a bounded prefix.
+struct UploadTraceFrame {
+  std::vector<PageBindOp> binds;
+  std::vector<std::array<uint32_t, 6>> copies;  // layer, mip, x, y, width, height (texels)
+};
+inline constexpr size_t kTraceEntries = size_t{1} << 16;
 
 class TextureCache final : public MipSink {
  public:
@@ -149,6 +159,10 @@ class TextureCache final : public MipSink {
   StagingRing ring_;
   CacheAllocator allocator_;
   std::vector<Residency> residency_;
+  uint64_t resident_count_ = 0;  // textures with a non-zero mask
+  std::vector<UploadTraceFrame> trace_;
+  size_t trace_entries_ = 0;
+  bool trace_open_ = false;  // the last prepare_uploads started a trace frame that record_uploads adds to
   std::unordered_map<uint64_t, StagingRing::Allocation> reserved_;  // by buffer offset, until commit/reject
   std::vector<Copy> queued_;        // committed, pages not yet bound
   std::vector<Copy> ready_;         // pages bound (prepare_uploads), not yet recorded

@@ -15,12 +15,14 @@
 #include "texstream/render/broad_phase.hpp"
 #include "texstream/render/gpu_structs.hpp"
 #include "texstream/render/scene_data.hpp"
+#include "texstream/render/scene_passes.hpp"
 
 namespace texstream::render {
 
 struct ViewRendererOptions {
   bool lod_probe = false;                 // compile the LOD_PROBE variant and return its samples
   std::array<double, 3> scene_offset{};   // added to every mesh origin (and expected in the poses given)
+  bool timestamps = false;                // GPU timestamps per pass (ViewResult::pass_times)
 };
 
 struct ViewRequest {
@@ -35,7 +37,10 @@ struct ViewResult {
   uint32_t list_count = 0;                      // the GPU's counter (may exceed the capacity)
   std::vector<gpu::CompactEntry> entries;       // read_back: the used prefix
   std::vector<gpu::LodProbeSample> probe;       // lod_probe: one per pixel
-  size_t submitted = 0;                         // meshes the broad phase kept
+  size_t submitted = 0;                         // meshes the broad phase kept (wide frustum)
+  uint32_t main_draws = 0;                      // of those, drawn by the main pass (touch the viewport frustum)
+  uint32_t wide_draws = 0;                      // drawn by the wide pass (reach outside the viewport frustum)
+  PassTimes pass_times;                         // ViewRendererOptions::timestamps
   BroadPhaseStats broad_phase;
   double broad_phase_ms = 0;
   double gpu_ms = 0;                            // submit to fence (the frame's GPU work, waited for)

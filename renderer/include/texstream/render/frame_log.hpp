@@ -1,0 +1,47 @@
+#pragma once
+// Per-frame measurements of one texstream-render run (issue 8), written as <output_dir>/frames.csv next to
+// summary.json and read back by texstream-bench path. One row per frame; the column names are the contract
+// between the two (kFrameLogColumns), so both sides use this one file.
+//
+// Quantities that a frame does not have are NaN in memory and an empty field in the file: image error
+// without render.reference_dir, pop-in while the camera moves.
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "texstream/common/result.hpp"
+
+namespace texstream::render {
+
+struct FrameRecord {
+  uint64_t index = 0;
+  double time_s = 0;          // virtual time along the camera path: index * render.frame_time_ms
+  double wall_s = 0;          // wall time from the start of frame 0 to the end of this frame
+  double latency_ms = 0;      // frame latency (lock-step waits for the server excluded; blocking loads included)
+  double waited_ms = 0;       // lock-step: time spent waiting for the previous cycle's answers
+  double tw_ms = 0;           // t_w, weighted maximum frame latency (seed 000 Eq. 5)
+  double load_size_mb = 0;    // s for the next cycle, 10^6 bytes
+  double mip_bias = 0;        // b for the next cycle, levels
+  uint64_t mips = 0;          // mips uploaded and published during this frame
+  uint64_t bytes = 0;         // their bytes
+  uint64_t bound_pages = 0;   // sparse pages bound in the cache at the end of the frame
+  double server_hit_rate = 0; // server RAM cache hits / lookups during this frame (NaN: no lookups)
+  uint64_t in_flight = 0;     // requests outstanding at the server after the frame
+  bool camera_still = false;  // the pose equals the previous frame's (a pause): pop-in is measured
+  double mse = 0;             // against the reference frame (NaN: no reference)
+  double psnr_db = 0;
+  double ssim = 0;
+  double popin_mse = 0;       // MSE to the previous frame while the camera is still (NaN otherwise)
+};
+
+// Column names, in file order.
+const std::vector<std::string>& frame_log_columns();
+
+std::string frame_log_csv(const std::vector<FrameRecord>& frames);
+Status write_frame_log(const std::filesystem::path& file, const std::vector<FrameRecord>& frames);
+// Fails naming the file and line for a header that differs from frame_log_columns() or a bad field.
+Result<std::vector<FrameRecord>> read_frame_log(const std::filesystem::path& file);
+Result<std::vector<FrameRecord>> parse_frame_log(const std::string& text, const std::string& what);
+
+}  // namespace texstream::render

@@ -1,0 +1,116 @@
+// texstream-bench path --quick on a generated 300-texture RGBA8 scene.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+const fs::path kBin = TEXSTREAM_BIN_DIR;
+
+// Runs a shell command; returns its exit code and what it printed (stdout and stderr).
+int run(const std::string& cmd, std::string* output) {
+  std::string out;
+  FILE* p = popen((cmd + " 2>&1").c_str(), "r");
+  if (!p) return -1;
+  char buf[4096];
+  size_t n;
+  while ((n = fread(buf, 1, sizeof buf, p)) > 0) out.append(buf, n);
+  const int rc = pclose(p);
+  if (output) *output = out;
+  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+std::string last_line(const std::string& text) {
+  std::istringstream in(text);
+  std::string line, last;
+  while (std::getline(in, line))
+    if (!line.empty()) last = line;
+  return last;
+}
+
+class BenchPath : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    work_ = fs::temp_directory_path() / ("texstream-bench-path-" + std::to_string(::getpid()));
+    fs::remove_all(work_);
+    fs::create_directories(work_);
+    gen_rc_ = run((kBin / "texstream-gen").string() + " --out " + (work_ / "scene").string() +
+                      " --textures 300 --seed 5 --format rgba8 --threads 2",
+                  nullptr);
+    if (gen_rc_ == 0) {
+      bench_rc_ = run((kBin / "texstream-bench").string() + " path --quick --scene " + (work_ / "scene").string() +
+                          " --out " + (work_ / "out").string(),
+                      &bench_output_);
+    }
+  }
+  static void TearDownTestSuite() { fs::remove_all(work_); }
+  static fs::path work_;
+  static int gen_rc_, bench_rc_;
+  static std::string bench_output_;
+};
+fs::path BenchPath::work_;
+int BenchPath::gen_rc_ = -1, BenchPath::bench_rc_ = -1;
+std::string BenchPath::bench_output_;
+
+TEST_F(BenchPath, QuickRunWritesTheSummaryLineAndReport) {
+  ASSERT_EQ(gen_rc_, 0);
+  ASSERT_EQ(bench_rc_, 0) << bench_output_;
+  const std::string summary = last_line(bench_output_);
+  EXPECT_EQ(summary.rfind("summary: lockstep_identical=true max_latency_ratio=", 0), 0u) << summary;
+  for (const char* key : {"popin_ratio=", "integrated_error_ratio=", "streaming_overhead=", "process_boundary_cost="})
+    EXPECT_NE(summary.find(key), std::string::npos) << key;
+  EXPECT_EQ(summary.find("nan"), std::string::npos) << summary;
+  EXPECT_TRUE(fs::exists(work_ / "out" / "report.md"));
+  EXPECT_TRUE(fs::exists(work_ / "out" / "plots" / "pareto.png"));
+  EXPECT_TRUE(fs::exists(work_ / "out" / "raw" / "ours.csv"));
+}
+
+TEST_F(BenchPath, ResidentRunReproducesTheReferenceAndStreamingDoesNot) {
+  ASSERT_EQ(bench_rc_, 0) << bench_output_;
+  std::ifstream in(work_ / "out" / "results.json");
+  const nlohmann::json j = nlohmann::json::parse(in);
+  std::map<std::string, nlohmann::json> runs;
+  for (const auto& r : j["runs"]) runs[r["name"].get<std::string>()] = r;
+  for (const char* name : {"reference", "ours", "baseline", "resident", "resident_blend", "blocking", "inprocess",
+                           "lockstep_a", "lockstep_b"}) {
+    ASSERT_TRUE(runs.count(name)) << name;
+    EXPECT_EQ(runs[name]["exit_code"], 0) << name;
+    EXPECT_EQ(runs[name]["failure"], "") << name;
+  }
+  // Every texture resident in both: the same pixels, frame for frame (PSNR capped at 100 dB, SSIM 1).
+  EXPECT_DOUBLE_EQ(runs["resident"]["psnr_db"]["median"].get<double>(), 100.0);
+  EXPECT_DOUBLE_EQ(runs["resident"]["integrated_mse"].get<double>(), 0.0);
+  // Eq. 8 mixes the colormap in by the displayed level even with every mip resident: an error of its own.
+  EXPECT_GT(runs["resident_blend"]["integrated_mse"].get<double>(), 0.0);
+  // Streaming starts from the colormap: some error, which refinement then lowers.
+  EXPECT_GT(runs["ours"]["integrated_mse"].get<double>(), 0.0);
+  EXPECT_GT(runs["ours"]["mse"]["max"].get<double>(), runs["ours"]["mse"]["median"].get<double>());
+  // The quick path holds one cut, whose recovery is measured.
+  EXPECT_EQ(j["cuts_s"].size(), 1u);
+  EXPECT_EQ(runs["ours"]["recoveries"].size(), 1u);
+  EXPECT_TRUE(j["summary"]["lockstep_identical"].get<bool>()) << j["summary"]["lockstep_difference"];
+}
+
+TEST(BenchPathArguments, UnknownArgumentAndMissingSceneAreRefused) {
+  std::string out;
+  EXPECT_EQ(run((kBin / "texstream-bench").string() + " path --bogus", &out), 2) << out;
+  EXPECT_NE(out.find("--bogus"), std::string::npos);
+  EXPECT_EQ(run((kBin / "texstream-bench").string() + " path --quick --scene /nonexistent-scene-dir --out /tmp/x" +
+                    std::to_string(::getpid()),
+                &out),
+            2)
+      << out;
+  EXPECT_NE(out.find("/nonexistent-scene-dir"), std::string::npos);
+}
+
+}  // namespace

@@ -1,0 +1,161 @@
+// texstream-bench path analysis: frames.csv round trip, seed-table statistics, windowed rates, recovery after
+// a cut on synthetic PSNR series, cuts and sections of a camera path, the lock-step comparison.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+
+#include "path_analysis.hpp"
+#include "texstream/render/frame_log.hpp"
+
+namespace texstream::bench {
+namespace {
+
+using render::FrameRecord;
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+std::vector<FrameRecord> series(size_t n, double dt) {
+  std::vector<FrameRecord> v(n);
+  for (size_t i = 0; i < n; ++i) {
+    v[i].index = i;
+    v[i].time_s = static_cast<double>(i) * dt;
+    v[i].wall_s = static_cast<double>(i + 1) * dt;
+    v[i].mse = v[i].psnr_db = v[i].ssim = v[i].popin_mse = kNaN;
+  }
+  return v;
+}
+
+TEST(FrameLog, RoundTripKeepsValuesAndNaN) {
+  auto v = series(3, 1.0 / 30);
+  v[1].latency_ms = 12.345678901234567;
+  v[1].mips = 17;
+  v[1].bytes = 123456789012ull;
+  v[1].camera_still = true;
+  v[2].mse = 0.1;
+  v[2].psnr_db = 58.1;
+  v[2].ssim = 0.99;
+  v[2].server_hit_rate = kNaN;
+  auto back = render::parse_frame_log(render::frame_log_csv(v), "mem");
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  ASSERT_EQ(back->size(), 3u);
+  EXPECT_EQ((*back)[1].latency_ms, v[1].latency_ms);  // %.17g: the same double
+  EXPECT_EQ((*back)[1].bytes, v[1].bytes);
+  EXPECT_TRUE((*back)[1].camera_still);
+  EXPECT_FALSE((*back)[0].camera_still);
+  EXPECT_TRUE(std::isnan((*back)[0].mse));
+  EXPECT_TRUE(std::isnan((*back)[2].server_hit_rate));
+  EXPECT_EQ((*back)[2].ssim, 0.99);
+  EXPECT_EQ(lockstep_difference(v, *back), "");
+}
+
+TEST(FrameLog, BadInputNamesTheLineAndColumn) {
+  auto csv = render::frame_log_csv(series(2, 0.1));
+  auto bad_header = render::parse_frame_log("frame,time\n1,2\n", "x.csv");
+  ASSERT_FALSE(bad_header.ok());
+  EXPECT_NE(bad_header.error().message.find("x.csv: line 1"), std::string::npos);
+  const size_t second = csv.find('\n', csv.find('\n') + 1) + 1;  // start of the second data row
+  std::string broken = csv;
+  broken[second] = 'z';  // frame index "z"
+  auto bad_field = render::parse_frame_log(broken, "x.csv");
+  ASSERT_FALSE(bad_field.ok());
+  EXPECT_NE(bad_field.error().message.find("line 3: column frame"), std::string::npos) << bad_field.error().message;
+  std::string extended = csv;
+  extended += "1,2\n";
+  auto short_row = render::parse_frame_log(extended, "x.csv");
+  ASSERT_FALSE(short_row.ok());
+  EXPECT_NE(short_row.error().message.find("line 4"), std::string::npos);
+}
+
+TEST(PathAnalysis, Stat3SkipsNaN) {
+  const Stat3 s = stat3({3, kNaN, 1, 2, 10});
+  EXPECT_EQ(s.samples, 4u);
+  EXPECT_DOUBLE_EQ(s.median, 2.5);
+  EXPECT_DOUBLE_EQ(s.avg, 4.0);
+  EXPECT_DOUBLE_EQ(s.max, 10.0);
+  EXPECT_TRUE(std::isnan(stat3({kNaN}).median));
+}
+
+TEST(PathAnalysis, RatesOverWindowsOfWallTime) {
+  auto v = series(6, 0.05);  // wall 0.05 .. 0.30
+  for (auto& f : v) {
+    f.mips = 10;
+    f.bytes = 1'000'000;
+  }
+  const Rates r = windowed_rates(v, 0.10423);
+  // Windows close at wall 0.15 (3 frames over 0.15 s) and 0.30 (3 frames over 0.15 s).
+  ASSERT_EQ(r.mips_per_s.size(), 2u);
+  EXPECT_NEAR(r.mips_per_s[0], 30 / 0.15, 1e-9);
+  EXPECT_NEAR(r.mb_per_s[1], 3 / 0.15, 1e-9);
+}
+
+TEST(PathAnalysis, RecoveryIsTheFirstFrameWithin1DbOfTheSettledPsnr) {
+  // 30 fps; a cut at 2 s; PSNR 20 dB before recovery, then a ramp of 20 dB per second up to 40 dB at 3 s,
+  // and 40 dB until the segment ends at 5 s. Within 1 dB: PSNR >= 39 at t = 2.95 s, 0.95 s after the cut.
+  auto v = series(150, 1.0 / 30);
+  for (auto& f : v) {
+    const double t = f.time_s;
+    f.psnr_db = t < 2.0 ? 45.0 : std::min(40.0, 20.0 + 20.0 * (t - 2.0));
+  }
+  const Recovery r = recovery_after_cut(v, 2.0, 5.0);
+  EXPECT_DOUBLE_EQ(r.settled_psnr_db, 40.0);
+  EXPECT_NEAR(r.seconds, 0.95, 1.0 / 30 + 1e-9);
+  EXPECT_GE(r.seconds, 0.95 - 1e-9);
+  // A view that never settles within the tolerance of its own end... is by definition reached; one with no
+  // frames in the segment is not.
+  EXPECT_TRUE(std::isnan(recovery_after_cut(v, 6.0, 7.0).seconds));
+  // An immediate recovery (already at the settled level): 0 s.
+  for (auto& f : v) f.psnr_db = 33.0;
+  EXPECT_DOUBLE_EQ(recovery_after_cut(v, 2.0, 5.0).seconds, 0.0);
+}
+
+TEST(PathAnalysis, CutsAndSections) {
+  auto path = CameraPath::parse(
+      "0 0 0 10 0 -20\n8 0 100 10 0 -20\n10 0 100 10 0 -20\n10 500 0 30 90 -30\n18 600 0 30 90 -30\n", "test");
+  ASSERT_TRUE(path.ok());
+  const auto cuts = cut_times(*path);
+  ASSERT_EQ(cuts.size(), 1u);  // the pause (8 -> 10, same pose) is not a cut
+  EXPECT_DOUBLE_EQ(cuts[0], 10.0);
+  const CameraPath s = path_section(*path, 8.5, 12.5);
+  EXPECT_DOUBLE_EQ(s.duration_s(), 4.0);
+  const auto scuts = cut_times(s);
+  ASSERT_EQ(scuts.size(), 1u);
+  EXPECT_DOUBLE_EQ(scuts[0], 1.5);
+  EXPECT_DOUBLE_EQ(s.sample(0.0).position[1], 100.0);   // in the pause
+  EXPECT_DOUBLE_EQ(s.sample(4.0).position[0], 531.25);  // 2.5 s into the 8 s move of 100 m
+}
+
+TEST(PathAnalysis, AnalysisIntegratesErrorAndFindsPopIn) {
+  auto v = series(4, 0.5);
+  const double mse[] = {100, 50, 10, 0};
+  for (size_t i = 0; i < 4; ++i) {
+    v[i].mse = mse[i];
+    v[i].ssim = 0.9;
+    v[i].psnr_db = 30;
+    v[i].latency_ms = static_cast<double>(i + 1);
+  }
+  v[2].popin_mse = 7;
+  v[3].popin_mse = 3;
+  const RunAnalysis a = analyse_run(v, 0.5, {});
+  EXPECT_DOUBLE_EQ(a.integrated_mse, 80.0);  // (100 + 50 + 10 + 0) * 0.5 s
+  EXPECT_NEAR(a.integrated_dssim, 4 * 0.1 * 0.5, 1e-12);
+  EXPECT_DOUBLE_EQ(a.max_popin_mse, 7.0);
+  EXPECT_EQ(a.popin_frames, 2u);
+  EXPECT_DOUBLE_EQ(a.latency_ms.max, 4.0);
+  EXPECT_DOUBLE_EQ(a.latency_ms.median, 3.0);  // frames 1-3: frame 0 is warm-up (kWarmUpFrames)
+  EXPECT_DOUBLE_EQ(a.p95_latency_ms, 4.0);
+}
+
+TEST(PathAnalysis, LockstepDifferenceNamesTheFirstDifferingFrameAndColumn) {
+  auto a = series(5, 0.1), b = series(5, 0.1);
+  b[3].latency_ms = 99;  // wall-clock quantities may differ
+  b[3].wall_s = 42;
+  EXPECT_EQ(lockstep_difference(a, b), "");
+  b[3].ssim = 0.5;
+  EXPECT_EQ(lockstep_difference(a, b), "frame 3: ssim");
+  b[2].mips = 1;
+  EXPECT_EQ(lockstep_difference(a, b), "frame 2: mips");
+  EXPECT_NE(lockstep_difference(a, series(4, 0.1)), "");
+}
+
+}  // namespace
+}  // namespace texstream::bench

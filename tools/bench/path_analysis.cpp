@@ -1,0 +1,178 @@
+#include "path_analysis.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+namespace texstream::bench {
+
+namespace {
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+// Exact equality that also holds for two NaNs (columns that were not measured in either run).
+bool same(double a, double b) {
+  if (std::isnan(a) || std::isnan(b)) return std::isnan(a) && std::isnan(b);
+  return std::memcmp(&a, &b, sizeof a) == 0;
+}
+}  // namespace
+
+Stat3 stat3(const std::vector<double>& values) {
+  std::vector<double> v;
+  v.reserve(values.size());
+  for (double x : values)
+    if (std::isfinite(x)) v.push_back(x);
+  Stat3 s;
+  s.samples = v.size();
+  if (v.empty()) {
+    s.median = s.avg = s.max = kNaN;
+    return s;
+  }
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  s.median = n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+  double sum = 0;
+  for (double x : v) sum += x;
+  s.avg = sum / static_cast<double>(n);
+  s.max = v.back();
+  return s;
+}
+
+Rates windowed_rates(const std::vector<render::FrameRecord>& frames, double window_s) {
+  Rates r;
+  double start = 0, mips = 0, bytes = 0;
+  for (const render::FrameRecord& f : frames) {
+    mips += static_cast<double>(f.mips);
+    bytes += static_cast<double>(f.bytes);
+    const double span = f.wall_s - start;
+    if (span >= window_s) {
+      r.mips_per_s.push_back(mips / span);
+      r.mb_per_s.push_back(bytes / 1e6 / span);
+      start = f.wall_s;
+      mips = bytes = 0;
+    }
+  }
+  return r;
+}
+
+Recovery recovery_after_cut(const std::vector<render::FrameRecord>& frames, double cut_s, double segment_end_s,
+                            double tolerance_db, double settle_window_s) {
+  Recovery r;
+  r.cut_s = cut_s;
+  r.settled_psnr_db = r.seconds = kNaN;
+  std::vector<double> settled;
+  for (const render::FrameRecord& f : frames) {
+    if (f.time_s >= cut_s && f.time_s < segment_end_s && f.time_s >= segment_end_s - settle_window_s)
+      settled.push_back(f.psnr_db);
+  }
+  r.settled_psnr_db = stat3(settled).median;
+  if (std::isnan(r.settled_psnr_db)) return r;
+  for (const render::FrameRecord& f : frames) {
+    if (f.time_s < cut_s || f.time_s >= segment_end_s || !std::isfinite(f.psnr_db)) continue;
+    if (f.psnr_db >= r.settled_psnr_db - tolerance_db) {
+      r.seconds = f.time_s - cut_s;
+      break;
+    }
+  }
+  return r;
+}
+
+std::vector<double> cut_times(const CameraPath& path) {
+  std::vector<double> cuts;
+  const auto& k = path.keys();
+  for (size_t i = 1; i < k.size(); ++i) {
+    const CameraPose& a = k[i - 1].pose;
+    const CameraPose& b = k[i].pose;
+    const bool moved = a.position[0] != b.position[0] || a.position[1] != b.position[1] ||
+                       a.position[2] != b.position[2] || a.yaw_deg != b.yaw_deg || a.pitch_deg != b.pitch_deg;
+    if (k[i].time_s == k[i - 1].time_s && moved) cuts.push_back(k[i].time_s);
+  }
+  return cuts;
+}
+
+CameraPath path_section(const CameraPath& path, double t0, double t1) {
+  std::vector<CameraKey> keys;
+  keys.push_back({0.0, path.sample(t0)});
+  if (t1 > t0) {
+    for (const CameraKey& k : path.keys())
+      if (k.time_s > t0 && k.time_s < t1) keys.push_back({k.time_s - t0, k.pose});
+    keys.push_back({t1 - t0, path.sample(t1)});
+  }
+  return CameraPath(std::move(keys));
+}
+
+RunAnalysis analyse_run(const std::vector<render::FrameRecord>& frames, double frame_time_s,
+                        const std::vector<double>& cuts_s) {
+  RunAnalysis a;
+  a.frames = frames.size();
+  std::vector<double> lat, tw, s, b, pages, hit, mse, psnr, ssim;
+  for (const render::FrameRecord& f : frames) {
+    if (f.index >= kWarmUpFrames || frames.size() <= kWarmUpFrames) {
+      lat.push_back(f.latency_ms);
+      tw.push_back(f.tw_ms);
+    }
+    s.push_back(f.load_size_mb);
+    b.push_back(f.mip_bias);
+    pages.push_back(static_cast<double>(f.bound_pages));
+    hit.push_back(f.server_hit_rate);
+    mse.push_back(f.mse);
+    psnr.push_back(f.psnr_db);
+    ssim.push_back(f.ssim);
+    if (std::isfinite(f.mse)) a.integrated_mse += f.mse * frame_time_s;
+    if (std::isfinite(f.ssim)) a.integrated_dssim += (1.0 - f.ssim) * frame_time_s;
+    if (std::isfinite(f.popin_mse)) {
+      ++a.popin_frames;
+      a.max_popin_mse = std::max(a.max_popin_mse, f.popin_mse);
+    }
+  }
+  a.latency_ms = stat3(lat);
+  a.tw_ms = stat3(tw);
+  a.load_size_mb = stat3(s);
+  a.mip_bias = stat3(b);
+  a.bound_pages = stat3(pages);
+  a.server_hit_rate = stat3(hit);
+  a.mse = stat3(mse);
+  a.psnr_db = stat3(psnr);
+  a.ssim = stat3(ssim);
+  const Rates r = windowed_rates(frames);
+  a.mips_per_s = stat3(r.mips_per_s);
+  a.mb_per_s = stat3(r.mb_per_s);
+  std::vector<double> sorted = lat;
+  std::sort(sorted.begin(), sorted.end());
+  if (!sorted.empty()) {
+    // Nearest rank: the smallest latency that at least 95 % of the frames do not exceed.
+    const size_t rank = static_cast<size_t>(std::ceil(0.95 * static_cast<double>(sorted.size())));
+    a.p95_latency_ms = sorted[std::min(sorted.size(), std::max<size_t>(rank, 1)) - 1];
+  }
+  const double end_s = frames.empty() ? 0.0 : frames.back().time_s + frame_time_s;
+  for (size_t i = 0; i < cuts_s.size(); ++i) {
+    if (cuts_s[i] >= end_s) break;
+    const double next = i + 1 < cuts_s.size() ? std::min(cuts_s[i + 1], end_s) : end_s;
+    a.recoveries.push_back(recovery_after_cut(frames, cuts_s[i], next));
+  }
+  return a;
+}
+
+std::string lockstep_difference(const std::vector<render::FrameRecord>& a, const std::vector<render::FrameRecord>& b) {
+  if (a.size() != b.size()) return std::to_string(a.size()) + " frames against " + std::to_string(b.size());
+  for (size_t i = 0; i < a.size(); ++i) {
+    const render::FrameRecord& x = a[i];
+    const render::FrameRecord& y = b[i];
+    auto at = [&](const char* what) { return "frame " + std::to_string(x.index) + ": " + what; };
+    if (x.mips != y.mips) return at("mips");
+    if (x.bytes != y.bytes) return at("bytes");
+    if (x.bound_pages != y.bound_pages) return at("bound_pages");
+    if (x.in_flight != y.in_flight) return at("in_flight");
+    if (x.camera_still != y.camera_still) return at("camera_still");
+    if (!same(x.time_s, y.time_s)) return at("time_s");
+    if (!same(x.load_size_mb, y.load_size_mb)) return at("load_size_mb");
+    if (!same(x.mip_bias, y.mip_bias)) return at("mip_bias");
+    if (!same(x.mse, y.mse)) return at("mse");
+    if (!same(x.psnr_db, y.psnr_db)) return at("psnr_db");
+    if (!same(x.ssim, y.ssim)) return at("ssim");
+    if (!same(x.popin_mse, y.popin_mse)) return at("popin_mse");
+  }
+  return "";
+}
+
+}  // namespace texstream::bench

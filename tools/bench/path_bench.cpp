@@ -1,0 +1,465 @@
+// texstream-bench path [--quick] [--scene DIR] [--path FILE] [--out DIR] [--config FILE] [--size WxH] [--keep-frames]
+//
+// Run time against image error on one camera path (issue 8; seed 000 §4.1-4.5, seed 004 §4.1). Every
+// configuration is a texstream-render process (texstream-render-inprocess for the in-process loader) over the
+// same path, frame size and frame time; each writes frames.csv (render/frame_log.hpp), which this command
+// turns into the seed's tables, the error integrals and the recovery after each cut:
+//
+//   reference   render.preload_all: every mip of every texture resident before frame 0, lock-step, every
+//               frame written, no Eq. 8 blending (a plain mipmapped texture path) — the ground truth the
+//               others are compared with (render.reference_dir)
+//   resident    the same all-resident renderer in real time: the "no streaming" latency; it must reproduce
+//               the reference exactly
+//   resident_blend   all resident with Eq. 8 blending: the error of the blending alone
+//   ours        the configuration as given (adaptive controller, Eq. 8 blending)
+//   baseline    the seed's baseline: controller.mode = none, stream.colormap_blend = false
+//   blocking    render.blocking_loads: each visible texture's whole chain before drawing (seed 002 §2)
+//   inprocess   ours with the server on a thread of the renderer (prices the process boundary)
+//   alpha_*/beta_*   seed 000 Tables 3-6
+//   lockstep_a/b     lock-step, fixed load size: run twice, every per-frame column must be bit-equal
+//
+// --quick: a 4 s section of the path around its first cut, 256x144, one α and one β besides ours; under 60 s
+// on the 2-core lavapipe machine. Ends with `summary: lockstep_identical=... max_latency_ratio=...
+// popin_ratio=... integrated_error_ratio=... streaming_overhead=... process_boundary_cost=...`.
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/wait.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "bench_registry.hpp"
+#include "bench_util.hpp"
+#include "path_analysis.hpp"
+#include "path_results.hpp"
+#include "texstream/common/camera_path.hpp"
+#include "texstream/common/config.hpp"
+#include "texstream/render/frame_log.hpp"
+#include "texstream/render/scene_data.hpp"
+
+extern char** environ;
+
+namespace fs = std::filesystem;
+
+namespace texstream::bench {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+// --quick: the section of the path around its first cut (1.5 s of the pause before it, 2.5 s after), which
+// holds one refinement at rest and one recovery from an instant switch.
+constexpr double kQuickBeforeCutS = 1.5;
+constexpr double kQuickAfterCutS = 2.5;
+constexpr uint32_t kQuickWidth = 256, kQuickHeight = 144;
+constexpr uint32_t kFullWidth = 640, kFullHeight = 360;
+// Lock-step runs use a fixed load size per cycle (seed 004 §4.1: "a fixed limit of pages per frame"); 1 MB
+// is the seed's median s at α = 12-16 ms (Table 3: 0.75-0.96 MB).
+constexpr double kLockstepLoadMb = 1.0;
+// Cache sizing for the all-resident runs: the address space of one sparse image on lavapipe is 2 GiB and an
+// image has at most 2048 layers (DESIGN "Lavapipe facts").
+constexpr uint64_t kMaxLayers = 2048;
+constexpr uint64_t kMaxCacheBytes = 2ull << 30;
+constexpr const char* kSystemPython = "/usr/bin/python3";
+
+fs::path self_dir() {
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  return ec ? fs::path(".") : exe.parent_path();
+}
+
+std::string flag_value(const std::vector<std::string>& args, const std::string& flag) {
+  for (size_t i = 0; i + 1 < args.size(); ++i)
+    if (args[i] == flag) return args[i + 1];
+  return "";
+}
+
+// Runs `argv` with stdout and stderr to `log`; returns the exit code (-1: not started, 128 + n: signal n).
+int run_process(const std::vector<std::string>& argv, const fs::path& log) {
+  posix_spawn_file_actions_t fa;
+  posix_spawn_file_actions_init(&fa);
+  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_adddup2(&fa, 1, 2);
+  std::vector<char*> args;
+  for (const std::string& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+  args.push_back(nullptr);
+  pid_t pid = -1;
+  const int rc = posix_spawn(&pid, args[0], &fa, nullptr, args.data(), environ);
+  posix_spawn_file_actions_destroy(&fa);
+  if (rc != 0) return -1;
+  int status = 0;
+  while (waitpid(pid, &status, 0) < 0) {
+    if (errno != EINTR) return -1;
+  }
+  if (WIFEXITED(status)) return WEXITSTATUS(status);
+  return WIFSIGNALED(status) ? 128 + WTERMSIG(status) : -1;
+}
+
+// cache.* settings under which every texture of the scene is resident at once: layers of one maximum extent
+// (CacheAllocator: square regions, one extent per layer) and memory for every page of them.
+struct ResidentCache {
+  uint64_t layer_extent = 4, layers = 0, memory_bytes = 0;
+  std::string error;
+};
+ResidentCache resident_cache(const render::SceneData& scene) {
+  ResidentCache c;
+  std::vector<uint64_t> per_extent(32, 0);
+  uint32_t bytes_per_block = 0;
+  for (const TextureShape& s : scene.shapes()) {
+    uint64_t e = 4;
+    while (e < std::max(s.width, s.height)) e *= 2;
+    c.layer_extent = std::max(c.layer_extent, e);
+    ++per_extent[static_cast<size_t>(std::log2(static_cast<double>(e)))];
+    bytes_per_block = s.format == TexelFormat::kBc1 ? 8 : 64;  // a 4x4 block: BC1 8 bytes, RGBA8 64 bytes
+  }
+  for (size_t k = 0; k < per_extent.size(); ++k) {
+    if (!per_extent[k]) continue;
+    const uint64_t e = uint64_t{1} << k;
+    const uint64_t per_layer = (c.layer_extent / e) * (c.layer_extent / e);
+    c.layers += (per_extent[k] + per_layer - 1) / per_layer;
+  }
+  // Every level of every layer bound in full, counted in 64 KiB sparse pages (the standard sparse block
+  // size; lavapipe has no mip tail, so each small level takes a page of its own): an upper bound of what the
+  // preload binds, since pages shared between small regions are counted once per layer here anyway.
+  constexpr uint64_t kPageBytes = 64u << 10;
+  uint64_t pages_per_layer = 0;
+  for (uint64_t e = c.layer_extent; e >= 1; e /= 2) {
+    const uint64_t blocks = ((e + 3) / 4) * ((e + 3) / 4);
+    pages_per_layer += std::max<uint64_t>(1, (blocks * bytes_per_block + kPageBytes - 1) / kPageBytes);
+  }
+  c.memory_bytes = std::max<uint64_t>(c.layers * pages_per_layer * kPageBytes, 64ull << 20);
+  if (c.layers > kMaxLayers) {
+    c.error = "the scene needs " + std::to_string(c.layers) + " cache layers of " + std::to_string(c.layer_extent) +
+              " px to be resident at once; a sparse image has at most " + std::to_string(kMaxLayers);
+  } else if (c.memory_bytes > kMaxCacheBytes) {
+    c.error = "the scene needs " + std::to_string(c.memory_bytes >> 20) + " MiB of cache to be resident at once; "
+              "the sparse address space is " + std::to_string(kMaxCacheBytes >> 20) + " MiB";
+  }
+  return c;
+}
+
+struct Plan {
+  fs::path bin, config, scene, path_file, out;
+  std::vector<std::string> common;  // --set for every run
+};
+
+ConfigRun make(const std::string& name, const std::string& group, const std::string& label,
+               std::vector<std::string> sets, bool in_process = false) {
+  ConfigRun r;
+  r.name = name;
+  r.group = group;
+  r.label = label;
+  r.sets = std::move(sets);
+  r.in_process = in_process;
+  return r;
+}
+
+void execute(const Plan& p, ConfigRun& r, double frame_time_s, const std::vector<double>& cuts) {
+  const fs::path dir = p.out / "runs" / r.name;
+  std::error_code ec;
+  fs::remove_all(dir, ec);
+  fs::create_directories(dir, ec);
+  std::vector<std::string> argv{(p.bin / (r.in_process ? "texstream-render-inprocess" : "texstream-render")).string()};
+  if (!p.config.empty()) argv.insert(argv.end(), {"--config", p.config.string()});
+  std::vector<std::string> sets = p.common;
+  sets.push_back("render.output_dir=" + dir.string());
+  if (r.measured) sets.push_back("render.reference_dir=" + (p.out / "runs" / "reference").string());
+  sets.insert(sets.end(), r.sets.begin(), r.sets.end());
+  for (const std::string& s : sets) argv.insert(argv.end(), {"--set", s});
+  {
+    std::ofstream cmd(dir / "command.txt");  // to rerun one configuration by hand
+    for (const std::string& a : argv) cmd << a << (a.rfind("--", 0) == 0 ? " " : " \\\n  ");
+    cmd << "\n";
+  }
+  Stopwatch sw;
+  r.exit_code = run_process(argv, dir / "log.txt");
+  r.wall_s = sw.seconds();
+  if (r.exit_code != 0) {
+    r.failure = "exit code " + std::to_string(r.exit_code) + ", see runs/" + r.name + "/log.txt";
+    std::fprintf(stderr, "path bench: %s failed (%d): %s\n", r.name.c_str(), r.exit_code, (dir / "log.txt").c_str());
+    return;
+  }
+  auto frames = render::read_frame_log(dir / "frames.csv");
+  if (!frames) {
+    r.failure = frames.error().message;
+    return;
+  }
+  fs::create_directories(p.out / "raw", ec);
+  fs::copy_file(dir / "frames.csv", p.out / "raw" / (r.name + ".csv"), fs::copy_options::overwrite_existing, ec);
+  r.analysis = analyse_run(*frames, frame_time_s, cuts);
+  std::printf("  %-14s %5.1f s  latency median %6.2f ms max %7.2f ms  PSNR median %6.2f dB  ∫MSE %8.1f  pop-in %7.2f\n",
+              r.name.c_str(), r.wall_s, r.analysis.latency_ms.median, r.analysis.latency_ms.max,
+              r.analysis.psnr_db.median, r.analysis.integrated_mse, r.analysis.max_popin_mse);
+  std::fflush(stdout);
+}
+
+std::string fmt_num(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+std::string fmt_name(const std::string& prefix, double v) { return prefix + fmt_num(v); }
+
+// The 1-minute load average (first field of /proc/loadavg), or "?".
+std::string load_average() {
+  std::ifstream in("/proc/loadavg");
+  std::string first;
+  return in >> first ? first : std::string("?");
+}
+
+double ratio(double a, double b) {
+  if (!std::isfinite(a) || !std::isfinite(b)) return kNaN;
+  if (b == 0) return a == 0 ? 1.0 : std::numeric_limits<double>::infinity();
+  return a / b;
+}
+
+int run_path(const std::vector<std::string>& args) {
+  Stopwatch total;
+  for (size_t i = 0; i < args.size(); ++i) {
+    const std::string& a = args[i];
+    const bool valued = a == "--scene" || a == "--path" || a == "--out" || a == "--config" || a == "--size";
+    if (valued && i + 1 < args.size()) {
+      ++i;
+    } else if (a != "--quick" && a != "--keep-frames") {
+      std::fprintf(stderr, "usage: texstream-bench path [--quick] [--scene DIR] [--path FILE] [--out DIR] "
+                           "[--config FILE] [--size WxH] [--keep-frames]\npath bench: unknown or incomplete argument '%s'\n",
+                   a.c_str());
+      return 2;
+    }
+  }
+  BenchResults res;
+  res.quick = has_flag(args, "--quick");
+  res.load_before = load_average();
+  res.cores = std::thread::hardware_concurrency();
+  Plan plan;
+  plan.bin = self_dir();
+  plan.config = flag_value(args, "--config");
+  if (plan.config.empty()) {
+    // The default device is lavapipe: its profile (seed 000 §4.3: α about twice the latency without streaming).
+    const fs::path lavapipe = fs::path(TEXSTREAM_PATH_BENCH_SOURCE_DIR) / "config" / "lavapipe.toml";
+    if (fs::exists(lavapipe)) plan.config = lavapipe;
+  }
+  auto base_config = load_config(plan.config, {});
+  if (!base_config) {
+    std::fprintf(stderr, "path bench: --config: %s\n", base_config.error().message.c_str());
+    return 2;
+  }
+  const double alpha_ms = base_config->controller.alpha_ms;
+  plan.scene = flag_value(args, "--scene");
+  if (plan.scene.empty()) plan.scene = fs::path(TEXSTREAM_PATH_BENCH_SOURCE_DIR) / "scenes" / "default";
+  plan.out = flag_value(args, "--out");
+  if (plan.out.empty()) plan.out = "out/bench-path";
+  std::error_code ec;
+  plan.out = fs::absolute(plan.out);
+  fs::create_directories(plan.out, ec);
+  if (ec) {
+    std::fprintf(stderr, "path bench: --out %s: %s\n", plan.out.c_str(), ec.message().c_str());
+    return 1;
+  }
+  auto scene = render::SceneData::load(plan.scene);
+  if (!scene) {
+    std::fprintf(stderr, "path bench: --scene %s: %s\n", plan.scene.c_str(), scene.error().message.c_str());
+    return 2;
+  }
+  plan.scene = fs::absolute(plan.scene);
+  const fs::path source_path = flag_value(args, "--path").empty() ? scene->dir / scene->manifest.camera_path
+                                                                  : fs::path(flag_value(args, "--path"));
+  auto path = CameraPath::load(source_path);
+  if (!path || path->keys().empty()) {
+    std::fprintf(stderr, "path bench: --path %s: %s\n", source_path.c_str(),
+                 path ? "no keyframes" : path.error().message.c_str());
+    return 2;
+  }
+  const ResidentCache cache = resident_cache(*scene);
+  if (!cache.error.empty()) {
+    std::fprintf(stderr, "path bench: no reference frames possible: %s\n", cache.error.c_str());
+    return 1;
+  }
+
+  // The path this bench runs: the whole file, or (--quick) the section around its first cut.
+  CameraPath bench_path = *path;
+  if (res.quick) {
+    const auto cuts = cut_times(*path);
+    const double t0 = cuts.empty() ? 0.0 : std::max(0.0, cuts.front() - kQuickBeforeCutS);
+    const double t1 = std::min(path->duration_s(), cuts.empty() ? 4.0 : cuts.front() + kQuickAfterCutS);
+    bench_path = path_section(*path, t0, t1);
+  }
+  plan.path_file = plan.out / "path.txt";
+  {
+    std::ofstream f(plan.path_file);
+    f << "# texstream-bench path: " << (res.quick ? "quick section of " : "") << source_path.string() << "\n"
+      << bench_path.to_text();
+    if (!f) {
+      std::fprintf(stderr, "path bench: cannot write %s\n", plan.path_file.c_str());
+      return 1;
+    }
+  }
+  res.scene = plan.scene;
+  res.path_file = source_path;
+  res.out = plan.out;
+  res.width = res.quick ? kQuickWidth : kFullWidth;
+  res.height = res.quick ? kQuickHeight : kFullHeight;
+  if (const std::string size = flag_value(args, "--size"); !size.empty()) {
+    unsigned w = 0, h = 0;
+    char extra = 0;
+    // At least one SSIM window (11 px) per axis; the renderer's own limit is 16.
+    if (std::sscanf(size.c_str(), "%ux%u%c", &w, &h, &extra) != 2 || w < 16 || h < 16 || w > 16384 || h > 16384) {
+      std::fprintf(stderr, "path bench: --size '%s': expected WxH, 16..16384 each (e.g. 640x360)\n", size.c_str());
+      return 2;
+    }
+    res.width = w;
+    res.height = h;
+  }
+  res.frame_time_s = 0.033333;
+  res.path_duration_s = bench_path.duration_s();
+  res.cuts_s = cut_times(bench_path);
+  plan.common = {"scene.dir=" + plan.scene.string(),
+                 "render.camera_path=" + plan.path_file.string(),
+                 "render.frames=0",
+                 "render.frame_time_ms=" + std::to_string(res.frame_time_s * 1e3),
+                 "render.width_px=" + std::to_string(res.width),
+                 "render.height_px=" + std::to_string(res.height),
+                 "render.write_every_frames=0",
+                 "cache.layer_extent_px=" + std::to_string(cache.layer_extent),
+                 "cache.layers=" + std::to_string(cache.layers),
+                 "cache.memory_bytes=" + std::to_string(cache.memory_bytes)};
+
+  // The configurations, in run order. The reference comes first: everything else is measured against it.
+  std::vector<ConfigRun>& runs = res.runs;
+  runs.push_back(make("reference", "reference", "reference (all resident, lock-step)",
+                      {"render.preload_all=true", "render.lockstep=true", "render.write_every_frames=1",
+                       "controller.mode=none", "stream.colormap_blend=false"}));
+  runs.back().measured = false;
+  runs.push_back(make("ours", "baseline", "ours (as configured: α = " + fmt_num(alpha_ms) + " ms, β = " +
+                                              fmt_num(base_config->controller.beta) + ", Eq. 8 blend)", {}));
+  // Ratios are taken between neighbours in run order (ours, in-process, resident, baseline), so slow drifts
+  // of a shared machine's load affect both sides alike.
+  runs.push_back(make("inprocess", "baseline", "ours, server in a thread (no process boundary)", {}, true));
+  // The all-resident renderer without and with Eq. 8: the first must reproduce the reference exactly (a check
+  // of the reference itself), the second shows the error the blending makes on its own (it mixes in the
+  // colormap by the displayed level even when every mip is resident, seed 000 Eq. 8).
+  runs.push_back(make("resident_blend", "baseline", "all textures resident, Eq. 8 blend (the blending's own error)",
+                      {"render.preload_all=true"}));
+  runs.push_back(make("resident", "baseline", "all textures resident (no streaming, no blending)",
+                      {"render.preload_all=true", "stream.colormap_blend=false"}));
+  runs.push_back(make("baseline", "baseline", "seed baseline (no adaptive streaming, no colour blending)",
+                      {"controller.mode=none", "stream.colormap_blend=false"}));
+  runs.push_back(make("blocking", "baseline", "blocking loads (whole chains before drawing)",
+                      {"render.blocking_loads=true"}));
+  // Seed 000 Table 3 sweeps α = 12, 14, 16, 18 ms around its chosen 16 ms: the same ratios around the
+  // configured α (0.75, 0.875, [1], 1.125), since a sensible α depends on the device (§4.3).
+  std::vector<double> alphas;
+  for (double f : res.quick ? std::vector<double>{0.75} : std::vector<double>{0.75, 0.875, 1.125})
+    alphas.push_back(std::round(alpha_ms * f * 10) / 10);
+  const std::vector<double> betas = res.quick ? std::vector<double>{0} : std::vector<double>{0, 2, 4};
+  for (double a : alphas) {
+    runs.push_back(make(fmt_name("alpha_", a), "alpha", "α = " + fmt_num(a) + " ms",
+                        {"controller.mode=adaptive", "controller.alpha_ms=" + fmt_num(a), "controller.beta=8"}));
+  }
+  for (double b : betas) {
+    runs.push_back(make(fmt_name("beta_", b), "beta", "β = " + fmt_num(b),
+                        {"controller.mode=adaptive", "controller.beta=" + fmt_num(b)}));
+  }
+  const std::vector<std::string> lockstep{"render.lockstep=true", "controller.mode=fixed",
+                                          "controller.fixed_load_mb=" + fmt_num(kLockstepLoadMb),
+                                          "controller.fixed_bias=0"};
+  runs.push_back(make("lockstep_a", "lockstep", "lock-step, s = " + fmt_num(kLockstepLoadMb) + " MB (run 1)", lockstep));
+  runs.push_back(make("lockstep_b", "lockstep", "lock-step, s = " + fmt_num(kLockstepLoadMb) + " MB (run 2)", lockstep));
+  if (!res.quick) {
+    runs.push_back(make("lockstep_baseline", "lockstep", "lock-step seed baseline (s = s_max, no blending)",
+                        {"render.lockstep=true", "controller.mode=none", "stream.colormap_blend=false"}));
+  }
+
+  std::printf("path bench: %s, %zu frames of %ux%u, %zu configurations, output %s\n", plan.scene.c_str(),
+              static_cast<size_t>(std::floor(res.path_duration_s / res.frame_time_s)) + 1, res.width, res.height,
+              runs.size(), plan.out.c_str());
+  for (ConfigRun& r : runs) {
+    execute(plan, r, res.frame_time_s, res.cuts_s);
+    if (r.name == "reference" && !r.failure.empty()) {
+      std::fprintf(stderr, "path bench: without reference frames nothing can be measured\n");
+      break;
+    }
+  }
+  const nlohmann::json ref_summary = [&] {
+    std::ifstream in(plan.out / "runs" / "reference" / "summary.json");
+    return nlohmann::json::parse(in, nullptr, false);
+  }();
+  res.config_file = plan.config;
+  res.device = ref_summary.is_object() ? ref_summary.value("device", std::string("?")) : std::string("?");
+
+  auto get = [&](const std::string& name) -> const RunAnalysis* {
+    const ConfigRun* r = res.find(name);
+    return r && r->failure.empty() && r->exit_code == 0 ? &r->analysis : nullptr;
+  };
+  HeadlineRatios& h = res.ratios;
+  const RunAnalysis *ours = get("ours"), *base = get("baseline"), *resident = get("resident_blend"),
+                    *inproc = get("inprocess");
+  h.max_latency_ratio = ours && base ? ratio(base->latency_ms.max, ours->latency_ms.max) : kNaN;
+  h.popin_ratio = ours && base ? ratio(base->max_popin_mse, ours->max_popin_mse) : kNaN;
+  h.integrated_error_ratio = ours && base ? ratio(base->integrated_mse, ours->integrated_mse) : kNaN;
+  h.streaming_overhead = ours && resident ? ratio(ours->latency_ms.median, resident->latency_ms.median) : kNaN;
+  h.process_boundary_cost = ours && inproc ? ratio(ours->latency_ms.median, inproc->latency_ms.median) : kNaN;
+  if (get("lockstep_a") && get("lockstep_b")) {
+    auto a = render::read_frame_log(plan.out / "raw" / "lockstep_a.csv");
+    auto b = render::read_frame_log(plan.out / "raw" / "lockstep_b.csv");
+    if (a && b) {
+      h.lockstep_difference = lockstep_difference(*a, *b);
+      h.lockstep_identical = h.lockstep_difference.empty();
+    } else {
+      h.lockstep_difference = (a ? b.error() : a.error()).message;
+    }
+  } else {
+    h.lockstep_difference = "a lock-step run failed";
+  }
+  if (!has_flag(args, "--keep-frames")) {
+    // The reference PNGs are the bulk of the output (one per frame); the report does not need them.
+    fs::remove_all(plan.out / "runs" / "reference" / "frames", ec);
+  }
+  res.bench_wall_s = total.seconds();
+  res.load_after = load_average();
+  bool plots = false;
+  if (auto st = write_results_json(res, plan.out / "results.json"); !st) {
+    std::fprintf(stderr, "path bench: %s\n", st.error().message.c_str());
+  } else {
+    // Debian's python3 (python3-matplotlib) rather than whatever python3 is first on PATH.
+    const std::string python = fs::exists(kSystemPython) ? kSystemPython : "/usr/bin/env";
+    std::vector<std::string> py{python};
+    if (python == "/usr/bin/env") py.push_back("python3");
+    py.insert(py.end(), {(fs::path(TEXSTREAM_PATH_BENCH_SOURCE_DIR) / "tools" / "bench" /
+                                       "path_report_plots.py").string(),
+                                      plan.out.string()});
+    const int rc = run_process(py, plan.out / "plots.log");
+    plots = rc == 0;
+    if (!plots) std::fprintf(stderr, "path bench: plots failed (%d), see %s\n", rc, (plan.out / "plots.log").c_str());
+  }
+  if (auto st = write_report(res, plan.out / "report.md", plots); !st) {
+    std::fprintf(stderr, "path bench: %s\n", st.error().message.c_str());
+  }
+  std::printf("report: %s (%.0f s)\n", (plan.out / "report.md").c_str(), total.seconds());
+  bool all_ok = true;
+  for (const ConfigRun& r : runs) all_ok = all_ok && r.failure.empty();
+  Summary()
+      .add_bool("lockstep_identical", h.lockstep_identical)
+      .add("max_latency_ratio", h.max_latency_ratio)
+      .add("popin_ratio", h.popin_ratio)
+      .add("integrated_error_ratio", h.integrated_error_ratio)
+      .add("streaming_overhead", h.streaming_overhead)
+      .add("process_boundary_cost", h.process_boundary_cost)
+      .print();
+  return all_ok ? 0 : 1;
+}
+
+}  // namespace
+
+TEXSTREAM_BENCH_COMMAND(path, "run time against image error on a camera path: seed tables, baselines, report",
+                        run_path);
+
+}  // namespace texstream::bench
