@@ -1,6 +1,7 @@
 #include "texstream/common/config.hpp"
 
 #include <charconv>
+#include <cstdio>
 #include <cmath>
 #include <fstream>
 #include <map>
@@ -48,6 +49,7 @@ void visit_keys(Config& c, V&& v) {
   v("render", "frames", c.render.frames, "frames", "Headless: frames to render; 0 = the whole camera path", Range{0, 1e9});
   v("render", "frame_time_ms", c.render.frame_time_ms, "ms", "Virtual time per frame along the camera path", Range{0.01, 10000});
   v("render", "lockstep", c.render.lockstep, "bool", "Each frame first takes every answer to the previous streaming cycle, so a run depends on the frame index only (false: real time, never waits)", kAny);
+  v("render", "pace_frames", c.render.pace_frames, "bool", "Real time: frame N starts no earlier than N x frame_time_ms after frame 0, like a display at 1000/frame_time_ms Hz, so a fast device does not fly the camera path faster than its speed (ignored in lock-step and window mode)", kAny);
   v("render", "camera_path", c.render.camera_path, "path", "Camera path file; empty: <scene>/camera_path.txt", kAny);
   v("render", "output_dir", c.render.output_dir, "path", "Folder for frames and the run summary", kAny);
   v("render", "write_every_frames", c.render.write_every_frames, "frames", "Write every Nth frame as PNG (0: only the last)", Range{0, 1e9});
@@ -122,6 +124,15 @@ std::string format_value(const double& d) {
 std::string format_value(const std::string& s) {
   std::string out = "\"";
   for (char ch : s) {
+    const auto u = static_cast<unsigned char>(ch);
+    if (u < 0x20 || u == 0x7f) {
+      // TOML basic strings may not hold control characters raw (toml++ refuses to read them back): escape
+      // them so that every value validate() accepts is written in a form that parses to the same value.
+      char esc[8];
+      std::snprintf(esc, sizeof esc, "\\u%04X", u);
+      out += esc;
+      continue;
+    }
     if (ch == '"' || ch == '\\') out += '\\';
     out += ch;
   }

@@ -644,8 +644,16 @@ Result<RunSummary> Renderer::run() {
   prev_bytes_ = cache_->stats().bytes_uploaded;
   prev_hits_ = client_->stats().server_ram_cache_hits;
   prev_misses_ = client_->stats().server_ram_cache_misses;
-  for (uint64_t i = 0; i < frames && !(interactive_ && interactive_->closed()); ++i, ++rendered)
+  // render.pace_frames: the camera path advances frame_time_ms per frame, so without pacing a device that
+  // draws a frame in 0.5 ms flies the path 60x faster than real time and the streaming never keeps up. The
+  // wait is not part of the frame's latency (render_frame measures from its own start).
+  const bool pace = cfg_.render.pace_frames && !cfg_.render.lockstep && !interactive_;
+  const auto frame_period = std::chrono::duration_cast<Clock::duration>(
+      std::chrono::duration<double, std::milli>(cfg_.render.frame_time_ms));
+  for (uint64_t i = 0; i < frames && !(interactive_ && interactive_->closed()); ++i, ++rendered) {
+    if (pace) std::this_thread::sleep_until(run_start_ + frame_period * static_cast<int64_t>(i));
     TS_TRY(render_frame(i, i + 1 == frames));
+  }
   frames = rendered;
   if (interactive_) TS_TRY(interactive_->finish());
   TS_VK_TRY(vkDeviceWaitIdle(ctx_->device()));

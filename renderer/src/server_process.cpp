@@ -1,6 +1,6 @@
 #include "texstream/render/server_process.hpp"
 
-#include <poll.h>
+#include <pthread.h>
 #include <signal.h>
 #include <spawn.h>
 #include <sys/wait.h>
@@ -18,6 +18,9 @@ extern char** environ;
 namespace texstream {
 
 namespace {
+
+// How often the idle spawner thread looks for a posted spawn: small next to the restart back-off (50 ms).
+constexpr auto kPostPoll = std::chrono::milliseconds(2);
 
 std::string describe_status(int status) {
   if (WIFEXITED(status)) return "exited with status " + std::to_string(WEXITSTATUS(status));
@@ -103,34 +106,133 @@ const char* to_string(ServerState state) {
 }
 
 ServerProcess::ServerProcess(ServerCommand command, RestartPolicy policy)
-    : command_(std::move(command)), policy_(policy) {}
+    : command_(std::move(command)), policy_(policy) {
+  spawner_ = std::thread([this] { spawner_main(); });
+}
 
 ServerProcess::~ServerProcess() {
-  if (pid_ <= 0) return;
-  ::kill(pid_, SIGTERM);
-  // Let it log its exit; a server that ignores SIGTERM for 500 ms is killed.
-  constexpr int kTermGraceMs = 500;
-  if (watch_.valid()) {
-    pollfd p{watch_.fd(), POLLIN, 0};
-    while (::poll(&p, 1, kTermGraceMs) < 0 && errno == EINTR) {
+  {
+    std::unique_lock lock(mutex_);
+    shared_.stopping = true;  // a posted spawn not yet taken is dropped
+    changed_.notify_all();
+    // A spawn in flight publishes its pid within milliseconds; then the child is ours to end.
+    changed_.wait(lock, [&] { return !shared_.spawning; });
+    if (shared_.pid > 0 && !shared_.dying && !shared_.exit) {
+      ::kill(shared_.pid, SIGTERM);
+      // Let it log its exit; a server that ignores SIGTERM for 500 ms is killed.
+      constexpr auto kTermGrace = std::chrono::milliseconds(500);
+      if (!changed_.wait_for(lock, kTermGrace, [&] { return shared_.dying || shared_.exit.has_value(); })) {
+        ::kill(shared_.pid, SIGKILL);
+      }
     }
   }
-  ::kill(pid_, SIGKILL);
-  int status = 0;
-  while (::waitpid(pid_, &status, 0) < 0 && errno == EINTR) {
+  spawner_.join();  // it reaps the child, then sees `stopping`
+}
+
+void ServerProcess::spawner_main() {
+  // Process-directed signals (SIGINT, SIGCHLD, ...) go to the renderer's other threads, never interrupt
+  // this one; the child gets its own mask through posix_spawn attributes.
+  sigset_t all;
+  sigfillset(&all);
+  pthread_sigmask(SIG_BLOCK, &all, nullptr);
+  pthread_setname_np(pthread_self(), "ts-spawner");
+  for (;;) {
+    {
+      std::unique_lock lock(mutex_);
+      // Polled, not notified: a notify from spawn_if_due woke this thread inside the frame's IPC section,
+      // and on 2 busy cores the woken thread took the CPU from the frame thread for the whole posix_spawn
+      // (measured 1-3 ms per spawn_if_due). A poll lands at a random instant of the frame instead. It runs only
+      // between a child's death and the next spawn (while a child lives, this thread waits in waitid).
+      while (!changed_.wait_for(lock, kPostPoll, [&] { return shared_.stopping || shared_.spawn_requested; })) {
+      }
+      if (shared_.stopping) return;
+      shared_.spawn_requested = false;
+      shared_.spawning = true;
+    }
+    run_child();
   }
 }
 
-bool ServerProcess::spawn_if_due(SteadyTime now) {
-  if (pid_ > 0 || spawn_failure_ || now < next_spawn_at_) return false;
+void ServerProcess::run_child() {
   const std::vector<std::string> args = command_.argv();
   std::vector<char*> argv;
   argv.reserve(args.size() + 1);
   for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));  // posix_spawn's signature
   argv.push_back(nullptr);
-  SpawnAttr sa;
   pid_t pid = -1;
-  const int err = posix_spawn(&pid, argv[0], &sa.actions, &sa.attr, argv.data(), environ);
+  int err = 0;
+  {
+    SpawnAttr sa;
+    err = posix_spawn(&pid, argv[0], &sa.actions, &sa.attr, argv.data(), environ);
+  }
+  if (err != 0) {
+    spdlog::error("texstream-server '{}' could not be spawned: {}", command_.executable.string(), std::strerror(err));
+    std::lock_guard lock(mutex_);
+    shared_.spawning = false;
+    shared_.exit = ServerExit{0, std::string("could not be spawned: ") + std::strerror(err), 0, false, {}};
+    changed_.notify_all();
+    return;
+  }
+  {
+    std::lock_guard lock(mutex_);
+    shared_.spawning = false;
+    shared_.pid = pid;
+    shared_.dying = false;
+    if (shared_.kill_requested) ::kill(pid, SIGKILL);  // killed while being spawned (kill() logged why)
+    shared_.kill_requested = false;
+    changed_.notify_all();
+  }
+  spdlog::info("texstream-server started: pid {} segment '{}'", pid, command_.segment_name);
+
+  // Wait for its end without reaping it (WNOWAIT): until we say `dying`, the frame thread may still signal
+  // the pid, which stays this child's (a zombie keeps it) until the waitpid below.
+  siginfo_t info{};
+  int r;
+  do {
+    r = ::waitid(P_PID, static_cast<id_t>(pid), &info, WEXITED | WNOWAIT);
+  } while (r < 0 && errno == EINTR);
+  {
+    std::lock_guard lock(mutex_);
+    shared_.dying = true;
+  }
+  int status = 0;
+  pid_t w;
+  do {
+    w = ::waitpid(pid, &status, 0);
+  } while (w < 0 && errno == EINTR);
+  ServerExit e;
+  e.pid = pid;
+  if (w == pid) {
+    e.how = describe_status(status);
+    e.term_signal = WIFSIGNALED(status) ? WTERMSIG(status) : 0;
+  } else {
+    // ECHILD: someone else reaped it (SIGCHLD set to SIG_IGN auto-reaps). The waitid answer, if any, still
+    // says how it ended.
+    e.how = std::string("vanished (waitpid: ") + std::strerror(errno) + ")";
+    if (r == 0 && (info.si_code == CLD_KILLED || info.si_code == CLD_DUMPED)) e.term_signal = info.si_status;
+  }
+  std::lock_guard lock(mutex_);
+  shared_.exit = std::move(e);
+  changed_.notify_all();
+}
+
+int ServerProcess::pid() const {
+  std::unique_lock lock(mutex_);
+  // A posted spawn is answered within milliseconds; the bound only keeps a wedged spawner from hanging a
+  // diagnostic call.
+  constexpr auto kSpawnAnswer = std::chrono::seconds(5);
+  changed_.wait_for(lock, kSpawnAnswer, [&] { return !shared_.spawn_requested && !shared_.spawning; });
+  return shared_.pid;
+}
+
+bool ServerProcess::spawn_if_due(SteadyTime now) {
+  if (child_ || now < next_spawn_at_) return false;
+  {
+    std::lock_guard lock(mutex_);  // held by the spawner only for a few stores, never across a system call
+    shared_.spawn_requested = true;
+    shared_.kill_requested = false;
+  }
+  // No notify: the spawner polls (see spawner_main).
   ++spawns_;
   spawned_at_ = now;
   last_progress_ = now;
@@ -138,59 +240,45 @@ bool ServerProcess::spawn_if_due(SteadyTime now) {
   attached_ = false;
   killing_ = false;
   kill_reason_.clear();
-  if (err != 0) {
-    spawn_failure_ = ServerExit{0, std::string("could not be spawned: ") + std::strerror(err), false, {}};
-    spdlog::error("texstream-server '{}' could not be spawned: {}", command_.executable.string(), std::strerror(err));
-    return false;
-  }
-  pid_ = pid;
-  watch_ = PidWatch(pid);
-  if (!watch_.valid()) {
-    // pidfd_open needs Linux 5.3; without it we still notice death through waitpid(WNOHANG) in reap().
-    spdlog::warn("pidfd_open({}) failed ({}); watching texstream-server with waitpid only", pid, std::strerror(errno));
-  }
-  spdlog::info("texstream-server started: pid {} segment '{}' (spawn #{})", pid, command_.segment_name, spawns_);
+  child_ = true;
+  spdlog::debug("texstream-server spawn #{} posted to the spawner thread", spawns_);
   return true;
 }
 
 std::optional<ServerExit> ServerProcess::reap(SteadyTime now) {
-  if (spawn_failure_) {
-    ServerExit e = std::move(*spawn_failure_);
-    spawn_failure_.reset();
-    record_death(now, true);
-    return e;
+  if (!child_) return std::nullopt;
+  std::optional<ServerExit> e;
+  {
+    // try_lock: a spawner preempted while holding the lock must not stall the frame; busy means
+    // "look again next frame".
+    std::unique_lock lock(mutex_, std::try_to_lock);
+    if (lock.owns_lock() && shared_.exit) {
+      e = std::move(shared_.exit);
+      shared_.exit.reset();
+      shared_.pid = -1;
+      shared_.dying = false;
+      shared_.kill_requested = false;
+    }
   }
-  if (pid_ <= 0) return std::nullopt;
-  // The pidfd is the cheap "has it died" test; without one, waitpid(WNOHANG) answers alone.
-  if (watch_.valid() && !watch_.dead()) {
+  if (!e) {
     if (colormap_only_ && now - spawned_at_ >= policy_.crash_window) {
       colormap_only_ = false;
-      spdlog::info("texstream-server pid {} has run for {} s: leaving colormap-only mode", pid_,
+      spdlog::info("texstream-server spawn #{} has run for {} s: leaving colormap-only mode", spawns_,
                    std::chrono::duration_cast<std::chrono::seconds>(policy_.crash_window).count());
     }
     return std::nullopt;
   }
-  int status = 0;
-  pid_t r;
-  do {
-    r = ::waitpid(pid_, &status, WNOHANG);
-  } while (r < 0 && errno == EINTR);
-  if (r == 0) return std::nullopt;  // pidfd said dead but the exit is not reapable yet: next call
-  ServerExit e;
-  e.pid = pid_;
-  e.how = r < 0 ? std::string("vanished (waitpid: ") + std::strerror(errno) + ")" : describe_status(status);
-  e.killed_by_us = killing_;
-  e.kill_reason = kill_reason_;
+  e->killed_by_us = killing_;
+  e->kill_reason = kill_reason_;
   // SIGKILL that we did not send came from outside (OOM killer, an operator, texstream-chaos): the server did
-  // nothing wrong. Anything else it ended by itself (exit, SIGSEGV, SIGABRT, ...) or we killed it: a crash.
-  const bool outside_kill = r > 0 && WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL && !killing_;
-  const bool crash = !outside_kill;
-  pid_ = -1;
-  watch_ = PidWatch();
+  // nothing wrong. Anything else it ended by itself (exit, SIGSEGV, SIGABRT, ...), could not be spawned, or
+  // we killed it: a crash.
+  const bool outside_kill = e->term_signal == SIGKILL && !killing_;
+  child_ = false;
   killing_ = false;
   kill_reason_.clear();
   attached_ = false;
-  record_death(now, crash);
+  record_death(now, !outside_kill);
   return e;
 }
 
@@ -228,7 +316,7 @@ bool ServerProcess::watch_heartbeat(uint64_t heartbeat, bool attached, bool work
     attached_ = true;
     if (colormap_only_) {
       colormap_only_ = false;
-      spdlog::info("texstream-server pid {} attached: leaving colormap-only mode", pid_);
+      spdlog::info("texstream-server spawn #{} attached: leaving colormap-only mode", spawns_);
     }
   }
   // Only a stall while work waits counts: an idle server may legitimately sleep between doorbells.
@@ -246,15 +334,34 @@ bool ServerProcess::watch_heartbeat(uint64_t heartbeat, bool attached, bool work
 }
 
 void ServerProcess::kill(const std::string& why) {
-  if (pid_ <= 0 || killing_) return;
-  spdlog::error("killing texstream-server pid {}: {}", pid_, why);
-  ::kill(pid_, SIGKILL);
+  if (!child_ || killing_) return;
+  int pid = -1;
+  {
+    std::lock_guard lock(mutex_);
+    if (shared_.exit || shared_.dying) {
+      // Already dead of something else (e.g. an outside SIGKILL the watchdog noticed first as a stall): not
+      // our kill, so reap() must not count it as a crash of ours. It reports the death at its next call.
+      spdlog::warn("texstream-server spawn #{} is already dead; not killing it ({})", spawns_, why);
+      return;
+    }
+    if (shared_.pid > 0) {
+      pid = shared_.pid;
+      ::kill(pid, SIGKILL);  // under the lock: the spawner cannot reap it meanwhile (it says `dying` first)
+    } else {
+      shared_.kill_requested = true;  // still being spawned
+    }
+  }
   killing_ = true;
   kill_reason_ = why;
+  if (pid > 0) {
+    spdlog::error("killing texstream-server pid {}: {}", pid, why);
+  } else {
+    spdlog::error("killing texstream-server spawn #{} as soon as it exists: {}", spawns_, why);
+  }
 }
 
 ServerState ServerProcess::state() const {
-  if (pid_ > 0 && !killing_) return ServerState::kRunning;
+  if (child_ && !killing_) return ServerState::kRunning;
   if (colormap_only_) return ServerState::kColormapOnly;
   if (spawns_ > 0) return ServerState::kBackingOff;
   return ServerState::kStopped;

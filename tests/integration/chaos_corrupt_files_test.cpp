@@ -1,6 +1,7 @@
 // Issue 9, corrupt inputs: the real texstream-server (spawned by a StreamClient, as the renderer does) over a
-// corpus of damaged DDS files (tools/chaos corrupt_corpus: truncation at every mip boundary, bit flips, bad
-// header sizes, huge and zero extents, wrong formats, zero bytes, missing and unreadable files, a directory).
+// corpus of damaged files (tools/chaos corrupt_corpus: DDS truncated at every mip boundary, bit flips, bad
+// header sizes, huge and zero extents, wrong formats, zero bytes, missing and unreadable files, a directory;
+// truncated mipmapped TIFF and OpenEXR files and truncated JPEGs under a .tif name).
 // Every mip of every file is asked for, mixed with intact control textures. The server must answer each
 // request (no stall), refuse every mip the damage makes unservable with an error status, serve nothing but
 // the file's own bytes, log the path of every refused file, and never crash.
@@ -8,6 +9,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <cstdio>
@@ -92,14 +94,21 @@ class StderrToFile {
 TEST(ChaosCorruptFiles, TheRealServerRefusesEveryDamagedMipByNameAndKeepsServingTheRest) {
   const fs::path server = chaos_test::find_server();
   ASSERT_FALSE(server.empty()) << "texstream-server not built";
-  chaos_test::SmallScene source(120);
+  // 100 textures per shape: every shape's whole mutation list (up to ~70 for RGBA8 with the TIFF, OpenEXR
+  // and JPEG cases), the rest intact controls.
+  chaos_test::SmallScene source(400);
   ASSERT_TRUE(source.ok());
   const fs::path corpus_dir = fs::temp_directory_path() / chaos_test::unique("corpus");
   auto corpus = chaos::make_corrupt_corpus(source.dir, corpus_dir, {});
   ASSERT_TRUE(corpus.ok()) << corpus.error().message;
   if (!corpus->skipped.empty()) std::printf("corpus: skipped %s\n", corpus->skipped.c_str());
-  ASSERT_GE(corpus->cases.size(), 50u);
-  ASSERT_GE(corpus->intact.size(), 10u);
+  ASSERT_GE(corpus->cases.size(), 200u);
+  ASSERT_GE(corpus->intact.size(), 50u);
+  const auto other = std::count_if(corpus->cases.begin(), corpus->cases.end(), [](const chaos::CorruptCase& c) {
+    return c.other_format;
+  });
+  // 2 RGBA8 shapes x 3 containers (TIFF, OpenEXR, JPEG as .tif) x 7 cuts.
+  ASSERT_EQ(other, 42) << "truncated TIFF / OpenEXR / JPEG files missing from the corpus";
 
   const fs::path log = corpus_dir / "server.log";
   std::map<std::pair<uint32_t, uint32_t>, Answer> answers;
@@ -155,6 +164,7 @@ TEST(ChaosCorruptFiles, TheRealServerRefusesEveryDamagedMipByNameAndKeepsServing
     }
   }
   int refused_files = 0;
+  int other_refused = 0;
   for (const chaos::CorruptCase& c : corpus->cases) {
     const auto& tex = source.textures[c.texture];
     const auto f = static_cast<TexelFormat>(tex.format);
@@ -185,7 +195,10 @@ TEST(ChaosCorruptFiles, TheRealServerRefusesEveryDamagedMipByNameAndKeepsServing
       EXPECT_NE(server_log.find(c.file.string()), std::string::npos)
           << c.mutation << ": the server's log does not name " << c.file;
     }
+    if (c.other_format) other_refused += refused_any ? 1 : 0;
   }
+  std::printf("corrupt corpus: %d of %lld truncated TIFF/OpenEXR/JPEG files refused\n", other_refused,
+              static_cast<long long>(other));
   std::printf("corrupt corpus: %d damaged files refused (at least one mip), each named in the server log\n",
               refused_files);
   std::error_code ec;

@@ -22,3 +22,16 @@ if(TARGET texstream-server)
     add_dependencies(chaos_corrupt_files_tests texstream-server)
   endif()
 endif()
+
+# Named kill points. Until the lead includes texture_server/fault.cmake, the server library lacks
+# fault_point.cpp and the test compiles it in itself.
+if(TARGET texstream_server)
+  get_target_property(_server_sources texstream_server SOURCES)
+  set(_fault_src)
+  if(NOT _server_sources MATCHES "fault_point\\.cpp")
+    set(_fault_src ${PROJECT_SOURCE_DIR}/texture_server/src/fault_point.cpp)
+  endif()
+  texstream_add_integration_test(chaos_fault_point_tests ${CMAKE_CURRENT_LIST_DIR}/chaos_fault_point_test.cpp
+                                 ${_fault_src})
+  target_link_libraries(chaos_fault_point_tests PRIVATE texstream::server texstream::common spdlog::spdlog)
+endif()

@@ -1,6 +1,8 @@
 // ServerProcess against stand-in executables (small shell scripts): the command line it passes, death told
-// by the pidfd and reaped without blocking, the back-off schedule (driven by a virtual clock), the
-// colormap-only mode after repeated crashes, the heartbeat watchdog, and the kill on destruction.
+// and reaped by the spawner thread without blocking the caller, the back-off schedule (driven by a virtual
+// clock), the colormap-only mode after repeated crashes, the heartbeat watchdog, a kill posted while the
+// child is still being spawned, the parent-death signal tied to the spawner thread (not the caller's), and
+// the kill on destruction.
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <unistd.h>
@@ -52,6 +54,16 @@ std::optional<ServerExit> wait_reap(ServerProcess& p, SteadyTime now) {
     std::this_thread::sleep_for(1ms);
   }
   return std::nullopt;
+}
+
+// The pid once the spawner thread has started the child (spawn_if_due only posts the spawn).
+int wait_pid(const ServerProcess& p) {
+  const auto deadline = std::chrono::steady_clock::now() + 10s;
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (p.pid() > 0) return p.pid();
+    std::this_thread::sleep_for(1ms);
+  }
+  return -1;
 }
 
 TEST(ServerCommand, ArgvFollowsTheServerCommandLine) {
@@ -169,12 +181,64 @@ TEST(ServerProcess, SpawnFailureCountsAsACrash) {
   fs::permissions(exe, fs::perms::owner_all);
   ServerProcess p(command(exe), {});
   const SteadyTime now = std::chrono::steady_clock::now();
-  EXPECT_FALSE(p.spawn_if_due(now));
-  const auto e = p.reap(now);
+  EXPECT_TRUE(p.spawn_if_due(now)) << "posted to the spawner thread";
+  const auto e = wait_reap(p, now);
   ASSERT_TRUE(e.has_value());
   EXPECT_NE(e->how.find("could not be spawned"), std::string::npos) << e->how;
+  EXPECT_EQ(e->pid, 0);
   EXPECT_EQ(p.state(), ServerState::kBackingOff);
   EXPECT_EQ(p.next_spawn_at(), now + 50ms);
+  EXPECT_EQ(p.crashes(), 1u);
+}
+
+TEST(ServerProcess, KillPostedWhileSpawningKillsTheChildOnceItExists) {
+  TempDir dir;
+  const fs::path exe = write_script(dir.path, "hang", "exec sleep 60");
+  ServerProcess p(command(exe), {});
+  const SteadyTime now = std::chrono::steady_clock::now();
+  ASSERT_TRUE(p.spawn_if_due(now));
+  p.kill("protocol violation before it even started");  // most likely before posix_spawn has returned
+  EXPECT_FALSE(p.serving());
+  const auto e = wait_reap(p, now);
+  ASSERT_TRUE(e.has_value()) << "the kill must reach a child spawned after it was asked for";
+  EXPECT_TRUE(e->killed_by_us);
+  EXPECT_EQ(e->term_signal, SIGKILL);
+  EXPECT_EQ(e->kill_reason, "protocol violation before it even started");
+  EXPECT_EQ(p.crashes(), 1u) << "a server we killed counts as a crash";
+}
+
+TEST(ServerProcess, SigkillFromOutsideIsNoCrash) {
+  TempDir dir;
+  const fs::path exe = write_script(dir.path, "hang", "exec sleep 60");
+  ServerProcess p(command(exe), {});
+  const SteadyTime now = std::chrono::steady_clock::now();
+  ASSERT_TRUE(p.spawn_if_due(now));
+  const int pid = wait_pid(p);
+  ASSERT_GT(pid, 0);
+  ::kill(pid, SIGKILL);  // texstream-chaos, the OOM killer
+  const auto e = wait_reap(p, now);
+  ASSERT_TRUE(e.has_value());
+  EXPECT_FALSE(e->killed_by_us);
+  EXPECT_EQ(e->pid, pid);
+  EXPECT_EQ(e->term_signal, SIGKILL);
+  EXPECT_EQ(p.crashes(), 0u);
+  EXPECT_EQ(p.next_spawn_at(), now + 50ms) << "replaced after first_delay";
+  EXPECT_EQ(p.pid(), -1);
+}
+
+// PR_SET_PDEATHSIG fires when the thread that spawned the child exits. The spawner thread lives as long as
+// the ServerProcess, so a child must survive the end of the thread that called spawn_if_due.
+TEST(ServerProcess, ChildSurvivesTheThreadThatAskedForIt) {
+  TempDir dir;
+  const fs::path exe = write_script(dir.path, "pdeathsig", "exec setpriv --pdeathsig KILL -- sleep 60");
+  ServerProcess p(command(exe), {});
+  const SteadyTime now = std::chrono::steady_clock::now();
+  std::thread([&] { ASSERT_TRUE(p.spawn_if_due(now)); }).join();
+  const int pid = wait_pid(p);
+  ASSERT_GT(pid, 0);
+  std::this_thread::sleep_for(300ms);  // setpriv has set the signal and exec'd sleep by now
+  EXPECT_FALSE(p.reap(now).has_value()) << "killed by the parent-death signal of an ended thread";
+  EXPECT_TRUE(p.serving());
 }
 
 TEST(ServerProcess, WatchdogKillsAServerWhoseHeartbeatStallsWithWorkOutstanding) {
@@ -213,7 +277,8 @@ TEST(ServerProcess, DestructorKillsAndReapsTheChild) {
   {
     ServerProcess p(command(exe), {});
     ASSERT_TRUE(p.spawn_if_due(t0));
-    pid = p.pid();
+    pid = wait_pid(p);
+    ASSERT_GT(pid, 0);
     std::this_thread::sleep_for(100ms);  // let the shell install its trap
     start = process_start_time(pid).value_or(0);
     ASSERT_NE(start, 0u);

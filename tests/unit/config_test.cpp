@@ -110,5 +110,17 @@ TEST(Config, ReferenceDocIsCurrent) {
       << "docs/config.md is stale; regenerate with: build/bin/texstream-config --reference";
 }
 
+// Found by fuzz_config: a control character in a string value passed validation but was written raw, and
+// toml++ refuses to read that back.
+TEST(Config, ControlCharactersInStringsRoundTrip) {
+  Config c;
+  c.scene.dir = std::string("form\ffeed, tab\t, bell\x07, del\x7f, nul") + '\0' + "end";
+  c.render.camera_path = "line\nbreak";
+  auto back = parse_config(to_toml(c), "roundtrip", {});
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_EQ(back->scene.dir, c.scene.dir);
+  EXPECT_EQ(back->render.camera_path, c.render.camera_path);
+}
+
 }  // namespace
 }  // namespace texstream

@@ -1,3 +1,4 @@
+#include "texstream/server/fault_point.hpp"
 #include "texstream/server/mip_cache.hpp"
 
 #include <cstring>
@@ -43,7 +44,7 @@ std::optional<CachedCopy> MipCache::copy_into(MipKey key, std::span<std::byte> d
   policy_->touch(it->second.node);
   // Copied under the lock: nothing can evict the entry meanwhile, so no pin (no reference-count traffic) is
   // needed. The longest hold is one slot-sized copy (1 MiB: ~100 µs), which only delays a worker's insert.
-  std::memcpy(dst.data(), mip.bytes.data(), mip.bytes.size());
+  copy_into_slot(dst.data(), mip.bytes.data(), mip.bytes.size());  // kSlotWrite halfway
   return CachedCopy{mip.bytes.size(), mip.checksum};
 }
 
@@ -64,6 +65,7 @@ bool MipCache::evict_one(std::vector<std::shared_ptr<const CachedMip>>& evicted)
   auto it = entries_.find(*victim);
   stats_.bytes -= it->second.mip->bytes.size();
   if (is_overflow(it->second.mip->bytes)) overflow_bytes_ -= it->second.mip->bytes.size();
+  fault_point(FaultPoint::kEviction);  // victim picked, not yet erased
   policy_->erase(it->second.node);
   evicted.push_back(std::move(it->second.mip));
   entries_.erase(it);

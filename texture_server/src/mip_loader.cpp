@@ -1,3 +1,4 @@
+#include "texstream/server/fault_point.hpp"
 #include "texstream/server/mip_loader.hpp"
 
 #include <spdlog/spdlog.h>
@@ -244,7 +245,7 @@ CompletionRecord MipLoader::load(const LoadRequest& request, const scene::Textur
   const uint64_t checksum = payload_checksum(target.data(), bytes);
   if (keep) {
     keep->checksum = checksum;
-    std::memcpy(slot.data(), keep->bytes.data(), bytes);
+    copy_into_slot(slot.data(), keep->bytes.data(), bytes);  // kSlotWrite halfway
     cache_.insert(request.key(), std::move(keep));
   }
   stats_.add(stats_.bytes_loaded, bytes);

@@ -1,3 +1,4 @@
+#include "texstream/server/fault_point.hpp"
 #include "texstream/server/server.hpp"
 
 #include <unistd.h>
@@ -387,8 +388,10 @@ bool Server::dispatch() {
 }
 
 void Server::complete(const CompletionRecord& c) {
+  fault_point(FaultPoint::kBeforeCompletion);  // payload and checksum in the slot, completion not pushed
   // Order is kept: once anything waits locally, later completions queue behind it.
   if (overflow_.empty() && completions_.try_push(c)) {
+    fault_point(FaultPoint::kAfterRingPush);  // published, statistics not yet counted
     segment_.server_block().completions.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
     return;
   }
@@ -398,6 +401,7 @@ void Server::complete(const CompletionRecord& c) {
 bool Server::flush_completions() {
   bool any = false;
   while (!overflow_.empty() && completions_.try_push(overflow_.front())) {
+    fault_point(FaultPoint::kAfterRingPush);
     overflow_.pop_front();
     segment_.server_block().completions.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
     any = true;

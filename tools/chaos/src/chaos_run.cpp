@@ -38,6 +38,13 @@ constexpr int kTailFrames = 450;
 constexpr double kIpcBoundUs = 1000.0;
 // Issue 9: the converged frame must equal the reference to PSNR >= 45 dB.
 constexpr double kPsnrBoundDb = 45.0;
+// Named kill points (texture_server fault_point.hpp), armed through TEXSTREAM_FAULT_ARM's file.
+constexpr const char* kFaultPoints[] = {"slot_write", "before_completion", "after_ring_push", "eviction"};
+// Share of kills sent as named points instead of a SIGKILL at a random instant.
+constexpr double kNamedKillFraction = 0.5;
+// How long an armed point may take to be reached: the server's watcher polls every 2 ms, and the points lie
+// on the path of every served mip (eviction only once the RAM cache is full). Past this, a SIGKILL instead.
+constexpr auto kNamedKillWait = std::chrono::milliseconds(300);
 // The server's comm name (TASK_COMM_LEN truncates "texstream-server" to 15 characters).
 constexpr const char* kServerComm = "texstream-serve";
 
@@ -92,6 +99,7 @@ struct RenderSpec {
   fs::path camera_path;
   int64_t frames = 0;
   bool lockstep = false;
+  std::vector<std::string> env;  // extra NAME=VALUE for the renderer (and so its servers)
 };
 
 class Runner {
@@ -117,7 +125,9 @@ class Runner {
                                   "--set", "render.write_every_frames=0",
                                   "--set", "server.executable=" + tool_.server.string(),
                                   "--set", "protocol.segment_name=" + segment(r.name)};
-    return ChildProcess::spawn(argv, log_file(r.name), {"TEXSTREAM_STREAM_STATS=" + stats_file(r.name).string()});
+    std::vector<std::string> env = r.env;
+    env.push_back("TEXSTREAM_STREAM_STATS=" + stats_file(r.name).string());
+    return ChildProcess::spawn(argv, log_file(r.name), env);
   }
 
   fs::path final_frame(const RenderSpec& r) const {
@@ -206,7 +216,7 @@ ChaosResult run_chaos(const ChaosOptions& o) {
   {
     const fs::path p = work / "calibrate_path.txt";
     std::ofstream(p) << looping_path(*scene_path, 1, 0.0).to_text();
-    RenderSpec cal{"calibrate", p, 300, false};
+    RenderSpec cal{"calibrate", p, 300, false, {}};
     const auto t0 = Clock::now();
     auto r = runner.start(cal);
     if (!r) {
@@ -243,7 +253,8 @@ ChaosResult run_chaos(const ChaosOptions& o) {
   const fs::path ref_path = work / "reference_path.txt";
   std::ofstream(ref_path) << CameraPath({{0.0, final_pose}, {hold_s, final_pose}}).to_text();
 
-  RenderSpec chaos{"chaos", chaos_path, fly_frames + kTailFrames, false};
+  const fs::path arm_file = work / "fault-arm";
+  RenderSpec chaos{"chaos", chaos_path, fly_frames + kTailFrames, false, {"TEXSTREAM_FAULT_ARM=" + arm_file.string()}};
   log("kill phase: " + fmt_num(kill_s, 0) + " s, " + std::to_string(o.kills) + " kills planned, renderer " +
       std::to_string(chaos.frames) + " frames");
   auto render = runner.start(chaos);
@@ -254,7 +265,10 @@ ChaosResult run_chaos(const ChaosOptions& o) {
   }
   std::mt19937_64 rng(o.seed * 7919 + 17);
   std::uniform_real_distribution<double> unit(0.0, 1.0);
-  const double mean_interval_s = kill_s / std::max(1, o.kills);
+  // Stalls are events too: pace events so that the planned kills fit the phase.
+  const double events = static_cast<double>(std::max(1, o.kills)) / std::max(0.05, 1.0 - o.stall_fraction);
+  const double mean_interval_s = kill_s / events;
+  uint64_t named_tried = 0, named_hit = 0, named_unclaimed = 0;
   const auto start = Clock::now();
   // --minutes paces the kills; the phase goes on past it (restarts take time) until --kills are sent, but
   // never into the renderer's convergence tail (estimated from the calibration).
@@ -287,11 +301,35 @@ ChaosResult run_chaos(const ChaosOptions& o) {
       while (Clock::now() < until && alive(*server)) std::this_thread::sleep_for(2ms);
       if (!alive(*server)) ++watchdog_stalls;
       ::kill(*server, SIGCONT);
+    } else if (unit(rng) < kNamedKillFraction) {
+      // A named protocol step: the server kills itself there (SIGKILL, as from outside).
+      const char* point = kFaultPoints[std::uniform_int_distribution<size_t>(0, std::size(kFaultPoints) - 1)(rng)];
+      ++named_tried;
+      const fs::path tmp = arm_file.string() + ".tmp";
+      std::ofstream(tmp) << point << "\n";
+      fs::rename(tmp, arm_file);
+      const auto until = Clock::now() + kNamedKillWait;
+      while (Clock::now() < until && alive(*server)) std::this_thread::sleep_for(1ms);
+      if (!alive(*server)) {
+        ++named_hit;
+      } else {
+        // Not reached: take the arm file back if no server claimed it (fault points not built in), and kill.
+        const fs::path back = arm_file.string() + ".back";
+        if (std::rename(arm_file.c_str(), back.c_str()) == 0) {
+          ++named_unclaimed;
+          fs::remove(back);
+        }
+        ::kill(*server, SIGKILL);
+      }
+      ++res.kills;
     } else {
       ::kill(*server, SIGKILL);
       ++res.kills;
     }
   }
+  log("named kill points: " + std::to_string(named_tried) + " armed, " + std::to_string(named_hit) +
+      " reached (the server died there), " + std::to_string(named_unclaimed) +
+      " never claimed by a server (texstream-server built without fault points?); the rest SIGKILLed");
   log("kill phase over after " + fmt_num(std::chrono::duration<double>(Clock::now() - start).count(), 1) + " s: " +
       std::to_string(res.kills) + " SIGKILLs, " + std::to_string(res.stalls) + " stalls (" +
       std::to_string(watchdog_stalls) + " ended by the renderer's watchdog)");
@@ -333,7 +371,7 @@ ChaosResult run_chaos(const ChaosOptions& o) {
 
   // ---- renderer death: its server must notice and exit ----
   {
-    RenderSpec victim{"victim", ref_path, 100000, false};
+    RenderSpec victim{"victim", ref_path, 100000, false, {}};
     auto r = runner.start(victim);
     std::optional<pid_t> server;
     const auto deadline = Clock::now() + 30s;
@@ -365,7 +403,7 @@ ChaosResult run_chaos(const ChaosOptions& o) {
 
   // ---- reference: no kills, lock-step, the final pose held (also removes the victim's stale segment) ----
   {
-    RenderSpec ref{"reference", ref_path, kTailFrames, true};
+    RenderSpec ref{"reference", ref_path, kTailFrames, true, {}};
     auto r = runner.start(ref);
     const auto e = r ? r->wait_for(10min) : std::nullopt;
     if (!e || !e->exited || e->code != 0) {

@@ -5,11 +5,17 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <OpenImageIO/imagebuf.h>
+#include <OpenImageIO/imagebufalgo.h>
+#include <OpenImageIO/imageio.h>
+
 #include <algorithm>
 #include <cstring>
 #include <fstream>
 #include <functional>
+#include <map>
 #include <random>
+#include <tuple>
 
 namespace texstream::chaos {
 
@@ -43,6 +49,43 @@ Status write_all(const fs::path& p, const Bytes& b) {
   return ok_status();
 }
 
+// Another container for an RGBA8 texture's mip 0, written by OpenImageIO: what the server also accepts
+// (texture_server texture_file_index.hpp: .tx/.tif, .exr) and a JPEG under a .tif name (OpenImageIO falls back
+// to the reader that recognises the bytes; the server has no .jpg lookup).
+enum class OtherFormat { kTiff, kExr, kJpegAsTif };
+
+// The file bytes of `dds` (an uncompressed RGBA8 DDS as scene_format writes it) in `format`: mipmapped and
+// tiled as maketx writes them (TIFF, EXR), or a single-level baseline JPEG. Empty if OpenImageIO failed.
+Bytes encode_other(const Bytes& dds, const scene::TextureRecord& t, OtherFormat format, const fs::path& scratch) {
+  if (dds.size() < scene::kDdsHeaderBytes + uint64_t{t.width} * t.height * 4) return {};
+  OIIO::ImageSpec spec(static_cast<int>(t.width), static_cast<int>(t.height), 4, OIIO::TypeDesc::UINT8);
+  OIIO::ImageBuf src(spec);
+  src.set_pixels(OIIO::ROI::All(), OIIO::TypeDesc::UINT8, dds.data() + scene::kDdsHeaderBytes);
+  const fs::path tmp = scratch.string() + (format == OtherFormat::kExr ? ".exr" : format == OtherFormat::kTiff ? ".tif" : ".jpg");
+  bool ok = false;
+  if (format == OtherFormat::kJpegAsTif) {
+    OIIO::ImageBuf rgb = OIIO::ImageBufAlgo::channels(src, 3, {});  // JPEG has no alpha
+    ok = rgb.write(tmp.string(), OIIO::TypeDesc::UINT8, "jpeg");
+  } else {
+    OIIO::ImageSpec config;
+    config.tile_width = 16;
+    config.tile_height = 16;
+    config.attribute("maketx:filtername", "box");
+    if (format == OtherFormat::kExr) {
+      config.attribute("maketx:fileformatname", "openexr");
+      config.set_format(OIIO::TypeDesc::HALF);
+    }
+    ok = OIIO::ImageBufAlgo::make_texture(OIIO::ImageBufAlgo::MakeTxTexture, src, tmp.string(), config);
+  }
+  Bytes out;
+  if (ok) {
+    if (Result<Bytes> bytes = read_all(tmp); bytes.ok()) out = std::move(*bytes);
+  }
+  std::error_code ec;
+  fs::remove(tmp, ec);
+  return out;
+}
+
 // One mutation: edits the file bytes (or the file itself) and fills in the case's expectations.
 struct Mutation {
   std::string name;
@@ -50,7 +93,49 @@ struct Mutation {
   enum Kind { kBytes, kMissing, kDirectory, kUnreadable } kind = kBytes;
 };
 
-std::vector<Mutation> mutations_for(const scene::TextureRecord& t, std::mt19937_64& rng) {
+// Truncations of the other containers (RGBA8 textures only: the server never encodes BC1 from them). The
+// file replaces the DDS (the lookup takes .dds first). Zero bytes and a cut inside the first 8 bytes leave
+// nothing to open: every mip fails. A cut anywhere past that loses at least the coarsest level: maketx
+// writes the levels finest first, each TIFF directory after its level's tiles, the EXR tiles level by level.
+void add_other_format_mutations(std::vector<Mutation>& m, const scene::TextureRecord& t, const fs::path& scratch) {
+  if (static_cast<TexelFormat>(t.format) != TexelFormat::kRgba8) return;
+  struct Kind {
+    OtherFormat format;
+    const char* name;
+    const char* suffix;
+  };
+  for (const Kind k : {Kind{OtherFormat::kTiff, "TIFF", ".tif"}, Kind{OtherFormat::kExr, "OpenEXR", ".exr"},
+                       Kind{OtherFormat::kJpegAsTif, "JPEG named .tif", ".tif"}}) {
+    // Eighths of the file, and the last byte.
+    for (int eighth : {0, 1, 2, 4, 6, 7, 8}) {
+      std::string what = eighth == 8 ? "cut by its last byte" : "truncated at " + std::to_string(eighth) + "/8";
+      m.push_back({std::string(k.name) + " " + what, [k, eighth, t, scratch](Bytes& b, CorruptCase& c) {
+                     Bytes file = encode_other(b, t, k.format, scratch);
+                     c.file.replace_extension(k.suffix);
+                     c.header_changed = true;  // decoded by OpenImageIO: a kOk payload is not the file's bytes
+                     c.other_format = true;
+                     if (file.empty()) {  // OpenImageIO could not write it: an empty file (all must fail)
+                       b.clear();
+                       c.all_must_fail = true;
+                       return;
+                     }
+                     const size_t cut = eighth == 8 ? file.size() - 1 : file.size() * static_cast<size_t>(eighth) / 8;
+                     file.resize(cut);
+                     c.mutation += " (" + std::to_string(cut) + " bytes)";
+                     // A JPEG holds one level: mips past 0 are never there. Any cut of its bytes loses the
+                     // end-of-image marker at least.
+                     if (k.format == OtherFormat::kJpegAsTif || cut <= 8) {
+                       c.all_must_fail = true;
+                     } else {
+                       c.first_failing_mip = t.mip_count - 1;
+                     }
+                     b = std::move(file);
+                   }});
+    }
+  }
+}
+
+std::vector<Mutation> mutations_for(const scene::TextureRecord& t, std::mt19937_64& rng, const fs::path& scratch) {
   const auto f = static_cast<TexelFormat>(t.format);
   std::vector<Mutation> m;
   // Truncation at every mip boundary, and one byte short of each (the header end is boundary 0).
@@ -122,6 +207,7 @@ std::vector<Mutation> mutations_for(const scene::TextureRecord& t, std::mt19937_
   m.push_back({"random bytes with a valid magic", [&rng](Bytes& b, CorruptCase&) {
                  for (size_t i = 4; i < b.size(); ++i) b[i] = static_cast<std::byte>(rng());
                }});
+  add_other_format_mutations(m, t, scratch);
   m.push_back({"missing file", {}, Mutation::kMissing});
   m.push_back({"a directory in place of the file", {}, Mutation::kDirectory});
   m.push_back({"unreadable (chmod 000)", {}, Mutation::kUnreadable});
@@ -156,26 +242,33 @@ Result<Corpus> make_corrupt_corpus(const fs::path& scene_dir, const fs::path& ou
   if (!can_unread) corpus.skipped = "unreadable files: chmod 000 does not stop reads here (running as root)";
 
   std::mt19937_64 rng(o.seed);
-  size_t next = 0;  // index into the mutation list, which depends on each texture's shape
-  bool exhausted = false;
+  // Per shape (extent, mips, format), the next mutation of that shape's list: every shape walks its whole
+  // list, so each mutation meets a texture it applies to; a shape whose list is done yields intact controls.
+  struct Cursor {
+    size_t next = 0;
+    bool exhausted = false;
+  };
+  std::map<std::tuple<uint32_t, uint32_t, uint32_t, uint32_t>, Cursor> cursors;
   for (uint32_t id = 0; id < table->size(); ++id) {
     const fs::path src = scene::texture_path(scene_dir, TextureId(id));
     const fs::path dst = scene::texture_path(out_dir, TextureId(id));
     auto bytes = read_all(src);
     if (!bytes) return bytes.error();
     const bool room = o.max_cases == 0 || corpus.cases.size() < o.max_cases;
-    std::vector<Mutation> list = mutations_for((*table)[id], rng);
+    std::vector<Mutation> list = mutations_for((*table)[id], rng, out_dir / (".scratch-" + std::to_string(id)));
     if (!can_unread) std::erase_if(list, [](const Mutation& m) { return m.kind == Mutation::kUnreadable; });
-    if (next >= list.size()) {
-      exhausted = !o.repeat;
-      next = 0;
+    const scene::TextureRecord& shape = (*table)[id];
+    Cursor& cur = cursors[{shape.width, shape.height, shape.mip_count, shape.format}];
+    if (cur.next >= list.size()) {
+      cur.exhausted = !o.repeat;
+      cur.next = 0;
     }
-    if (!room || exhausted) {
+    if (!room || cur.exhausted) {
       TS_TRY(write_all(dst, *bytes));
       corpus.intact.push_back(id);
       continue;
     }
-    const Mutation& mu = list[next++];
+    const Mutation& mu = list[cur.next++];
     CorruptCase c;
     c.texture = id;
     c.mutation = mu.name;
@@ -185,9 +278,9 @@ Result<Corpus> make_corrupt_corpus(const fs::path& scene_dir, const fs::path& ou
       case Mutation::kBytes: {
         const Bytes before = *bytes;
         mu.apply(*bytes, c);
-        c.header_changed = bytes->size() < scene::kDdsHeaderBytes ||
+        c.header_changed = c.header_changed || bytes->size() < scene::kDdsHeaderBytes ||
                            !std::equal(bytes->begin(), bytes->begin() + scene::kDdsHeaderBytes, before.begin());
-        TS_TRY(write_all(dst, *bytes));
+        TS_TRY(write_all(c.file, *bytes));  // another container: c.file has its suffix, no .dds is written
         break;
       }
       case Mutation::kMissing:

@@ -3,8 +3,10 @@
 // texture — truncation at every mip boundary (and one byte short of it), inside the header and to zero
 // bytes; bit flips in the header and in the texel data; wrong header size, huge and zero dimensions, wrong
 // mip counts, wrong and unknown formats, bad magic; zeroed regions; a header of another extent; trailing
-// garbage; unreadable permissions; a missing file; a directory in place of the file. Textures past the
-// mutations are copied intact (controls: they must keep streaming).
+// garbage; unreadable permissions; a missing file; a directory in place of the file; and, for RGBA8
+// textures, the DDS replaced by a truncated mipmapped TIFF, a truncated OpenEXR, or a truncated JPEG under a
+// .tif name (the other containers the server reads, through OpenImageIO). Textures past the mutations are
+// copied intact (controls: they must keep streaming).
 //
 // Each case says what the server must answer: which mips must fail (the damage makes them unservable), and,
 // for the rest, that a kOk payload must equal the (mutated) file's bytes at the texture table's byte range
@@ -30,6 +32,7 @@ struct CorruptCase {
   // The header differs from the original: for an rgba8 texture the server may then decode the file through
   // OpenImageIO (e.g. other channel masks), so a kOk payload need not be the raw bytes.
   bool header_changed = false;
+  bool other_format = false;      // not a DDS any more (TIFF, OpenEXR, JPEG): `file` has that suffix
 };
 
 struct CorpusOptions {
@@ -46,7 +49,7 @@ struct Corpus {
 };
 
 // Copies `scene_dir`'s scene files into `out_dir` (created; must not be the source) and writes the damaged
-// textures. Only DDS textures are mutated.
+// textures. The source must be a DDS scene (scene_format.hpp).
 Result<Corpus> make_corrupt_corpus(const std::filesystem::path& scene_dir, const std::filesystem::path& out_dir,
                                    const CorpusOptions& options);
 

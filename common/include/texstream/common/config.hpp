@@ -46,6 +46,7 @@ struct RenderConfig {
   int64_t frames = 90;                  // headless: frames to render (0: the whole camera path)
   double frame_time_ms = 33.333;        // virtual time per frame along the camera path
   bool lockstep = false;                // each frame first takes every answer to the previous cycle (reproducible)
+  bool pace_frames = false;             // real time: frame N starts no earlier than N × frame_time_ms (a fixed-rate display)
   std::string camera_path;              // empty: <scene>/camera_path.txt
   std::string output_dir = "out";
   int64_t write_every_frames = 10;      // write every Nth frame as PNG (0: none; the last frame always)

@@ -1,27 +1,34 @@
 #pragma once
 // The renderer's supervisor of its texstream-server child: spawn (posix_spawn), death told by the kernel
-// (a pidfd through PidWatch), reaping without blocking (waitpid WNOHANG), restart with exponential back-off,
-// a "colormap only" mode after repeated crashes, and a progress watchdog that SIGKILLs a hung server.
+// (waitid), reaping, restart with exponential back-off, a "colormap only" mode after repeated crashes, and a
+// progress watchdog that SIGKILLs a hung server.
 //
-// Frame-safe: every method but the destructor returns at once. Time is passed in (`now`), never read here,
-// so the back-off schedule can be tested with a virtual clock. One thread (the renderer's frame loop) owns it
-// and must outlive the child: a `--spawned` server asks for PR_SET_PDEATHSIG, which Linux fires when the
-// *thread* that spawned it exits, not the process.
+// Frame-safe: every method but pid() and the destructor returns at once. posix_spawn (a vfork that suspends the caller
+// until the child has exec'd: milliseconds on a loaded machine) and the wait for the child's death run on a
+// long-lived *spawner thread* owned by this object; the frame thread only posts requests and reads results
+// under a mutex that is never held across a system call that can block. The spawner thread lives as long as
+// this object, which kills and reaps its child before it goes: a `--spawned` server asks for
+// PR_SET_PDEATHSIG, which Linux fires when the *thread* that spawned it exits, not the process.
+//
+// Time is passed in (`now`), never read here, so the back-off schedule can be tested with a virtual clock.
+// One thread (the renderer's frame loop) calls the methods.
 //
 // The caller (StreamClient) sequences what must happen around a death: reap() reports it, the caller resets
 // the shared segment (only after the reap: the dead process was the sole writer of its words), and only
-// then calls spawn_if_due(), which spawns once the back-off has passed.
+// then calls spawn_if_due(), which posts a spawn once the back-off has passed.
 #include <chrono>
+#include <condition_variable>
 #include <cstdint>
 #include <deque>
 #include <filesystem>
+#include <mutex>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "texstream/common/config.hpp"
 #include "texstream/common/result.hpp"
-#include "texstream/protocol/liveness.hpp"
 
 namespace texstream {
 
@@ -69,24 +76,28 @@ const char* to_string(ServerState state);
 struct ServerExit {
   int pid = 0;
   std::string how;          // "exited with status 3", "killed by signal 9", "could not be spawned: ..."
+  int term_signal = 0;      // the signal that ended it; 0 if it exited or was never spawned
   bool killed_by_us = false;
   std::string kill_reason;  // why we killed it, if we did
 };
 
 class ServerProcess {
  public:
+  // Starts the spawner thread (it spawns nothing until spawn_if_due()).
   ServerProcess(ServerCommand command, RestartPolicy policy);
-  // Kills the child (SIGTERM, then SIGKILL after a short grace) and reaps it. May block briefly.
+  // Kills the child (SIGTERM, then SIGKILL after a short grace), lets the spawner reap it and joins the
+  // spawner. May block briefly (at most the grace plus a spawn in flight).
   ~ServerProcess();
   ServerProcess(const ServerProcess&) = delete;
   ServerProcess& operator=(const ServerProcess&) = delete;
 
-  // Spawns a child if there is none and the back-off has passed. Returns true if one was started. A failed
-  // posix_spawn counts as a crash (logged; the next try is scheduled), and is reported by the next reap().
+  // Posts a spawn if there is no child and the back-off has passed; returns true if it posted one. The
+  // spawner thread runs posix_spawn; a failure counts as a crash and is reported by a later reap().
+  // Requests may be queued in the (reset) segment at once: the server reads them once it attaches.
   bool spawn_if_due(SteadyTime now);
 
-  // Non-blocking. If the child has died (pidfd readable), reaps it and returns how it ended; also returns a
-  // pending spawn failure. Schedules the next spawn by the back-off policy.
+  // Non-blocking. If the child has died (the spawner reaped it) or could not be spawned, returns how it
+  // ended and schedules the next spawn by the back-off policy.
   std::optional<ServerExit> reap(SteadyTime now);
 
   // Progress watchdog. `heartbeat` is ServerBlock.heartbeat, `attached` ServerBlock.attached. The server is
@@ -96,13 +107,17 @@ class ServerProcess {
   bool watch_heartbeat(uint64_t heartbeat, bool attached, bool work_outstanding, std::chrono::milliseconds timeout,
                        SteadyTime now);
 
-  // SIGKILL now (a protocol violation, a hang). The child stays until reap() collects it. No-op if none.
+  // SIGKILL now (a protocol violation, a hang); a child still being spawned is killed as soon as it exists.
+  // The child stays until reap() reports it. No-op if none.
   void kill(const std::string& why);
 
-  bool has_child() const { return pid_ > 0; }
-  // A child exists and we have not decided to kill it: requests may be sent to it.
-  bool serving() const { return pid_ > 0 && !killing_; }
-  int pid() const { return pid_; }
+  // A spawn was posted and its end not yet reported by reap().
+  bool has_child() const { return child_; }
+  // A child exists (or is being spawned) and we have not decided to kill it: requests may be sent to it.
+  bool serving() const { return child_ && !killing_; }
+  // The child's pid; -1 without a child or after a failed spawn. Diagnostics and tests only, not for the
+  // frame loop: it waits (milliseconds) for a spawn in flight to return.
+  int pid() const;
   ServerState state() const;
   SteadyTime next_spawn_at() const { return next_spawn_at_; }
   SteadyTime spawned_at() const { return spawned_at_; }
@@ -115,14 +130,20 @@ class ServerProcess {
   // `crash`: see RestartPolicy. A crash backs off (and may enter colormap-only); any other death restarts
   // after first_delay.
   void record_death(SteadyTime now, bool crash);
+  // The spawner thread: waits for a posted spawn, spawns, publishes the pid, waits for the child's death,
+  // reaps it and publishes how it ended; until the destructor says stop.
+  void spawner_main();
+  // Spawner thread: one child's life from posix_spawn to its reaped exit.
+  void run_child();
 
-  ServerCommand command_;
-  RestartPolicy policy_;
-  int pid_ = -1;
-  PidWatch watch_;
+  // Immutable after construction (the spawner thread reads command_).
+  const ServerCommand command_;
+  const RestartPolicy policy_;
+
+  // ---- the frame thread's own state ----
+  bool child_ = false;
   bool killing_ = false;
   std::string kill_reason_;
-  std::optional<ServerExit> spawn_failure_;
   SteadyTime spawned_at_{};
   SteadyTime next_spawn_at_{};
   std::deque<SteadyTime> recent_deaths_;  // within crash_window
@@ -133,6 +154,23 @@ class ServerProcess {
   bool attached_ = false;  // the current child reported `attached` to watch_heartbeat (ends colormap-only)
   uint64_t last_heartbeat_ = 0;
   SteadyTime last_progress_{};
+
+  // ---- shared between the frame thread and the spawner thread, guarded by mutex_ ----
+  struct Shared {
+    bool spawn_requested = false;  // frame → spawner
+    bool stopping = false;         // destructor → spawner
+    bool kill_requested = false;   // frame → spawner: SIGKILL the child as soon as posix_spawn returns
+    bool spawning = false;         // the spawner is inside posix_spawn
+    int pid = -1;                  // the current child, from spawn until reap() takes its exit
+    // The child has terminated (waitid WNOWAIT told so) and is about to be reaped: its pid must not be
+    // signalled any more (once reaped it may belong to another process).
+    bool dying = false;
+    std::optional<ServerExit> exit;  // how the child ended (or why it could not be spawned), for reap()
+  };
+  mutable std::mutex mutex_;
+  mutable std::condition_variable changed_;  // any change of shared_ (pid() waits on it)
+  Shared shared_;
+  std::thread spawner_;  // last: started once every member above exists
 };
 
 }  // namespace texstream
