@@ -25,6 +25,9 @@ int main(int argc, char** argv) {
   app.add_option("--work-dir", work_dir, "work folder (default: a temp folder, removed after a clean run)");
   app.add_flag("--keep", o.keep, "keep the work folder (logs, frames, statistics)");
   app.add_option("--stall-fraction", o.stall_fraction, "share of events that are SIGSTOP stalls")->check(CLI::Range(0.0, 1.0));
+  app.add_option("--ipc-bound-us", o.ipc_bound_us,
+                 "p99.99 bound on a frame's IPC time, an invariant (default 1000); 0: report only")
+      ->check(CLI::Range(0.0, 1e9));
   CLI11_PARSE(app, argc, argv);
   o.quick = quick;
   if (quick) o.textures = std::min<uint32_t>(o.textures, 1500);

@@ -19,6 +19,9 @@ struct ChaosOptions {
   std::filesystem::path work_dir;  // empty: a temp folder, removed unless keep
   bool keep = false;
   double stall_fraction = 0.15;    // share of events that are SIGSTOP stalls instead of kills
+  // Issue 9's bound on the p99.99 of a frame's IPC time; 0: reported, not an invariant (CI on a shared
+  // 2-core machine, where scheduling noise alone exceeds 1 ms; the long run keeps the bound).
+  double ipc_bound_us = 1000.0;
 };
 
 struct ChaosResult {
@@ -26,6 +29,7 @@ struct ChaosResult {
   uint64_t stalls = 0;
   uint64_t renderer_crashes = 0;   // the renderer ended by a signal or a failure exit, or hung
   double ipc_p9999_us = 0;
+  double ipc_bound_us = 1000.0;    // from ChaosOptions; 0: not checked by passed()
   double ipc_max_us = 0;
   uint64_t ipc_frames = 0;
   uint64_t bad_payloads = 0;       // payloads whose checksum failed (never committed, but a bug with a real server)
