@@ -212,7 +212,11 @@ void ServerProcess::run_child() {
     if (r == 0 && (info.si_code == CLD_KILLED || info.si_code == CLD_DUMPED)) e.term_signal = info.si_status;
   }
   std::lock_guard lock(mutex_);
-  shared_.exit = std::move(e);
+  if (shared_.exit_told_early) {
+    shared_.exit_told_early = false;  // reap() has told this death already
+  } else {
+    shared_.exit = std::move(e);
+  }
   changed_.notify_all();
 }
 
@@ -258,6 +262,26 @@ std::optional<ServerExit> ServerProcess::reap(SteadyTime now) {
       shared_.pid = -1;
       shared_.dying = false;
       shared_.kill_requested = false;
+    } else if (lock.owns_lock() && shared_.pid > 0 && !shared_.spawning) {
+      // The spawner tells a death only once the scheduler runs it; on a loaded machine that took 270 ms.
+      // A non-blocking waitid WNOWAIT peek (any thread of the process may wait for its children) tells it
+      // now; the child stays a zombie, so its pid cannot be reused until the spawner's waitpid.
+      siginfo_t info{};
+      if (::waitid(P_PID, static_cast<id_t>(shared_.pid), &info, WEXITED | WNOHANG | WNOWAIT) == 0 &&
+          info.si_pid == shared_.pid) {
+        ServerExit early;
+        early.pid = shared_.pid;
+        if (info.si_code == CLD_EXITED) {
+          early.how = "exited with status " + std::to_string(info.si_status);
+        } else {
+          early.term_signal = info.si_status;
+          early.how = "killed by signal " + std::to_string(info.si_status) + " (" + strsignal(info.si_status) + ")";
+        }
+        e = std::move(early);
+        shared_.exit_told_early = true;
+        shared_.pid = -1;
+        shared_.kill_requested = false;
+      }
     }
   }
   if (!e) {

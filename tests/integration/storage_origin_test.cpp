@@ -209,7 +209,9 @@ TEST_F(StorageOriginTest, RamHitsAreServedWhileASlowFetchIsInFlightAndWaitingFet
   // Texture 0 mip 0 takes the only remote-fetch worker; texture 1 waits for it; texture 2 is a RAM hit.
   ASSERT_TRUE(h->push(0, 0, 100, 5.0f));
   h->ring();
-  std::this_thread::sleep_for(50ms);
+  // Time for the remote-fetch worker to take texture 0 (its fetch then runs >= 600 ms). 50 ms was too short
+  // under ASan on a loaded 2-core machine: texture 1 was taken instead and could no longer go stale.
+  std::this_thread::sleep_for(250ms);
   const auto t0 = std::chrono::steady_clock::now();
   ASSERT_TRUE(h->push(1, 0, 100, 4.0f));
   ASSERT_TRUE(h->push(2, coarsest, 100, 3.0f));

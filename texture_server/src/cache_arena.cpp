@@ -2,6 +2,7 @@
 
 #include <sched.h>
 #include <sys/mman.h>
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -74,10 +75,12 @@ void CacheArena::prefault_range(uint64_t from, uint64_t to) {
 }
 
 void CacheArena::warm_in_background() {
-  // Idle priority: faulting the arena in must never take CPU from the renderer or the server's own workers
-  // (seed 002 §3.3); a payload written before its pages are warm just faults them itself.
-  sched_param param{};
-  ::pthread_setschedparam(::pthread_self(), SCHED_IDLE, &param);
+  // Low priority: faulting the arena in should not take CPU from the renderer or the server's own workers
+  // (seed 002 §3.3); a payload written before its pages are warm just faults them itself. Nice 10, not
+  // SCHED_IDLE: on a loaded machine a SCHED_IDLE thread can wait seconds for the CPU, and a process dies only
+  // once every thread has run its exit — a SIGKILLed server was told dead 0.3-1 s late that way (and the
+  // thread holds the mmap lock inside madvise while it waits, stalling the other threads' mmap/munmap).
+  ::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), 10);
   for (uint64_t from = 0; from < capacity_ && !stop_.load(std::memory_order_relaxed); from += kWarmStep) {
     prefault_range(from, std::min(capacity_, from + kWarmStep));
   }

@@ -21,10 +21,6 @@
 // --quick: a 4 s section of the path around its first cut, 256x144, one α and one β besides ours; under 60 s
 // on the 2-core lavapipe machine. Ends with `summary: lockstep_identical=... max_latency_ratio=...
 // popin_ratio=... integrated_error_ratio=... streaming_overhead=... process_boundary_cost=...`.
-#include <fcntl.h>
-#include <spawn.h>
-#include <sys/wait.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -41,12 +37,11 @@
 #include "bench_util.hpp"
 #include "path_analysis.hpp"
 #include "path_results.hpp"
+#include "path_runner.hpp"
 #include "texstream/common/camera_path.hpp"
 #include "texstream/common/config.hpp"
 #include "texstream/render/frame_log.hpp"
 #include "texstream/render/scene_data.hpp"
-
-extern char** environ;
 
 namespace fs = std::filesystem;
 
@@ -55,95 +50,15 @@ namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-// --quick: the section of the path around its first cut (1.5 s of the pause before it, 2.5 s after), which
-// holds one refinement at rest and one recovery from an instant switch.
-constexpr double kQuickBeforeCutS = 1.5;
-constexpr double kQuickAfterCutS = 2.5;
-constexpr uint32_t kQuickWidth = 256, kQuickHeight = 144;
 constexpr uint32_t kFullWidth = 640, kFullHeight = 360;
 // Lock-step runs use a fixed load size per cycle (seed 004 §4.1: "a fixed limit of pages per frame"); 1 MB
 // is the seed's median s at α = 12-16 ms (Table 3: 0.75-0.96 MB).
 constexpr double kLockstepLoadMb = 1.0;
-// Cache sizing for the all-resident runs: the address space of one sparse image on lavapipe is 2 GiB and an
-// image has at most 2048 layers (DESIGN "Lavapipe facts").
-constexpr uint64_t kMaxLayers = 2048;
-constexpr uint64_t kMaxCacheBytes = 2ull << 30;
-constexpr const char* kSystemPython = "/usr/bin/python3";
-
-fs::path self_dir() {
-  std::error_code ec;
-  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-  return ec ? fs::path(".") : exe.parent_path();
-}
 
 std::string flag_value(const std::vector<std::string>& args, const std::string& flag) {
   for (size_t i = 0; i + 1 < args.size(); ++i)
     if (args[i] == flag) return args[i + 1];
   return "";
-}
-
-// Runs `argv` with stdout and stderr to `log`; returns the exit code (-1: not started, 128 + n: signal n).
-int run_process(const std::vector<std::string>& argv, const fs::path& log) {
-  posix_spawn_file_actions_t fa;
-  posix_spawn_file_actions_init(&fa);
-  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_adddup2(&fa, 1, 2);
-  std::vector<char*> args;
-  for (const std::string& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-  args.push_back(nullptr);
-  pid_t pid = -1;
-  const int rc = posix_spawn(&pid, args[0], &fa, nullptr, args.data(), environ);
-  posix_spawn_file_actions_destroy(&fa);
-  if (rc != 0) return -1;
-  int status = 0;
-  while (waitpid(pid, &status, 0) < 0) {
-    if (errno != EINTR) return -1;
-  }
-  if (WIFEXITED(status)) return WEXITSTATUS(status);
-  return WIFSIGNALED(status) ? 128 + WTERMSIG(status) : -1;
-}
-
-// cache.* settings under which every texture of the scene is resident at once: layers of one maximum extent
-// (CacheAllocator: square regions, one extent per layer) and memory for every page of them.
-struct ResidentCache {
-  uint64_t layer_extent = 4, layers = 0, memory_bytes = 0;
-  std::string error;
-};
-ResidentCache resident_cache(const render::SceneData& scene) {
-  ResidentCache c;
-  std::vector<uint64_t> per_extent(32, 0);
-  uint32_t bytes_per_block = 0;
-  for (const TextureShape& s : scene.shapes()) {
-    uint64_t e = 4;
-    while (e < std::max(s.width, s.height)) e *= 2;
-    c.layer_extent = std::max(c.layer_extent, e);
-    ++per_extent[static_cast<size_t>(std::log2(static_cast<double>(e)))];
-    bytes_per_block = s.format == TexelFormat::kBc1 ? 8 : 64;  // a 4x4 block: BC1 8 bytes, RGBA8 64 bytes
-  }
-  for (size_t k = 0; k < per_extent.size(); ++k) {
-    if (!per_extent[k]) continue;
-    const uint64_t e = uint64_t{1} << k;
-    const uint64_t per_layer = (c.layer_extent / e) * (c.layer_extent / e);
-    c.layers += (per_extent[k] + per_layer - 1) / per_layer;
-  }
-  // Every level of every layer bound in full, counted in 64 KiB sparse pages (the standard sparse block
-  // size; lavapipe has no mip tail, so each small level takes a page of its own): an upper bound of what the
-  // preload binds, since pages shared between small regions are counted once per layer here anyway.
-  constexpr uint64_t kPageBytes = 64u << 10;
-  uint64_t pages_per_layer = 0;
-  for (uint64_t e = c.layer_extent; e >= 1; e /= 2) {
-    const uint64_t blocks = ((e + 3) / 4) * ((e + 3) / 4);
-    pages_per_layer += std::max<uint64_t>(1, (blocks * bytes_per_block + kPageBytes - 1) / kPageBytes);
-  }
-  c.memory_bytes = std::max<uint64_t>(c.layers * pages_per_layer * kPageBytes, 64ull << 20);
-  if (c.layers > kMaxLayers) {
-    c.error = "the scene needs " + std::to_string(c.layers) + " cache layers of " + std::to_string(c.layer_extent) +
-              " px to be resident at once; a sparse image has at most " + std::to_string(kMaxLayers);
-  } else if (c.memory_bytes > kMaxCacheBytes) {
-    c.error = "the scene needs " + std::to_string(c.memory_bytes >> 20) + " MiB of cache to be resident at once; "
-              "the sparse address space is " + std::to_string(kMaxCacheBytes >> 20) + " MiB";
-  }
-  return c;
 }
 
 struct Plan {
@@ -164,37 +79,21 @@ ConfigRun make(const std::string& name, const std::string& group, const std::str
 
 void execute(const Plan& p, ConfigRun& r, double frame_time_s, const std::vector<double>& cuts) {
   const fs::path dir = p.out / "runs" / r.name;
+  RenderRun run{p.bin, p.config, dir, p.common, r.in_process};
+  if (r.measured) run.sets.push_back("render.reference_dir=" + (p.out / "runs" / "reference").string());
+  run.sets.insert(run.sets.end(), r.sets.begin(), r.sets.end());
+  RenderOutcome o = run_renderer(run);
+  r.exit_code = o.exit_code;
+  r.wall_s = o.wall_s;
+  r.failure = o.failure;
+  if (!r.failure.empty()) {
+    std::fprintf(stderr, "path bench: %s failed: %s\n", r.name.c_str(), r.failure.c_str());
+    return;
+  }
   std::error_code ec;
-  fs::remove_all(dir, ec);
-  fs::create_directories(dir, ec);
-  std::vector<std::string> argv{(p.bin / (r.in_process ? "texstream-render-inprocess" : "texstream-render")).string()};
-  if (!p.config.empty()) argv.insert(argv.end(), {"--config", p.config.string()});
-  std::vector<std::string> sets = p.common;
-  sets.push_back("render.output_dir=" + dir.string());
-  if (r.measured) sets.push_back("render.reference_dir=" + (p.out / "runs" / "reference").string());
-  sets.insert(sets.end(), r.sets.begin(), r.sets.end());
-  for (const std::string& s : sets) argv.insert(argv.end(), {"--set", s});
-  {
-    std::ofstream cmd(dir / "command.txt");  // to rerun one configuration by hand
-    for (const std::string& a : argv) cmd << a << (a.rfind("--", 0) == 0 ? " " : " \\\n  ");
-    cmd << "\n";
-  }
-  Stopwatch sw;
-  r.exit_code = run_process(argv, dir / "log.txt");
-  r.wall_s = sw.seconds();
-  if (r.exit_code != 0) {
-    r.failure = "exit code " + std::to_string(r.exit_code) + ", see runs/" + r.name + "/log.txt";
-    std::fprintf(stderr, "path bench: %s failed (%d): %s\n", r.name.c_str(), r.exit_code, (dir / "log.txt").c_str());
-    return;
-  }
-  auto frames = render::read_frame_log(dir / "frames.csv");
-  if (!frames) {
-    r.failure = frames.error().message;
-    return;
-  }
   fs::create_directories(p.out / "raw", ec);
   fs::copy_file(dir / "frames.csv", p.out / "raw" / (r.name + ".csv"), fs::copy_options::overwrite_existing, ec);
-  r.analysis = analyse_run(*frames, frame_time_s, cuts);
+  r.analysis = analyse_run(o.frames, frame_time_s, cuts);
   std::printf("  %-14s %5.1f s  latency median %6.2f ms max %7.2f ms  PSNR median %6.2f dB  ∫MSE %8.1f  pop-in %7.2f\n",
               r.name.c_str(), r.wall_s, r.analysis.latency_ms.median, r.analysis.latency_ms.max,
               r.analysis.psnr_db.median, r.analysis.integrated_mse, r.analysis.max_popin_mse);
@@ -286,12 +185,7 @@ int run_path(const std::vector<std::string>& args) {
 
   // The path this bench runs: the whole file, or (--quick) the section around its first cut.
   CameraPath bench_path = *path;
-  if (res.quick) {
-    const auto cuts = cut_times(*path);
-    const double t0 = cuts.empty() ? 0.0 : std::max(0.0, cuts.front() - kQuickBeforeCutS);
-    const double t1 = std::min(path->duration_s(), cuts.empty() ? 4.0 : cuts.front() + kQuickAfterCutS);
-    bench_path = path_section(*path, t0, t1);
-  }
+  if (res.quick) bench_path = section_around_first_cut(*path, kQuickBeforeCutS, kQuickAfterCutS);
   plan.path_file = plan.out / "path.txt";
   {
     std::ofstream f(plan.path_file);
@@ -318,25 +212,16 @@ int run_path(const std::vector<std::string>& args) {
     res.width = w;
     res.height = h;
   }
-  res.frame_time_s = 0.033333;
+  res.frame_time_s = kPathFrameTimeS;
   res.path_duration_s = bench_path.duration_s();
   res.cuts_s = cut_times(bench_path);
-  plan.common = {"scene.dir=" + plan.scene.string(),
-                 "render.camera_path=" + plan.path_file.string(),
-                 "render.frames=0",
-                 "render.frame_time_ms=" + std::to_string(res.frame_time_s * 1e3),
-                 "render.width_px=" + std::to_string(res.width),
-                 "render.height_px=" + std::to_string(res.height),
-                 "render.write_every_frames=0",
-                 "cache.layer_extent_px=" + std::to_string(cache.layer_extent),
-                 "cache.layers=" + std::to_string(cache.layers),
-                 "cache.memory_bytes=" + std::to_string(cache.memory_bytes)};
+  plan.common = path_run_sets(plan.scene, plan.path_file, res.frame_time_s, res.width, res.height);
+  const std::vector<std::string> resident_sets = cache.sets();
+  plan.common.insert(plan.common.end(), resident_sets.begin(), resident_sets.end());
 
   // The configurations, in run order. The reference comes first: everything else is measured against it.
   std::vector<ConfigRun>& runs = res.runs;
-  runs.push_back(make("reference", "reference", "reference (all resident, lock-step)",
-                      {"render.preload_all=true", "render.lockstep=true", "render.write_every_frames=1",
-                       "controller.mode=none", "stream.colormap_blend=false"}));
+  runs.push_back(make("reference", "reference", "reference (all resident, lock-step)", reference_sets()));
   runs.back().measured = false;
   runs.push_back(make("ours", "baseline", "ours (as configured: α = " + fmt_num(alpha_ms) + " ms, β = " +
                                               fmt_num(base_config->controller.beta) + ", Eq. 8 blend)", {}));
@@ -429,14 +314,8 @@ int run_path(const std::vector<std::string>& args) {
   if (auto st = write_results_json(res, plan.out / "results.json"); !st) {
     std::fprintf(stderr, "path bench: %s\n", st.error().message.c_str());
   } else {
-    // Debian's python3 (python3-matplotlib) rather than whatever python3 is first on PATH.
-    const std::string python = fs::exists(kSystemPython) ? kSystemPython : "/usr/bin/env";
-    std::vector<std::string> py{python};
-    if (python == "/usr/bin/env") py.push_back("python3");
-    py.insert(py.end(), {(fs::path(TEXSTREAM_PATH_BENCH_SOURCE_DIR) / "tools" / "bench" /
-                                       "path_report_plots.py").string(),
-                                      plan.out.string()});
-    const int rc = run_process(py, plan.out / "plots.log");
+    const int rc = run_python(fs::path(TEXSTREAM_PATH_BENCH_SOURCE_DIR) / "tools" / "bench" / "path_report_plots.py",
+                              {plan.out.string()}, plan.out / "plots.log");
     plots = rc == 0;
     if (!plots) std::fprintf(stderr, "path bench: plots failed (%d), see %s\n", rc, (plan.out / "plots.log").c_str());
   }

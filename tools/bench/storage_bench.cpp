@@ -17,6 +17,11 @@
 //      read, 8 MB/s shared link): mips/s.
 //   6. failures_handled=N/M: origin down, 404, 500, truncated body, wrong Content-Range, slowloris stall: an
 //      error completion within its deadline and the server still answering.
+//   7. Fig. 12 with the image-error metric (storage_fig12.hpp): texstream-render over a fixed camera path with
+//      its server reading the scene through nginx at the same four link rates (a true shared cap: the
+//      slow-storage token bucket over nginx's unthrottled prefix), against reference frames: ∫MSE dt, mean
+//      PSNR, bytes and mips per second, time to first mip. storage_fig12.csv, storage_fig12_frames.csv;
+//      storage_plots.py draws storage_fig12.png and storage_timeline.png.
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -28,6 +33,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <utility>
 #include <random>
 #include <string>
 #include <thread>
@@ -37,7 +44,9 @@
 #include "bench_util.hpp"
 #include "fake_http_origin.hpp"
 #include "nginx_origin.hpp"
+#include "path_runner.hpp"
 #include "server_harness.hpp"
+#include "storage_fig12.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texstream/server/disk_cache.hpp"
 #include "texstream/server/storage_stack.hpp"
@@ -59,8 +68,9 @@ struct Plan {
   fs::path scene;
   uint32_t textures = 0;
   std::chrono::milliseconds link_run{0};  // time cap of one bandwidth run
-  // --phases hits,reuse,links,policies,inflight,failures: run only these (profiling one); skipped ones report 0.
-  std::string phases = "hits,reuse,links,policies,inflight,failures";
+  // --phases hits,reuse,links,policies,inflight,failures,fig12: run only these (profiling one); skipped ones
+  // report 0.
+  std::string phases = "hits,reuse,links,policies,inflight,failures,fig12";
   bool runs(const char* phase) const {
     return ("," + phases + ",").find(std::string(",") + phase + ",") != std::string::npos;
   }
@@ -425,7 +435,7 @@ int run_storage(const std::vector<std::string>& args) {
     } else if (args[i] == "--phases" && i + 1 < args.size()) {
       plan.phases = args[++i];
     } else if (args[i] != "--quick") {
-      std::fprintf(stderr, "usage: texstream-bench storage [--quick] [--out DIR] [--phases hits,reuse,links,policies,inflight,failures]\n");
+      std::fprintf(stderr, "usage: texstream-bench storage [--quick] [--out DIR] [--phases hits,reuse,links,policies,inflight,failures,fig12]\n");
       return 2;
     }
   }
@@ -556,10 +566,47 @@ int run_storage(const std::vector<std::string>& args) {
     std::printf("   %-20s %-8s %s after %.0f ms\n", f.name, f.handled ? "handled" : "FAILED",
                 to_string(static_cast<CompletionStatus>(f.status)), f.ms);
   }
+
+  Fig12Result fig12;
+  if (plan.runs("fig12")) {
+    Fig12Plan fp;
+    fp.quick = plan.quick;
+    fp.scene = plan.scene;
+    fp.work = plan.work;
+    fp.out = plan.out;
+    fp.config = fs::path(TEXSTREAM_STORAGE_BENCH_SOURCE_DIR) / "config" / "lavapipe.toml";
+    fp.origin_url = nginx->url("unlimited");
+    for (const Link& link : kLinks) fp.links.push_back({link.name, link.nominal_bytes_s});
+    Stopwatch sw;
+    fig12 = run_fig12(fp);
+    std::printf("7. Fig. 12: texstream-render (lavapipe.toml, real time, paced 30 Hz) over a %.2f s camera path at "
+                "%ux%u, server reading through nginx; links capped by the slow-storage shared token bucket over "
+                "nginx's unthrottled prefix (%.1f s):\n",
+                fig12.path_s, fig12.width, fig12.height, sw.seconds());
+    if (!fig12.failure.empty()) std::printf("   FAILED: %s\n", fig12.failure.c_str());
+    for (const Fig12Row& r : fig12.rows) {
+      if (!r.failure.empty()) {
+        std::printf("   %-16s FAILED: %s\n", r.link.name.c_str(), r.failure.c_str());
+        continue;
+      }
+      std::printf("   %-16s ∫MSE dt %9.2f  mean PSNR %6.2f dB  %8.3f MB/s %7.1f mips/s  first mip %7.1f ms  "
+                  "%llu mips, %.2f MB, %llu frames\n",
+                  r.link.name.c_str(), r.integrated_mse, r.mean_psnr_db, r.mb_s, r.mips_s, r.first_mip_ms,
+                  (unsigned long long)r.mips, double(r.bytes) / 1e6, (unsigned long long)r.frames);
+    }
+  }
   nginx->stop();
   fs::remove_all(plan.work, ec);
-  std::printf("CSV: %s, %s; %.1f s in all\n", (plan.out / "storage_bandwidth.csv").c_str(),
-              (plan.out / "storage_timeline.csv").c_str(), total.seconds());
+  csv.close();
+  timeline.close();
+  const int plots = run_python(fs::path(TEXSTREAM_STORAGE_BENCH_SOURCE_DIR) / "tools" / "bench" / "storage_plots.py",
+                               {plan.out.string()}, plan.out / "storage_plots.log");
+  if (plots != 0) {
+    std::fprintf(stderr, "storage bench: plots failed (%d), see %s\n", plots, (plan.out / "storage_plots.log").c_str());
+  }
+  std::printf("CSV: %s, %s, %s; plots: %s%s; %.1f s in all\n", (plan.out / "storage_bandwidth.csv").c_str(),
+              (plan.out / "storage_timeline.csv").c_str(), (plan.out / "storage_fig12.csv").c_str(),
+              (plan.out / "storage_fig12.png").c_str(), plots == 0 ? "" : " (FAILED)", total.seconds());
 
   Summary s;
   s.add("hit_p99_ratio_under_load", hit_ratio)
@@ -567,6 +614,14 @@ int run_storage(const std::vector<std::string>& args) {
       .add("t1_mb_s", t1_mb_s)
       .add("isdn_mb_s", isdn_mb_s)
       .add("failures_handled", fmt::format("{}/{}", handled, failures.size()));
+  // Fig. 12's integrated error at the slow links over the unlimited link's (extra keys, after the issue's).
+  const Fig12Row* unlimited = fig12.find("unlimited");
+  for (const auto& [key, name] : {std::pair{"fig12_error_ratio_t1_vs_unlimited", "T1_1.5Mbit_s"},
+                                  std::pair{"fig12_error_ratio_isdn_vs_unlimited", "ISDN_128kbit_s"}}) {
+    const Fig12Row* slow = fig12.find(name);
+    const bool ok = unlimited && slow && unlimited->failure.empty() && slow->failure.empty() && unlimited->integrated_mse > 0;
+    s.add(key, ok ? slow->integrated_mse / unlimited->integrated_mse : std::numeric_limits<double>::quiet_NaN());
+  }
   s.print();
   return 0;
 }

@@ -166,6 +166,9 @@ class ServerProcess {
     // signalled any more (once reaped it may belong to another process).
     bool dying = false;
     std::optional<ServerExit> exit;  // how the child ended (or why it could not be spawned), for reap()
+    // reap() told the death itself (a non-blocking waitid WNOWAIT peek) before the spawner published it:
+    // the spawner still reaps the child but drops its own report of it.
+    bool exit_told_early = false;
   };
   mutable std::mutex mutex_;
   mutable std::condition_variable changed_;  // any change of shared_ (pid() waits on it)

@@ -111,6 +111,7 @@ class Server {
   std::deque<CompletionRecord> overflow_;       // completions waiting for room in the ring
   std::vector<LoadRequest> cancelled_scratch_;  // reused each iteration: no allocation when warm
   std::vector<LoadResult> results_scratch_;
+  uint64_t pass_now_ns_ = 0;                    // steady clock at the start of the loop's current pass
   uint64_t clock_generation_ = 0;               // last generation forwarded to the cache policy (Eq. 4 clock)
   std::unique_ptr<WorkerPool> workers_;         // last members: their threads die before what they use
   std::unique_ptr<WorkerPool> remote_workers_;
