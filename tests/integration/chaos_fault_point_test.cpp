@@ -96,14 +96,13 @@ TEST(FaultPoint, CopyIntoSlotDiesHalfway) {
 
 TEST(FaultPoint, ArmFileKillsAtTheNextPassAndIsClaimed) {
   const fs::path arm = fs::temp_directory_path() / chaos_test::unique("fault-arm");
-  std::thread writer([&] {
-    std::this_thread::sleep_for(100ms);  // the child is passing points by then: nothing may fire before
-    const fs::path tmp = arm.string() + ".tmp";
-    std::ofstream(tmp) << "eviction\n";
-    fs::rename(tmp, arm);
-  });
   const fs::path marker = fs::temp_directory_path() / chaos_test::unique("fault-arm-marker");
-  const int status = in_child("TEXSTREAM_FAULT_ARM", arm.string(), [&] {
+  // Fork while this process has one thread only, and write the arm file from the parent afterwards: a
+  // writer thread alive at fork() time could hold the allocator's lock (ASan's did), and the child's watcher
+  // thread then blocks on it forever.
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::setenv("TEXSTREAM_FAULT_ARM", arm.c_str(), 1);
     const auto t0 = std::chrono::steady_clock::now();
     while (std::chrono::steady_clock::now() - t0 < 5s) {
       fault_point(FaultPoint::kSlotWrite);
@@ -111,8 +110,17 @@ TEST(FaultPoint, ArmFileKillsAtTheNextPassAndIsClaimed) {
       fault_point(FaultPoint::kEviction);
       std::this_thread::sleep_for(1ms);
     }
-  });
-  writer.join();
+    std::_Exit(0);
+  }
+  ASSERT_GT(pid, 0);
+  std::this_thread::sleep_for(100ms);  // the child is passing points by then: nothing may fire before
+  {
+    const fs::path tmp = arm.string() + ".tmp";
+    std::ofstream(tmp) << "eviction\n";
+    fs::rename(tmp, arm);
+  }
+  int status = 0;
+  ::waitpid(pid, &status, 0);
   ASSERT_TRUE(WIFSIGNALED(status)) << "not killed within 5 s of arming";
   EXPECT_EQ(WTERMSIG(status), SIGKILL);
   EXPECT_FALSE(fs::exists(arm)) << "the arm file must be claimed";
