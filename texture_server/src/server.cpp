@@ -336,8 +336,14 @@ bool Server::collect_results() {
       continue;
     }
     slots_.release_unused(r.slot);
-    if (remote_pending_.size() >= kRemotePendingLimit || r.request.generation.value < scheduler_.newest_generation().value) {
-      // Full, or already stale (a newer batch came while the local worker looked): ask again later.
+    if (r.request.generation.value < scheduler_.newest_generation().value) {
+      // Already stale: a newer batch came while the local worker looked. Superseded, like a waiting one.
+      stats_.add(stats_.cancelled, 1);
+      complete(make_completion(r.request, CompletionStatus::kCancelled));
+      continue;
+    }
+    if (remote_pending_.size() >= kRemotePendingLimit) {
+      // Full: the renderer asks again in a later cycle.
       unfilled_.fetch_add(1, std::memory_order_relaxed);
       complete(r.completion);
       continue;
