@@ -3,9 +3,11 @@
 // into the arm file. Each case runs in a forked child (the environment is read once per process).
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/mman.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <array>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
@@ -13,6 +15,7 @@
 #include <thread>
 
 #include "chaos_test_support.hpp"
+#include "texstream/protocol/spsc_ring.hpp"
 #include "texstream/server/fault_point.hpp"
 
 namespace texstream::server {
@@ -70,6 +73,34 @@ TEST(FaultPoint, DiesOnTheNthPassOfItsPointOnly) {
   in >> passes;
   EXPECT_EQ(passes, 3);
   fs::remove(marker);
+}
+
+TEST(FaultPoint, MidRingPushDiesWithTheRecordHalfWrittenAndUnpublished) {
+  // The ring lives in a shared anonymous mapping so the parent sees what the killed child left in it.
+  struct Shared {
+    RingControl control;
+    std::array<uint64_t, 4> records[4];
+  };
+  void* mem = ::mmap(nullptr, sizeof(Shared), PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0);
+  ASSERT_NE(mem, MAP_FAILED);
+  auto* shared = new (mem) Shared{};
+  const int status = in_child("TEXSTREAM_FAULT", "mid_ring_push@2", [&] {
+    SpscRingProducer<std::array<uint64_t, 4>> ring(&shared->control, shared->records, 4);
+    if (fault_injection_enabled()) ring.set_mid_push_hook([] { fault_point(FaultPoint::kMidRingPush); });
+    ring.try_push({1, 1, 1, 1});
+    ring.try_push({2, 2, 2, 2});  // dies halfway through this one
+    ring.try_push({3, 3, 3, 3});
+  });
+  ASSERT_TRUE(WIFSIGNALED(status)) << "exited with " << WEXITSTATUS(status);
+  EXPECT_EQ(WTERMSIG(status), SIGKILL);
+  EXPECT_EQ(shared->control.write_pos.v.load(), 1u) << "the torn record was published";
+  EXPECT_EQ(shared->records[0], (std::array<uint64_t, 4>{1, 1, 1, 1}));
+  EXPECT_EQ(shared->records[1], (std::array<uint64_t, 4>{2, 2, 0, 0})) << "not killed halfway through the copy";
+  // A consumer sees exactly the one published record.
+  SpscRingConsumer<std::array<uint64_t, 4>> consumer(&shared->control, shared->records, 4);
+  EXPECT_TRUE(consumer.try_pop().has_value());
+  EXPECT_FALSE(consumer.try_pop().has_value());
+  ::munmap(mem, sizeof(Shared));
 }
 
 TEST(FaultPoint, CopyIntoSlotDiesHalfway) {

@@ -20,7 +20,7 @@ namespace texstream::server {
 namespace {
 
 constexpr std::array<const char*, kFaultPointCount> kNames = {"slot_write", "before_completion", "after_ring_push",
-                                                              "eviction"};
+                                                              "eviction", "mid_ring_push"};
 // How often the watcher looks for TEXSTREAM_FAULT_ARM's file: far below the chaos tool's kill intervals
 // (>= 50 ms between events), far above a cost anyone would notice (one failed rename per poll).
 constexpr auto kPollInterval = std::chrono::milliseconds(2);
@@ -117,7 +117,7 @@ Result<FaultPlan> parse_fault_plan(std::string_view text) {
       return make_error(ErrorCode::kInvalidArgument,
                         "TEXSTREAM_FAULT entry '" + std::string(entry) +
                             "': expected <point>[@N] with N >= 1 and <point> one of slot_write, before_completion, "
-                            "after_ring_push, eviction");
+                            "after_ring_push, eviction, mid_ring_push");
     }
     plan.die_on_pass[static_cast<uint32_t>(*p)] = pass;
     if (comma == std::string_view::npos) return plan;
@@ -137,6 +137,11 @@ void fault_point(FaultPoint point) {
       state->armed.compare_exchange_strong(armed, kNotArmed, std::memory_order_relaxed)) {
     die_at(point);
   }
+}
+
+bool fault_injection_enabled() {
+  static const bool enabled = std::getenv("TEXSTREAM_FAULT") != nullptr || std::getenv("TEXSTREAM_FAULT_ARM") != nullptr;
+  return enabled;
 }
 
 void copy_into_slot(void* dst, const void* src, size_t bytes) {

@@ -123,6 +123,7 @@ Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const S
       slots_(segment.slot_count()) {
   cancelled_scratch_.reserve(256);
   results_scratch_.reserve(64);
+  if (fault_injection_enabled()) completions_.set_mid_push_hook([] { fault_point(FaultPoint::kMidRingPush); });
   ShmAtomic<uint32_t>* doorbell = &segment_.renderer_block().doorbell;
   const ShmAtomic<uint32_t>* sleeping = &segment_.server_block().sleeping;
   // Only a sleeping dispatcher is woken: a wake per result was a syscall per miss, mostly for a dispatcher

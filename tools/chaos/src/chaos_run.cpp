@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -38,7 +39,8 @@ constexpr int kTailFrames = 450;
 // Issue 9: the converged frame must equal the reference to PSNR >= 45 dB.
 constexpr double kPsnrBoundDb = 45.0;
 // Named kill points (texture_server fault_point.hpp), armed through TEXSTREAM_FAULT_ARM's file.
-constexpr const char* kFaultPoints[] = {"slot_write", "before_completion", "after_ring_push", "eviction"};
+constexpr const char* kFaultPoints[] = {"slot_write", "before_completion", "after_ring_push", "eviction",
+                                       "mid_ring_push"};
 // Share of kills sent as named points instead of a SIGKILL at a random instant.
 constexpr double kNamedKillFraction = 0.5;
 // How long an armed point may take to be reached: the server's watcher polls every 2 ms, and the points lie
@@ -269,6 +271,7 @@ ChaosResult run_chaos(const ChaosOptions& o) {
   const double events = static_cast<double>(std::max(1, o.kills)) / std::max(0.05, 1.0 - o.stall_fraction);
   const double mean_interval_s = kill_s / events;
   uint64_t named_tried = 0, named_hit = 0, named_unclaimed = 0;
+  std::array<uint64_t, std::size(kFaultPoints)> point_tried{}, point_hit{};
   const auto start = Clock::now();
   // --minutes paces the kills; the phase goes on past it (restarts take time) until --kills are sent, but
   // never into the renderer's convergence tail (estimated from the calibration).
@@ -303,8 +306,10 @@ ChaosResult run_chaos(const ChaosOptions& o) {
       ::kill(*server, SIGCONT);
     } else if (unit(rng) < kNamedKillFraction) {
       // A named protocol step: the server kills itself there (SIGKILL, as from outside).
-      const char* point = kFaultPoints[std::uniform_int_distribution<size_t>(0, std::size(kFaultPoints) - 1)(rng)];
+      const size_t point_index = std::uniform_int_distribution<size_t>(0, std::size(kFaultPoints) - 1)(rng);
+      const char* point = kFaultPoints[point_index];
       ++named_tried;
+      ++point_tried[point_index];
       const fs::path tmp = arm_file.string() + ".tmp";
       std::ofstream(tmp) << point << "\n";
       fs::rename(tmp, arm_file);
@@ -312,6 +317,7 @@ ChaosResult run_chaos(const ChaosOptions& o) {
       while (Clock::now() < until && alive(*server)) std::this_thread::sleep_for(1ms);
       if (!alive(*server)) {
         ++named_hit;
+        ++point_hit[point_index];
       } else {
         // Not reached: take the arm file back if no server claimed it (fault points not built in), and kill.
         const fs::path back = arm_file.string() + ".back";
@@ -330,6 +336,13 @@ ChaosResult run_chaos(const ChaosOptions& o) {
   log("named kill points: " + std::to_string(named_tried) + " armed, " + std::to_string(named_hit) +
       " reached (the server died there), " + std::to_string(named_unclaimed) +
       " never claimed by a server (texstream-server built without fault points?); the rest SIGKILLed");
+  {
+    std::string per_point = "named kill points reached / armed:";
+    for (size_t i = 0; i < std::size(kFaultPoints); ++i)
+      per_point += std::string(" ") + kFaultPoints[i] + " " + std::to_string(point_hit[i]) + "/" +
+                   std::to_string(point_tried[i]);
+    log(per_point + " (a point lies on the path of a served mip: an idle server passes none)");
+  }
   log("kill phase over after " + fmt_num(std::chrono::duration<double>(Clock::now() - start).count(), 1) + " s: " +
       std::to_string(res.kills) + " SIGKILLs, " + std::to_string(res.stalls) + " stalls (" +
       std::to_string(watchdog_stalls) + " ended by the renderer's watchdog)");

@@ -55,7 +55,15 @@ class SpscRingProducer {
       return false;
     }
     if (write_pos_ - read == capacity_) return false;
-    std::memcpy(&records_[write_pos_ & (capacity_ - 1)], &record, sizeof(Record));
+    auto* dst = reinterpret_cast<unsigned char*>(&records_[write_pos_ & (capacity_ - 1)]);
+    if (mid_push_hook_ == nullptr) {
+      std::memcpy(dst, &record, sizeof(Record));
+    } else {  // fault injection (texstream-chaos): the hook may kill this process with the record half written
+      constexpr size_t kHalf = sizeof(Record) / 2;
+      std::memcpy(dst, &record, kHalf);
+      mid_push_hook_();
+      std::memcpy(dst + kHalf, reinterpret_cast<const unsigned char*>(&record) + kHalf, sizeof(Record) - kHalf);
+    }
     ++write_pos_;
     // release: pairs with the consumer's acquire-load of write_pos; publishes the record copied above.
     control_->write_pos.v.store(write_pos_, std::memory_order_release);
@@ -73,12 +81,17 @@ class SpscRingProducer {
   uint64_t position() const { return write_pos_; }
   uint32_t capacity() const { return capacity_; }
 
+  // Fault injection only: called in the middle of every push, with half of the record copied into the ring
+  // and the write position not yet published (texstream-chaos's mid_ring_push kill point). nullptr: none.
+  void set_mid_push_hook(void (*hook)()) { mid_push_hook_ = hook; }
+
  private:
   RingControl* control_ = nullptr;
   Record* records_ = nullptr;
   uint32_t capacity_ = 0;
   uint64_t write_pos_ = 0;
   RingError error_ = RingError::kNone;
+  void (*mid_push_hook_)() = nullptr;
 };
 
 template <class Record>

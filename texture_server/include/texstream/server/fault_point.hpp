@@ -11,7 +11,8 @@
 //                                                  and each kill is taken by exactly one of them.
 // Points: slot_write (halfway through copying a payload into a staging slot), before_completion (payload and
 // checksum in the slot, completion not pushed), after_ring_push (completion record published, the renderer
-// not yet woken, statistics not yet counted), eviction (a RAM-cache victim picked, not yet erased).
+// not yet woken, statistics not yet counted), eviction (a RAM-cache victim picked, not yet erased),
+// mid_ring_push (inside the completion ring's push: half of the record copied, the position not published).
 //
 // Cost when neither variable is set: one relaxed atomic load per pass after the first (which reads the
 // environment once). Thread-safe: workers and the main loop pass points concurrently.
@@ -24,8 +25,18 @@
 
 namespace texstream::server {
 
-enum class FaultPoint : uint8_t { kSlotWrite = 0, kBeforeCompletion = 1, kAfterRingPush = 2, kEviction = 3 };
-inline constexpr uint32_t kFaultPointCount = 4;
+enum class FaultPoint : uint8_t {
+  kSlotWrite = 0,
+  kBeforeCompletion = 1,
+  kAfterRingPush = 2,
+  kEviction = 3,
+  kMidRingPush = 4,
+};
+inline constexpr uint32_t kFaultPointCount = 5;
+
+// True when TEXSTREAM_FAULT or TEXSTREAM_FAULT_ARM is set: the server then hooks the completion ring's push
+// (kMidRingPush); otherwise the ring runs without the hook's call.
+bool fault_injection_enabled();
 
 const char* to_string(FaultPoint point);
 std::optional<FaultPoint> fault_point_from_string(std::string_view name);
