@@ -1,5 +1,6 @@
 #include "texstream/render/stream_client.hpp"
 
+#include <signal.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -131,13 +132,17 @@ const char* to_string(RequestOutcome outcome) {
     case RequestOutcome::kNoServer: return "no server";
     case RequestOutcome::kUnknownTexture: return "unknown texture";
     case RequestOutcome::kBadMip: return "mip level out of range";
+    case RequestOutcome::kQuarantined: return "texture quarantined (it crashed the server twice)";
   }
   return "?";
 }
 
 SendResult to_send_result(RequestOutcome outcome) {
   switch (outcome) {
-    case RequestOutcome::kSent: return SendResult::kSent;
+    case RequestOutcome::kSent:
+    // Answered at once: its kCorrupt comes with the next poll. kSent, so the texture states hold the mip
+    // pending and take that failure (kSkip would leave the texture wanted, and asked for, forever).
+    case RequestOutcome::kQuarantined: return SendResult::kSent;
     case RequestOutcome::kAlreadyInFlight:
     case RequestOutcome::kUnknownTexture:
     case RequestOutcome::kBadMip: return SendResult::kSkip;
@@ -270,6 +275,11 @@ RequestOutcome StreamClient::try_request(TextureId texture, MipLevel mip, float 
   IpcScope scope(*this);
   if (texture.value >= shapes_.size()) return RequestOutcome::kUnknownTexture;
   if (mip.value >= shapes_[texture.value].mip_count) return RequestOutcome::kBadMip;
+  if (quarantined_.count(texture.value) != 0) {
+    // Never sent: the texture states learn at the next poll that it failed for good (kCorrupt).
+    if (quarantine_refused_set_.insert(key(texture, mip)).second) quarantine_refused_.push_back(key(texture, mip));
+    return RequestOutcome::kQuarantined;
+  }
   if (!accepting_requests()) return RequestOutcome::kNoServer;
   if (in_flight_.count(key(texture, mip))) return RequestOutcome::kAlreadyInFlight;
   if (in_flight_.size() >= static_cast<size_t>(config_.stream.max_requests_in_flight)) {
@@ -376,8 +386,51 @@ void StreamClient::on_server_gone(MipSink& sink, const std::string& why) {
     spdlog::warn("texstream-server gone ({}): {} request(s) in flight lost", why, lost.size());
   }
   for (uint64_t k : lost) {
+    const auto texture = static_cast<uint32_t>(k >> 32);
+    // A quarantined texture's lost request is its final answer; any other is asked again (kCancelled).
+    sink.failed(TextureId(texture), MipLevel(static_cast<uint32_t>(k)),
+                quarantined_.count(texture) != 0 ? CompletionStatus::kCorrupt : CompletionStatus::kCancelled);
+  }
+}
+
+void StreamClient::charge_crash(int signal) {
+  // Signals a process raises on itself when its own code fails; SIGKILL (and SIGTERM) come from outside.
+  const bool crash = signal == SIGSEGV || signal == SIGBUS || signal == SIGABRT || signal == SIGFPE ||
+                     signal == SIGILL;
+  if (!crash) return;
+  ++stats_.crash_signal_deaths;
+  const ServerBlock& sb = std::as_const(*segment_).server_block();
+  std::unordered_set<uint32_t> charged;  // two workers on one texture: one crash, one charge
+  for (uint32_t i = 0; i < kLoadingWords; ++i) {
+    // relaxed: the writer is dead and reaped; its stores are in the page.
+    const uint32_t word = sb.loading[i].v.load(std::memory_order_relaxed);
+    // A dead server's words are as untrusted as its completions: ids outside the table are ignored.
+    if (word == 0 || word - 1 >= shapes_.size()) continue;
+    const uint32_t texture = word - 1;
+    if (!charged.insert(texture).second || quarantined_.count(texture) != 0) continue;
+    const uint32_t n = ++crash_charges_[texture];
+    if (n < kQuarantineAfterCrashes) {
+      spdlog::warn("texstream-server died by signal {} while loading texture {} (crash {} of {} before it is "
+                   "quarantined)",
+                   signal, texture, n, kQuarantineAfterCrashes);
+      continue;
+    }
+    quarantined_.insert(texture);
+    ++stats_.textures_quarantined;
+    spdlog::warn("texture {} quarantined: texstream-server crashed {} times while loading it (last: signal {}); "
+                 "it is not requested again and stays on its colormap",
+                 texture, n, signal);
+  }
+}
+
+void StreamClient::fail_quarantined_requests(MipSink& sink) {
+  if (quarantine_refused_.empty()) return;
+  std::vector<uint64_t> refused;
+  refused.swap(quarantine_refused_);
+  quarantine_refused_set_.clear();
+  for (uint64_t k : refused) {
     sink.failed(TextureId(static_cast<uint32_t>(k >> 32)), MipLevel(static_cast<uint32_t>(k)),
-                CompletionStatus::kCancelled);
+                CompletionStatus::kCorrupt);
   }
 }
 
@@ -396,6 +449,9 @@ void StreamClient::supervise(MipSink& sink) {
   const SteadyTime t = now();
   if (auto exit = process_->reap(t)) {
     ++stats_.server_deaths;
+    // Before on_server_gone (a quarantined texture's lost requests fail for good) and before the reset
+    // (which zeroes the words).
+    if (!exit->killed_by_us) charge_crash(exit->term_signal);
     on_server_gone(sink, "pid " + std::to_string(exit->pid) + " " + exit->how +
                              (exit->killed_by_us ? " after we killed it: " + exit->kill_reason : ""));
     // Only now, with the process reaped, are its words in the segment ours to reset.
@@ -430,6 +486,7 @@ void StreamClient::poll(MipSink& renderer_sink, size_t max_mips) {
   // relaxed: a progress counter only; we are its sole writer.
   rb.heartbeat.v.store(rb.heartbeat.v.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
   supervise(sink);
+  fail_quarantined_requests(sink);
   if (!accepting_requests()) return;
   flush_releases();
 
@@ -658,6 +715,8 @@ std::string StreamClient::stats_text() const {
     << "server_restarts " << s.server_restarts << "\n"
     << "server_deaths " << s.server_deaths << "\n"
     << "server_crashes " << s.server_crashes << "\n"
+    << "crash_signal_deaths " << s.crash_signal_deaths << "\n"
+    << "textures_quarantined " << s.textures_quarantined << "\n"
     << "lost_resent " << s.lost_resent << "\n"
     << "lost_answered_in_time " << s.lost_answered_in_time << "\n"
     << "unserved_after_restart " << s.unserved_after_restart << "\n"

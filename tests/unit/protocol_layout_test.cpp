@@ -22,9 +22,11 @@ TEST(ProtocolLayout, RecordSizesAndOffsets) {
   EXPECT_EQ(sizeof(SegmentHeader), 224u);
   EXPECT_EQ(sizeof(RendererBlock), 64u);
   EXPECT_EQ(sizeof(ServerBlock), 128u);
+  EXPECT_EQ(offsetof(ServerBlock, loading), 80u);  // version 2: the load workers' textures (crash quarantine)
+  EXPECT_EQ(kLoadingWords, 8u);
   EXPECT_EQ(sizeof(RingControl), 128u);
   EXPECT_EQ(offsetof(RingControl, read_pos), 64u);
-  EXPECT_EQ(kLayoutVersion, 1u);
+  EXPECT_EQ(kLayoutVersion, 2u);
 }
 
 TEST(ProtocolLayout, ComputedLayoutIsAlignedAndDisjoint) {

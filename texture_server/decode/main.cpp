@@ -7,6 +7,13 @@
 // read_image: for a tiled file only that level's tiles), checked against the texture table's extent, into
 // RGBA8 (texel_conversion.hpp). OpenImageIO 2.4 returns true from reads of truncated JPEG and TIFF files with
 // wrong pixels, so a read succeeds only if it returned true AND has_error() is false AND no read failed.
+//
+// Test hooks (issue 9's quarantine tests; unset in normal runs, read once at start):
+//   TEXSTREAM_DECODE_CRASH_ON=<text>  abort() when asked to decode a path that contains <text>
+//   TEXSTREAM_DECODE_HANG_ON=<text>   read the file's first bytes, then stop answering (sleep until killed)
+// They stand in for a hostile file that crashes or hangs OpenImageIO, which no fixed file does reliably
+// across OpenImageIO versions.
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <OpenImageIO/filesystem.h>
@@ -157,7 +164,36 @@ Outcome decode(RemoteProxy& proxy, const std::string& path, uint32_t level, Exte
   return Outcome{};
 }
 
+// The test hooks above; empty = off.
+struct TestHooks {
+  std::string crash_on;
+  std::string hang_on;
+};
+
+TestHooks read_test_hooks() {
+  TestHooks h;
+  if (const char* v = std::getenv("TEXSTREAM_DECODE_CRASH_ON"); v != nullptr) h.crash_on = v;
+  if (const char* v = std::getenv("TEXSTREAM_DECODE_HANG_ON"); v != nullptr) h.hang_on = v;
+  return h;
+}
+
+void apply_test_hooks(const TestHooks& hooks, const std::string& path, RemoteProxy& proxy) {
+  if (!hooks.crash_on.empty() && path.find(hooks.crash_on) != std::string::npos) {
+    const rlimit no_core{0, 0};
+    ::setrlimit(RLIMIT_CORE, &no_core);  // a deliberate crash leaves no core file behind in tests
+    std::abort();
+  }
+  if (!hooks.hang_on.empty() && path.find(hooks.hang_on) != std::string::npos) {
+    // As OpenImageIO stuck on a hostile header would: the header read first (the server charges a timeout
+    // to the file only once the helper has read from it), then nothing.
+    char header[16];
+    (void)proxy.pread(header, sizeof header, 0);
+    for (;;) ::pause();  // the server's timeout kills us (SIGKILL), or the orphan watch in main() ends us
+  }
+}
+
 int serve(int fd) {
+  const TestHooks hooks = read_test_hooks();
   DecodeChannel channel(fd);
   std::vector<std::byte> pixels;
   for (;;) {
@@ -170,6 +206,7 @@ int serve(int fd) {
     // The slot bound the server enforces is far below this; a larger request is a broken server.
     if (uint64_t{expected.width} * expected.height * 4 > (1ull << 32)) return 2;
     RemoteProxy proxy(channel, *path, request->c);
+    apply_test_hooks(hooks, *path, proxy);
     const Outcome outcome = decode(proxy, *path, static_cast<uint32_t>(request->a), expected, pixels);
     if (proxy.channel_dead()) return 2;
     DecodeFrame result;

@@ -147,11 +147,16 @@ Status DecodeHelper::decode(StorageFile& file, const std::filesystem::path& path
   const uint64_t pixels_bytes = uint64_t{expected.width} * expected.height * 4;
   TS_ASSERT(out.size() >= pixels_bytes, "decode target of %zu bytes for %llu", out.size(),
             static_cast<unsigned long long>(pixels_bytes));
+  helper_failed_ = false;
   Result<uint64_t> size = file.size();
   if (!size.ok()) return fail(ErrorCode::kIo, path, level, size.error().message);
   // Everything that is not the file's own fault ends the helper: it is killed, the caller gets an error that
   // names the file, and the pool starts a fresh helper for the next decode.
+  // Whether the helper has asked for a byte of this file yet: before that, a timeout may be a helper still
+  // starting (loading OpenImageIO's libraries on a loaded machine takes seconds), not the file's doing.
+  bool touched_file = false;
   const auto broken = [&](const Error& e) -> Error {
+    helper_failed_ = e.code != ErrorCode::kTimeout || touched_file;
     const std::string how = kill_and_reap();
     const ErrorCode code = e.code == ErrorCode::kTimeout ? ErrorCode::kTimeout : ErrorCode::kCorrupt;
     return fail(code, path, level, fmt::format("the decode helper failed ({}): {}", e.message, how));
@@ -164,12 +169,17 @@ Status DecodeHelper::decode(StorageFile& file, const std::filesystem::path& path
   request.b = (uint64_t{expected.width} << 32) | expected.height;
   request.c = *size;
   if (Status s = channel_.send(request, std::as_bytes(std::span(name.data(), name.size()))); !s.ok()) {
-    return broken(s.error());
+    // The helper was gone before it got the path (killed from outside while idle): ended like any broken
+    // helper, but not counted against this file.
+    Error e = broken(s.error());
+    helper_failed_ = false;
+    return e;
   }
   for (;;) {
     Result<DecodeFrame> frame = channel_.receive_header(timeout);
     if (!frame.ok()) return broken(frame.error());
     if (frame->type == uint32_t(DecodeFrameType::kRead)) {
+      touched_file = true;
       if (Status s = serve_read(file, *frame, bytes_read); !s.ok()) return broken(s.error());
       continue;
     }

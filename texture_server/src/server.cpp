@@ -133,18 +133,22 @@ Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const S
   auto wake = [doorbell, sleeping] {
     if (sleeping->v.load(std::memory_order_seq_cst) == 1) futex_wake_all(*doorbell);
   };
+  // Crash attribution (ServerBlock::loading, read by the renderer after a crash): the local workers' words
+  // first, the remote fetch workers' after them; workers beyond kLoadingWords are not recorded.
+  const std::span<ShmAtomic<uint32_t>> loading(segment_.server_block().loading);
+  const size_t local_words = std::min<size_t>(loading.size(), static_cast<size_t>(config.worker_threads));
   workers_ = std::make_unique<WorkerPool>(
       static_cast<uint32_t>(config.worker_threads),
       [this](const LoadJob& job) {
         return loader_.load(job.request, job.record, job.slot, segment_.slot(job.slot), /*local_only=*/true);
       },
-      wake);
+      wake, loading.first(local_words));
   remote_workers_ = std::make_unique<WorkerPool>(
       static_cast<uint32_t>(config.remote_fetches_in_flight),
       [this](const LoadJob& job) {
         return loader_.load(job.request, job.record, job.slot, segment_.slot(job.slot), /*local_only=*/false);
       },
-      wake);
+      wake, loading.subspan(local_words));
 }
 
 Server::~Server() {

@@ -2,6 +2,8 @@
 
 #include <fmt/format.h>
 
+#include "texstream/server/decode_helper_pool.hpp"
+
 namespace texstream::server {
 
 namespace {
@@ -37,6 +39,12 @@ std::string format_stats(const ServerStats& s, const MipCacheStats& c) {
                        "max={}\n",
                        name, h->count(), h->mean_us(), h->percentile_us(50), h->percentile_us(90),
                        h->percentile_us(99), h->max_us());
+  }
+  // The process's decode helpers (one pool for every server in it); no line while no decode ever ran.
+  if (const std::optional<DecodeHelperPoolStats> d = default_decode_helper_pool_stats()) {
+    out += fmt::format("decode helpers: {} started, {} crashed or hung, {} files quarantined, {} decodes refused "
+                       "as quarantined\n",
+                       d->helpers_started, d->helper_failures, d->files_quarantined, d->quarantine_refusals);
   }
   if (!out.empty()) out.pop_back();
   return out;

@@ -2,11 +2,12 @@
 
 namespace texstream::server {
 
-WorkerPool::WorkerPool(uint32_t threads, Work work, std::function<void()> on_result)
-    : work_(std::move(work)), on_result_(std::move(on_result)) {
+WorkerPool::WorkerPool(uint32_t threads, Work work, std::function<void()> on_result,
+                       std::span<ShmAtomic<uint32_t>> loading)
+    : work_(std::move(work)), loading_(loading), on_result_(std::move(on_result)) {
   results_.reserve(64);
   threads_.reserve(threads);
-  for (uint32_t i = 0; i < threads; ++i) threads_.emplace_back([this] { worker_main(); });
+  for (uint32_t i = 0; i < threads; ++i) threads_.emplace_back([this, i] { worker_main(i); });
 }
 
 WorkerPool::~WorkerPool() {
@@ -34,7 +35,8 @@ void WorkerPool::take_results(std::vector<LoadResult>& out) {
   ready_.store(0, std::memory_order_release);  // pairs with results_ready()'s acquire
 }
 
-void WorkerPool::worker_main() {
+void WorkerPool::worker_main(uint32_t index) {
+  ShmAtomic<uint32_t>* const loading = index < loading_.size() ? &loading_[index] : nullptr;
   for (;;) {
     LoadJob job;
     {
@@ -44,8 +46,11 @@ void WorkerPool::worker_main() {
       job = jobs_.front();
       jobs_.pop_front();
     }
-    // The read and the copy run with no lock held.
+    // The read and the copy run with no lock held. Relaxed: the renderer reads the word only after this
+    // process died, when every store it made is in the shared page.
+    if (loading) loading->v.store(job.request.texture.value + 1, std::memory_order_relaxed);
     const CompletionRecord completion = work_(job);
+    if (loading) loading->v.store(0, std::memory_order_relaxed);
     {
       std::lock_guard lock(mutex_);
       results_.push_back({completion, job.slot, job.request.received_ns, job.request});

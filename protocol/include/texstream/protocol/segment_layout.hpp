@@ -19,7 +19,7 @@
 namespace texstream {
 
 inline constexpr uint64_t kSegmentMagic = 0x314d525453584554ull;  // "TEXSTRM1" read little-endian
-inline constexpr uint32_t kLayoutVersion = 1;
+inline constexpr uint32_t kLayoutVersion = 2;  // 2: ServerBlock.loading
 inline constexpr uint64_t kSegmentHeaderBytes = 4096;
 inline constexpr uint64_t kSlotAlignment = 4096;
 inline constexpr uint32_t kCompilerIdBytes = 64;
@@ -68,6 +68,10 @@ static_assert(sizeof(RendererBlock) == 64);
 static_assert(offsetof(RendererBlock, heartbeat) == 16);
 static_assert(offsetof(RendererBlock, doorbell) == 32);
 
+// Load workers whose current texture the ServerBlock records (ServerBlock::loading): the default server
+// runs 2 (config.hpp), the words fill the block's spare 32 bytes.
+inline constexpr uint32_t kLoadingWords = 8;
+
 // Written by the server only.
 struct alignas(64) ServerBlock {
   ShmAtomic<uint32_t> attached;    // 1 while a server serves this segment
@@ -83,11 +87,17 @@ struct alignas(64) ServerBlock {
   ShmAtomic<uint64_t> ram_cache_hits;     // mips served from the RAM cache
   ShmAtomic<uint64_t> ram_cache_misses;   // mips read from storage
   ShmAtomic<uint64_t> bytes_read;         // bytes read from storage (exact mip reads + headers)
-  uint64_t reserved1[6];
+  // Crash attribution (issue 9): loading[i] = texture id + 1 while load worker i works on that texture, 0
+  // while idle (relaxed stores; workers beyond kLoadingWords are not recorded). Read by the renderer only
+  // after the server died by a crash signal, before it resets the block: a texture being loaded during two
+  // crashes is quarantined (stream_client.hpp).
+  ShmAtomic<uint32_t> loading[kLoadingWords];
+  uint64_t reserved1[2];
 };
 static_assert(sizeof(ServerBlock) == 128);
 static_assert(offsetof(ServerBlock, heartbeat) == 16);
 static_assert(offsetof(ServerBlock, completions) == 32);
+static_assert(offsetof(ServerBlock, loading) == 80);
 
 struct SegmentParams {
   uint32_t request_capacity = 1024;

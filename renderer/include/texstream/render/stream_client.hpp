@@ -18,6 +18,15 @@
 // to us; a kReleaseSlot request hands it back. We track which slots we hold, so a completion naming a slot
 // we already hold is refused (and never released twice).
 //
+// Crash quarantine (issue 9): the server records in ServerBlock::loading the texture each load worker is
+// working on. When the server dies by a crash signal it raised itself (SIGSEGV, SIGBUS, SIGABRT, SIGFPE,
+// SIGILL: never SIGKILL, which is the watchdog, texstream-chaos or the OOM killer), the textures in those
+// words are charged one crash each, read before the segment is reset. A texture charged
+// kQuarantineAfterCrashes times is quarantined for this client's life: it is never requested again (every
+// request of it fails at once with kCorrupt, as a broken file does, so the texture states leave it on its
+// colormap), and its requests lost with the dead server fail with kCorrupt instead of kCancelled. A
+// texture that merely shared a crash with a guilty one is charged once and served on.
+//
 // Single-threaded: the renderer's frame thread makes every call.
 #include <chrono>
 #include <cstdint>
@@ -29,6 +38,7 @@
 #include <span>
 #include <string>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include "texstream/common/config.hpp"
@@ -71,9 +81,11 @@ enum class RequestOutcome : uint8_t {
   kNoServer,          // the server is dead, backing off or in colormap-only mode
   kUnknownTexture,    // id outside the texture table
   kBadMip,            // mip level >= the texture's mip count
+  kQuarantined,       // the texture was being loaded when the server crashed twice: failed (kCorrupt) at next poll
 };
 const char* to_string(RequestOutcome outcome);
-// kSent → kSent; outcomes about this one (texture, mip) → kSkip; outcomes about the whole pipe → kStop.
+// kSent and kQuarantined (answered kCorrupt at the next poll) → kSent; other outcomes about this one
+// (texture, mip) → kSkip; outcomes about the whole pipe → kStop.
 SendResult to_send_result(RequestOutcome outcome);
 
 enum class StreamServerState : uint8_t {
@@ -120,6 +132,8 @@ struct StreamStats {
   uint64_t server_restarts = 0;                          // spawns after the first
   uint64_t server_deaths = 0;
   uint64_t server_crashes = 0;                           // deaths counted as crashes (RestartPolicy)
+  uint64_t crash_signal_deaths = 0;                      // deaths by a crash signal the server raised itself
+  uint64_t textures_quarantined = 0;                     // loaded during kQuarantineAfterCrashes such deaths
   // Recovery (issue 9): a request in flight when the server died, sent again to a later server, must be
   // answered (any status) within kRecoveryDeadline of being sent again.
   uint64_t lost_resent = 0;                              // lost requests sent again
@@ -155,6 +169,9 @@ struct StreamClientOptions {
 class StreamClient {
  public:
   static constexpr std::chrono::milliseconds kRecoveryDeadline{2000};  // issue 9: served within 2 s of a restart
+  // Crashes while a texture was being loaded before it is quarantined (issue 9: "a file that crashed it
+  // twice"): one is forgiven, as a texture may share a crash with another one that caused it.
+  static constexpr uint32_t kQuarantineAfterCrashes = 2;
   // Removes stale "texstream-" segments, creates this one (protocol.segment_name or "texstream-<pid>",
   // sized from `config.protocol`), and spawns the server (unless options.spawn_server is false) with
   // `--scene scene_dir`, `--config config_file` (if not empty) and each override as `--set`.
@@ -193,6 +210,7 @@ class StreamClient {
   // written elsewhere).
   std::string stats_text() const;
   bool in_flight(TextureId texture, MipLevel mip) const;
+  bool quarantined(TextureId texture) const { return quarantined_.count(texture.value) != 0; }
   const Segment& segment() const { return *segment_; }
   Segment& segment() { return *segment_; }
   int server_pid() const { return process_ ? process_->pid() : -1; }
@@ -227,6 +245,11 @@ class StreamClient {
   void release_slot(SlotIndex slot);
   void supervise(MipSink& sink);
   void on_server_gone(MipSink& sink, const std::string& why);
+  // A server died by signal `signal`: if it is a crash signal, charges the textures its workers were loading
+  // (ServerBlock::loading; before the segment is reset) and quarantines those charged often enough.
+  void charge_crash(int signal);
+  // Fails (kCorrupt) the requests of quarantined textures refused since the last poll.
+  void fail_quarantined_requests(MipSink& sink);
   void protocol_error(const std::string& what);
   // Returns false when the sink had no room (the completion is held).
   bool deliver(const CheckedCompletion& c, MipSink& sink);
@@ -267,6 +290,10 @@ class StreamClient {
   uint64_t sink_ns_ = 0;        // time inside the sink during the current client call
   int ipc_depth_ = 0;           // nested client calls (poll → restart paths) count once
   SteadyTime next_expiry_scan_{};
+  std::unordered_map<uint32_t, uint32_t> crash_charges_;  // texture id → crashes while it was being loaded
+  std::unordered_set<uint32_t> quarantined_;              // texture ids
+  std::vector<uint64_t> quarantine_refused_;              // keys refused by try_request, failed at next poll
+  std::unordered_set<uint64_t> quarantine_refused_set_;   // the same keys: each failed once per poll
 };
 
 }  // namespace texstream

@@ -33,10 +33,17 @@ class DecodeHelper {
   // Decodes mip `level` of `file` (named `path`) into `out` (expected.width * expected.height * 4 bytes).
   // `bytes_read` gets what was read from storage, also on failure. `timeout` bounds each wait for the helper.
   // A file error (kCorrupt, kIo, ...) leaves the helper usable; after any other failure usable() is false.
+  // helper_failed() then tells whether the helper itself failed on this file (see there).
   Status decode(StorageFile& file, const std::filesystem::path& path, uint32_t level, Extent2D expected,
                 std::span<std::byte> out, uint64_t& bytes_read, std::chrono::milliseconds timeout);
   // False once the helper failed, exited or broke the protocol: the pool drops it.
   bool usable();
+  // True when the last decode() ended because the helper failed while it held the file: it died (a signal, an
+  // exit), broke the protocol, or hung past the timeout after it had read from the file. False after a
+  // success, an error the helper reported itself (the file's own fault: kCorrupt, kIo, ...), a helper found
+  // dead before it was sent the file (killed from outside while idle), and a timeout before its first read
+  // (a helper slow to start on a loaded machine): nothing to blame the file for. The pool quarantines on it.
+  bool helper_failed() const { return helper_failed_; }
   pid_t pid() const { return pid_; }
 
  private:
@@ -48,6 +55,7 @@ class DecodeHelper {
   pid_t pid_ = -1;
   DecodeChannel channel_;
   bool broken_ = false;
+  bool helper_failed_ = false;
   std::vector<std::byte> read_buffer_;  // reused across reads: no allocation per kRead once grown
 };
 

@@ -2,7 +2,8 @@
 // The server's statistics (issue 3): hits, misses, evictions, bytes read, read amplification, queue lengths
 // and request→completion latency histograms for hits and misses. Counters are relaxed atomics written by
 // the dispatcher and the workers; a snapshot may be taken from any thread (the bench reads it while the
-// server runs). Printed at exit and on SIGUSR1 (format_stats).
+// server runs). Printed at exit and on SIGUSR1 (format_stats), with the process's decode helpers' counters
+// (crashes, quarantined files: decode_helper_pool.hpp).
 #include <atomic>
 #include <cstdint>
 #include <string>

@@ -10,11 +10,13 @@
 #include <deque>
 #include <functional>
 #include <mutex>
+#include <span>
 #include <thread>
 #include <vector>
 
 #include "texstream/common/scene_format.hpp"
 #include "texstream/protocol/records.hpp"
+#include "texstream/protocol/shm_atomic.hpp"
 #include "texstream/server/request_scheduler.hpp"
 
 namespace texstream::server {
@@ -36,7 +38,11 @@ class WorkerPool {
  public:
   using Work = std::function<CompletionRecord(const LoadJob&)>;
   // `on_result` runs on the worker thread after each result is queued (the server wakes its dispatcher).
-  WorkerPool(uint32_t threads, Work work, std::function<void()> on_result);
+  // `loading` (ServerBlock::loading, or part of it): worker i stores its job's texture id + 1 in loading[i]
+  // while the job runs and 0 after, so that the renderer can tell which texture a crashed server was
+  // loading; workers beyond loading.size() are not recorded.
+  WorkerPool(uint32_t threads, Work work, std::function<void()> on_result,
+             std::span<ShmAtomic<uint32_t>> loading = {});
   ~WorkerPool();  // finishes the jobs already started, drops the others, joins
   WorkerPool(const WorkerPool&) = delete;
   WorkerPool& operator=(const WorkerPool&) = delete;
@@ -50,9 +56,10 @@ class WorkerPool {
   bool results_ready() const { return ready_.load(std::memory_order_seq_cst) > 0; }
 
  private:
-  void worker_main();
+  void worker_main(uint32_t index);
 
   Work work_;
+  std::span<ShmAtomic<uint32_t>> loading_;
   std::function<void()> on_result_;
   std::mutex mutex_;
   std::condition_variable cv_;
