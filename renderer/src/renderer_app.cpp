@@ -189,6 +189,7 @@ class Renderer {
   uint64_t prev_mips_ = 0, prev_bytes_ = 0, prev_hits_ = 0, prev_misses_ = 0;
   std::optional<CameraPose> prev_pose_;
   std::unique_ptr<FrameMeasurement> measure_;  // render.reference_dir set: every frame captured and compared
+  std::vector<std::pair<std::string, double>> startup_seconds_;  // set_up()'s stages (RunSummary)
 };
 
 Status Renderer::set_up() {
@@ -197,6 +198,13 @@ Status Renderer::set_up() {
   fs::create_directories(output_dir_ / "frames", ec);
   if (ec) return make_error(ErrorCode::kIo, "render.output_dir '" + output_dir_.string() + "': " + ec.message());
 
+  // Start-up stages, timed for the summary (texstream-bench cache compares 1 K with 1 M textures).
+  auto stage_start = Clock::now();
+  auto stage = [&](const char* name) {
+    const auto t = Clock::now();
+    startup_seconds_.emplace_back(name, std::chrono::duration<double>(t - stage_start).count());
+    stage_start = t;
+  };
   auto scene = SceneData::load(cfg_.scene.dir);
   if (!scene) return scene.error();
   scene_ = std::move(*scene);
@@ -206,6 +214,7 @@ Status Renderer::set_up() {
   if (!path) return path.error();
   if (path->keys().empty()) return make_error(ErrorCode::kInvalidArgument, path_file.string() + ": no keyframes");
   path_ = std::make_unique<CameraPath>(std::move(*path));
+  stage("scene_load");
 
   // cache.format = auto takes the scene's texel format; an explicit one must match the scene's textures.
   const auto format = cfg_.cache.format == "auto" ? std::optional<TexelFormat>(scene_.manifest.texture_format)
@@ -230,6 +239,7 @@ Status Renderer::set_up() {
   if (!ctx) return ctx.error();
   ctx_ = std::move(*ctx);
   spdlog::info("vulkan device: {}", ctx_->device_name());
+  stage("vulkan");
 
   states_ = std::make_unique<TextureStates>(scene_.shapes());
   TextureCacheOptions co;
@@ -241,6 +251,7 @@ Status Renderer::set_up() {
   auto cache = TextureCache::create(*ctx_, co, scene_, *states_);
   if (!cache) return cache.error();
   cache_ = std::move(*cache);
+  stage("texture_cache");
   // Load size s and mip bias b: controller.mode adaptive (Eq. 4-7), none (s = s_max, b = 0) or fixed.
   auto controller_params = ControllerParams::from_config(cfg_.controller);
   if (!controller_params) return controller_params.error();
@@ -252,6 +263,7 @@ Status Renderer::set_up() {
   auto gpu = SceneGpu::create(*ctx_, scene_);
   if (!gpu) return gpu.error();
   scene_gpu_ = std::make_unique<SceneGpu>(std::move(*gpu));
+  stage("scene_gpu_upload");
   compiler_ = std::make_unique<ShaderCompiler>(ShaderCompiler::default_source_dir(), ShaderCompiler::default_cache_dir());
   ScenePassesOptions po;
   po.width = static_cast<uint32_t>(cfg_.render.width_px);
@@ -264,11 +276,13 @@ Status Renderer::set_up() {
   auto passes = ScenePasses::create(*ctx_, *compiler_, po, *scene_gpu_, *cache_);
   if (!passes) return passes.error();
   passes_ = std::move(*passes);
+  stage("passes_and_shaders");
   if (interactive_) TS_TRY(interactive_->attach(*ctx_));
   auto capture = FrameCapture::create(*ctx_, po.width, po.height);
   if (!capture) return capture.error();
   capture_ = std::make_unique<FrameCapture>(std::move(*capture));
   broad_phase_ = std::make_unique<BroadPhase>(scene_.meshes.meshes);
+  stage("broad_phase_tree");
 
   VkDevice device = ctx_->device();
   VkCommandPoolCreateInfo pci{};
@@ -305,6 +319,7 @@ Status Renderer::set_up() {
   auto client = StreamClient::start(cfg_, scene_.shapes(), scene_.dir, run_.config_file, run_.overrides, so);
   if (!client) return client.error();
   client_ = std::move(*client);
+  stage("stream_client");
   if (run_.in_process_server) {
     in_process_ = run_.in_process_server(cfg_);
     if (!in_process_) return make_error(ErrorCode::kInvalidArgument, "in-process server: the factory made none");
@@ -681,6 +696,7 @@ Result<RunSummary> Renderer::run() {
   s.avg_weighted_latency_ms = sum_tw_ms_ / n;
   s.load_time_limited_frames = load_time_limited_frames_;
   s.controller_rejected_frames = controller_->frames_rejected();
+  s.startup_seconds = startup_seconds_;
   TS_TRY(cache_->write_stats_json(output_dir_ / "cache.json"));  // budget checks, binds, thrash rate
   if (measure_) {
     TS_TRY(measure_->measure(frames_));

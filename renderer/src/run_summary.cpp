@@ -44,6 +44,9 @@ std::string RunSummary::to_json() const {
                      {"avg_weighted_latency_ms", avg_weighted_latency_ms},
                      {"load_time_limited_frames", load_time_limited_frames},
                      {"rejected_frames", controller_rejected_frames}};
+  nlohmann::json startup = nlohmann::json::object();
+  for (const auto& [stage, seconds] : startup_seconds) startup[stage] = seconds;
+  j["startup_seconds"] = startup;
   return j.dump(2);
 }
 

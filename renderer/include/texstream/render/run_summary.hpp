@@ -3,6 +3,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "texstream/common/result.hpp"
@@ -39,6 +40,8 @@ struct RunSummary {
   double avg_weighted_latency_ms = 0;  // t_w (Eq. 5)
   uint64_t load_time_limited_frames = 0;   // frames whose completion intake hit controller.load_time_ms
   uint64_t controller_rejected_frames = 0; // frame latencies the controller refused (non-finite, negative)
+  // Start-up, stage by stage in order (seconds of wall time): what grows with the scene's size.
+  std::vector<std::pair<std::string, double>> startup_seconds;
 
   std::string to_json() const;
   std::string to_text() const;
