@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdlib>
 #include <cstdio>
 #include <functional>
 #include <thread>
@@ -159,7 +160,10 @@ TEST(ChaosRecovery, AStoppedServerIsKilledByTheWatchdogWithinTheHeartbeatTimeout
 TEST(ChaosRecovery, ARestartStormEndsInNormalStreamingWithin5s) {
   Rig rig(chaos_test::unique("storm"));
   ASSERT_TRUE(rig.client) << "texstream-server not built";
-  constexpr int kKills = 30;
+  // Issue 9: 100 kills (asserted to fit in 60 s, printed); TEXSTREAM_STORM_KILLS changes the count.
+  const char* env = std::getenv("TEXSTREAM_STORM_KILLS");
+  const int kKills = env != nullptr && std::atoi(env) > 0 ? std::atoi(env) : 100;
+  const auto storm_start = Clock::now();
   for (int k = 0; k < kKills; ++k) {
     ASSERT_LT(rig.pump([&] { return rig.client->server_pid() > 0 && rig.attached(); }, 10s), 10s) << "kill " << k;
     rig.client->begin_cycle();
@@ -168,6 +172,8 @@ TEST(ChaosRecovery, ARestartStormEndsInNormalStreamingWithin5s) {
     rig.pump([&] { return rig.client->stats().server_deaths == static_cast<uint64_t>(k + 1); }, 2s);
   }
   const auto after_storm = Clock::now();
+  std::printf("storm: %d SIGKILLs in %.1f s\n", kKills, std::chrono::duration<double>(after_storm - storm_start).count());
+  EXPECT_LT(after_storm - storm_start, std::chrono::seconds(60) * std::max(1, kKills / 100));
   const int before = rig.sink.commits;
   auto streaming = [&] {
     if (rig.client->stats().in_flight == 0) {
