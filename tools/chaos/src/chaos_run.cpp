@@ -45,7 +45,9 @@ constexpr const char* kFaultPoints[] = {"slot_write", "before_completion", "afte
 constexpr double kNamedKillFraction = 0.5;
 // How long an armed point may take to be reached: the server's watcher polls every 2 ms, and the points lie
 // on the path of every served mip (eviction only once the RAM cache is full). Past this, a SIGKILL instead.
-constexpr auto kNamedKillWait = std::chrono::milliseconds(300);
+constexpr auto kNamedKillWait = std::chrono::milliseconds(1000);
+// The servers' RAM cache in chaos runs (see Runner::start).
+constexpr int64_t kChaosRamCacheBytes = 4 << 20;
 // The server's comm name (TASK_COMM_LEN truncates "texstream-server" to 15 characters).
 constexpr const char* kServerComm = "texstream-serve";
 
@@ -125,6 +127,9 @@ class Runner {
                                   "--set", "render.validation=false",
                                   "--set", "render.write_every_frames=0",
                                   "--set", "server.executable=" + tool_.server.string(),
+                                  // A RAM cache far smaller than the scene: the server keeps reading and
+                                  // evicting, so the eviction kill point is on its path (the image is the same).
+                                  "--set", "server.ram_cache_bytes=" + std::to_string(kChaosRamCacheBytes),
                                   "--set", "protocol.segment_name=" + segment(r.name)};
     std::vector<std::string> env = r.env;
     env.push_back("TEXSTREAM_STREAM_STATS=" + stats_file(r.name).string());
