@@ -58,7 +58,7 @@ void watch_arm_file(FaultState* state, std::string file) {
       state->armed.store(static_cast<int>(*p), std::memory_order_relaxed);  // relaxed: a lone flag, no data
     } else {
       spdlog::error("{} named fault point '{}', not one of slot_write, before_completion, after_ring_push, "
-                    "eviction: ignored", file, name);
+                    "eviction, mid_ring_push: ignored", file, name);
     }
   }
 }

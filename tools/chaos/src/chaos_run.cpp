@@ -340,7 +340,7 @@ ChaosResult run_chaos(const ChaosOptions& o) {
   }
   log("named kill points: " + std::to_string(named_tried) + " armed, " + std::to_string(named_hit) +
       " reached (the server died there), " + std::to_string(named_unclaimed) +
-      " never claimed by a server (texstream-server built without fault points?); the rest SIGKILLed");
+      " never claimed (a server reads the arm file only once it has passed a point: one idle since its start never does); the rest SIGKILLed");
   {
     std::string per_point = "named kill points reached / armed:";
     for (size_t i = 0; i < std::size(kFaultPoints); ++i)
