@@ -3,10 +3,12 @@
 #include <cstring>
 #include <memory>
 #include <random>
+#include <unordered_map>
 #include <vector>
 
 #include "texstream/server/lru_eviction_policy.hpp"
 #include "texstream/server/mip_cache.hpp"
+#include "texstream/server/mip_cache_table.hpp"
 
 namespace texstream::server {
 namespace {
@@ -216,6 +218,71 @@ TEST(MipCacheTest, ArenaFullOfPinnedEntriesGivesNoPayloadInsteadOfOverflowing) {
   pins.pop_back();  // key(3) unpinned: it can go
   EXPECT_NE(cache.make_payload(4096), nullptr);
   EXPECT_FALSE(cache.contains(key(3)));
+}
+
+// The index under a random mix of inserts and erases, against std::unordered_map: growth past the initial
+// size, long probe runs and backward-shift deletion (an erase in the middle of a run must leave every later
+// key of the run findable, and no stale copy of a moved entry behind).
+TEST(MipCacheTableTest, AgreesWithAReferenceMapUnderRandomInsertsAndErases) {
+  // 8 textures x 4 mips stay within the initial 64 slots, so probe runs often wrap around the table's end;
+  // 301 x 4 make it grow several times.
+  for (const uint32_t textures : {8u, 301u}) {
+    MipCacheTable table;
+    std::unordered_map<uint64_t, uint64_t> reference;  // key value -> size
+    std::mt19937 rng(11);
+    // Few keys: keys come back after being erased, and runs of colliding homes form.
+    std::uniform_int_distribution<uint32_t> texture(0, textures - 1), mip(0, 3), action(0, 2);
+    for (int step = 0; step < 20000; ++step) {
+      const MipKey k = key(texture(rng), mip(rng));
+      const bool present = reference.count(k.value) != 0;
+      if (action(rng) != 0 && !present) {
+        MipCacheSlot slot;
+        slot.key = k;
+        slot.size = static_cast<uint64_t>(step) + 1;
+        slot.mip = mip_of(1, 1);
+        MipCacheSlot* placed = table.insert(std::move(slot));
+        ASSERT_EQ(placed->key, k);
+        reference[k.value] = static_cast<uint64_t>(step) + 1;
+      } else {
+        std::shared_ptr<const CachedMip> out;
+        ASSERT_EQ(table.erase(k, out), present) << "step " << step;
+        EXPECT_EQ(out != nullptr, present);
+        reference.erase(k.value);
+      }
+      ASSERT_EQ(table.size(), reference.size());
+      if (textures < 100 || step % 97 == 0) {
+        for (uint32_t t = 0; t < textures; ++t) {
+          for (uint32_t m = 0; m <= 3; ++m) {
+            const MipCacheSlot* e = table.find(key(t, m));
+            auto it = reference.find(key(t, m).value);
+            ASSERT_EQ(e != nullptr, it != reference.end()) << "step " << step << " texture " << t << " mip " << m;
+            if (e) {
+              EXPECT_EQ(e->size, it->second);
+            }
+          }
+        }
+      }
+    }
+  }
+}
+
+TEST(MipCacheTest, CopyIntoServesTheEntryStillPresentAfterOthersAreEvicted) {
+  // Evictions move entries inside the index (backward shift): the survivors must still copy their own bytes.
+  MipCache cache = make_cache(64 * 100);
+  for (uint32_t t = 0; t < 200; ++t) ASSERT_TRUE(cache.insert(key(t), mip_of(100, static_cast<uint8_t>(t))));
+  const MipCacheStats s = cache.stats();
+  EXPECT_LE(s.bytes, 64u * 100u);
+  EXPECT_EQ(s.entries, 64u);
+  std::vector<std::byte> dst(100);
+  for (uint32_t t = 0; t < 200; ++t) {
+    const std::optional<CachedCopy> c = cache.copy_into(key(t), dst);
+    ASSERT_EQ(c.has_value(), t >= 136) << "texture " << t;  // LRU: the last 64 inserted survive
+    if (!c) continue;
+    EXPECT_EQ(c->bytes, 100u);
+    EXPECT_EQ(c->checksum, t);
+    EXPECT_EQ(dst[0], std::byte{static_cast<uint8_t>(t)});
+    EXPECT_EQ(dst[99], std::byte{static_cast<uint8_t>(t)});
+  }
 }
 
 }  // namespace

@@ -6,40 +6,42 @@ namespace texstream::server {
 
 LevelEvictionPolicy::LevelEvictionPolicy(std::function<uint32_t(MipKey)> level_of) : level_of_(std::move(level_of)) {}
 
-void LevelEvictionPolicy::touch(const Where& w) {
-  std::list<Node>& list = levels_[w.level];
-  w.it->last_used = now_;
-  w.it->sequence = ++sequence_;
-  list.splice(list.begin(), list, w.it);
+void LevelEvictionPolicy::touch(Node& n) {
+  std::list<Node>& list = levels_[n.level];
+  n.last_used = now_;
+  n.sequence = ++sequence_;
+  list.splice(list.begin(), list, n.self);
 }
 
 PolicyNode* LevelEvictionPolicy::on_insert(MipKey key) {
   if (auto it = where_.find(key); it != where_.end()) {
-    touch(it->second);
-    return node_of(*it);
+    touch(*it->second);
+    return node_of(*it->second);
   }
   const uint32_t level = std::min(level_of_(key), kMaxLevels - 1);
   std::list<Node>& list = levels_[level];
-  list.push_front(Node{key, now_, ++sequence_});
-  return node_of(*where_.emplace(key, Where{level, list.begin()}).first);
+  list.push_front(Node{key, now_, ++sequence_, level, {}});
+  list.front().self = list.begin();
+  where_.emplace(key, list.begin());
+  return node_of(list.front());
 }
 
-void LevelEvictionPolicy::touch(PolicyNode* node) { touch(element_of(node).second); }
+void LevelEvictionPolicy::touch(PolicyNode* node) { touch(element_of(node)); }
 
 void LevelEvictionPolicy::erase(PolicyNode* node) {
-  WhereMap::value_type& e = element_of(node);
-  levels_[e.second.level].erase(e.second.it);
-  const MipKey key = e.first;  // a copy: erase() must not read the key of the element it frees
+  Node& n = element_of(node);
+  const MipKey key = n.key;  // a copy: the list erase below frees the node
+  levels_[n.level].erase(n.self);
   where_.erase(key);
 }
 
 void LevelEvictionPolicy::on_access(MipKey key) {
-  if (auto it = where_.find(key); it != where_.end()) touch(it->second);
+  if (auto it = where_.find(key); it != where_.end()) touch(*it->second);
 }
 
 void LevelEvictionPolicy::on_erase(MipKey key) {
   if (auto it = where_.find(key); it != where_.end()) {
-    levels_[it->second.level].erase(it->second.it);
+    levels_[it->second->level].erase(it->second);
     where_.erase(it);
   }
 }

@@ -20,55 +20,57 @@ MipCache::MipCache(uint64_t budget_bytes, std::unique_ptr<EvictionPolicy> policy
 
 std::shared_ptr<const CachedMip> MipCache::lookup(MipKey key) {
   std::lock_guard lock(mutex_);
-  auto it = entries_.find(key);
-  if (it == entries_.end()) {
+  MipCacheSlot* e = entries_.find(key);
+  if (e == nullptr) {
     ++stats_.misses;
     return nullptr;
   }
   ++stats_.hits;
-  policy_->touch(it->second.node);
-  return it->second.mip;  // the copy is the pin: made under the lock (see the header's contract)
+  policy_->touch(e->node);
+  return e->mip;  // the copy is the pin: made under the lock (see the header's contract)
 }
 
 std::optional<CachedCopy> MipCache::copy_into(MipKey key, std::span<std::byte> dst) {
   std::lock_guard lock(mutex_);
-  auto it = entries_.find(key);
-  if (it == entries_.end()) {
+  const MipCacheSlot* e = entries_.find(key);
+  if (e == nullptr) {
     ++stats_.misses;
     return std::nullopt;
   }
-  const CachedMip& mip = *it->second.mip;
-  TS_ASSERT(mip.bytes.size() <= dst.size(), "cached mip of %zu bytes does not fit a buffer of %zu",
-            mip.bytes.size(), dst.size());
+  TS_ASSERT(e->size <= dst.size(), "cached mip of %llu bytes does not fit a buffer of %zu",
+            static_cast<unsigned long long>(e->size), dst.size());
   ++stats_.hits;
-  policy_->touch(it->second.node);
+  policy_->touch(e->node);
   // Copied under the lock: nothing can evict the entry meanwhile, so no pin (no reference-count traffic) is
   // needed. The longest hold is one slot-sized copy (1 MiB: ~100 µs), which only delays a worker's insert.
-  copy_into_slot(dst.data(), mip.bytes.data(), mip.bytes.size());  // kSlotWrite halfway
-  return CachedCopy{mip.bytes.size(), mip.checksum};
+  // The payload's pointer, size and checksum are the index's copies: the CachedMip is not dereferenced.
+  copy_into_slot(dst.data(), e->data, e->size);  // kSlotWrite halfway
+  return CachedCopy{e->size, e->checksum};
 }
 
 bool MipCache::contains(MipKey key) const {
   std::lock_guard lock(mutex_);
-  return entries_.count(key) != 0;
+  return entries_.find(key) != nullptr;
 }
 
 bool MipCache::evict_one(std::vector<std::shared_ptr<const CachedMip>>& evicted) {
   // Only entries nobody outside holds may go: use_count() == 1 is the cache's own reference. Counts only fall
   // concurrently (new references are made under this lock), so a stale read can only keep an entry.
   const auto evictable = [this](MipKey k) {
-    auto it = entries_.find(k);
-    return it != entries_.end() && it->second.mip.use_count() == 1;
+    const MipCacheSlot* e = entries_.find(k);
+    return e != nullptr && e->mip.use_count() == 1;
   };
   const std::optional<MipKey> victim = policy_->pick_victim(evictable);
   if (!victim) return false;
-  auto it = entries_.find(*victim);
-  stats_.bytes -= it->second.mip->bytes.size();
-  if (is_overflow(it->second.mip->bytes)) overflow_bytes_ -= it->second.mip->bytes.size();
+  MipCacheSlot* e = entries_.find(*victim);
+  TS_ASSERT(e != nullptr, "the eviction policy picked a key the cache does not hold");
+  stats_.bytes -= e->size;
+  if (is_overflow(e->mip->bytes)) overflow_bytes_ -= e->size;
   fault_point(FaultPoint::kEviction);  // victim picked, not yet erased
-  policy_->erase(it->second.node);
-  evicted.push_back(std::move(it->second.mip));
-  entries_.erase(it);
+  policy_->erase(e->node);
+  std::shared_ptr<const CachedMip> gone;
+  entries_.erase(*victim, gone);
+  evicted.push_back(std::move(gone));
   ++stats_.evictions;
   return true;
 }
@@ -117,15 +119,13 @@ bool MipCache::insert(MipKey key, std::shared_ptr<const CachedMip> mip) {
   // Declared before the lock: evicted payloads are freed after it is released (a large free() is a munmap).
   std::vector<std::shared_ptr<const CachedMip>> evicted;
   std::lock_guard lock(mutex_);
-  auto [it, fresh] = entries_.try_emplace(key, Entry{nullptr, nullptr});
-  if (!fresh) {
-    policy_->touch(it->second.node);
+  if (MipCacheSlot* e = entries_.find(key)) {
+    policy_->touch(e->node);
     return true;  // two loads of the same mip raced; `mip` is freed after the lock (a parameter)
   }
-  // The slot is reserved in the map before evicting, so evict_one() must not pick it: it has no policy node
-  // and a null mip, and the policy does not know the key yet, so it never can.
+  // The key is not in the index (nor in the policy) while evicting, so evict_one() can never pick it; it is
+  // added only once the budget has room (erasing moves index entries, so nothing is reserved up front).
   const auto give_up = [&] {
-    entries_.erase(key);
     ++stats_.rejections;
     stats_.entries = entries_.size();
     return false;
@@ -135,10 +135,15 @@ bool MipCache::insert(MipKey key, std::shared_ptr<const CachedMip> mip) {
     // Everything left is pinned (at most one entry per worker plus the dispatcher): refuse, stay in budget.
     if (!evict_one(evicted)) return give_up();
   }
-  // `it` is still valid: erasing other elements invalidates only their own iterators.
   if (is_overflow(mip->bytes)) overflow_bytes_ += size;
-  it->second.mip = std::move(mip);
-  it->second.node = policy_->on_insert(key);
+  MipCacheSlot slot;
+  slot.key = key;
+  slot.data = mip->bytes.data();
+  slot.size = size;
+  slot.checksum = mip->checksum;
+  slot.node = policy_->on_insert(key);
+  slot.mip = std::move(mip);
+  entries_.insert(std::move(slot));
   stats_.bytes += size;
   ++stats_.insertions;
   stats_.entries = entries_.size();

@@ -30,6 +30,25 @@ constexpr std::chrono::microseconds kRemoteBusyWait{10000};
 // worker lets it go on at once; the cost is that up to this many jobs per worker can no longer be superseded.
 constexpr uint32_t kJobsPerWorker = 2;
 
+// With every worker's queue full, the dispatcher loads a miss itself when it is this small: a hand-off to a
+// worker and back costs two wake-ups and context switches, which on the 2-core machine were most of a miss
+// (texstream-bench server, misses: 0.64-0.69 GB/s with workers only, 0.79-0.93 GB/s with this; the loader
+// alone does ~2.4 GB/s). 64 KiB from the page cache is a few µs, about one hit's worth of delay for the
+// requests behind it. A remote mip is never read here (the attempt is local-only: it comes back kUnfilled
+// at once and goes to the remote path), and a texture whose inline load was slow is not loaded inline again
+// (inline_ok_): a cold disk or a decoded format costs the dispatcher at most one slow load per texture.
+constexpr uint64_t kInlineMissBytes = 64 << 10;
+// An inline load that took longer than this (a disk read, a decode) marks its texture as not for inline loads.
+constexpr uint64_t kInlineSlowNs = 250'000;
+// At most this many inline loads per pass, so that worker results, completions and the request ring are
+// still looked at every few tens of µs while the dispatcher loads.
+constexpr uint32_t kInlineMissesPerPass = 4;
+
+// Completions are published in groups of at most this many (and at the end of every pass): one release-store
+// per group, while the renderer can already take the first ones and hand their slots back as the dispatcher
+// copies the rest of a batch (publishing only at the end of a pass of 32 hits left it idle meanwhile).
+constexpr uint32_t kPublishBatch = 8;
+
 // After a busy pass, poll this long (yielding the core) before sleeping on the futex: a renderer streaming
 // a batch pushes again within microseconds, and a futex sleep + wake costs two syscalls and a context switch
 // per batch. Bounded so an idle server costs nothing.
@@ -124,6 +143,7 @@ Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const S
   cancelled_scratch_.reserve(256);
   results_scratch_.reserve(64);
   if (fault_injection_enabled()) completions_.set_mid_push_hook([] { fault_point(FaultPoint::kMidRingPush); });
+  publish_each_completion_ = fault_injection_enabled();
   ShmAtomic<uint32_t>* doorbell = &segment_.renderer_block().doorbell;
   const ShmAtomic<uint32_t>* sleeping = &segment_.server_block().sleeping;
   // Only a sleeping dispatcher is woken: a wake per result was a syscall per miss, mostly for a dispatcher
@@ -137,6 +157,11 @@ Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const S
   // first, the remote fetch workers' after them; workers beyond kLoadingWords are not recorded.
   const std::span<ShmAtomic<uint32_t>> loading(segment_.server_block().loading);
   const size_t local_words = std::min<size_t>(loading.size(), static_cast<size_t>(config.worker_threads));
+  // The dispatcher's own inline loads take the word after the remote workers' (none left: no inline loads,
+  // so that a crash during a load can always be attributed).
+  const size_t dispatcher_word = local_words + static_cast<size_t>(config.remote_fetches_in_flight);
+  if (dispatcher_word < loading.size() && !rate_limited_) inline_loading_ = &loading[dispatcher_word];
+  inline_ok_.assign(textures_.size(), true);
   workers_ = std::make_unique<WorkerPool>(
       static_cast<uint32_t>(config.worker_threads),
       [this](const LoadJob& job) {
@@ -202,6 +227,7 @@ RunOutcome Server::run(const std::atomic<bool>& stop, std::atomic<bool>* print_s
     busy |= dispatch_remote();  // first: a slot freed by a remote result goes to the next remote fetch
     busy |= dispatch();
     busy |= flush_completions();
+    publish_completions();  // one release-store for the pass's completions (before any sleep below)
     if (requests_.error() != RingError::kNone || completions_.error() != RingError::kNone) {
       spdlog::error("segment '{}': the renderer published an impossible ring position; giving up the segment",
                     segment_.name());
@@ -240,7 +266,7 @@ bool Server::drain_requests() {
   // Bounded per pass so that a flood of requests cannot starve completions and the heartbeat.
   const uint32_t budget = segment_.header().request_capacity;
   for (uint32_t i = 0; i < budget; ++i) {
-    const std::optional<RequestRecord> r = requests_.try_pop();
+    const std::optional<RequestRecord> r = requests_.try_pop_deferred();  // handed back below, once
     if (!r) break;
     any = true;
     if (r->kind == static_cast<uint32_t>(RequestKind::kLoad)) {
@@ -251,6 +277,7 @@ bool Server::drain_requests() {
       spdlog::warn("dropped a request record of unknown kind {}", r->kind);
     }
   }
+  requests_.publish();  // one release-store of the read position for the whole batch
   if (!any) return false;
   if (scheduler_.newest_generation().value > clock_generation_) {
     clock_generation_ = scheduler_.newest_generation().value;
@@ -322,43 +349,66 @@ bool Server::collect_results() {
     if (i >= local_results) {
       TS_ASSERT(remote_in_flight_ > 0, "a remote-fetch result with no fetch in flight");
       --remote_in_flight_;
+      inline_ok_[r.request.texture.value] = false;  // a remote texture
       finish(r);
       continue;
     }
     TS_ASSERT(loads_in_flight_ > 0, "a worker result with no load in flight");
     --loads_in_flight_;
-    if (r.completion.status != static_cast<uint32_t>(CompletionStatus::kUnfilled)) {
-      finish(r);
-      continue;
-    }
-    // The mip is not on this machine. A free remote-fetch worker takes it (keeping the slot); with all of
-    // them busy it waits in the remote queue without its slot, or — queue full — the renderer is told to
-    // ask again later (seed 002 §4.3: the server must not get bogged down in old requests).
-    if (remote_in_flight_ < remote_workers_->threads() && remote_pending_.empty()) {
-      ++remote_in_flight_;
-      remote_fetches_.fetch_add(1, std::memory_order_relaxed);
-      remote_workers_->submit(LoadJob{r.request, textures_[r.request.texture.value], r.slot});
-      continue;
-    }
-    slots_.release_unused(r.slot);
-    if (r.request.generation.value < scheduler_.newest_generation().value) {
-      // Already stale: a newer batch came while the local worker looked. Superseded, like a waiting one.
-      stats_.add(stats_.cancelled, 1);
-      complete(make_completion(r.request, CompletionStatus::kCancelled));
-      continue;
-    }
-    if (remote_pending_.size() >= kRemotePendingLimit) {
-      // Full: the renderer asks again in a later cycle.
-      unfilled_.fetch_add(1, std::memory_order_relaxed);
-      complete(r.completion);
-      continue;
-    }
-    if (const std::optional<LoadRequest> dup = remote_pending_.add(r.request)) {
-      stats_.add(stats_.cancelled, 1);
-      complete(make_completion(*dup, CompletionStatus::kCancelled));
-    }
+    handle_local_result(r);
   }
   return !results_scratch_.empty();
+}
+
+void Server::handle_local_result(const LoadResult& r) {
+  if (r.completion.status != static_cast<uint32_t>(CompletionStatus::kUnfilled)) {
+    finish(r);
+    return;
+  }
+  inline_ok_[r.request.texture.value] = false;  // not on this machine: its next mips go to the workers
+  // The mip is not on this machine. A free remote-fetch worker takes it (keeping the slot); with all of
+  // them busy it waits in the remote queue without its slot, or — queue full — the renderer is told to
+  // ask again later (seed 002 §4.3: the server must not get bogged down in old requests).
+  if (remote_in_flight_ < remote_workers_->threads() && remote_pending_.empty()) {
+    ++remote_in_flight_;
+    remote_fetches_.fetch_add(1, std::memory_order_relaxed);
+    remote_workers_->submit(LoadJob{r.request, textures_[r.request.texture.value], r.slot});
+    return;
+  }
+  slots_.release_unused(r.slot);
+  if (r.request.generation.value < scheduler_.newest_generation().value) {
+    // Already stale: a newer batch came while the local worker looked. Superseded, like a waiting one.
+    stats_.add(stats_.cancelled, 1);
+    complete(make_completion(r.request, CompletionStatus::kCancelled));
+    return;
+  }
+  if (remote_pending_.size() >= kRemotePendingLimit) {
+    // Full: the renderer asks again in a later cycle.
+    unfilled_.fetch_add(1, std::memory_order_relaxed);
+    complete(r.completion);
+    return;
+  }
+  if (const std::optional<LoadRequest> dup = remote_pending_.add(r.request)) {
+    stats_.add(stats_.cancelled, 1);
+    complete(make_completion(*dup, CompletionStatus::kCancelled));
+  }
+}
+
+bool Server::loads_inline(const LoadRequest& request, uint32_t done_this_pass) const {
+  if (inline_loading_ == nullptr || done_this_pass >= kInlineMissesPerPass) return false;
+  if (!inline_ok_[request.texture.value]) return false;
+  const scene::TextureRecord& t = textures_[request.texture.value];
+  return mip_bytes(static_cast<TexelFormat>(t.format), t.width, t.height, request.mip.value) <= kInlineMissBytes;
+}
+
+void Server::load_inline(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot) {
+  // Crash attribution as a worker's (ServerBlock::loading). Relaxed: read only after this process died.
+  inline_loading_->v.store(request.texture.value + 1, std::memory_order_relaxed);
+  const uint64_t start = steady_now_ns();
+  const CompletionRecord c = loader_.load(request, record, slot, segment_.slot(slot), /*local_only=*/true);
+  if (steady_now_ns() - start > kInlineSlowNs) inline_ok_[request.texture.value] = false;
+  inline_loading_->v.store(0, std::memory_order_relaxed);
+  handle_local_result(LoadResult{c, slot, request.received_ns, request});
 }
 
 bool Server::dispatch_remote() {
@@ -387,11 +437,20 @@ void Server::finish(const LoadResult& r) {
 bool Server::dispatch() {
   bool any = false;
   const uint32_t workers = workers_->threads();
+  uint32_t inline_loads = 0;
   while (!scheduler_.empty() && slots_.free_count() > 0) {
     // With every worker busy, a RAM-cache hit is still served here at once: a slow read must not hold up a
     // fast hit (seed 002 §3.2, the bimodal access problem). Only then is the top peeked at first: with a
-    // worker free it is taken whatever it is (a peek + pop was two more hash lookups per request).
-    if (loads_in_flight_ >= workers * kJobsPerWorker && !cache_.contains(scheduler_.top()->key())) break;
+    // worker free it is taken whatever it is (a peek + pop was two more hash lookups per request). A small
+    // miss of a local texture is then loaded here (see kInlineMissBytes); anything else waits for a worker.
+    bool inline_miss = false;
+    if (loads_in_flight_ >= workers * kJobsPerWorker) {
+      const LoadRequest top = *scheduler_.top();
+      if (!cache_.contains(top.key())) {
+        if (!loads_inline(top, inline_loads)) break;
+        inline_miss = true;
+      }
+    }
     const LoadRequest request = *scheduler_.pop();
     const scene::TextureRecord& record = textures_[request.texture.value];
     const uint32_t slot = *slots_.acquire();
@@ -404,6 +463,11 @@ bool Server::dispatch() {
       complete(hit);
       continue;
     }
+    if (inline_miss) {
+      ++inline_loads;
+      load_inline(request, record, slot);
+      continue;
+    }
     // A miss (or an entry evicted since contains()): the job may wait in the pool's queue for a worker.
     ++loads_in_flight_;
     workers_->submit(LoadJob{request, record, slot});
@@ -411,23 +475,36 @@ bool Server::dispatch() {
   return any;
 }
 
+bool Server::push_completion(const CompletionRecord& c) {
+  if (!completions_.try_push_deferred(c)) return false;
+  ++unpublished_completions_;
+  // Under fault injection every record is published at once, so that kAfterRingPush is where it always was:
+  // after one record became visible, before its statistic is counted.
+  if (publish_each_completion_ || unpublished_completions_ >= kPublishBatch) publish_completions();
+  return true;
+}
+
+void Server::publish_completions() {
+  if (unpublished_completions_ == 0) return;
+  completions_.publish();
+  fault_point(FaultPoint::kAfterRingPush);  // published, statistics not yet counted
+  // relaxed: statistic
+  segment_.server_block().completions.v.fetch_add(unpublished_completions_, std::memory_order_relaxed);
+  unpublished_completions_ = 0;
+}
+
 void Server::complete(const CompletionRecord& c) {
   fault_point(FaultPoint::kBeforeCompletion);  // payload and checksum in the slot, completion not pushed
-  // Order is kept: once anything waits locally, later completions queue behind it.
-  if (overflow_.empty() && completions_.try_push(c)) {
-    fault_point(FaultPoint::kAfterRingPush);  // published, statistics not yet counted
-    segment_.server_block().completions.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
-    return;
-  }
+  // Order is kept: once anything waits locally, later completions queue behind it. The record becomes
+  // visible to the renderer at the end of the pass (publish_completions()).
+  if (overflow_.empty() && push_completion(c)) return;
   overflow_.push_back(c);
 }
 
 bool Server::flush_completions() {
   bool any = false;
-  while (!overflow_.empty() && completions_.try_push(overflow_.front())) {
-    fault_point(FaultPoint::kAfterRingPush);
+  while (!overflow_.empty() && push_completion(overflow_.front())) {
     overflow_.pop_front();
-    segment_.server_block().completions.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
     any = true;
   }
   return any;

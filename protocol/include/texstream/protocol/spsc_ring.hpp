@@ -70,6 +70,49 @@ class SpscRingProducer {
     return true;
   }
 
+  // Producer thread only. Like try_push(), but the record stays invisible to the consumer until publish()
+  // (or a later try_push(), which publishes everything before it): a producer with a burst of records pays
+  // one release-store of write_pos per burst instead of one per record, and looks at the consumer's read
+  // position only when the ring seems full with the position it last saw (read_pos only grows, so an old
+  // reading never over-states the free space). A peer killed before publish() never sees the records.
+  bool try_push_deferred(const Record& record) {
+    if (error_ != RingError::kNone) return false;
+    if (write_pos_ - seen_read_ >= capacity_) {
+      // acquire: pairs with the consumer's release-store of read_pos, as in try_push().
+      const uint64_t read = control_->read_pos.v.load(std::memory_order_acquire);
+      if (read > write_pos_ || write_pos_ - read > capacity_ || read < seen_read_) {
+        error_ = RingError::kPeerCorrupt;
+        return false;
+      }
+      seen_read_ = read;
+      if (write_pos_ - read == capacity_) return false;
+    }
+    auto* dst = reinterpret_cast<unsigned char*>(&records_[write_pos_ & (capacity_ - 1)]);
+    if (mid_push_hook_ == nullptr) {
+      std::memcpy(dst, &record, sizeof(Record));
+    } else {  // fault injection, as in try_push(): killed here, the half record is not even deferred-visible
+      constexpr size_t kHalf = sizeof(Record) / 2;
+      std::memcpy(dst, &record, kHalf);
+      mid_push_hook_();
+      std::memcpy(dst + kHalf, reinterpret_cast<const unsigned char*>(&record) + kHalf, sizeof(Record) - kHalf);
+    }
+    ++write_pos_;
+    deferred_ = true;
+    return true;
+  }
+
+  // Producer thread only: makes every record pushed with try_push_deferred() visible to the consumer.
+  void publish() {
+    if (!deferred_) return;
+    deferred_ = false;
+    // release: pairs with the consumer's acquire-load of write_pos; publishes the records copied before.
+    control_->write_pos.v.store(write_pos_, std::memory_order_release);
+  }
+
+  // Producer thread only: records pushed with try_push_deferred() and not published yet (possibly already
+  // published by a try_push() since; publish() is then a harmless repeat).
+  bool has_deferred() const { return deferred_; }
+
   // Producer thread only: free space as seen now.
   uint32_t free_space() const {
     const uint64_t read = control_->read_pos.v.load(std::memory_order_acquire);  // pairs with consumer's release
@@ -92,6 +135,8 @@ class SpscRingProducer {
   uint64_t write_pos_ = 0;
   RingError error_ = RingError::kNone;
   void (*mid_push_hook_)() = nullptr;
+  uint64_t seen_read_ = 0;  // try_push_deferred(): the consumer's read position when last loaded (≤ the truth)
+  bool deferred_ = false;   // try_push_deferred() wrote records that publish() has not published
 };
 
 template <class Record>
@@ -126,6 +171,38 @@ class SpscRingConsumer {
     return out;
   }
 
+  // Consumer thread only. Like try_pop(), but the record's place is handed back to the producer only at
+  // publish() (or a later try_pop(), which hands back everything before it): a consumer draining a burst
+  // pays one release-store of read_pos per burst instead of one per record, and loads the producer's write
+  // position only when the records it last saw are used up. Call publish() before waiting for the producer.
+  std::optional<Record> try_pop_deferred() {
+    if (error_ != RingError::kNone) return std::nullopt;
+    if (seen_write_ <= read_pos_) {  // used up (or stale: try_pop() went past it, or never loaded)
+      // acquire: pairs with the producer's release-store of write_pos; makes the records' bytes visible.
+      const uint64_t write = control_->write_pos.v.load(std::memory_order_acquire);
+      if (write < read_pos_ || write - read_pos_ > capacity_) {
+        error_ = RingError::kPeerCorrupt;
+        return std::nullopt;
+      }
+      seen_write_ = write;
+      if (write == read_pos_) return std::nullopt;
+    }
+    Record out;
+    std::memcpy(&out, &records_[read_pos_ & (capacity_ - 1)], sizeof(Record));
+    ++read_pos_;
+    deferred_ = true;
+    return out;
+  }
+
+  // Consumer thread only: hands back the places of the records taken with try_pop_deferred().
+  void publish() {
+    if (!deferred_) return;
+    deferred_ = false;
+    // release: pairs with the producer's acquire-load of read_pos; our copies are complete before the
+    // producer may overwrite those records.
+    control_->read_pos.v.store(read_pos_, std::memory_order_release);
+  }
+
   // Consumer thread only: records waiting now (0 on a corrupt peer position).
   uint32_t size() const {
     const uint64_t write = control_->write_pos.v.load(std::memory_order_acquire);  // pairs with producer's release
@@ -142,6 +219,8 @@ class SpscRingConsumer {
   uint32_t capacity_ = 0;
   uint64_t read_pos_ = 0;
   RingError error_ = RingError::kNone;
+  uint64_t seen_write_ = 0;  // try_pop_deferred(): the producer's write position when last loaded
+  bool deferred_ = false;    // try_pop_deferred() took records whose places publish() has not handed back
 };
 
 }  // namespace texstream

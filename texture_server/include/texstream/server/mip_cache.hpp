@@ -18,18 +18,19 @@
 // Thread-safe. No syscall is made while the lock is held.
 //
 // The hit path: copy_into() finds, touches and copies a mip into the caller's buffer under one lock with one
-// hash lookup and no allocation (the pinned lookup() costs a second reference-count round trip).
+// hash lookup and no allocation (the pinned lookup() costs a second reference-count round trip); the index
+// (mip_cache_table.hpp) keeps the payload pointer, size and checksum inline, so a hit reads one index slot.
 #include <cstdint>
 #include <memory>
 #include <mutex>
 #include <optional>
 #include <span>
-#include <unordered_map>
 #include <utility>
 #include <vector>
 
 #include "texstream/server/cache_arena.hpp"
 #include "texstream/server/eviction_policy.hpp"
+#include "texstream/server/mip_cache_table.hpp"
 #include "texstream/server/mip_key.hpp"
 #include "texstream/server/payload_bytes.hpp"
 
@@ -101,11 +102,6 @@ class MipCache {
   void advance_clock(uint64_t now);
 
  private:
-  struct Entry {
-    std::shared_ptr<const CachedMip> mip;
-    PolicyNode* node;  // the policy's node for this key: touched on a hit without a second lookup
-  };
-  using Entries = std::unordered_map<MipKey, Entry, MipKeyHash>;
   // Removes one unpinned entry in policy order (lock held); its reference goes to `evicted`. False if every
   // entry is pinned.
   bool evict_one(std::vector<std::shared_ptr<const CachedMip>>& evicted);
@@ -126,7 +122,7 @@ class MipCache {
   std::shared_ptr<CacheArena> arena_;  // shared with the payloads it backs: they may outlive the cache
   mutable std::mutex mutex_;
   std::unique_ptr<EvictionPolicy> policy_;
-  Entries entries_;
+  MipCacheTable entries_;  // each entry keeps the policy node of its key: a hit touches it without a lookup
   MipCacheStats stats_;
 };
 

@@ -81,10 +81,21 @@ class Server {
   void handle_load(const RequestRecord& r);
   void handle_release(const RequestRecord& r);
   bool collect_results();
+  // A local worker's (or an inline load's) result: finished, or handed on to the remote path if kUnfilled.
+  void handle_local_result(const LoadResult& r);
+  // True if the dispatcher may load this miss itself now (kInlineMissBytes, server.cpp).
+  bool loads_inline(const LoadRequest& request, uint32_t done_this_pass) const;
+  void load_inline(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot);
   void finish(const LoadResult& r);
   bool dispatch_remote();
   bool dispatch();
   void complete(const CompletionRecord& c);
+  // Pushes one completion into the ring without publishing it (false: the ring is full).
+  bool push_completion(const CompletionRecord& c);
+  // Makes the completions pushed so far visible to the renderer: one release-store of the ring position per
+  // pass instead of one per record (texstream-bench server: the per-record store and the load of the
+  // renderer's read position were a share of a hit's ring cost).
+  void publish_completions();
   bool flush_completions();
   void idle_wait();
   void update_gauges();
@@ -109,9 +120,13 @@ class Server {
   std::atomic<uint64_t> remote_fetches_{0};
   std::atomic<uint64_t> unfilled_{0};
   std::deque<CompletionRecord> overflow_;       // completions waiting for room in the ring
+  uint32_t unpublished_completions_ = 0;        // pushed into the ring, not yet published (this pass's)
+  bool publish_each_completion_ = false;        // fault injection: publish per record (kAfterRingPush)
   std::vector<LoadRequest> cancelled_scratch_;  // reused each iteration: no allocation when warm
   std::vector<LoadResult> results_scratch_;
   uint64_t pass_now_ns_ = 0;                    // steady clock at the start of the loop's current pass
+  ShmAtomic<uint32_t>* inline_loading_ = nullptr;  // the dispatcher's crash-attribution word (null: no inline loads)
+  std::vector<bool> inline_ok_;                 // per texture: may be loaded inline (not remote, not slow)
   uint64_t clock_generation_ = 0;               // last generation forwarded to the cache policy (Eq. 4 clock)
   std::unique_ptr<WorkerPool> workers_;         // last members: their threads die before what they use
   std::unique_ptr<WorkerPool> remote_workers_;
