@@ -120,5 +120,118 @@ TEST(SpscRing, TwoThreadStressDeliversEveryRecordInOrder) {
   EXPECT_EQ(p.error(), RingError::kNone);
 }
 
+// ---- deferred publication (try_push_deferred / try_pop_deferred + publish) ----
+
+TEST(SpscRingDeferred, PushedRecordsAreInvisibleUntilPublished) {
+  RingMemory m(8);
+  SpscRingProducer<RequestRecord> p(&m.control, m.records.data(), 8);
+  SpscRingConsumer<RequestRecord> c(&m.control, m.records.data(), 8);
+  for (uint32_t i = 0; i < 3; ++i) ASSERT_TRUE(p.try_push_deferred(load(i)));
+  EXPECT_EQ(m.control.write_pos.v.load(), 0u) << "published before publish()";
+  EXPECT_FALSE(c.try_pop().has_value());
+  EXPECT_TRUE(p.has_deferred());
+  p.publish();
+  EXPECT_FALSE(p.has_deferred());
+  EXPECT_EQ(m.control.write_pos.v.load(), 3u);
+  for (uint32_t i = 0; i < 3; ++i) {
+    auto r = c.try_pop();
+    ASSERT_TRUE(r.has_value());
+    EXPECT_EQ(r->texture_id, i);
+  }
+  // A plain try_push() after deferred ones publishes them all, in order.
+  ASSERT_TRUE(p.try_push_deferred(load(10)));
+  ASSERT_TRUE(p.try_push(load(11)));
+  EXPECT_EQ(c.try_pop()->texture_id, 10u);
+  EXPECT_EQ(c.try_pop()->texture_id, 11u);
+}
+
+TEST(SpscRingDeferred, AFullRingRefusesAndFreedPlacesAreSeenAfterTheConsumerPublishes) {
+  RingMemory m(4);
+  SpscRingProducer<RequestRecord> p(&m.control, m.records.data(), 4);
+  SpscRingConsumer<RequestRecord> c(&m.control, m.records.data(), 4);
+  for (uint32_t i = 0; i < 4; ++i) ASSERT_TRUE(p.try_push_deferred(load(i)));
+  EXPECT_FALSE(p.try_push_deferred(load(99))) << "a full ring must refuse";
+  p.publish();
+  // The consumer takes two without handing their places back: still full for the producer.
+  ASSERT_EQ(c.try_pop_deferred()->texture_id, 0u);
+  ASSERT_EQ(c.try_pop_deferred()->texture_id, 1u);
+  EXPECT_EQ(m.control.read_pos.v.load(), 0u) << "read position published before publish()";
+  EXPECT_FALSE(p.try_push_deferred(load(4)));
+  c.publish();
+  EXPECT_EQ(m.control.read_pos.v.load(), 2u);
+  EXPECT_TRUE(p.try_push_deferred(load(4)));
+  EXPECT_TRUE(p.try_push_deferred(load(5)));
+  EXPECT_FALSE(p.try_push_deferred(load(6)));
+  p.publish();
+  for (uint32_t want = 2; want < 6; ++want) {
+    auto r = c.try_pop_deferred();
+    ASSERT_TRUE(r.has_value()) << want;
+    EXPECT_EQ(r->texture_id, want);
+  }
+  EXPECT_FALSE(c.try_pop_deferred().has_value());
+  c.publish();
+  EXPECT_EQ(p.free_space(), 4u);
+}
+
+TEST(SpscRingDeferred, ImpossiblePeerPositionsAreRejected) {
+  {
+    RingMemory m(8);
+    SpscRingProducer<RequestRecord> p(&m.control, m.records.data(), 8);
+    for (uint32_t i = 0; i < 8; ++i) ASSERT_TRUE(p.try_push_deferred(load(i)));
+    p.publish();
+    m.control.read_pos.v.store(100);  // claims records never written; seen when the ring looks full
+    EXPECT_FALSE(p.try_push_deferred(load(8)));
+    EXPECT_EQ(p.error(), RingError::kPeerCorrupt);
+    EXPECT_EQ(p.position(), 8u);
+  }
+  {
+    RingMemory m(8);
+    SpscRingConsumer<RequestRecord> c(&m.control, m.records.data(), 8);
+    m.control.write_pos.v.store(100);
+    EXPECT_FALSE(c.try_pop_deferred().has_value());
+    EXPECT_EQ(c.error(), RingError::kPeerCorrupt);
+    EXPECT_EQ(c.position(), 0u);
+  }
+}
+
+TEST(SpscRingDeferred, TwoThreadStressInBurstsDeliversEveryRecordInOrder) {
+  constexpr uint32_t kCap = 64;
+  constexpr uint32_t kCount = 1'000'000;
+  RingMemory m(kCap);
+  SpscRingProducer<RequestRecord> p(&m.control, m.records.data(), kCap);
+  SpscRingConsumer<RequestRecord> c(&m.control, m.records.data(), kCap);
+  std::thread producer([&] {
+    uint32_t i = 0;
+    while (i < kCount) {
+      // Bursts of up to 8, then one publish (the server's pattern).
+      uint32_t burst = 0;
+      while (burst < 8 && i < kCount) {
+        RequestRecord r = load(i);
+        r.generation = uint64_t{i} * 3 + 1;
+        if (!p.try_push_deferred(r)) break;
+        ++i;
+        ++burst;
+      }
+      p.publish();
+      if (burst == 0) std::this_thread::yield();
+    }
+  });
+  uint32_t expected = 0, mismatches = 0;
+  while (expected < kCount) {
+    uint32_t taken = 0;
+    while (auto r = c.try_pop_deferred()) {
+      if (r->texture_id != expected || r->generation != uint64_t{expected} * 3 + 1) ++mismatches;
+      ++expected;
+      if (++taken == 16) break;
+    }
+    c.publish();
+    if (taken == 0) std::this_thread::yield();
+  }
+  producer.join();
+  EXPECT_EQ(mismatches, 0u);
+  EXPECT_EQ(c.error(), RingError::kNone);
+  EXPECT_EQ(p.error(), RingError::kNone);
+}
+
 }  // namespace
 }  // namespace texstream
