@@ -30,6 +30,7 @@
 #include <thread>
 #include <vector>
 
+#include "scoped_env.hpp"
 #include "server_harness.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texstream/protocol/texel_format.hpp"
@@ -73,17 +74,7 @@ void write_garbage(const fs::path& out) {
 
 bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 
-// Sets a texstream-decode test hook for the helpers started while alive (they inherit the environment).
-class ScopedEnv {
- public:
-  ScopedEnv(const char* name, const std::string& value) : name_(name) { ::setenv(name, value.c_str(), 1); }
-  ~ScopedEnv() { ::unsetenv(name_); }
-  ScopedEnv(const ScopedEnv&) = delete;
-  ScopedEnv& operator=(const ScopedEnv&) = delete;
-
- private:
-  const char* name_;
-};
+using test::ScopedEnv;
 
 class DecodeQuarantineTest : public ::testing::Test {
  protected:

@@ -21,6 +21,7 @@
 #include <thread>
 #include <vector>
 
+#include "scoped_env.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texstream/render/stream_client.hpp"
 
@@ -33,16 +34,7 @@ using Clock = std::chrono::steady_clock;
 
 const fs::path kFakeServer = fs::path(TEXSTREAM_BIN_DIR) / "quarantine_fake_server";
 
-class ScopedEnv {
- public:
-  ScopedEnv(const char* name, const std::string& value) : name_(name) { ::setenv(name, value.c_str(), 1); }
-  ~ScopedEnv() { ::unsetenv(name_); }
-  ScopedEnv(const ScopedEnv&) = delete;
-  ScopedEnv& operator=(const ScopedEnv&) = delete;
-
- private:
-  const char* name_;
-};
+using test::ScopedEnv;
 
 class RecordingSink : public MipSink {
  public:

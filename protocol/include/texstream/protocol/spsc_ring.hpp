@@ -55,15 +55,7 @@ class SpscRingProducer {
       return false;
     }
     if (write_pos_ - read == capacity_) return false;
-    auto* dst = reinterpret_cast<unsigned char*>(&records_[write_pos_ & (capacity_ - 1)]);
-    if (mid_push_hook_ == nullptr) {
-      std::memcpy(dst, &record, sizeof(Record));
-    } else {  // fault injection (texstream-chaos): the hook may kill this process with the record half written
-      constexpr size_t kHalf = sizeof(Record) / 2;
-      std::memcpy(dst, &record, kHalf);
-      mid_push_hook_();
-      std::memcpy(dst + kHalf, reinterpret_cast<const unsigned char*>(&record) + kHalf, sizeof(Record) - kHalf);
-    }
+    copy_record(record);
     ++write_pos_;
     // release: pairs with the consumer's acquire-load of write_pos; publishes the record copied above.
     control_->write_pos.v.store(write_pos_, std::memory_order_release);
@@ -87,15 +79,7 @@ class SpscRingProducer {
       seen_read_ = read;
       if (write_pos_ - read == capacity_) return false;
     }
-    auto* dst = reinterpret_cast<unsigned char*>(&records_[write_pos_ & (capacity_ - 1)]);
-    if (mid_push_hook_ == nullptr) {
-      std::memcpy(dst, &record, sizeof(Record));
-    } else {  // fault injection, as in try_push(): killed here, the half record is not even deferred-visible
-      constexpr size_t kHalf = sizeof(Record) / 2;
-      std::memcpy(dst, &record, kHalf);
-      mid_push_hook_();
-      std::memcpy(dst + kHalf, reinterpret_cast<const unsigned char*>(&record) + kHalf, sizeof(Record) - kHalf);
-    }
+    copy_record(record);
     ++write_pos_;
     deferred_ = true;
     return true;
@@ -129,6 +113,20 @@ class SpscRingProducer {
   void set_mid_push_hook(void (*hook)()) { mid_push_hook_ = hook; }
 
  private:
+  // Copies `record` into the place at write_pos_ (not yet published). Under fault injection the mid-push
+  // hook runs with half of it copied: killed there, the torn record is never published.
+  void copy_record(const Record& record) {
+    auto* dst = reinterpret_cast<unsigned char*>(&records_[write_pos_ & (capacity_ - 1)]);
+    if (mid_push_hook_ == nullptr) {
+      std::memcpy(dst, &record, sizeof(Record));
+      return;
+    }
+    constexpr size_t kHalf = sizeof(Record) / 2;
+    std::memcpy(dst, &record, kHalf);
+    mid_push_hook_();
+    std::memcpy(dst + kHalf, reinterpret_cast<const unsigned char*>(&record) + kHalf, sizeof(Record) - kHalf);
+  }
+
   RingControl* control_ = nullptr;
   Record* records_ = nullptr;
   uint32_t capacity_ = 0;
