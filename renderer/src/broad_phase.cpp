@@ -1,9 +1,15 @@
 #include "texstream/render/broad_phase.hpp"
 
+#include <spdlog/spdlog.h>
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <cmath>
+#include <chrono>
 #include <limits>
+
+#include "texstream/render/scene_data.hpp"
 
 namespace texstream::render {
 
@@ -15,33 +21,40 @@ constexpr size_t kFrontierTarget = 64;
 
 }  // namespace
 
-BroadPhase::BroadPhase(std::span<const scene::MeshRecord> meshes) {
-  mesh_bounds_.reserve(meshes.size());
-  double lo[2] = {std::numeric_limits<double>::max(), std::numeric_limits<double>::max()};
-  double hi[2] = {std::numeric_limits<double>::lowest(), std::numeric_limits<double>::lowest()};
-  for (const auto& m : meshes) {
-    Box b;
-    for (int a = 0; a < 3; ++a) {
-      // A record may store min > max (a bad file is not ours to judge here): order them so no test breaks.
-      const double p = m.origin[a] + static_cast<double>(m.bounds_min[a]);
-      const double q = m.origin[a] + static_cast<double>(m.bounds_max[a]);
-      b.min[a] = std::min(p, q);
-      b.max[a] = std::max(p, q);
-    }
-    for (int a = 0; a < 2; ++a) {
-      const double c = 0.5 * (b.min[a] + b.max[a]);
-      lo[a] = std::min(lo[a], c);
-      hi[a] = std::max(hi[a], c);
-    }
-    mesh_bounds_.push_back(b);
-  }
-  order_.resize(meshes.size());
-  for (uint32_t i = 0; i < order_.size(); ++i) order_[i] = i;
-  if (meshes.empty()) return;
-  // A square root region, so cells stay square however elongated the city is.
-  const double side = std::max({hi[0] - lo[0], hi[1] - lo[1], 1e-3});
-  build(lo[0], lo[1], side);
+BroadPhase::BroadPhase(std::span<const scene::MeshRecord> meshes)
+    : meshes_(meshes), built_(scene::build_mesh_index(meshes)), tree_(built_.view()) {
+  init_frontier();
+}
 
+BroadPhase::BroadPhase(std::span<const scene::MeshRecord> meshes, scene::MappedMeshIndex index)
+    : meshes_(meshes), mapped_(std::move(index)), tree_(mapped_.view) {
+  TS_ASSERT(tree_.order.size() == meshes_.size(), "mesh index of %zu meshes for %zu", tree_.order.size(),
+            meshes_.size());
+  init_frontier();
+}
+
+std::unique_ptr<BroadPhase> BroadPhase::for_scene(const SceneData& scene) {
+  const auto meshes = scene.mesh_records();
+  if (!scene.is_mapped()) return std::make_unique<BroadPhase>(meshes);
+  auto mapped = scene::map_mesh_index(scene.dir, meshes.size());
+  if (mapped) return std::make_unique<BroadPhase>(meshes, std::move(*mapped));
+  if (mapped.error().code != ErrorCode::kNotFound)
+    spdlog::warn("broad phase: {}: building the tree instead", mapped.error().message);
+  const auto t0 = std::chrono::steady_clock::now();
+  auto built = std::make_unique<BroadPhase>(meshes);
+  const double build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (auto w = scene::write_mesh_index(scene.dir, built->tree_); !w) {
+    spdlog::warn("broad phase: tree of {} meshes built in {:.2f} s but not kept ({}): every start builds it",
+                 meshes.size(), build_s, w.error().message);
+  } else {
+    spdlog::info("broad phase: tree of {} meshes built in {:.2f} s and kept in {} for the next start",
+                 meshes.size(), build_s, (scene.dir / "mesh_index.bin").string());
+  }
+  return built;
+}
+
+void BroadPhase::init_frontier() {
+  if (tree_.nodes.empty()) return;
   // Frontier for the parallel query: expand nodes in place (children replace their parent, in order) until
   // there are enough subtrees or nothing left to expand.
   frontier_ = {0};
@@ -49,7 +62,7 @@ BroadPhase::BroadPhase(std::span<const scene::MeshRecord> meshes) {
     std::vector<uint32_t> next;
     bool expanded = false;
     for (uint32_t n : frontier_) {
-      const Node& node = nodes_[n];
+      const scene::MeshIndexNode& node = tree_.nodes[n];
       if (node.child_count == 0) {
         next.push_back(n);
         continue;
@@ -62,88 +75,37 @@ BroadPhase::BroadPhase(std::span<const scene::MeshRecord> meshes) {
   }
 }
 
-void BroadPhase::build(double x0, double y0, double side) {
-  struct Pending {
-    uint32_t node;
-    std::array<double, 4> rect;  // x0, y0, x1, y1 of the quadrant the node's meshes were filed into
-    uint32_t depth;
-  };
-  auto make_node = [&](uint32_t begin, uint32_t end) {
-    Node node;
-    node.begin = begin;
-    node.end = end;
-    node.bounds = mesh_bounds_[order_[begin]];
-    for (uint32_t i = begin + 1; i < end; ++i) {
-      const Box& b = mesh_bounds_[order_[i]];
-      for (int a = 0; a < 3; ++a) {
-        node.bounds.min[a] = std::min(node.bounds.min[a], b.min[a]);
-        node.bounds.max[a] = std::max(node.bounds.max[a], b.max[a]);
-      }
-    }
-    nodes_.push_back(node);
-  };
-  auto centre = [&](uint32_t id, int a) { return 0.5 * (mesh_bounds_[id].min[a] + mesh_bounds_[id].max[a]); };
-
-  // Breadth first, so that the children of a node are appended together and stay contiguous.
-  make_node(0, static_cast<uint32_t>(order_.size()));
-  std::vector<Pending> queue{{0, {x0, y0, x0 + side, y0 + side}, 0}};
-  for (size_t q = 0; q < queue.size(); ++q) {
-    const Pending p = queue[q];
-    const uint32_t begin = nodes_[p.node].begin;
-    const uint32_t end = nodes_[p.node].end;
-    depth_ = std::max(depth_, p.depth);
-    if (end - begin <= kLeafMeshes || p.depth >= kMaxDepth) continue;
-    // File each mesh into the quadrant of its centre: (x0,y0) (x1,y0) (x0,y1) (x1,y1), in that order.
-    const double mx = 0.5 * (p.rect[0] + p.rect[2]);
-    const double my = 0.5 * (p.rect[1] + p.rect[3]);
-    uint32_t* base = order_.data();
-    uint32_t* split_y = std::stable_partition(base + begin, base + end, [&](uint32_t id) { return centre(id, 1) < my; });
-    uint32_t* split_x0 = std::stable_partition(base + begin, split_y, [&](uint32_t id) { return centre(id, 0) < mx; });
-    uint32_t* split_x1 = std::stable_partition(split_y, base + end, [&](uint32_t id) { return centre(id, 0) < mx; });
-    const std::array<uint32_t, 5> cut{begin, static_cast<uint32_t>(split_x0 - base),
-                                      static_cast<uint32_t>(split_y - base), static_cast<uint32_t>(split_x1 - base),
-                                      end};
-    const std::array<std::array<double, 4>, 4> rects{{{p.rect[0], p.rect[1], mx, my},
-                                                       {mx, p.rect[1], p.rect[2], my},
-                                                       {p.rect[0], my, mx, p.rect[3]},
-                                                       {mx, my, p.rect[2], p.rect[3]}}};
-    const auto first_child = static_cast<uint32_t>(nodes_.size());
-    uint32_t count = 0;
-    for (uint32_t k = 0; k < 4; ++k) {
-      if (cut[k + 1] == cut[k]) continue;
-      queue.push_back({static_cast<uint32_t>(nodes_.size()), rects[k], p.depth + 1});
-      make_node(cut[k], cut[k + 1]);  // may reallocate nodes_: index, never hold a reference across it
-      ++count;
-    }
-    nodes_[p.node].first_child = first_child;
-    nodes_[p.node].child_count = count;
-  }
+Frustum::Side BroadPhase::classify(const Frustum& f, const double bmin[3], const double bmax[3],
+                                   const std::array<double, 3>& camera) {
+  // Subtract in double first: at map coordinates a float has ~0.5 m steps, relative values are exact enough.
+  const glm::vec3 min(static_cast<float>(bmin[0] - camera[0]), static_cast<float>(bmin[1] - camera[1]),
+                      static_cast<float>(bmin[2] - camera[2]));
+  const glm::vec3 max(static_cast<float>(bmax[0] - camera[0]), static_cast<float>(bmax[1] - camera[1]),
+                      static_cast<float>(bmax[2] - camera[2]));
+  return f.classify(min, max);
 }
 
-Frustum::Side BroadPhase::classify(const Frustum& f, const Box& b, const std::array<double, 3>& camera) {
-  // Subtract in double first: at map coordinates a float has ~0.5 m steps, relative values are exact enough.
-  const glm::vec3 min(static_cast<float>(b.min[0] - camera[0]), static_cast<float>(b.min[1] - camera[1]),
-                      static_cast<float>(b.min[2] - camera[2]));
-  const glm::vec3 max(static_cast<float>(b.max[0] - camera[0]), static_cast<float>(b.max[1] - camera[1]),
-                      static_cast<float>(b.max[2] - camera[2]));
-  return f.classify(min, max);
+Frustum::Side BroadPhase::classify_mesh(const Frustum& f, uint32_t id, const std::array<double, 3>& camera) const {
+  double bmin[3], bmax[3];
+  scene::mesh_box(meshes_[id], bmin, bmax);
+  return classify(f, bmin, bmax, camera);
 }
 
 void BroadPhase::query_node(uint32_t index, const Frustum& frustum, const std::array<double, 3>& camera,
                             std::vector<uint32_t>& out, BroadPhaseStats& stats) const {
-  const Node& node = nodes_[index];
+  const scene::MeshIndexNode& node = tree_.nodes[index];
   ++stats.nodes_tested;
-  const auto side = classify(frustum, node.bounds, camera);
+  const auto side = classify(frustum, node.min, node.max, camera);
   if (side == Frustum::Side::kOutside) return;
   if (side == Frustum::Side::kInside) {
-    out.insert(out.end(), order_.begin() + node.begin, order_.begin() + node.end);
+    out.insert(out.end(), tree_.order.begin() + node.begin, tree_.order.begin() + node.end);
     return;
   }
   if (node.child_count == 0) {
     for (uint32_t i = node.begin; i < node.end; ++i) {
       ++stats.meshes_tested;
-      const uint32_t id = order_[i];
-      if (classify(frustum, mesh_bounds_[id], camera) != Frustum::Side::kOutside) out.push_back(id);
+      const uint32_t id = tree_.order[i];
+      if (classify_mesh(frustum, id, camera) != Frustum::Side::kOutside) out.push_back(id);
     }
     return;
   }
@@ -154,11 +116,11 @@ void BroadPhase::query(const Frustum& frustum, const std::array<double, 3>& came
                        BroadPhaseStats* stats, bool parallel) const {
   out.clear();
   BroadPhaseStats total;
-  if (nodes_.empty()) {
+  if (tree_.nodes.empty()) {
     if (stats) *stats = total;
     return;
   }
-  if (!parallel || order_.size() < kParallelMinMeshes || frontier_.size() < 2) {
+  if (!parallel || tree_.order.size() < kParallelMinMeshes || frontier_.size() < 2) {
     query_node(0, frustum, camera, out, total);
     if (stats) *stats = total;
     return;
@@ -184,8 +146,8 @@ ViewportSplit BroadPhase::split_by_viewport(const Frustum& viewport, const std::
   std::vector<uint32_t> straddle, outside;
   uint32_t inside = 0;
   for (uint32_t id : ids) {
-    if (id >= mesh_bounds_.size()) continue;  // not a mesh of this tree: dropped, as query() never returns it
-    switch (classify(viewport, mesh_bounds_[id], camera)) {
+    if (id >= meshes_.size()) continue;  // not a mesh of this tree: dropped, as query() never returns it
+    switch (classify_mesh(viewport, id, camera)) {
       case Frustum::Side::kInside: ids[inside++] = id; break;  // inside <= position read: in-place is safe
       case Frustum::Side::kIntersects: straddle.push_back(id); break;
       case Frustum::Side::kOutside: outside.push_back(id); break;
@@ -196,6 +158,82 @@ ViewportSplit BroadPhase::split_by_viewport(const Frustum& viewport, const std::
   const auto main_end = static_cast<uint32_t>(ids.size());
   ids.insert(ids.end(), outside.begin(), outside.end());
   return ViewportSplit{main_end, inside};
+}
+
+bool BroadPhase::covers_sample(const SampleGrid& grid, uint32_t id, const std::array<double, 3>& camera) const {
+  const scene::MeshRecord& m = meshes_[id];
+  // The corners as the vertex shader places vertices: the mesh's offset rounded to float (SceneGpu), plus
+  // positions inside the record's bounds; projected in double.
+  double offset[3];
+  for (int a = 0; a < 3; ++a) offset[a] = static_cast<double>(static_cast<float>(m.origin[a] - camera[a]));
+  double lo[2] = {std::numeric_limits<double>::max(), std::numeric_limits<double>::max()};
+  double hi[2] = {std::numeric_limits<double>::lowest(), std::numeric_limits<double>::lowest()};
+  const glm::mat4& vp = grid.view_proj;
+  for (int corner = 0; corner < 8; ++corner) {
+    double p[3];
+    for (int a = 0; a < 3; ++a)
+      p[a] = offset[a] + static_cast<double>((corner >> a) & 1 ? m.bounds_max[a] : m.bounds_min[a]);
+    double clip[4];
+    for (int r = 0; r < 4; ++r) {
+      clip[r] = static_cast<double>(vp[3][r]);
+      for (int c = 0; c < 3; ++c) clip[r] += static_cast<double>(vp[c][r]) * p[c];
+    }
+    // On or behind the camera plane the rectangle is unbounded: keep the mesh (1 mm: well inside any near
+    // plane; NaN keeps it too).
+    if (!(clip[3] > 1e-3)) return true;
+    for (int a = 0; a < 2; ++a) {
+      const double size = a == 0 ? grid.width : grid.height;
+      const double px = (clip[a] / clip[3] * 0.5 + 0.5) * size;
+      if (!std::isfinite(px)) return true;  // a non-finite record: drawn, so make_resident reports it
+      lo[a] = std::min(lo[a], px);
+      hi[a] = std::max(hi[a], px);
+    }
+  }
+  // A pixel centre i + 0.5 (i in [0, size)) inside [lo - margin, hi + margin] on both axes. Flipping y does not
+  // change the set of centres.
+  for (int a = 0; a < 2; ++a) {
+    const double size = a == 0 ? grid.width : grid.height;
+    const double first = std::max(0.0, std::ceil(lo[a] - grid.margin_px - 0.5));
+    const double last = std::min(size - 1.0, std::floor(hi[a] + grid.margin_px - 0.5));
+    if (first > last) return false;
+  }
+  return true;
+}
+
+ViewportSplit BroadPhase::drop_unsampled(const SampleGrid& main, const SampleGrid& wide,
+                                         const std::array<double, 3>& camera, std::vector<uint32_t>& ids,
+                                         ViewportSplit split) const {
+  const size_t main_end = std::min<size_t>(split.main_end, ids.size());
+  const size_t wide_begin = std::min<size_t>(split.wide_begin, main_end);
+  auto keep = [&](size_t i) {
+    const uint32_t id = ids[i];
+    if (id >= meshes_.size()) return false;
+    if (i < wide_begin) return covers_sample(main, id, camera);
+    if (i < main_end) return covers_sample(main, id, camera) || covers_sample(wide, id, camera);
+    return covers_sample(wide, id, camera);
+  };
+  // The tests on every core for a large view (eight corner projections a mesh), the compaction in order.
+  std::vector<uint8_t> kept_flags(ids.size());
+  auto test = [&](size_t begin, size_t end) {
+    for (size_t i = begin; i < end; ++i) kept_flags[i] = keep(i) ? 1 : 0;
+  };
+  if (ids.size() < kParallelMinMeshes) {
+    test(0, ids.size());
+  } else {
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, ids.size(), 4096),
+                      [&](const tbb::blocked_range<size_t>& r) { test(r.begin(), r.end()); });
+  }
+  size_t kept = 0;
+  ViewportSplit out;
+  for (size_t i = 0; i < ids.size(); ++i) {
+    if (i == wide_begin) out.wide_begin = static_cast<uint32_t>(kept);
+    if (i == main_end) out.main_end = static_cast<uint32_t>(kept);
+    if (kept_flags[i]) ids[kept++] = ids[i];  // kept <= i: in place, order kept
+  }
+  if (wide_begin == ids.size()) out.wide_begin = static_cast<uint32_t>(kept);
+  if (main_end == ids.size()) out.main_end = static_cast<uint32_t>(kept);
+  ids.resize(kept);
+  return out;
 }
 
 }  // namespace texstream::render

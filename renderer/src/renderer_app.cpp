@@ -149,6 +149,9 @@ class Renderer {
   // `no_evictions`, an eviction on the way is an error (the preload must fit the cache); otherwise the load
   // stops at the first eviction (a visible set larger than the cache cannot be made fully resident).
   Status load_fully(std::vector<StreamCandidate> wanted, bool no_evictions);
+  // Frame 0's parts go into the summary after set_up()'s stages (where a start's first frame goes):
+  // the time since the previous part, under `name`.
+  void first_frame_stage(const char* name);
   // frames.csv: the frame's streaming counters and, with render.reference_dir, its image error.
   Status record_frame(uint64_t index, double time_s, const CameraPose& pose, double latency_ms, double waited_ms);
 
@@ -173,6 +176,8 @@ class Renderer {
   VkCommandBuffer cmd_ = VK_NULL_HANDLE;
   UniqueFence fence_;
   std::vector<uint32_t> visible_;
+  std::vector<uint32_t> new_textures_;  // textures of the meshes a frame draws for the first time
+  Clock::time_point frame0_mark_{};     // first_frame_stage(): end of frame 0's previous part
   std::vector<double> latencies_ms_;
   uint64_t serial_ = 0;
   uint64_t cycles_ = 0;
@@ -205,7 +210,8 @@ Status Renderer::set_up() {
     startup_seconds_.emplace_back(name, std::chrono::duration<double>(t - stage_start).count());
     stage_start = t;
   };
-  auto scene = SceneData::load(cfg_.scene.dir);
+  // Mapped, not read: the start costs the same for any scene size; meshes are checked when first drawn.
+  auto scene = SceneData::open(cfg_.scene.dir);
   if (!scene) return scene.error();
   scene_ = std::move(*scene);
   const fs::path path_file = cfg_.render.camera_path.empty() ? scene_.dir / scene_.manifest.camera_path
@@ -281,7 +287,7 @@ Status Renderer::set_up() {
   auto capture = FrameCapture::create(*ctx_, po.width, po.height);
   if (!capture) return capture.error();
   capture_ = std::make_unique<FrameCapture>(std::move(*capture));
-  broad_phase_ = std::make_unique<BroadPhase>(scene_.meshes.meshes);
+  broad_phase_ = BroadPhase::for_scene(scene_);  // mesh_index.bin, mapped (built and kept once when missing)
   stage("broad_phase_tree");
 
   VkDevice device = ctx_->device();
@@ -329,8 +335,14 @@ Status Renderer::set_up() {
   if (cfg_.render.preload_all) {
     // Every texture, its whole chain: the reference frames and the all-resident baseline.
     std::vector<StreamCandidate> all;
-    all.reserve(scene_.textures.size());
-    for (uint32_t t = 0; t < scene_.textures.size(); ++t) all.push_back({TextureId(t), 0.0f, 1.0f});
+    std::vector<uint32_t> ids;
+    all.reserve(scene_.texture_records().size());
+    ids.reserve(scene_.texture_records().size());
+    for (uint32_t t = 0; t < scene_.texture_records().size(); ++t) {
+      all.push_back({TextureId(t), 0.0f, 1.0f});
+      ids.push_back(t);
+    }
+    TS_TRY(cache_->prepare_textures(ids));  // every entry, and a format check of every texture, up front
     const auto t0 = Clock::now();
     TS_TRY(load_fully(std::move(all), true));
     spdlog::info("render.preload_all: {} mips ({:.1f} MB) of {} textures resident in {:.2f} s",
@@ -338,6 +350,12 @@ Status Renderer::set_up() {
                  cache_->resident_textures(), ms_between(t0, Clock::now()) / 1e3);
   }
   return ok_status();
+}
+
+void Renderer::first_frame_stage(const char* name) {
+  const auto t = Clock::now();
+  startup_seconds_.emplace_back(name, std::chrono::duration<double>(t - frame0_mark_).count());
+  frame0_mark_ = t;
 }
 
 Status Renderer::submit_and_wait() {
@@ -469,6 +487,7 @@ Status Renderer::load_fully(std::vector<StreamCandidate> wanted, bool no_evictio
 
 Status Renderer::render_frame(uint64_t index, bool last) {
   const auto t0 = Clock::now();
+  frame0_mark_ = t0;
   const double time_s = static_cast<double>(index) * cfg_.render.frame_time_ms / 1000.0;
   CameraLens lens{cfg_.render.fov_y_deg, cfg_.render.offscreen_fov_y_deg,
                   static_cast<double>(cfg_.render.width_px) / static_cast<double>(cfg_.render.height_px),
@@ -481,13 +500,28 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   FrameRecording rec;
   // Inside / straddling / outside the viewport's frustum: the main pass draws the first two runs, the wide
   // pass the last two (a mesh wholly inside the viewport adds nothing the main pass does not already count).
-  const ViewportSplit split =
+  ViewportSplit split =
       broad_phase_->split_by_viewport(Frustum::from_matrix(cam.proj * cam.view), cam.position, visible_);
-  scene_gpu_->write_draws(scene_, visible_, cam.position, split, rec);
   rec.main = main_pass_constants(cam);
   const auto& po = passes_->options();
   rec.wide = wide_pass_constants(cam, cfg_.render.fov_y_deg, cfg_.render.offscreen_fov_y_deg, po.height,
                                  po.wide_height);
+  // Meshes that cover no pixel centre of the passes drawing them have no fragment: neither uploaded nor drawn.
+  const uint32_t bits = ctx_->properties().limits.subPixelPrecisionBits;
+  split = broad_phase_->drop_unsampled(
+      SampleGrid::from_columns(rec.main.view_proj.m, po.width, po.height, bits),
+      SampleGrid::from_columns(rec.wide.view_proj.m, po.wide_width, po.wide_height, bits), cam.position, visible_,
+      split);
+  if (index == 0) first_frame_stage("frame0_broad_phase");
+  // Meshes drawn for the first time: checked, their geometry queued for this frame's command buffer and their
+  // textures' table entries written, so the frame draws every one of them.
+  new_textures_.clear();
+  TS_TRY(scene_gpu_->make_resident(scene_, visible_, &new_textures_));
+  if (index == 0) first_frame_stage("frame0_make_resident");
+  TS_TRY(cache_->prepare_textures(new_textures_));
+  if (index == 0) first_frame_stage("frame0_texture_entries");
+  scene_gpu_->write_draws(scene_, visible_, cam.position, split, rec);
+  if (index == 0) first_frame_stage("frame0_draw_list");
   // The same constants the offline ViewRenderer uses (frame_constants.hpp); ScenePasses::record adds the
   // view mode and the feedback bit.
   *scene_gpu_->frame_uniforms.as<gpu::FrameUniforms>() =
@@ -536,18 +570,26 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   TS_VK_TRY(vkBeginCommandBuffer(cmd_, &bi));
   TS_TRY(cache_->prepare_uploads(serial_));  // this frame's sparse binds: one vkQueueBindSparse
   cache_->record_uploads(cmd_, serial_);
+  TS_TRY(scene_gpu_->record_uploads(scene_, cmd_));
+  if (index == 0) {
+    first_frame_stage("frame0_record_uploads");
+    spdlog::info("first frame: {} meshes in the wide frustum ({} in the viewport's), {} meshes of {} uploaded ({:.1f} MB)",
+                 visible_.size(), split.main_end, scene_gpu_->stats().meshes_resident, scene_gpu_->mesh_count,
+                 static_cast<double>(scene_gpu_->stats().bytes_uploaded) / 1e6);
+  }
   passes_->record(cmd_, rec);
   // Every frame is captured when it is measured against a reference (the copy is part of every measured
   // configuration alike, so ratios between them are unaffected).
   if (write || measure_) capture_->record(cmd_, passes_->colour().handle());
   TS_VK_TRY(vkEndCommandBuffer(cmd_));
   TS_TRY(submit_and_wait());
+  if (index == 0) first_frame_stage("frame0_gpu");
   if (interactive_) {
     InteractiveReadout r;
     r.frame_latency_ms = latencies_ms_.empty() ? 0.0 : latencies_ms_.back();
     r.bytes_uploaded_total = cache_->stats().bytes_uploaded;
     r.textures_resident = cache_->resident_textures();
-    r.texture_count = scene_.textures.size();
+    r.texture_count = scene_.texture_records().size();
     r.load_size_mb = static_cast<double>(load_bytes_) / 1e6;
     TS_TRY(interactive_->present(passes_->colour().handle(), passes_->options().width, passes_->options().height, r));
   }
@@ -558,6 +600,7 @@ Status Renderer::render_frame(uint64_t index, bool last) {
       start_cycle();
     }
   }
+  if (index == 0) first_frame_stage("frame0_cycle");
   // Lock-step waits for the server are not frame latency: they would not exist in real time.
   latencies_ms_.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0 - waited).count());
   // Δt of Eq. 4-7 is in seconds; the next cycle uses the s and b this frame leads to.
@@ -619,7 +662,7 @@ std::vector<StreamCandidate> Renderer::read_candidates() {
   const auto* entries = reinterpret_cast<const gpu::CompactEntry*>(scene_gpu_->readback.bytes().data() +
                                                                    sizeof(gpu::CompactListHeader));
   uint64_t skipped = 0;
-  const auto candidates = build_candidates({entries, count}, scene_.meshes.meshes, &skipped);
+  const auto candidates = build_candidates({entries, count}, scene_.mesh_records(), &skipped);
   if (skipped) spdlog::warn("visibility list: {} entries with a bad mesh id skipped", skipped);
   return candidates;
 }
@@ -686,7 +729,7 @@ Result<RunSummary> Renderer::run() {
   s.protocol_errors = ss.protocol_errors;
   s.server_restarts = ss.server_restarts;
   s.textures_resident = cache_->resident_textures();
-  s.texture_count = scene_.textures.size();
+  s.texture_count = scene_.texture_records().size();
   s.streaming_cycles = cycles_;
   s.evictions = cache_->stats().evictions;
   s.controller_mode = to_string(controller_->params().mode);

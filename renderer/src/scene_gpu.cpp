@@ -1,20 +1,68 @@
 #include "texstream/render/scene_gpu.hpp"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
+#include <atomic>
+#include <cstring>
 #include <vector>
 
 #include "texstream/render/broad_phase.hpp"
-#include "texstream/render/one_shot.hpp"
 #include "texstream/render/scene_passes.hpp"
 #include "texstream/render/scene_data.hpp"
 #include "texstream/render/vulkan_context.hpp"
 
 namespace texstream::render {
 
-Result<SceneGpu> SceneGpu::create(const VulkanContext& ctx, const SceneData& scene) {
+namespace {
+
+// make_resident checks this many new meshes or more on several threads (TBB), in chunks of the grain: a
+// mesh's check takes about a microsecond, so below a few thousand the tasks cost more than they save.
+constexpr size_t kParallelCheckMin = 4096;
+constexpr size_t kParallelCheckGrain = 1024;
+
+// The "no fragment yet" metadata entry compact.comp also resets to (atomicMin identity, zero weight).
+constexpr gpu::MeshMeta kEmptyMeta{gpu::kNoMip, 0};
+
+// Copies into one destination buffer, merged while both source and destination continue the previous one.
+void add_region(std::vector<VkBufferCopy>& regions, VkDeviceSize src, VkDeviceSize dst, VkDeviceSize size) {
+  if (size == 0) return;
+  if (!regions.empty()) {
+    VkBufferCopy& last = regions.back();
+    if (last.srcOffset + last.size == src && last.dstOffset + last.size == dst) {
+      last.size += size;
+      return;
+    }
+  }
+  regions.push_back(VkBufferCopy{src, dst, size});
+}
+
+// Unified memory (lavapipe, integrated GPUs): every host-visible, coherent memory type is device-local, so a
+// host-visible buffer is as fast for the GPU as a device-local one and meshes can be written in place: one
+// copy (file -> buffer) instead of three (file -> staging -> GPU copy). A discrete GPU keeps its geometry in
+// device-local memory and gets it through staging copies.
+bool unified_memory(const VulkanContext& ctx) {
+  VkPhysicalDeviceMemoryProperties mp{};
+  vkGetPhysicalDeviceMemoryProperties(ctx.physical_device(), &mp);
+  constexpr VkMemoryPropertyFlags kHost = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+  bool any = false;
+  for (uint32_t i = 0; i < mp.memoryTypeCount; ++i) {
+    const VkMemoryPropertyFlags f = mp.memoryTypes[i].propertyFlags;
+    if ((f & kHost) != kHost) continue;
+    if (!(f & VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT)) return false;
+    any = true;
+  }
+  return any;
+}
+
+}  // namespace
+
+Result<SceneGpu> SceneGpu::create(const VulkanContext& ctx, const SceneData& scene, bool always_stage) {
   SceneGpu g;
-  const auto& md = scene.meshes;
-  g.mesh_count = static_cast<uint32_t>(md.meshes.size());
+  g.ctx_ = &ctx;
+  const auto records = scene.mesh_records();
+  g.mesh_count = static_cast<uint32_t>(records.size());
   g.compact_capacity = g.mesh_count;
   const VkDeviceSize n = std::max<VkDeviceSize>(g.mesh_count, 1);  // zero-sized buffers are invalid
   constexpr VkBufferUsageFlags kDst = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
@@ -25,16 +73,19 @@ Result<SceneGpu> SceneGpu::create(const VulkanContext& ctx, const SceneData& sce
     out = std::move(*b);
     return ok_status();
   };
-  const VkDeviceSize vbytes = std::max<VkDeviceSize>(md.vertices.size() * sizeof(scene::Vertex), 4);
-  const VkDeviceSize ibytes = std::max<VkDeviceSize>(md.indices.size() * sizeof(uint32_t), 4);
-  TS_TRY(make(g.vertices, vbytes, VK_BUFFER_USAGE_VERTEX_BUFFER_BIT | kDst, MemoryUse::kDeviceLocal));
-  TS_TRY(make(g.indices, ibytes, VK_BUFFER_USAGE_INDEX_BUFFER_BIT | kDst, MemoryUse::kDeviceLocal));
+  // Allocated at the scene's size, filled only where meshes are used (make_resident): nothing is written here,
+  // so creating them costs the same for any scene.
+  const VkDeviceSize vbytes = std::max<VkDeviceSize>(scene.vertices().size() * sizeof(scene::Vertex), 4);
+  const VkDeviceSize ibytes = std::max<VkDeviceSize>(scene.indices().size() * sizeof(uint32_t), 4);
+  g.in_place_ = !always_stage && unified_memory(ctx);
+  const MemoryUse geometry = g.in_place_ ? MemoryUse::kHostVisible : MemoryUse::kDeviceLocal;
+  TS_TRY(make(g.vertices, vbytes, VK_BUFFER_USAGE_VERTEX_BUFFER_BIT | kDst, geometry));
+  TS_TRY(make(g.indices, ibytes, VK_BUFFER_USAGE_INDEX_BUFFER_BIT | kDst, geometry));
   TS_TRY(make(g.meshes, n * sizeof(gpu::MeshGpu), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible));
   // Also a storage buffer: compact.comp reads the frame's mesh ids from it.
   TS_TRY(make(g.indirect, n * sizeof(VkDrawIndexedIndirectCommand),
               VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT | VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible));
-  TS_TRY(make(g.mesh_meta, n * sizeof(gpu::MeshMeta), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst,
-              MemoryUse::kDeviceLocal));
+  TS_TRY(make(g.mesh_meta, n * sizeof(gpu::MeshMeta), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst, geometry));
   const VkDeviceSize list_bytes = sizeof(gpu::CompactListHeader) + n * sizeof(gpu::CompactEntry);
   TS_TRY(make(g.compacted, list_bytes,
               VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst,
@@ -44,15 +95,129 @@ Result<SceneGpu> SceneGpu::create(const VulkanContext& ctx, const SceneData& sce
   TS_TRY(make(g.readback, list_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst, MemoryUse::kHostVisible));
   TS_TRY(make(g.frame_uniforms, sizeof(gpu::FrameUniforms), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT,
               MemoryUse::kHostVisible));
-
-  TS_TRY(upload_to_buffer(ctx, g.vertices, 0, std::as_bytes(std::span(md.vertices))));
-  TS_TRY(upload_to_buffer(ctx, g.indices, 0, std::as_bytes(std::span(md.indices))));
-  // The sparse metadata starts "no fragment yet": mip = kNoMip (atomicMin identity), weight = 0.
-  std::vector<gpu::MeshMeta> empty(n, gpu::MeshMeta{gpu::kNoMip, 0});
-  TS_TRY(upload_to_buffer(ctx, g.mesh_meta, 0, std::as_bytes(std::span(empty))));
-  std::fill_n(g.meshes.as<gpu::MeshGpu>(), n, gpu::MeshGpu{0, 0, 0, 0});
-  for (uint32_t i = 0; i < g.mesh_count; ++i) g.meshes.as<gpu::MeshGpu>()[i].texture_id = md.meshes[i].texture_id;
+  g.resident_.assign((static_cast<size_t>(g.mesh_count) + 63) / 64, 0);
   return g;
+}
+
+Status SceneGpu::make_resident(const SceneData& scene, std::span<const uint32_t> ids,
+                               std::vector<uint32_t>* new_textures) {
+  const auto records = scene.mesh_records();
+  stats_.meshes_uploaded = 0;
+  fresh_.clear();
+  for (uint32_t id : ids) {
+    TS_ASSERT(id < mesh_count, "make_resident of mesh %u of %u", id, mesh_count);
+    if (is_resident(id)) continue;
+    resident_[id >> 6] |= uint64_t{1} << (id & 63);  // also skips a repeated id
+    fresh_.push_back(id);
+  }
+  if (fresh_.empty()) return ok_status();
+
+  // The checks read the mapped file only: a view's first frame checks its meshes on every core. The first
+  // failing mesh in `ids` order is reported, whatever the scheduling, and then none of them is made resident.
+  std::atomic<size_t> first_bad{fresh_.size()};
+  auto check = [&](size_t begin, size_t end) {
+    for (size_t k = begin; k < end && k < first_bad.load(std::memory_order_relaxed); ++k) {
+      if (scene.check_mesh(fresh_[k]).ok()) continue;
+      // Lowers first_bad to k unless a lower index failed already (relaxed: only the final minimum matters,
+      // read after the parallel_for joins).
+      size_t seen = first_bad.load(std::memory_order_relaxed);
+      while (k < seen && !first_bad.compare_exchange_weak(seen, k, std::memory_order_relaxed)) {
+      }
+      return;
+    }
+  };
+  if (fresh_.size() < kParallelCheckMin) {
+    check(0, fresh_.size());
+  } else {
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, fresh_.size(), kParallelCheckGrain),
+                      [&](const tbb::blocked_range<size_t>& r) { check(r.begin(), r.end()); });
+  }
+  if (first_bad.load() < fresh_.size()) {
+    for (uint32_t id : fresh_) resident_[id >> 6] &= ~(uint64_t{1} << (id & 63));
+    return scene.check_mesh(fresh_[first_bad.load()]);  // the same error, built once
+  }
+
+  for (uint32_t id : fresh_) {
+    const scene::MeshRecord& m = records[id];
+    if (in_place_) {
+      // No submission reads a mesh before it is resident, so its ranges can be written now; the next
+      // vkQueueSubmit makes the host writes visible to the GPU.
+      const size_t vb = size_t{m.vertex_count} * sizeof(scene::Vertex);
+      const size_t ib = size_t{m.index_count} * sizeof(uint32_t);
+      std::memcpy(vertices.bytes().data() + size_t{m.first_vertex} * sizeof(scene::Vertex),
+                  scene.vertices().data() + m.first_vertex, vb);
+      std::memcpy(indices.bytes().data() + size_t{m.first_index} * sizeof(uint32_t),
+                  scene.indices().data() + m.first_index, ib);
+      mesh_meta.as<gpu::MeshMeta>()[id] = kEmptyMeta;
+      stats_.bytes_uploaded += vb + ib + sizeof(gpu::MeshMeta);
+    } else {
+      queued_.push_back(id);
+    }
+    if (new_textures) new_textures->push_back(m.texture_id);
+  }
+  stats_.meshes_resident += fresh_.size();
+  stats_.meshes_uploaded = fresh_.size();
+  return ok_status();
+}
+
+Status SceneGpu::record_uploads(const SceneData& scene, VkCommandBuffer cmd) {
+  if (queued_.empty()) return ok_status();
+  // In mesh order: meshes.bin stores neighbouring meshes' data next to each other, so copies merge.
+  std::sort(queued_.begin(), queued_.end());
+  const auto records = scene.mesh_records();
+  const auto verts = std::as_bytes(scene.vertices());
+  const auto idx = std::as_bytes(scene.indices());
+  VkDeviceSize total = 0;
+  for (uint32_t id : queued_) {
+    const scene::MeshRecord& m = records[id];
+    total += uint64_t{m.vertex_count} * sizeof(scene::Vertex) + uint64_t{m.index_count} * sizeof(uint32_t) +
+             sizeof(gpu::MeshMeta);
+  }
+  if (staging_.size() < total) {
+    // Grown, never shrunk: the largest frame so far (the first frame of a view) sets the size.
+    auto b = GpuBuffer::create(*ctx_, std::max<VkDeviceSize>(total, staging_.size() * 2),
+                               VK_BUFFER_USAGE_TRANSFER_SRC_BIT, MemoryUse::kHostVisible);
+    if (!b) return b.error();
+    staging_ = std::move(*b);
+  }
+  std::byte* dst = staging_.bytes().data();
+  std::vector<VkBufferCopy> vregions, iregions, mregions;
+  VkDeviceSize at = 0;
+  for (uint32_t id : queued_) {
+    const scene::MeshRecord& m = records[id];
+    const VkDeviceSize vb = uint64_t{m.vertex_count} * sizeof(scene::Vertex);
+    const VkDeviceSize voff = uint64_t{m.first_vertex} * sizeof(scene::Vertex);
+    std::memcpy(dst + at, verts.data() + voff, vb);
+    add_region(vregions, at, voff, vb);
+    at += vb;
+    const VkDeviceSize ib = uint64_t{m.index_count} * sizeof(uint32_t);
+    const VkDeviceSize ioff = uint64_t{m.first_index} * sizeof(uint32_t);
+    std::memcpy(dst + at, idx.data() + ioff, ib);
+    add_region(iregions, at, ioff, ib);
+    at += ib;
+  }
+  for (uint32_t id : queued_) {  // after the geometry: consecutive ids give one region
+    std::memcpy(dst + at, &kEmptyMeta, sizeof kEmptyMeta);
+    add_region(mregions, at, VkDeviceSize{id} * sizeof(gpu::MeshMeta), sizeof kEmptyMeta);
+    at += sizeof kEmptyMeta;
+  }
+  stats_.bytes_uploaded += total;
+  queued_.clear();
+
+  VkBuffer src = staging_.handle();
+  if (!vregions.empty()) vkCmdCopyBuffer(cmd, src, vertices.handle(), static_cast<uint32_t>(vregions.size()), vregions.data());
+  if (!iregions.empty()) vkCmdCopyBuffer(cmd, src, indices.handle(), static_cast<uint32_t>(iregions.size()), iregions.data());
+  vkCmdCopyBuffer(cmd, src, mesh_meta.handle(), static_cast<uint32_t>(mregions.size()), mregions.data());
+  VkMemoryBarrier b{};
+  b.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
+  b.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+  b.dstAccessMask = VK_ACCESS_VERTEX_ATTRIBUTE_READ_BIT | VK_ACCESS_INDEX_READ_BIT | VK_ACCESS_SHADER_READ_BIT |
+                    VK_ACCESS_SHADER_WRITE_BIT;
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT,
+                       VK_PIPELINE_STAGE_VERTEX_INPUT_BIT | VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT |
+                           VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                       0, 1, &b, 0, nullptr, 0, nullptr);
+  return ok_status();
 }
 
 void SceneGpu::write_draws(const SceneData& scene, std::span<const uint32_t> visible,
@@ -78,14 +243,17 @@ uint32_t SceneGpu::write_draws(const SceneData& scene, std::span<const uint32_t>
 uint32_t SceneGpu::write_draws_at(const SceneData& scene, std::span<const uint32_t> visible,
                                   const std::array<double, 3>& camera, VkDrawIndexedIndirectCommand* draws) {
   auto* mesh_out = meshes.as<gpu::MeshGpu>();
+  const auto records = scene.mesh_records();
   uint32_t count = 0;
   for (uint32_t id : visible) {
-    const scene::MeshRecord& m = scene.meshes.meshes[id];
+    const scene::MeshRecord& m = records[id];
     if (m.index_count == 0) continue;
+    TS_ASSERT(is_resident(id), "mesh %u drawn before make_resident", id);
     gpu::MeshGpu& g = mesh_out[id];
     g.offset_x = static_cast<float>(m.origin[0] - camera[0]);
     g.offset_y = static_cast<float>(m.origin[1] - camera[1]);
     g.offset_z = static_cast<float>(m.origin[2] - camera[2]);
+    g.texture_id = m.texture_id;
     draws[count++] = VkDrawIndexedIndirectCommand{m.index_count, 1, m.first_index,
                                                   static_cast<int32_t>(m.first_vertex), id};
   }

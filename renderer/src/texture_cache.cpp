@@ -39,8 +39,9 @@ TextureCache::TextureCache(const TextureCacheOptions& options, const SceneData& 
       states_(states),
       ring_(options.staging_bytes),
       allocator_(options.layer_extent, options.layers),
-      residency_(scene.textures.size()),
-      unplaceable_logged_(scene.textures.size(), false) {}
+      residency_(scene.texture_records().size()),
+      unplaceable_logged_(scene.texture_records().size(), false),
+      entry_written_(scene.texture_records().size(), false) {}
 
 Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& ctx, const TextureCacheOptions& options,
                                                            const SceneData& scene, TextureStates& states) {
@@ -54,17 +55,6 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
                       "cache.layers = " + std::to_string(options.layers) + " exceeds the device's maxImageArrayLayers " +
                           std::to_string(ctx.properties().limits.maxImageArrayLayers));
   }
-  // The renderer never decodes: texel blocks go from the file to the image unchanged.
-  for (size_t i = 0; i < scene.textures.size(); ++i) {
-    if (scene.textures[i].format != static_cast<uint32_t>(options.format)) {
-      return make_error(ErrorCode::kInvalidArgument,
-                        "cache.format = " + std::string(to_string(options.format)) + " but texture " + std::to_string(i) +
-                            " of " + (scene.dir / "textures.bin").string() + " is " +
-                            std::string(to_string(texel_format_from_raw(scene.textures[i].format)
-                                                      .value_or(TexelFormat::kRgba8))));
-    }
-  }
-
   std::unique_ptr<TextureCache> c(new TextureCache(options, scene, states));
   c->mip_levels_ = floor_log2(options.layer_extent) + 1;
   SparseImageInfo info;
@@ -87,19 +77,13 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
   if (!staging) return staging.error();
   c->staging_ = std::move(*staging);
 
-  const size_t n = std::max<size_t>(scene.textures.size(), 1);
+  // Entries are written by prepare_textures when first used: the shader reads only the entries of the
+  // textures of the meshes it draws.
+  const size_t n = std::max<size_t>(scene.texture_records().size(), 1);
   auto table = GpuBuffer::create(ctx, n * sizeof(gpu::TextureGpu), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT,
                                  MemoryUse::kHostVisible);
   if (!table) return table.error();
   c->table_ = std::move(*table);
-  auto* t = c->table_.as<gpu::TextureGpu>();
-  std::fill_n(t, n, gpu::TextureGpu{});
-  for (size_t i = 0; i < scene.textures.size(); ++i) {
-    const auto& r = scene.textures[i];
-    t[i].placement = {0, gpu::kNotResident, 0, r.mip_count};
-    t[i].region = {0, 0, r.width, r.height};
-    t[i].colour = {scene.colormap[i], 0, 0, 0};
-  }
 
   // Every level of every layer starts in the layout the shader reads; copies move it to TRANSFER_DST and back.
   VkImage img = c->sparse_->image();
@@ -119,6 +103,32 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
   }));
   c->stats_.create_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return c;
+}
+
+Status TextureCache::prepare_textures(std::span<const uint32_t> textures) {
+  for (uint32_t t : textures) TS_TRY(prepare_texture(t));
+  return ok_status();
+}
+
+Status TextureCache::prepare_texture(uint32_t texture) {
+  const auto records = scene_.texture_records();
+  TS_ASSERT(texture < records.size(), "texture %u of %zu", texture, records.size());
+  if (entry_written_[texture]) return ok_status();
+  const scene::TextureRecord& r = records[texture];
+  // The renderer never decodes: texel blocks go from the file to the image unchanged.
+  if (r.format != static_cast<uint32_t>(options_.format)) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "cache.format = " + std::string(to_string(options_.format)) + " but texture " +
+                          std::to_string(texture) + " of " + (scene_.dir / "textures.bin").string() + " is " +
+                          std::string(to_string(texel_format_from_raw(r.format).value_or(TexelFormat::kRgba8))));
+  }
+  gpu::TextureGpu& t = table_.as<gpu::TextureGpu>()[texture];
+  t = gpu::TextureGpu{};
+  t.placement = {0, gpu::kNotResident, 0, r.mip_count};
+  t.region = {0, 0, r.width, r.height};
+  t.colour = {scene_.colours()[texture], 0, 0, 0};
+  entry_written_[texture] = true;
+  return ok_status();
 }
 
 std::span<std::byte> TextureCache::reserve(TextureId, MipLevel, uint64_t bytes) {
@@ -186,8 +196,18 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
   reserved_.erase(it);
 
   // StreamClient checked the payload against the texture table; these are our own invariants.
-  TS_ASSERT(texture.value < scene_.textures.size(), "commit of unknown texture %u", texture.value);
-  const scene::TextureRecord& rec = scene_.textures[texture.value];
+  TS_ASSERT(texture.value < scene_.texture_records().size(), "commit of unknown texture %u", texture.value);
+  if (auto prepared = prepare_texture(texture.value); !prepared) {
+    // Streamed before any mesh of it was drawn (render.preload_all) and of another format: never shown.
+    if (!unplaceable_logged_[texture.value]) {
+      spdlog::warn("texture cache: {}", prepared.error().message);
+      unplaceable_logged_[texture.value] = true;
+    }
+    release_staging(alloc);
+    states_.on_failed(texture, mip, CompletionStatus::kNotFound);
+    return;
+  }
+  const scene::TextureRecord& rec = scene_.texture_records()[texture.value];
   TS_ASSERT(mip.value < rec.mip_count && data.size() == mip_bytes(options_.format, rec.width, rec.height, mip.value),
             "commit of texture %u mip %u with %zu bytes", texture.value, mip.value, data.size());
 
@@ -311,7 +331,7 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
   regions.reserve(ready_.size());
   const uint32_t block = block_size(options_.format);
   for (Copy& c : ready_) {
-    const scene::TextureRecord& rec = scene_.textures[c.texture.value];
+    const scene::TextureRecord& rec = scene_.texture_records()[c.texture.value];
     const auto region = allocator_.find(c.texture);
     TS_ASSERT(region.has_value(), "queued copy of texture %u without a region", c.texture.value);
     const Extent2D e = mip_extent(rec.width, rec.height, c.mip);

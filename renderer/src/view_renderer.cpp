@@ -58,6 +58,7 @@ struct ViewRenderer::Impl {
   VkCommandBuffer cmd = VK_NULL_HANDLE;
   UniqueFence fence;
   std::vector<uint32_t> visible;
+  std::vector<uint32_t> new_textures;
   uint64_t serial = 0;
 };
 
@@ -78,8 +79,11 @@ Result<std::unique_ptr<ViewRenderer>> ViewRenderer::create(const Config& cfg, Sc
   m.cfg = cfg;
   m.options = options;
   m.scene = std::move(scene);
-  for (auto& mesh : m.scene.meshes.meshes)
-    for (int a = 0; a < 3; ++a) mesh.origin[a] += options.scene_offset[a];
+  if (options.scene_offset != std::array<double, 3>{}) {
+    TS_TRY(m.scene.make_loaded());  // the records are edited: an opened (mapped) scene is copied first
+    for (auto& mesh : m.scene.meshes.meshes)
+      for (int a = 0; a < 3; ++a) mesh.origin[a] += options.scene_offset[a];
+  }
 
   VulkanContextOptions vo;
   vo.device_substring = cfg.render.device;
@@ -98,7 +102,7 @@ Result<std::unique_ptr<ViewRenderer>> ViewRenderer::create(const Config& cfg, Sc
   auto cache = TextureCache::create(*m.ctx, co, m.scene, *m.states);
   if (!cache) return cache.error();
   m.cache = std::move(*cache);
-  auto gpu = SceneGpu::create(*m.ctx, m.scene);
+  auto gpu = SceneGpu::create(*m.ctx, m.scene, options.stage_geometry);
   if (!gpu) return gpu.error();
   m.gpu = std::make_unique<SceneGpu>(std::move(*gpu));
   m.compiler = std::make_unique<ShaderCompiler>(ShaderCompiler::default_source_dir(),
@@ -120,7 +124,7 @@ Result<std::unique_ptr<ViewRenderer>> ViewRenderer::create(const Config& cfg, Sc
   auto capture = FrameCapture::create(*m.ctx, po.width, po.height);
   if (!capture) return capture.error();
   m.capture = std::make_unique<FrameCapture>(std::move(*capture));
-  m.broad_phase = std::make_unique<BroadPhase>(m.scene.meshes.meshes);
+  m.broad_phase = BroadPhase::for_scene(m.scene);
 
   VkDevice device = m.ctx->device();
   VkCommandPoolCreateInfo pci{};
@@ -157,17 +161,30 @@ Result<ViewResult> ViewRenderer::render(const CameraPose& pose, const ViewReques
   const auto t0 = Clock::now();
   // The wide frustum for both passes, then split by the viewport's: each pass draws only what it can see.
   m.broad_phase->query(Frustum::from_matrix(cam.wide_proj * cam.view), cam.position, m.visible, &out.broad_phase);
-  const ViewportSplit split =
+  ViewportSplit split =
       m.broad_phase->split_by_viewport(Frustum::from_matrix(cam.proj * cam.view), cam.position, m.visible);
-  out.broad_phase_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
   out.submitted = m.visible.size();
-
   FrameRecording rec;
+  rec.main = main_pass_constants(cam);
+  rec.wide = wide_pass_constants(cam, r.fov_y_deg, r.offscreen_fov_y_deg, out.height, m.passes->options().wide_height);
+  if (m.options.drop_unsampled) {
+    const auto& po = m.passes->options();
+    const uint32_t bits = m.ctx->properties().limits.subPixelPrecisionBits;
+    split = m.broad_phase->drop_unsampled(
+        SampleGrid::from_columns(rec.main.view_proj.m, po.width, po.height, bits),
+        SampleGrid::from_columns(rec.wide.view_proj.m, po.wide_width, po.wide_height, bits), cam.position,
+        m.visible, split);
+  }
+  out.unsampled = out.submitted - m.visible.size();
+  out.broad_phase_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+
+  // As the frame loop does: meshes drawn for the first time are checked and uploaded in this submission.
+  m.new_textures.clear();
+  TS_TRY(m.gpu->make_resident(m.scene, m.visible, &m.new_textures));
+  TS_TRY(m.cache->prepare_textures(m.new_textures));
   m.gpu->write_draws(m.scene, m.visible, cam.position, split, rec);
   out.main_draws = rec.main_count;
   out.wide_draws = rec.draw_count - rec.wide_first;
-  rec.main = main_pass_constants(cam);
-  rec.wide = wide_pass_constants(cam, r.fov_y_deg, r.offscreen_fov_y_deg, out.height, m.passes->options().wide_height);
   rec.feedback = request.feedback;
   rec.read_back_list = request.feedback && request.read_back;
   *m.gpu->frame_uniforms.as<gpu::FrameUniforms>() = frame_uniforms(
@@ -184,6 +201,7 @@ Result<ViewResult> ViewRenderer::render(const CameraPose& pose, const ViewReques
   bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
   TS_VK_TRY(vkBeginCommandBuffer(m.cmd, &bi));
   m.cache->record_uploads(m.cmd, ++m.serial);
+  TS_TRY(m.gpu->record_uploads(m.scene, m.cmd));
   m.passes->record(m.cmd, rec);
   if (request.capture) m.capture->record(m.cmd, m.passes->colour().handle());
   TS_VK_TRY(vkEndCommandBuffer(m.cmd));

@@ -18,6 +18,7 @@
 #include "camera_path_builder.hpp"
 #include "city_layout.hpp"
 #include "mip_chain.hpp"
+#include "texstream/common/mesh_index.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texture_painter.hpp"
 
@@ -60,7 +61,8 @@ Status prepare_output(const fs::path& out, bool force) {
     if (!force)
       return make_error(ErrorCode::kInvalidArgument,
                         out.string() + ": folder is not empty (pass --force to overwrite a previous scene)");
-    for (const char* name : {"scene.json", "meshes.bin", "textures.bin", "colormap.bin", "camera_path.txt"}) {
+    for (const char* name :
+         {"scene.json", "meshes.bin", "mesh_index.bin", "textures.bin", "colormap.bin", "camera_path.txt"}) {
       fs::remove(out / name, ec);
       if (ec) return make_error(ErrorCode::kIo, (out / name).string() + ": cannot remove: " + ec.message());
     }
@@ -233,6 +235,9 @@ Result<GeneratorStats> generate_scene(const GeneratorOptions& options, const Pro
     stats.vertices = meshes.vertices.size();
     stats.triangles = meshes.indices.size() / 3;
     TS_TRY(scene::write_meshes(opt.out, meshes));
+    // The broad phase's tree, built once here so that no renderer start pays for it (mesh_index.hpp); after
+    // meshes.bin, whose size and time it is stamped with.
+    TS_TRY(scene::write_mesh_index(opt.out, scene::build_mesh_index(meshes.meshes).view()));
   }
 
   std::vector<scene::TextureRecord> table(city.surfaces.size());

@@ -7,9 +7,11 @@
 //   <scene>/textures.bin       TextureFileHeader, TextureRecord[texture_count]
 //   <scene>/colormap.bin       ColormapFileHeader, uint32 RGBA8[texture_count]   (seed 000 §3.7 City Colormap)
 //   <scene>/camera_path.txt    the default fly-through (see camera_path.hpp)
+//   <scene>/mesh_index.bin     optional: the broad phase's quadtree over meshes.bin (mesh_index.hpp)
 //   <scene>/textures/XXX/YYYYYYYY.dds   one DDS per texture, all mips finest first, no DX10 extension:
 //                              mip L of texture T lies at 128 + mip_chain_offset(format, w, h, L)
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <filesystem>
 #include <span>
@@ -111,6 +113,57 @@ Result<std::vector<TextureRecord>> read_texture_table(const std::filesystem::pat
 Result<std::vector<uint32_t>> read_colormap(const std::filesystem::path& dir, uint64_t expected_count);
 
 Status write_meshes(const std::filesystem::path& dir, const MeshData& data);
+
+// ---- Mapped reading: start-up cost that does not grow with the scene (texstream-render) ----
+
+// A whole file mapped read-only; pages arrive from the page cache as they are touched. Move-only.
+class MappedFile {
+ public:
+  MappedFile() = default;
+  MappedFile(MappedFile&& o) noexcept { *this = std::move(o); }
+  MappedFile& operator=(MappedFile&& o) noexcept;
+  MappedFile(const MappedFile&) = delete;
+  MappedFile& operator=(const MappedFile&) = delete;
+  ~MappedFile();
+
+  // kNotFound when the file is missing; errors name the path.
+  static Result<MappedFile> open(const std::filesystem::path& path);
+  std::span<const std::byte> bytes() const { return {static_cast<const std::byte*>(data_), size_}; }
+  const std::string& what() const { return what_; }
+
+ private:
+  void* data_ = nullptr;
+  size_t size_ = 0;
+  std::string what_;
+};
+
+// meshes.bin, mapped. map_meshes() checks what costs O(1): magic, version, counts against the file size.
+// check_mesh() is read_meshes()'s per-mesh check (ranges, triangles, finite bounds and vertices, indices in
+// range), made when the mesh is first used, with the same message naming the file and the mesh.
+struct MappedMeshes {
+  MappedFile file;
+  std::span<const MeshRecord> meshes;
+  std::span<const Vertex> vertices;
+  std::span<const uint32_t> indices;
+
+  Status check_mesh(size_t i) const;
+};
+Result<MappedMeshes> map_meshes(const std::filesystem::path& dir);
+
+// textures.bin, mapped, every record validated as read_texture_table() does (16 bytes a texture: cheap next
+// to the table copies the streaming side makes of it).
+struct MappedTextureTable {
+  MappedFile file;
+  std::span<const TextureRecord> textures;
+};
+Result<MappedTextureTable> map_texture_table(const std::filesystem::path& dir);
+
+// colormap.bin, mapped; header and size checked (a colour has no invalid value).
+struct MappedColormap {
+  MappedFile file;
+  std::span<const uint32_t> rgba;
+};
+Result<MappedColormap> map_colormap(const std::filesystem::path& dir, uint64_t expected_count);
 Status write_texture_table(const std::filesystem::path& dir, std::span<const TextureRecord> textures);
 Status write_colormap(const std::filesystem::path& dir, std::span<const uint32_t> rgba);
 

@@ -23,6 +23,8 @@ struct ViewRendererOptions {
   bool lod_probe = false;                 // compile the LOD_PROBE variant and return its samples
   std::array<double, 3> scene_offset{};   // added to every mesh origin (and expected in the poses given)
   bool timestamps = false;                // GPU timestamps per pass (ViewResult::pass_times)
+  bool stage_geometry = false;            // SceneGpu copies meshes through staging even on unified memory
+  bool drop_unsampled = true;             // BroadPhase::drop_unsampled (false: draw every mesh the frusta keep)
 };
 
 struct ViewRequest {
@@ -38,6 +40,7 @@ struct ViewResult {
   std::vector<gpu::CompactEntry> entries;       // read_back: the used prefix
   std::vector<gpu::LodProbeSample> probe;       // lod_probe: one per pixel
   size_t submitted = 0;                         // meshes the broad phase kept (wide frustum)
+  size_t unsampled = 0;                         // of those, dropped: no pixel centre in their passes
   uint32_t main_draws = 0;                      // of those, drawn by the main pass (touch the viewport frustum)
   uint32_t wide_draws = 0;                      // drawn by the wide pass (reach outside the viewport frustum)
   PassTimes pass_times;                         // ViewRendererOptions::timestamps
