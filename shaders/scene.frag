@@ -1,17 +1,25 @@
 #version 450
 // Main pass: shades with the texture cache (only resident mips) and the City Colormap (Eq. 8), and writes the
-// per-mesh visibility metadata (Eq. 1-3). It runs in the subpass after the depth pre-pass with an EQUAL depth
+// fragment's visibility metadata (Eq. 1-3) into a second colour attachment, which meta_reduce.comp sums per
+// mesh. It runs in the subpass after the depth pre-pass with an EQUAL depth
 // test, so only the fragments that end up in the image run it, and of those only the pixel's owner (the mesh id
 // the pre-pass wrote, prepass.frag) goes on: coplanar surfaces both pass EQUAL, yet one pixel has one owner. A
 // mesh gets metadata exactly when it owns a pixel, which is what the mesh-id view shows.
 // Variants:
 //   WIDE_PASS  the small off-screen pass at the wider FOV: metadata only, W = 1 per viewport pixel, and only
 //              outside the viewport (seed 000 §3.2);
+//   SUBGROUP_FEEDBACK  (with WIDE_PASS) the wide pass's atomics combined per subgroup first;
 //   LOD_PROBE  also writes, per pixel, the metadata's level next to the device's textureQueryLod (tests and
 //              texstream-bench visibility check the formula against the hardware).
 // FrameUniforms.view.x selects a debug view (render.debug_view): displayed mip as grey, weight heat map,
 // mesh ids.
 layout(early_fragment_tests) in;  // metadata only from fragments that passed the depth test (seed 000 §3.2)
+
+#ifdef SUBGROUP_FEEDBACK
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_ballot : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
+#endif
 
 #include "bindings.glsl"
 #include "mip_math.glsl"
@@ -26,6 +34,8 @@ layout(location = 3) in vec4 in_clip;
 
 #ifndef WIDE_PASS
 layout(location = 0) out vec4 out_colour;
+// The pixel's mesh and metadata for meta_reduce.comp (layout in shared_structs.h): the main pass writes no buffer.
+layout(location = 1) out uvec2 out_meta;
 layout(input_attachment_index = 0, set = 0, binding = kBindingOwner) uniform usubpassInput owner_id;
 #endif
 
@@ -139,10 +149,37 @@ void main() {
   float wanted = clamp(meta.lod + pc.pass.x, 0.0, mip_max);
   uint mip_fixed = uint(wanted * float(kMipFixedScale));
   uint weight_fixed = uint(weight * float(kWeightFixedScale) + 0.5);
+#ifndef WIDE_PASS
+  // This fragment owns its pixel (the test above): one value per pixel, reduced per mesh by meta_reduce.comp.
+  out_meta = uvec2(in_mesh + 1u, (min(mip_fixed, kMetaWeightMask) << kMetaMipShift) | min(weight_fixed, kMetaWeightMask));
+#elif defined(SUBGROUP_FEEDBACK)
+  // The wide pass has no owner buffer (several fragments of a pixel may count, as in the seed), so it keeps the
+  // atomics, one pair per (subgroup, mesh) instead of per fragment: each pass of the loop takes the mesh of the
+  // first remaining lane, reduces min(mip) and sum(W) over the lanes of that mesh, and one of them writes.
+  // Helper invocations are not in this branch, so they are not active lanes of the reductions. Integer min and
+  // sum do not depend on order: the result equals per-fragment atomics.
+  if (!gl_HelperInvocation) {
+    bool pending = true;
+    while (pending) {
+      uint leader = subgroupBroadcastFirst(in_mesh);
+      if (in_mesh == leader) {
+        uint group_mip = subgroupMin(mip_fixed);
+        uint group_weight = subgroupAdd(weight_fixed);  // <= 272 per lane, at most 128 lanes: no overflow
+        if (subgroupElect()) {
+          if (group_mip < mesh_meta[in_mesh].mip_fixed) atomicMin(mesh_meta[in_mesh].mip_fixed, group_mip);
+          if (mesh_meta[in_mesh].weight_fixed < kWeightSaturate)
+            atomicAdd(mesh_meta[in_mesh].weight_fixed, group_weight);
+        }
+        pending = false;
+      }
+    }
+  }
+#else
   // Most fragments of a mesh do not lower its minimum: a plain read first skips their atomic (a stale read
   // only lets an unneeded atomicMin through, never skips a needed one, since the value only decreases).
   if (mip_fixed < mesh_meta[in_mesh].mip_fixed) atomicMin(mesh_meta[in_mesh].mip_fixed, mip_fixed);
   // Saturating sum (kWeightSaturate): the plain read may be stale, which only lets a bounded number of
   // in-flight fragments add past the threshold (see shared_structs.h).
   if (mesh_meta[in_mesh].weight_fixed < kWeightSaturate) atomicAdd(mesh_meta[in_mesh].weight_fixed, weight_fixed);
+#endif
 }

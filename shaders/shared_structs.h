@@ -31,6 +31,7 @@ TS_CONST kBindingLodProbe = 7;     // buffer LodProbeSample[width * height] (LOD
 TS_CONST kBindingProbeSampler = 8; // sampler2DArray: the cache image through a sampler with anisotropy A_m
 TS_CONST kBindingOwner = 9;        // usubpassInput: the depth pre-pass's id buffer (mesh id + 1, 0 = none)
 TS_CONST kBindingDraws = 10;       // buffer: the frame's VkDrawIndexedIndirectCommand list (compact.comp reads ids)
+TS_CONST kBindingMetaImage = 11;   // usampler2D: the shading subpass's per-pixel metadata (meta_reduce.comp)
 // 32-bit words per VkDrawIndexedIndirectCommand, and the word holding firstInstance (= the mesh id).
 TS_CONST kDrawWords = 5u;
 TS_CONST kDrawMeshWord = 4u;
@@ -52,6 +53,14 @@ TS_CONST kFlagColormapBlend = 1u;  // Eq. 8 blending (config stream.colormap_ble
 TS_CONST kFlagLighting = 2u;       // headlight shading; off gives the plain texel colour
 TS_CONST kFlagFeedback = 4u;       // write visibility metadata (config render.feedback)
 TS_CONST kCompactWorkgroupSize = 64u;
+// meta_reduce.comp: one invocation per run of kMetaReduceRun pixels of a row, kMetaReduceGroup per workgroup.
+TS_CONST kMetaReduceRun = 16u;
+TS_CONST kMetaReduceGroup = 64u;
+// The shading subpass's metadata attachment (RG32_UINT): x = mesh id + 1 (0: no mesh), y = mip_fixed << 16 |
+// weight_fixed. Both fit 16 bits: levels <= 15 (a 32768-texel texture) are <= 3840 in 1/256, and one
+// fragment's W <= 17 is <= 272 in 1/16.
+TS_CONST kMetaMipShift = 16u;
+TS_CONST kMetaWeightMask = 0xffffu;
 // FrameUniforms.view.x: what the main pass draws (config render.debug_view). Debug views write raw bytes into a
 // UNORM target, so a PNG of them can be decoded exactly.
 TS_CONST kDebugViewNone = 0u;

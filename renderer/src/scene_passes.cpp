@@ -4,6 +4,7 @@
 #include <array>
 #include <cstddef>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include "texstream/common/scene_format.hpp"
@@ -24,6 +25,8 @@ constexpr VkFormat kDebugColourFormat = VK_FORMAT_R8G8B8A8_UNORM;
 constexpr VkFormat kDepthFormat = VK_FORMAT_D32_SFLOAT;
 // The pre-pass's id buffer: mesh id + 1 per pixel (0 = no mesh); 32 bits hold any mesh count.
 constexpr VkFormat kOwnerFormat = VK_FORMAT_R32_UINT;
+// The shading subpass's per-pixel mesh and metadata (layout: gpu::kMetaMipShift in shared_structs.h).
+constexpr VkFormat kMetaFormat = VK_FORMAT_R32G32_UINT;
 // compact.comp reads the mesh id of each draw from the indirect list as 32-bit words.
 static_assert(sizeof(VkDrawIndexedIndirectCommand) == gpu::kDrawWords * sizeof(uint32_t));
 static_assert(offsetof(VkDrawIndexedIndirectCommand, firstInstance) == gpu::kDrawMeshWord * sizeof(uint32_t));
@@ -73,18 +76,22 @@ Result<UniqueRenderPass> finish_render_pass(VkDevice device, std::span<const VkA
 }
 
 // The main pass: subpass 0 is the depth pre-pass, which also writes the owner id (kOwnerFormat); subpass 1
-// shades with an EQUAL depth test and reads the owner id as an input attachment (scene.frag).
-// Attachments: 0 colour, 1 depth, 2 owner id.
+// shades with an EQUAL depth test, reads the owner id as an input attachment and writes each pixel's metadata
+// (kMetaFormat) next to its colour (scene.frag). meta_reduce.comp reads the metadata after the pass.
+// Attachments: 0 colour, 1 depth, 2 owner id, 3 metadata.
 Result<UniqueRenderPass> make_main_pass(VkDevice device, VkFormat colour_format) {
-  const std::array<VkAttachmentDescription, 3> atts{
+  const std::array<VkAttachmentDescription, 4> atts{
       attachment(colour_format, VK_ATTACHMENT_STORE_OP_STORE, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL),  // captured
       attachment(kDepthFormat, VK_ATTACHMENT_STORE_OP_DONT_CARE, VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL),
       attachment(kOwnerFormat, VK_ATTACHMENT_STORE_OP_DONT_CARE, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL),
+      attachment(kMetaFormat, VK_ATTACHMENT_STORE_OP_STORE, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL),
   };
   const VkAttachmentReference colour_ref{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
   const VkAttachmentReference depth_ref{1, VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL};
   const VkAttachmentReference owner_out{2, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
   const VkAttachmentReference owner_in{2, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
+  const std::array<VkAttachmentReference, 2> shading_out{
+      colour_ref, VkAttachmentReference{3, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL}};
   std::array<VkSubpassDescription, 2> subs{};
   subs[0].pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
   subs[0].colorAttachmentCount = 1;
@@ -93,24 +100,26 @@ Result<UniqueRenderPass> make_main_pass(VkDevice device, VkFormat colour_format)
   subs[1].pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
   subs[1].inputAttachmentCount = 1;
   subs[1].pInputAttachments = &owner_in;
-  subs[1].colorAttachmentCount = 1;
-  subs[1].pColorAttachments = &colour_ref;
+  subs[1].colorAttachmentCount = static_cast<uint32_t>(shading_out.size());
+  subs[1].pColorAttachments = shading_out.data();
   subs[1].pDepthStencilAttachment = &depth_ref;
 
-  // In: the previous frame's use of the same attachments (and its capture copy) must be done before we clear.
-  // Between: the shading subpass tests against the pre-pass's depth and reads its owner id at the same pixel.
-  // Out: the capture copy reads the colour after the pass.
-  std::array<VkSubpassDependency, 4> deps{};
+  // In: the previous frame's use of the same attachments (its shading, capture copy and meta_reduce reads)
+  // must be done before we clear. Between: the shading subpass tests against the pre-pass's depth and reads its
+  // owner id at the same pixel. Out: the capture copy reads the colour, meta_reduce the metadata.
+  std::array<VkSubpassDependency, 5> deps{};
   deps[0].srcSubpass = VK_SUBPASS_EXTERNAL;
   deps[0].dstSubpass = 0;
-  deps[0].srcStageMask = VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT | VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT;
+  deps[0].srcStageMask = VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT | VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT |
+                         VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT;
   deps[0].dstStageMask = VK_PIPELINE_STAGE_EARLY_FRAGMENT_TESTS_BIT | VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
   deps[0].srcAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT | VK_ACCESS_INPUT_ATTACHMENT_READ_BIT;
   deps[0].dstAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_READ_BIT | VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT |
                           VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
   deps[1].srcSubpass = VK_SUBPASS_EXTERNAL;
   deps[1].dstSubpass = 1;
-  deps[1].srcStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[1].srcStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT |
+                         VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT;
   deps[1].dstStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
   deps[1].srcAccessMask = VK_ACCESS_TRANSFER_READ_BIT | VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
   deps[1].dstAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
@@ -127,6 +136,12 @@ Result<UniqueRenderPass> make_main_pass(VkDevice device, VkFormat colour_format)
   deps[3].dstStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT;
   deps[3].srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
   deps[3].dstAccessMask = VK_ACCESS_TRANSFER_READ_BIT;
+  deps[4].srcSubpass = 1;  // the metadata to meta_reduce
+  deps[4].dstSubpass = VK_SUBPASS_EXTERNAL;
+  deps[4].srcStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[4].dstStageMask = VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT;
+  deps[4].srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  deps[4].dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
   return finish_render_pass(device, atts, subs, deps);
 }
 
@@ -234,6 +249,12 @@ Status ScenePasses::create_targets(const VulkanContext& ctx) {
   auto owner = GpuImage::create(ctx, oi);
   if (!owner) return owner.error();
   owner_ = std::move(*owner);
+  GpuImageInfo mi = ci;
+  mi.format = kMetaFormat;
+  mi.usage = VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_SAMPLED_BIT;
+  auto meta = GpuImage::create(ctx, mi);
+  if (!meta) return meta.error();
+  meta_ = std::move(*meta);
   di.width = options_.wide_width;
   di.height = options_.wide_height;
   auto wide = GpuImage::create(ctx, di);
@@ -246,8 +267,8 @@ Status ScenePasses::create_targets(const VulkanContext& ctx) {
   auto wide_pass = make_wide_pass(device);
   if (!wide_pass) return wide_pass.error();
   wide_pass_ = std::move(*wide_pass);
-  auto main_fb = make_framebuffer(device, main_pass_.get(), {colour_.view(), depth_.view(), owner_.view()}, options_.width,
-                                  options_.height);
+  auto main_fb = make_framebuffer(device, main_pass_.get(), {colour_.view(), depth_.view(), owner_.view(), meta_.view()},
+                                  options_.width, options_.height);
   if (!main_fb) return main_fb.error();
   main_fb_ = std::move(*main_fb);
   auto wide_fb = make_framebuffer(device, wide_pass_.get(), {wide_depth_.view()}, options_.wide_width,
@@ -289,8 +310,17 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
   VkSampler probe_sampler = VK_NULL_HANDLE;
   TS_VK_TRY(vkCreateSampler(device, &si, nullptr, &probe_sampler));
   probe_sampler_ = UniqueSampler(device, probe_sampler);
+  // meta_reduce.comp only texelFetches the integer target; nearest keeps the sampler valid for formats that
+  // cannot be filtered.
+  si.magFilter = si.minFilter = VK_FILTER_NEAREST;
+  si.mipmapMode = VK_SAMPLER_MIPMAP_MODE_NEAREST;
+  si.anisotropyEnable = VK_FALSE;
+  si.maxAnisotropy = 1.0f;
+  VkSampler texel_sampler = VK_NULL_HANDLE;
+  TS_VK_TRY(vkCreateSampler(device, &si, nullptr, &texel_sampler));
+  texel_sampler_ = UniqueSampler(device, texel_sampler);
 
-  const std::array<VkDescriptorSetLayoutBinding, 11> bindings{{
+  const std::array<VkDescriptorSetLayoutBinding, 12> bindings{{
       {gpu::kBindingFrame, VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1, kAllStages, nullptr},
       {gpu::kBindingMeshes, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
       {gpu::kBindingTextures, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
@@ -302,6 +332,7 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
       {gpu::kBindingProbeSampler, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr},
       {gpu::kBindingOwner, VK_DESCRIPTOR_TYPE_INPUT_ATTACHMENT, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr},
       {gpu::kBindingDraws, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr},
+      {gpu::kBindingMetaImage, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr},
   }};
   VkDescriptorSetLayoutCreateInfo li{};
   li.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO;
@@ -313,7 +344,7 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
 
   const std::array<VkDescriptorPoolSize, 4> sizes{{{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1},
                                                    {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 7},
-                                                   {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2},
+                                                   {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 3},
                                                    {VK_DESCRIPTOR_TYPE_INPUT_ATTACHMENT, 1}}};
   VkDescriptorPoolCreateInfo pi{};
   pi.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
@@ -345,7 +376,8 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
   const VkDescriptorImageInfo probe_image{probe_sampler_.get(), cache.image_view(),
                                           VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
   const VkDescriptorImageInfo owner_image{VK_NULL_HANDLE, owner_.view(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
-  std::array<VkWriteDescriptorSet, kBuffers + 3> writes{};
+  const VkDescriptorImageInfo meta_texels{texel_sampler_.get(), meta_.view(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
+  std::array<VkWriteDescriptorSet, kBuffers + 4> writes{};
   const std::array<uint32_t, kBuffers> buffer_bindings{gpu::kBindingFrame,     gpu::kBindingMeshes,
                                                        gpu::kBindingTextures,  gpu::kBindingMeshMeta,
                                                        gpu::kBindingCompacted, gpu::kBindingReadback,
@@ -359,17 +391,22 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
     writes[i].descriptorType = i == 0 ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
     writes[i].pBufferInfo = &buffers[i];
   }
-  for (size_t k = 0; k < 2; ++k) {
-    VkWriteDescriptorSet& w = writes[kBuffers + k];
+  const std::array<std::pair<uint32_t, const VkDescriptorImageInfo*>, 3> sampled{{
+      {gpu::kBindingCache, &image},
+      {gpu::kBindingProbeSampler, &probe_image},
+      {gpu::kBindingMetaImage, &meta_texels},
+  }};
+  for (size_t k = 0; k < sampled.size(); ++k) {
+    VkWriteDescriptorSet& w = writes[kBuffers + 1 + k];
     w = {};
     w.sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
     w.dstSet = set_;
-    w.dstBinding = k == 0 ? gpu::kBindingCache : gpu::kBindingProbeSampler;
+    w.dstBinding = sampled[k].first;
     w.descriptorCount = 1;
     w.descriptorType = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
-    w.pImageInfo = k == 0 ? &image : &probe_image;
+    w.pImageInfo = sampled[k].second;
   }
-  VkWriteDescriptorSet& ow = writes[kBuffers + 2];
+  VkWriteDescriptorSet& ow = writes[kBuffers];
   ow = {};
   ow.sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
   ow.dstSet = set_;
@@ -397,13 +434,19 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
   auto vert = make_module(ctx, compiler, {"scene.vert", ShaderStage::kVertex, {}});
   if (!vert) return vert.error();
   std::vector<std::string> main_defines;
+  std::vector<std::string> wide_defines{"WIDE_PASS"};
   if (options_.lod_probe) main_defines.push_back("LOD_PROBE");
+  if (options_.subgroup_reduce && ctx.subgroup_reductions(VK_SHADER_STAGE_FRAGMENT_BIT))
+    wide_defines.push_back("SUBGROUP_FEEDBACK");
+
   auto frag = make_module(ctx, compiler, {"scene.frag", ShaderStage::kFragment, main_defines});
   if (!frag) return frag.error();
   auto prepass = make_module(ctx, compiler, {"prepass.frag", ShaderStage::kFragment, {}});
   if (!prepass) return prepass.error();
-  auto wide_frag = make_module(ctx, compiler, {"scene.frag", ShaderStage::kFragment, {"WIDE_PASS"}});
+  auto wide_frag = make_module(ctx, compiler, {"scene.frag", ShaderStage::kFragment, wide_defines});
   if (!wide_frag) return wide_frag.error();
+  auto reduce = make_module(ctx, compiler, {"meta_reduce.comp", ShaderStage::kCompute, {}});
+  if (!reduce) return reduce.error();
   auto comp = make_module(ctx, compiler, {"compact.comp", ShaderStage::kCompute, {}});
   if (!comp) return comp.error();
   auto to_host = make_module(ctx, compiler, {"compact.comp", ShaderStage::kCompute, {"COMPACT_TO_HOST"}});
@@ -440,9 +483,7 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
   VkPipelineDepthStencilStateCreateInfo ds{};
   ds.sType = VK_STRUCTURE_TYPE_PIPELINE_DEPTH_STENCIL_STATE_CREATE_INFO;
   ds.depthTestEnable = VK_TRUE;
-  VkPipelineColorBlendAttachmentState cba{};
-  cba.colorWriteMask =
-      VK_COLOR_COMPONENT_R_BIT | VK_COLOR_COMPONENT_G_BIT | VK_COLOR_COMPONENT_B_BIT | VK_COLOR_COMPONENT_A_BIT;
+  std::array<VkPipelineColorBlendAttachmentState, 2> cba{};
   VkPipelineColorBlendStateCreateInfo cb{};
   cb.sType = VK_STRUCTURE_TYPE_PIPELINE_COLOR_BLEND_STATE_CREATE_INFO;
   const std::array<VkDynamicState, 2> dyn{VK_DYNAMIC_STATE_VIEWPORT, VK_DYNAMIC_STATE_SCISSOR};
@@ -451,12 +492,13 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
   dy.dynamicStateCount = static_cast<uint32_t>(dyn.size());
   dy.pDynamicStates = dyn.data();
 
-  // `colour_mask` 0: the subpass has no colour attachment.
-  auto graphics = [&](VkShaderModule fs, VkRenderPass pass, uint32_t subpass, VkColorComponentFlags colour_mask,
-                      VkCompareOp compare, bool depth_write, UniquePipeline& out) -> Status {
+  // One write mask per colour attachment of the subpass (none: depth only).
+  auto graphics = [&](VkShaderModule fs, VkRenderPass pass, uint32_t subpass,
+                      std::span<const VkColorComponentFlags> colour_masks, VkCompareOp compare, bool depth_write,
+                      UniquePipeline& out) -> Status {
     ds.depthCompareOp = compare;
     ds.depthWriteEnable = depth_write ? VK_TRUE : VK_FALSE;
-    cba.colorWriteMask = colour_mask;
+    for (size_t i = 0; i < colour_masks.size(); ++i) cba[i].colorWriteMask = colour_masks[i];
     std::array<VkPipelineShaderStageCreateInfo, 2> stages{};
     stages[0] = {};
     stages[0].sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
@@ -468,8 +510,8 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
     stages[1].stage = VK_SHADER_STAGE_FRAGMENT_BIT;
     stages[1].module = fs;
     stages[1].pName = "main";
-    cb.attachmentCount = colour_mask != 0 ? 1 : 0;
-    cb.pAttachments = colour_mask != 0 ? &cba : nullptr;
+    cb.attachmentCount = static_cast<uint32_t>(colour_masks.size());
+    cb.pAttachments = colour_masks.empty() ? nullptr : cba.data();
     VkGraphicsPipelineCreateInfo gi{};
     gi.sType = VK_STRUCTURE_TYPE_GRAPHICS_PIPELINE_CREATE_INFO;
     gi.stageCount = 2;
@@ -496,10 +538,13 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
   // the pixel.
   constexpr VkColorComponentFlags kRgba =
       VK_COLOR_COMPONENT_R_BIT | VK_COLOR_COMPONENT_G_BIT | VK_COLOR_COMPONENT_B_BIT | VK_COLOR_COMPONENT_A_BIT;
-  TS_TRY(graphics(prepass->get(), main_pass_.get(), 0, VK_COLOR_COMPONENT_R_BIT, VK_COMPARE_OP_GREATER, true,
-                  prepass_pipeline_));
-  TS_TRY(graphics(frag->get(), main_pass_.get(), 1, kRgba, VK_COMPARE_OP_EQUAL, false, main_pipeline_));
-  TS_TRY(graphics(wide_frag->get(), wide_pass_.get(), 0, 0, VK_COMPARE_OP_GREATER, true, wide_pipeline_));
+  constexpr std::array<VkColorComponentFlags, 1> kOwnerMask{VK_COLOR_COMPONENT_R_BIT};
+  // The same mask for both attachments (without the independentBlend feature they must be identical); the
+  // metadata attachment simply has no B and A to write.
+  constexpr std::array<VkColorComponentFlags, 2> kShadingMasks{kRgba, kRgba};
+  TS_TRY(graphics(prepass->get(), main_pass_.get(), 0, kOwnerMask, VK_COMPARE_OP_GREATER, true, prepass_pipeline_));
+  TS_TRY(graphics(frag->get(), main_pass_.get(), 1, kShadingMasks, VK_COMPARE_OP_EQUAL, false, main_pipeline_));
+  TS_TRY(graphics(wide_frag->get(), wide_pass_.get(), 0, {}, VK_COMPARE_OP_GREATER, true, wide_pipeline_));
 
   auto compute = [&](VkShaderModule module, UniquePipeline& out) -> Status {
     VkComputePipelineCreateInfo ci{};
@@ -515,6 +560,7 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
     out = UniquePipeline(device, p);
     return ok_status();
   };
+  TS_TRY(compute(reduce->get(), meta_reduce_pipeline_));
   TS_TRY(compute(comp->get(), compact_pipeline_));
   TS_TRY(compute(to_host->get(), compact_to_host_pipeline_));
   return ok_status();
@@ -535,7 +581,8 @@ void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const
   // The previous submission's compaction wrote the sparse metadata and the list counter; this frame's fragment
   // atomics and the counter reset come after it (submission order + this barrier).
   memory_barrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_SHADER_READ_BIT,
-                 VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+                 VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT |
+                     VK_PIPELINE_STAGE_TRANSFER_BIT,
                  VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT);
   // The list this frame compacts into: straight into the host-visible read-back list when a streaming cycle
   // is about to start (compact.comp with COMPACT_TO_HOST), else the device-local one.
@@ -544,19 +591,20 @@ void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const
 
   const VkDeviceSize zero = 0;
   auto begin_pass = [&](VkRenderPass pass, VkFramebuffer fb, uint32_t w, uint32_t h, bool main) {
-    std::array<VkClearValue, 3> clears{};
+    std::array<VkClearValue, 4> clears{};
     // Sky colour in linear light (the attachment is sRGB); the id view clears to 0 = "no mesh". Depth 0 is
     // "infinitely far" with reversed Z; owner 0 is "no mesh".
     clears[0].color = {{0.45f, 0.6f, 0.8f, 1.0f}};
     if (options_.debug_view == gpu::kDebugViewMeshId) clears[0].color = {{0.0f, 0.0f, 0.0f, 1.0f}};
     clears[main ? 1 : 0].depthStencil = {0.0f, 0};
     clears[2].color.uint32[0] = 0;
+    clears[3].color.uint32[0] = 0;  // metadata: mesh id + 1 = 0, "no mesh" (meta_reduce skips the pixel)
     VkRenderPassBeginInfo bi{};
     bi.sType = VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO;
     bi.renderPass = pass;
     bi.framebuffer = fb;
     bi.renderArea = {{0, 0}, {w, h}};
-    bi.clearValueCount = main ? 3 : 1;
+    bi.clearValueCount = main ? 4 : 1;
     bi.pClearValues = clears.data();
     vkCmdBeginRenderPass(cmd, &bi, VK_SUBPASS_CONTENTS_INLINE);
     const VkViewport viewport{0, 0, static_cast<float>(w), static_cast<float>(h), 0, 1};
@@ -591,12 +639,18 @@ void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const
   vkCmdEndRenderPass(cmd);
   if (timestamps_) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps_.get(), 2);
 
-  // Compaction reads what both passes' fragment shaders wrote and the cleared counter. One invocation per draw
-  // of this frame (the only meshes that can have metadata), not per mesh of the scene.
-  memory_barrier(cmd, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+  // The main pass's metadata, per pixel, summed per mesh (the render pass's external dependencies make its
+  // owner ids and metadata visible here). Its atomics and the wide pass's commute.
+  vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, layout_.get(), 0, 1, &set_, 0, nullptr);
+  vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, meta_reduce_pipeline_.get());
+  const uint32_t runs = (options_.width + gpu::kMetaReduceRun - 1) / gpu::kMetaReduceRun * options_.height;
+  vkCmdDispatch(cmd, (runs + gpu::kMetaReduceGroup - 1) / gpu::kMetaReduceGroup, 1, 1);
+  // Compaction reads what the wide pass's fragment shader and meta_reduce wrote and the cleared counter. One
+  // invocation per draw of this frame (the only meshes that can have metadata), not per mesh of the scene.
+  memory_barrier(cmd, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT |
+                          VK_PIPELINE_STAGE_TRANSFER_BIT,
                  VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
                  VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
-  vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, layout_.get(), 0, 1, &set_, 0, nullptr);
   vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE,
                     frame.read_back_list ? compact_to_host_pipeline_.get() : compact_pipeline_.get());
   const uint32_t groups = (frame.draw_count + gpu::kCompactWorkgroupSize - 1) / gpu::kCompactWorkgroupSize;

@@ -3,42 +3,66 @@
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
-#include <unordered_map>
+#include <cstdint>
 
 namespace texstream::render {
 
+namespace {
+
+// Lists up to this long are sorted on the calling thread: below it, handing work to TBB's threads costs more
+// than the sort (a frame's list is typically a few thousand entries; seed 000 §3.3's parallel sort pays off for
+// the hundreds of thousands a city view can hold).
+constexpr size_t kParallelSortMin = 1u << 15;
+
+struct TextureSum {
+  uint32_t texture;
+  uint32_t mip_fixed;
+  uint64_t weight_fixed;
+};
+
+template <class It, class Less>
+void sort_list(It first, It last, Less less) {
+  if (static_cast<size_t>(last - first) >= kParallelSortMin) {
+    tbb::parallel_sort(first, last, less);
+  } else {
+    std::sort(first, last, less);
+  }
+}
+
+}  // namespace
+
 std::vector<StreamCandidate> build_candidates(std::span<const gpu::CompactEntry> entries,
                                               std::span<const scene::MeshRecord> meshes, uint64_t* skipped) {
-  std::unordered_map<uint32_t, size_t> index;  // texture id -> position in out
-  std::vector<StreamCandidate> out;
-  out.reserve(entries.size());
-  // Weights summed in the GPU's fixed point (exact, so the sum, and with it the order, does not depend on the
-  // order the compaction's atomics wrote the entries in), converted once at the end.
-  std::vector<uint64_t> weight_fixed;
-  weight_fixed.reserve(entries.size());
+  // Meshes sharing a texture merge by sorting on the texture id and combining neighbours: no hash table and no
+  // allocation per entry (this runs on the frame thread every streaming cycle). Weights are summed in the GPU's
+  // fixed point (exact, so the sum, and with it the order, does not depend on the order the compaction's
+  // atomics wrote the entries in), converted once at the end.
+  std::vector<TextureSum> sums;
+  sums.reserve(entries.size());
   uint64_t bad = 0;
   for (const gpu::CompactEntry& e : entries) {
     if (e.mesh_id >= meshes.size() || e.mip_fixed == gpu::kNoMip) {
       ++bad;
       continue;
     }
-    const uint32_t texture = meshes[e.mesh_id].texture_id;
-    const float mip = static_cast<float>(e.mip_fixed) / static_cast<float>(gpu::kMipFixedScale);
-    auto [it, inserted] = index.emplace(texture, out.size());
-    if (inserted) {
-      out.push_back(StreamCandidate{TextureId(texture), mip, 0.0f});
-      weight_fixed.push_back(e.weight_fixed);
-    } else {
-      StreamCandidate& c = out[it->second];
-      c.desired_mip = std::min(c.desired_mip, mip);
-      weight_fixed[it->second] += e.weight_fixed;
-    }
+    sums.push_back(TextureSum{meshes[e.mesh_id].texture_id, e.mip_fixed, e.weight_fixed});
   }
-  for (size_t i = 0; i < out.size(); ++i)
-    out[i].weight = static_cast<float>(static_cast<double>(weight_fixed[i]) / gpu::kWeightFixedScale);
-  // Parallel CPU sort as in seed 000 §3.3 (TBB falls back to one thread for short lists). The order is total
-  // (ties by texture id, ids are unique after the merge), so the result does not depend on the threads.
-  tbb::parallel_sort(out.begin(), out.end(), [](const StreamCandidate& a, const StreamCandidate& b) {
+  sort_list(sums.begin(), sums.end(), [](const TextureSum& a, const TextureSum& b) { return a.texture < b.texture; });
+  std::vector<StreamCandidate> out;
+  out.reserve(sums.size());
+  for (size_t i = 0; i < sums.size();) {
+    TextureSum t = sums[i];
+    for (++i; i < sums.size() && sums[i].texture == t.texture; ++i) {
+      t.mip_fixed = std::min(t.mip_fixed, sums[i].mip_fixed);
+      t.weight_fixed += sums[i].weight_fixed;
+    }
+    out.push_back(StreamCandidate{TextureId(t.texture),
+                                  static_cast<float>(t.mip_fixed) / static_cast<float>(gpu::kMipFixedScale),
+                                  static_cast<float>(static_cast<double>(t.weight_fixed) / gpu::kWeightFixedScale)});
+  }
+  // Descending weight (seed 000 §3.3), parallel for long lists. The order is total (ties by texture id, ids are
+  // unique after the merge), so the result does not depend on the threads.
+  sort_list(out.begin(), out.end(), [](const StreamCandidate& a, const StreamCandidate& b) {
     return a.weight != b.weight ? a.weight > b.weight : a.texture < b.texture;
   });
   if (skipped) *skipped = bad;

@@ -114,6 +114,20 @@ Result<std::unique_ptr<VulkanContext>> VulkanContext::create(const VulkanContext
                                                    "' supports only Vulkan < 1.2");
   }
   vkGetPhysicalDeviceMemoryProperties(ctx->physical_, &ctx->memory_properties_);
+  {
+    // Subgroup reductions let the visibility metadata do one atomic pair per (subgroup, mesh) instead of one per
+    // pixel (meta_reduce.comp, the wide pass's scene.frag): core in Vulkan 1.1, but which stages and operations
+    // is the device's choice.
+    VkPhysicalDeviceSubgroupProperties subgroup{};
+    subgroup.sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_SUBGROUP_PROPERTIES;
+    VkPhysicalDeviceProperties2 props2{};
+    props2.sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2;
+    props2.pNext = &subgroup;
+    vkGetPhysicalDeviceProperties2(ctx->physical_, &props2);
+    const VkSubgroupFeatureFlags needed =
+        VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT | VK_SUBGROUP_FEATURE_BALLOT_BIT;
+    ctx->subgroup_reduce_stages_ = (subgroup.supportedOperations & needed) == needed ? subgroup.supportedStages : 0;
+  }
 
   uint32_t family_count = 0;
   vkGetPhysicalDeviceQueueFamilyProperties(ctx->physical_, &family_count, nullptr);

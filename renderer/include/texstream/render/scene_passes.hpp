@@ -44,6 +44,9 @@ struct ScenePassesOptions {
   bool lod_probe = false;      // main pass compiled with LOD_PROBE: per-pixel metadata level vs textureQueryLod
   float probe_anisotropy = 16; // A_m of the probe sampler (clamped to the device's maxSamplerAnisotropy)
   bool timestamps = false;     // GPU timestamps around the passes (read_pass_times)
+  // The wide pass's atomics combined per subgroup first (scene.frag SUBGROUP_FEEDBACK) where the device has
+  // fragment-stage subgroup arithmetic and ballot; false: one atomic pair per fragment.
+  bool subgroup_reduce = true;
 };
 
 // GPU time of the passes of the last recorded frame (ScenePassesOptions::timestamps; zeros otherwise).
@@ -92,7 +95,7 @@ class ScenePasses {
   bool probe_is_anisotropic() const { return probe_anisotropic_; }
 
  private:
-  static constexpr uint32_t kTimestampCount = 4;  // start, after main, after wide, after compaction
+  static constexpr uint32_t kTimestampCount = 4;  // start, after main, after wide, after reduce + compaction
 
   ScenePasses(const ScenePassesOptions& options, const SceneGpu& scene) : options_(options), scene_(scene) {}
   Status create_targets(const VulkanContext& ctx);
@@ -108,6 +111,7 @@ class ScenePasses {
   GpuImage colour_;
   GpuImage depth_;
   GpuImage owner_;  // the pre-pass's id buffer (input attachment of the shading subpass)
+  GpuImage meta_;   // the shading subpass's per-pixel mesh and metadata, read by meta_reduce
   GpuImage wide_depth_;
   UniqueRenderPass main_pass_;
   UniqueRenderPass wide_pass_;
@@ -115,6 +119,7 @@ class ScenePasses {
   UniqueFramebuffer wide_fb_;
   UniqueSampler sampler_;
   UniqueSampler probe_sampler_;
+  UniqueSampler texel_sampler_;  // nearest: meta_reduce.comp's texelFetch of the integer target
   GpuBuffer probe_;
   bool probe_anisotropic_ = false;
   UniqueDescriptorSetLayout set_layout_;
@@ -124,6 +129,7 @@ class ScenePasses {
   UniquePipeline prepass_pipeline_;
   UniquePipeline main_pipeline_;
   UniquePipeline wide_pipeline_;
+  UniquePipeline meta_reduce_pipeline_;
   UniquePipeline compact_pipeline_;
   UniquePipeline compact_to_host_pipeline_;
 };
