@@ -556,9 +556,13 @@ Status Renderer::render_frame(uint64_t index, bool last) {
     if (timed.limited()) ++load_time_limited_frames_;
   }
   const uint64_t in_flight = client_->stats().in_flight;
-  rec.feedback = cfg_.render.feedback;  // off: no metadata, so no streaming cycle either
-  rec.read_back_list = rec.feedback && static_cast<double>(in_flight) <=
-                                           kCycleOutstandingFraction * static_cast<double>(last_cycle_sent_);
+  // Only a frame that starts a streaming cycle has its compacted list read; any other frame's list would be
+  // reset unseen by the next frame's compaction. So the metadata writes, the wide pass and the compaction run
+  // on exactly those frames, and the frames in between draw only the picture (render.feedback = false: never,
+  // so no streaming cycle either).
+  rec.read_back_list = cfg_.render.feedback && static_cast<double>(in_flight) <=
+                                                   kCycleOutstandingFraction * static_cast<double>(last_cycle_sent_);
+  rec.feedback = rec.read_back_list;
   const bool write = last || (cfg_.render.write_every_frames > 0 &&
                               index % static_cast<uint64_t>(cfg_.render.write_every_frames) == 0);
 
