@@ -92,7 +92,7 @@ Result<SceneGpu> SceneGpu::create(const VulkanContext& ctx, const SceneData& sce
               MemoryUse::kDeviceLocal));
   // Written by compact.comp (COMPACT_TO_HOST): only the header and the used prefix, only when a streaming cycle
   // starts.
-  TS_TRY(make(g.readback, list_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst, MemoryUse::kHostVisible));
+  TS_TRY(make(g.readback, list_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst, MemoryUse::kHostRead));
   TS_TRY(make(g.frame_uniforms, sizeof(gpu::FrameUniforms), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT,
               MemoryUse::kHostVisible));
   g.resident_.assign((static_cast<size_t>(g.mesh_count) + 63) / 64, 0);

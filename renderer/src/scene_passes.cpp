@@ -280,7 +280,7 @@ Status ScenePasses::create_targets(const VulkanContext& ctx) {
   const VkDeviceSize probe_bytes =
       sizeof(gpu::LodProbeSample) *
       (options_.lod_probe ? static_cast<VkDeviceSize>(options_.width) * options_.height : 1);
-  auto probe = GpuBuffer::create(ctx, probe_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible);
+  auto probe = GpuBuffer::create(ctx, probe_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostRead);
   if (!probe) return probe.error();
   probe_ = std::move(*probe);
   std::fill_n(probe_.bytes().data(), probe_bytes, std::byte{0});
