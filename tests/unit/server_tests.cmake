@@ -7,5 +7,7 @@ texstream_add_unit_test(server_unit_tests
   ${CMAKE_CURRENT_LIST_DIR}/server_formats_unit_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/server_request_scheduler_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/server_slot_pool_test.cpp
-  ${CMAKE_CURRENT_LIST_DIR}/server_open_file_cache_test.cpp)
+  ${CMAKE_CURRENT_LIST_DIR}/server_open_file_cache_test.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/server_fast_checksum_test.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/server_tail_read_test.cpp)
 target_link_libraries(server_unit_tests PRIVATE texstream::server)

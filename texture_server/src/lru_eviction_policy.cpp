@@ -3,12 +3,15 @@
 namespace texstream::server {
 
 PolicyNode* LruEvictionPolicy::on_insert(MipKey key) {
-  if (auto it = where_.find(key); it != where_.end()) {
+  // One hash lookup for both cases (find + emplace was two).
+  const auto [it, fresh] = where_.try_emplace(key);
+  if (!fresh) {
     order_.splice(order_.begin(), order_, it->second);
     return node_of(*it);
   }
   order_.push_front(key);
-  return node_of(*where_.emplace(key, order_.begin()).first);
+  it->second = order_.begin();
+  return node_of(*it);
 }
 
 void LruEvictionPolicy::touch(PolicyNode* node) {

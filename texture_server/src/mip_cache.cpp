@@ -30,9 +30,20 @@ std::shared_ptr<const CachedMip> MipCache::lookup(MipKey key) {
   return e->mip;  // the copy is the pin: made under the lock (see the header's contract)
 }
 
-std::optional<CachedCopy> MipCache::copy_into(MipKey key, std::span<std::byte> dst) {
+std::optional<CachedCopy> MipCache::copy_into(MipKey key, std::span<std::byte> dst,
+                                              std::optional<MipKey> prefetch_next) {
   std::lock_guard lock(mutex_);
-  const MipCacheSlot* e = entries_.find(key);
+  if (prefetch_next) {
+    // The first kPrefetchBytes of the next payload, one line at a time; the hardware prefetcher follows once
+    // its copy streams. texstream-bench server, hit phase, 6 runs each: no prefetch 0.44, 2 KiB 0.46, 4 KiB
+    // 0.45, 16 KiB 0.43 of memcpy (16 KiB of prefetches fill the line-fill buffers and stall the copy).
+    constexpr uint64_t kPrefetchBytes = 2 << 10;
+    constexpr uint64_t kLine = 64;
+    if (const MipCacheSlot* n = entries_.find(*prefetch_next)) {
+      for (uint64_t o = 0; o < std::min(n->size, kPrefetchBytes); o += kLine) __builtin_prefetch(n->data + o, 0, 3);
+    }
+  }
+  MipCacheSlot* e = entries_.find(key);
   if (e == nullptr) {
     ++stats_.misses;
     return std::nullopt;
@@ -45,7 +56,10 @@ std::optional<CachedCopy> MipCache::copy_into(MipKey key, std::span<std::byte> d
   // needed. The longest hold is one slot-sized copy (1 MiB: ~100 µs), which only delays a worker's insert.
   // The payload's pointer, size and checksum are the index's copies: the CachedMip is not dereferenced.
   copy_into_slot(dst.data(), e->data, e->size);  // kSlotWrite halfway
-  return CachedCopy{e->size, e->checksum};
+  const bool first_use = e->prefetched;
+  e->prefetched = false;
+  stats_.prefetch_hits += first_use ? 1 : 0;
+  return CachedCopy{e->size, e->checksum, first_use};
 }
 
 bool MipCache::contains(MipKey key) const {
@@ -113,12 +127,34 @@ std::shared_ptr<CachedMip> MipCache::make_payload(uint64_t bytes) {
   return mip;
 }
 
-bool MipCache::insert(MipKey key, std::shared_ptr<const CachedMip> mip) {
-  TS_ASSERT(mip != nullptr, "inserting a null mip");
-  const uint64_t size = mip->bytes.size();
+bool MipCache::insert(MipKey key, std::shared_ptr<const CachedMip> mip, bool prefetched) {
   // Declared before the lock: evicted payloads are freed after it is released (a large free() is a munmap).
   std::vector<std::shared_ptr<const CachedMip>> evicted;
   std::lock_guard lock(mutex_);
+  return insert_locked(key, std::move(mip), prefetched, evicted);
+}
+
+size_t MipCache::insert_all(std::span<std::pair<MipKey, std::shared_ptr<const CachedMip>>> mips, bool prefetched) {
+  std::vector<std::shared_ptr<const CachedMip>> evicted;  // freed after the lock, as in insert()
+  size_t admitted = 0;
+  std::lock_guard lock(mutex_);
+  for (auto& [key, mip] : mips) admitted += insert_locked(key, std::move(mip), prefetched, evicted) ? 1 : 0;
+  return admitted;
+}
+
+uint32_t MipCache::cached_levels(TextureId texture, uint32_t levels) const {
+  uint32_t mask = 0;
+  std::lock_guard lock(mutex_);
+  for (uint32_t l = 0; l < std::min<uint32_t>(levels, 32); ++l) {
+    if (entries_.find(MipKey(texture, MipLevel(l))) != nullptr) mask |= 1u << l;
+  }
+  return mask;
+}
+
+bool MipCache::insert_locked(MipKey key, std::shared_ptr<const CachedMip> mip, bool prefetched,
+                             std::vector<std::shared_ptr<const CachedMip>>& evicted) {
+  TS_ASSERT(mip != nullptr, "inserting a null mip");
+  const uint64_t size = mip->bytes.size();
   if (MipCacheSlot* e = entries_.find(key)) {
     policy_->touch(e->node);
     return true;  // two loads of the same mip raced; `mip` is freed after the lock (a parameter)
@@ -143,6 +179,8 @@ bool MipCache::insert(MipKey key, std::shared_ptr<const CachedMip> mip) {
   slot.checksum = mip->checksum;
   slot.node = policy_->on_insert(key);
   slot.mip = std::move(mip);
+  slot.prefetched = prefetched;
+  stats_.prefetched += prefetched ? 1 : 0;
   entries_.insert(std::move(slot));
   stats_.bytes += size;
   ++stats_.insertions;

@@ -6,7 +6,7 @@
 #include <array>
 #include <cstring>
 
-#include "texstream/protocol/checksum.hpp"
+#include "texstream/server/fast_checksum.hpp"
 #include "texstream/server/oiio_mip_decoder.hpp"
 
 namespace texstream::server {
@@ -89,13 +89,23 @@ void MipLoader::count_read(uint64_t bytes) {
 }
 
 CompletionRecord MipLoader::serve_cached(const LoadRequest& request, const scene::TextureRecord& record,
-                                         uint32_t slot_index, std::span<std::byte> slot) {
+                                         uint32_t slot_index, std::span<std::byte> slot,
+                                         std::optional<MipKey> prefetch_next) {
   // One lookup, copied under the cache's lock: no pin, no allocation.
-  const std::optional<CachedCopy> hit = cache_.copy_into(request.key(), slot);
+  const std::optional<CachedCopy> hit = cache_.copy_into(request.key(), slot, prefetch_next);
   if (!hit) return CompletionRecord{};
   block_.ram_cache_hits.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: a statistic, read for reports
   stats_.add(stats_.bytes_served_cached, hit->bytes);
+  // A coarse-tail mip read ahead (load()'s read_tail) is delivered now: the read it came with counts it here.
+  if (hit->first_use_of_prefetch) stats_.add(stats_.bytes_loaded, hit->bytes);
   return ok_completion(request, record, slot_index, hit->bytes, hit->checksum);
+}
+
+bool MipLoader::serves_raw(TextureId texture, TexelFormat format) const {
+  const std::optional<TextureFileEntry> e = index_.find(texture);
+  if (!e || e->kind != TextureFileKind::kDds || !e->dds) return false;
+  return format == TexelFormat::kRgba8 ? e->dds->encoding == DdsEncoding::kRgba8
+                                       : e->dds->encoding == DdsEncoding::kBc1;
 }
 
 bool MipLoader::open_texture(const LoadRequest& request, Opened& opened, CompletionRecord& error) {
@@ -139,8 +149,75 @@ bool MipLoader::open_texture(const LoadRequest& request, Opened& opened, Complet
   return false;
 }
 
+CompletionStatus MipLoader::read_tail(const LoadRequest& request, const scene::TextureRecord& record, Opened& opened,
+                                      std::span<std::byte> target, bool local_only, Tail& tail,
+                                      uint32_t wanted_levels) {
+  // read_mip() checked the asked level against the file (extent, encoding). A neighbour joins the read only
+  // if it is small or wanted (asked for and queued), not cached, has the texture table's extent and exactly
+  // the bytes the table implies, fits kMaxTailReadBytes and gets a cache payload; the first that does not
+  // ends the range on that side (it must stay contiguous).
+  const DdsLayout& dds = *opened.entry.dds;
+  const TexelFormat format = static_cast<TexelFormat>(record.format);
+  const uint32_t level = request.mip.value;
+  const uint32_t levels = std::min(dds.mip_count, record.mip_count);
+  const uint32_t cached = cache_.cached_levels(request.texture, levels);  // one lock for all levels
+  uint64_t total = target.size();
+  const auto joins = [&](uint32_t l) -> std::shared_ptr<CachedMip> {
+    const uint64_t bytes = mip_bytes(format, record.width, record.height, l);
+    const bool wanted = l < 32 && ((wanted_levels >> l) & 1u) != 0;
+    if ((bytes > kTailMipBytes && !wanted) || dds.mip_size(l) != bytes) return nullptr;
+    if (total + bytes > kMaxTailReadBytes || tail.size() + 1 >= kMaxTailParts) return nullptr;
+    if (mip_extent(dds.width, dds.height, l) != mip_extent(record.width, record.height, l)) return nullptr;
+    if (l < 32 && ((cached >> l) & 1u) != 0) return nullptr;
+    std::shared_ptr<CachedMip> payload = cache_.make_payload(bytes);  // null: no room, or not admissible
+    if (payload) total += bytes;
+    return payload;
+  };
+  tail.clear();
+  uint32_t finest = level;
+  for (uint32_t l = level + 1; l < levels; ++l) {  // coarser: after the asked mip in the file
+    std::shared_ptr<CachedMip> m = joins(l);
+    if (!m) break;
+    tail.push_back(TailMip{l, std::move(m)});
+  }
+  const size_t coarser = tail.size();
+  for (uint32_t l = level; l-- > 0;) {  // finer: before it in the file
+    std::shared_ptr<CachedMip> m = joins(l);
+    if (!m) break;
+    tail.push_back(TailMip{l, std::move(m)});
+    finest = l;
+  }
+  // Parts in file order: finest first.
+  std::array<std::span<std::byte>, kMaxTailParts> parts{};
+  size_t count = 0;
+  for (size_t i = tail.size(); i-- > coarser;) parts[count++] = tail[i].mip->bytes;
+  parts[count++] = target;
+  for (size_t i = 0; i < coarser; ++i) parts[count++] = tail[i].mip->bytes;
+  const uint64_t offset = dds.mip_offset(finest);
+  if (local_only && !opened.file->local(offset, total)) {
+    tail.clear();
+    return CompletionStatus::kUnfilled;
+  }
+  Result<uint64_t> got = opened.file->read_scatter_at(std::span(parts).first(count), offset);
+  if (!got.ok()) {
+    tail.clear();
+    return fail_status(request, read_status(got.error().code), opened.path, got.error().message);
+  }
+  count_read(*got);
+  if (*got != total) {
+    tail.clear();
+    index_.forget(request.texture);  // the file may have been replaced: look again next time
+    return fail_status(request, CompletionStatus::kCorrupt, opened.path,
+                       "truncated: mips " + std::to_string(finest) + ".." + std::to_string(finest + count - 1) +
+                           " need bytes [" + std::to_string(offset) + ", " + std::to_string(offset + total) +
+                           "), the file ends after " + std::to_string(offset + *got));
+  }
+  return CompletionStatus::kOk;
+}
+
 CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::TextureRecord& record, Opened& opened,
-                                     std::span<std::byte> target, bool local_only) {
+                                     std::span<std::byte> target, bool local_only, Tail* tail,
+                                     uint32_t wanted_levels) {
   const TexelFormat format = static_cast<TexelFormat>(record.format);  // validated with the texture table
   const uint32_t level = request.mip.value;
   const Extent2D expected = mip_extent(record.width, record.height, level);
@@ -177,6 +254,9 @@ CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::Te
                          "the texture table says bc1 but the file is not BC1/DXT1 (the server never encodes BC1)");
     }
     decode = format == TexelFormat::kRgba8 && dds.encoding != DdsEncoding::kRgba8;
+    if (!decode && tail != nullptr && (target.size() <= kTailMipBytes || wanted_levels != 0)) {
+      return read_tail(request, record, opened, target, local_only, *tail, wanted_levels);
+    }
     if (!decode) {
       // Exactly the mip's byte range.
       const uint64_t offset = dds.mip_offset(level);
@@ -210,7 +290,8 @@ CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::Te
 }
 
 CompletionRecord MipLoader::load(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot_index,
-                                 std::span<std::byte> slot, bool local_only) {
+                                 std::span<std::byte> slot, bool local_only, bool read_tail,
+                                 uint32_t wanted_levels) {
   const TexelFormat format = static_cast<TexelFormat>(record.format);  // validated with the texture table
   const uint64_t bytes = mip_bytes(format, record.width, record.height, request.mip.value);
   TS_ASSERT(bytes <= slot.size(), "mip of %llu bytes does not fit a slot of %zu (the dispatcher checks this)",
@@ -230,7 +311,11 @@ CompletionRecord MipLoader::load(const LoadRequest& request, const scene::Textur
     keep = cache_.make_payload(bytes);  // warm arena memory (may evict); nullptr: into the slot, not cached
     if (keep) target = keep->bytes;
   }
-  const CompletionStatus status = read_mip(request, record, opened, target, local_only);
+  // Only with a cache payload: the tail is read for the cache. tail_scratch_ is the dispatcher's (read_tail
+  // is its alone, see the header): no allocation per load once warm; other threads never touch it.
+  Tail* const tail = read_tail && keep ? &tail_scratch_ : nullptr;
+  if (tail) tail->clear();
+  const CompletionStatus status = read_mip(request, record, opened, target, local_only, tail, wanted_levels);
   if (status == CompletionStatus::kUnfilled) {  // nothing was read: the file is as good as before
     files_.give_back(request.texture, OpenTextureFile{std::move(opened.path), std::move(opened.file)});
     return make_completion(request, status);
@@ -242,11 +327,21 @@ CompletionRecord MipLoader::load(const LoadRequest& request, const scene::Textur
 
   // The checksum is of the bytes we meant to hand over (equal to the slot's unless the renderer wrote into a
   // slot it does not own, which the renderer's own check then catches).
-  const uint64_t checksum = payload_checksum(target.data(), bytes);
+  const uint64_t checksum = fast_payload_checksum(target.data(), bytes);
   if (keep) {
     keep->checksum = checksum;
     copy_into_slot(slot.data(), keep->bytes.data(), bytes);  // kSlotWrite halfway
     cache_.insert(request.key(), std::move(keep));
+  }
+  if (tail && !tail->empty()) {
+    std::array<std::pair<MipKey, std::shared_ptr<const CachedMip>>, kMaxTailParts> batch;
+    size_t n = 0;
+    for (TailMip& t : *tail) {
+      t.mip->checksum = fast_payload_checksum(t.mip->bytes.data(), t.mip->bytes.size());
+      batch[n++] = {MipKey(request.texture, MipLevel(t.level)), std::move(t.mip)};
+    }
+    tail->clear();
+    cache_.insert_all(std::span(batch).first(n), /*prefetched=*/true);
   }
   stats_.add(stats_.bytes_loaded, bytes);
   return ok_completion(request, record, slot_index, bytes, checksum);

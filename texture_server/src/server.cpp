@@ -1,6 +1,7 @@
 #include "texstream/server/fault_point.hpp"
 #include "texstream/server/server.hpp"
 
+#include <sys/mman.h>
 #include <unistd.h>
 
 #include <spdlog/spdlog.h>
@@ -30,13 +31,19 @@ constexpr std::chrono::microseconds kRemoteBusyWait{10000};
 // worker lets it go on at once; the cost is that up to this many jobs per worker can no longer be superseded.
 constexpr uint32_t kJobsPerWorker = 2;
 
-// With every worker's queue full, the dispatcher loads a miss itself when it is this small: a hand-off to a
-// worker and back costs two wake-ups and context switches, which on the 2-core machine were most of a miss
-// (texstream-bench server, misses: 0.64-0.69 GB/s with workers only, 0.79-0.93 GB/s with this; the loader
-// alone does ~2.4 GB/s). 64 KiB from the page cache is a few µs, about one hit's worth of delay for the
-// requests behind it. A remote mip is never read here (the attempt is local-only: it comes back kUnfilled
-// at once and goes to the remote path), and a texture whose inline load was slow is not loaded inline again
-// (inline_ok_): a cold disk or a decoded format costs the dispatcher at most one slow load per texture.
+// The dispatcher loads a miss itself when it is this small: a hand-off to a worker and back costs two
+// wake-ups and context switches, which on the 2-core machine were most of a miss (texstream-bench server,
+// misses: 0.64-0.69 GB/s with workers only, 0.79-0.93 GB/s inline once every worker's queue was full; the
+// loader alone does ~2.4 GB/s). So: inline first, workers only for what is not small, not local or not raw,
+// and an inline load of a raw DDS mip brings the texture's coarse tail and its queued levels along in one
+// read (MipLoader::load, read_tail), after which the renderer's next requests for the texture are hits.
+// (Tried: tail reads on a free worker, the texture's other misses parked until it finished: misses at 0.26
+// of read() against 0.28 inline, 4 runs each: the hand-off costs what the overlap gains on 2 cores.)
+// 64 KiB from the page cache is a few µs, about one hit's worth of delay for the requests behind it (a tail
+// read is at most MipLoader::kMaxTailReadBytes). A remote mip is never read here (the attempt is local-only:
+// it comes back kUnfilled at once and goes to the remote path), and a texture whose inline load was slow or
+// that is not a DDS served raw is not loaded inline again (inline_ok_): a cold disk or a decoded format
+// costs the dispatcher at most one load per texture.
 constexpr uint64_t kInlineMissBytes = 64 << 10;
 // An inline load that took longer than this (a disk read, a decode) marks its texture as not for inline loads.
 constexpr uint64_t kInlineSlowNs = 250'000;
@@ -63,6 +70,12 @@ constexpr uint64_t kLivenessCheckNs = 1'000'000;
 // renderer's next batch; this bounds the queue's memory against a renderer that floods one cycle. 256 = the
 // default stream.max_requests_in_flight: one whole cycle of requests.
 constexpr size_t kRemotePendingLimit = 256;
+
+// The staging slots' pages are faulted in while the dispatcher is idle, this many bytes per idle pass (about
+// half a millisecond of page allocation, the most a request arriving meanwhile waits). A fresh segment's
+// pages are otherwise faulted by the first payload copied into them: texstream-bench server measured the
+// first misses after start at half the speed of later ones, ~1 µs of fault per 4 KiB page copied.
+constexpr uint64_t kSlotWarmStep = 2ull << 20;
 
 uint64_t steady_now_ns() {
   return static_cast<uint64_t>(
@@ -142,6 +155,7 @@ Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const S
       slots_(segment.slot_count()) {
   cancelled_scratch_.reserve(256);
   results_scratch_.reserve(64);
+  hits_unrecorded_.reserve(256);
   if (fault_injection_enabled()) completions_.set_mid_push_hook([] { fault_point(FaultPoint::kMidRingPush); });
   publish_each_completion_ = fault_injection_enabled();
   ShmAtomic<uint32_t>* doorbell = &segment_.renderer_block().doorbell;
@@ -239,6 +253,8 @@ RunOutcome Server::run(const std::atomic<bool>& stop, std::atomic<bool>* print_s
     if (print_stats && print_stats->exchange(false, std::memory_order_relaxed)) {
       spdlog::info("statistics (SIGUSR1):\n{}", stats_report());
     }
+    // Idle: fault in a step of the staging slots before sleeping (see kSlotWarmStep).
+    if (!busy && !slots_warm_.load(std::memory_order_relaxed)) busy = warm_slots_step();
     was_idle = !busy;
     if (!busy) idle_wait();
   }
@@ -394,9 +410,8 @@ void Server::handle_local_result(const LoadResult& r) {
   }
 }
 
-bool Server::loads_inline(const LoadRequest& request, uint32_t done_this_pass) const {
-  if (inline_loading_ == nullptr || done_this_pass >= kInlineMissesPerPass) return false;
-  if (!inline_ok_[request.texture.value]) return false;
+bool Server::inline_candidate(const LoadRequest& request) const {
+  if (inline_loading_ == nullptr || !inline_ok_[request.texture.value]) return false;
   const scene::TextureRecord& t = textures_[request.texture.value];
   return mip_bytes(static_cast<TexelFormat>(t.format), t.width, t.height, request.mip.value) <= kInlineMissBytes;
 }
@@ -405,8 +420,20 @@ void Server::load_inline(const LoadRequest& request, const scene::TextureRecord&
   // Crash attribution as a worker's (ServerBlock::loading). Relaxed: read only after this process died.
   inline_loading_->v.store(request.texture.value + 1, std::memory_order_relaxed);
   const uint64_t start = steady_now_ns();
-  const CompletionRecord c = loader_.load(request, record, slot, segment_.slot(slot), /*local_only=*/true);
+  // The dispatcher is the only caller with read_tail: a small mip brings its texture's coarse tail along,
+  // and the other levels of the texture that wait in the queue join the same read (they are asked anyway).
+  uint32_t wanted = 0;
+  for (uint32_t l = 0; l < std::min<uint32_t>(record.mip_count, 32); ++l) {
+    if (l != request.mip.value && scheduler_.contains(MipKey(request.texture, MipLevel(l)))) wanted |= 1u << l;
+  }
+  const CompletionRecord c = loader_.load(request, record, slot, segment_.slot(slot), /*local_only=*/true,
+                                          /*read_tail=*/true, wanted);
   if (steady_now_ns() - start > kInlineSlowNs) inline_ok_[request.texture.value] = false;
+  // A texture that is decoded (TIFF, OpenEXR, a DDS encoding served as RGBA8) or was not found goes to the
+  // workers from now on, however fast this load was: a decode must never hold up the hits behind it.
+  if (!loader_.serves_raw(request.texture, static_cast<TexelFormat>(record.format))) {
+    inline_ok_[request.texture.value] = false;
+  }
   inline_loading_->v.store(0, std::memory_order_relaxed);
   handle_local_result(LoadResult{c, slot, request.received_ns, request});
 }
@@ -439,31 +466,37 @@ bool Server::dispatch() {
   const uint32_t workers = workers_->threads();
   uint32_t inline_loads = 0;
   while (!scheduler_.empty() && slots_.free_count() > 0) {
-    // With every worker busy, a RAM-cache hit is still served here at once: a slow read must not hold up a
-    // fast hit (seed 002 §3.2, the bimodal access problem). Only then is the top peeked at first: with a
-    // worker free it is taken whatever it is (a peek + pop was two more hash lookups per request). A small
-    // miss of a local texture is then loaded here (see kInlineMissBytes); anything else waits for a worker.
-    bool inline_miss = false;
-    if (loads_in_flight_ >= workers * kJobsPerWorker) {
+    // A RAM-cache hit is always served here at once: a slow read must not hold up a fast hit (seed 002 §3.2,
+    // the bimodal access problem). A small miss of a local texture is loaded here too (kInlineMissBytes),
+    // at most kInlineMissesPerPass per pass; anything else goes to a worker. Only when the top may have to
+    // stay queued (every worker's queue full, or no inline load left this pass) is it peeked at first: with
+    // room for it either way it is taken whatever it is (a peek + pop is two more hash lookups per request).
+    const bool workers_full = loads_in_flight_ >= workers * kJobsPerWorker;
+    const bool inline_left = inline_loads < kInlineMissesPerPass;
+    if (workers_full || !inline_left) {
       const LoadRequest top = *scheduler_.top();
       if (!cache_.contains(top.key())) {
-        if (!loads_inline(top, inline_loads)) break;
-        inline_miss = true;
+        // A small local miss waits for the next pass's inline loads rather than going to a worker: the
+        // hand-off to a worker and back costs more than the read itself (see kInlineMissBytes).
+        if (inline_candidate(top) ? !inline_left : workers_full) break;
       }
     }
     const LoadRequest request = *scheduler_.pop();
     const scene::TextureRecord& record = textures_[request.texture.value];
     const uint32_t slot = *slots_.acquire();
     any = true;
-    const CompletionRecord hit = loader_.serve_cached(request, record, slot, segment_.slot(slot));
+    // The next request's payload starts loading into the CPU cache while this one is copied.
+    const CompletionRecord hit =
+        loader_.serve_cached(request, record, slot, segment_.slot(slot), scheduler_.peek_key_hint());
     if (hit.status == static_cast<uint32_t>(CompletionStatus::kOk)) {
       slots_.hand_to_renderer(slot);
       stats_.add(stats_.hits_ok, 1);
-      record_latency(stats_.hit_latency, request.received_ns);
+      // Recorded when the completion is published (publish_completions()): one clock read per group.
+      hits_unrecorded_.push_back(request.received_ns);
       complete(hit);
       continue;
     }
-    if (inline_miss) {
+    if (inline_left && inline_candidate(request)) {
       ++inline_loads;
       load_inline(request, record, slot);
       continue;
@@ -485,6 +518,15 @@ bool Server::push_completion(const CompletionRecord& c) {
 }
 
 void Server::publish_completions() {
+  if (!hits_unrecorded_.empty()) {
+    // A clock read per hit was ~5 % of the dispatcher's time in texstream-bench server's hit phase; the hits
+    // of one group become visible together anyway (or, with the ring full, later: then recorded a bit early).
+    const uint64_t now = steady_now_ns();
+    for (const uint64_t received : hits_unrecorded_) {
+      stats_.hit_latency.record(now > received ? (now - received) / 1000 : 0);
+    }
+    hits_unrecorded_.clear();
+  }
   if (unpublished_completions_ == 0) return;
   completions_.publish();
   fault_point(FaultPoint::kAfterRingPush);  // published, statistics not yet counted
@@ -508,6 +550,23 @@ bool Server::flush_completions() {
     any = true;
   }
   return any;
+}
+
+bool Server::warm_slots_step() {
+  const uint64_t total = uint64_t{segment_.slot_count()} * segment_.slot_bytes();
+  if (slots_warmed_bytes_ >= total) return false;
+  // The slots lie back to back (segment_layout.hpp); madvise needs page-aligned bounds. Rounding out to
+  // pages may take in a neighbouring page of the segment: populating faults pages in and writes nothing.
+  const uint64_t page = static_cast<uint64_t>(::sysconf(_SC_PAGESIZE));
+  const uint64_t base = reinterpret_cast<uintptr_t>(segment_.slot(0).data());
+  uint64_t next = std::min(total, slots_warmed_bytes_ + kSlotWarmStep);
+  const uint64_t start = (base + slots_warmed_bytes_) / page * page;
+  const uint64_t end = (base + next + page - 1) / page * page;
+  // MADV_POPULATE_WRITE (Linux 5.14); on an older kernel it fails and the slots are faulted on first use.
+  if (::madvise(reinterpret_cast<void*>(start), end - start, MADV_POPULATE_WRITE) != 0) next = total;
+  slots_warmed_bytes_ = next;
+  slots_warm_.store(slots_warmed_bytes_ >= total, std::memory_order_relaxed);  // relaxed: a gauge
+  return true;
 }
 
 void Server::idle_wait() {

@@ -23,6 +23,8 @@ std::string format_stats(const ServerStats& s, const MipCacheStats& c) {
                      "{} entries, {} of {} bytes\n",
                      c.hits, c.misses, hit_rate, c.insertions, c.evictions, c.rejections, c.entries, c.bytes,
                      c.budget_bytes);
+  out += fmt::format("coarse tails: {} mips read ahead, {} of the hits were their first use\n", c.prefetched,
+                     c.prefetch_hits);
   out += fmt::format("storage: {} bytes read, {} bytes of mips loaded, read amplification {:.4f}; {} bytes served "
                      "from the cache; rate-limit waits {} us\n",
                      get(s.bytes_read), get(s.bytes_loaded), read_amplification(s), get(s.bytes_served_cached),

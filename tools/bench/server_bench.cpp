@@ -16,6 +16,7 @@
 //      texture set ≥ 4x the cache; peak RSS vs budget + staging + 64 MB
 // The scene is generated with texstream-gen (rgba8, so both caches hold the same bytes per mip) unless
 // --scene is given.
+#include <pthread.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -126,7 +127,10 @@ class Harness {
       return nullptr;
     }
     h->server_ = std::move(server).value();
-    h->thread_ = std::thread([p = h.get()] { p->server_->run(p->stop_); });
+    h->thread_ = std::thread([p = h.get()] {
+      pthread_setname_np(pthread_self(), "ts-dispatcher");  // perf report --comm ts-dispatcher
+      p->server_->run(p->stop_);
+    });
     return h;
   }
 
@@ -498,13 +502,26 @@ OiioResult replay_oiio(const Scene& s, const std::vector<Cycle>& trace, uint64_t
   return out;
 }
 
-// Waits (at most 10 s) until the server's cache arena, if it has one, is pre-faulted; returns the seconds.
+// Waits (at most 10 s) until the server's cache arena, if it has one, and its staging slots are pre-faulted
+// (both happen while a server that just started is idle); returns the seconds.
 double wait_for_warm_arena(const server::Server& server) {
   const Stopwatch sw;
   for (;;) {
     const server::MipCacheStats cs = server.cache_stats();
-    if (cs.arena_warm_bytes >= cs.arena_bytes || sw.seconds() > 10.0) return sw.seconds();
+    const bool warm = cs.arena_warm_bytes >= cs.arena_bytes && server.staging_warm();
+    if (warm || sw.seconds() > 10.0) return sw.seconds();
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+}
+
+// A multi-line report, each line indented under a phase's output.
+void print_indented(const std::string& report) {
+  size_t pos = 0;
+  while (pos < report.size()) {
+    const size_t nl = report.find('\n', pos);
+    std::printf("    %s\n", report.substr(pos, nl - pos).c_str());
+    if (nl == std::string::npos) break;
+    pos = nl + 1;
   }
 }
 
@@ -531,14 +548,7 @@ OursResult replay_ours(const Scene& s, const std::vector<Cycle>& trace, ServerCo
   const server::MipCacheStats cs = h->server().cache_stats();
   out.hit_rate = cs.hits + cs.misses == 0 ? 0 : static_cast<double>(cs.hits) / static_cast<double>(cs.hits + cs.misses);
   std::printf("  our server's statistics after the trace:\n");
-  std::string report = h->server().stats_report();
-  size_t pos = 0;
-  while (pos < report.size()) {
-    const size_t nl = report.find('\n', pos);
-    std::printf("    %s\n", report.substr(pos, nl - pos).c_str());
-    if (nl == std::string::npos) break;
-    pos = nl + 1;
-  }
+  print_indented(h->server().stats_report());
   return out;
 }
 
@@ -812,6 +822,7 @@ int run_server_bench(const std::vector<std::string>& args) {
     read_bw = 2.0 / (1.0 / read_before + 1.0 / read_after);  // the same bytes twice: total bytes / total time
     miss_bw = static_cast<double>(r.bytes) / r.seconds / 1e9;
     read_amp = server::read_amplification(h->server().stats());
+    const std::string miss_report = h->server().stats_report();
     // Latency of misses: other textures, not cached yet.
     uint32_t end2 = 0;
     const std::vector<Request> lat_set = all_mips_until(s, end, 8ull << 20, &end2);
@@ -844,9 +855,13 @@ int run_server_bench(const std::vector<std::string>& args) {
       std::vector<std::byte> slot(kSlotBytes);
       uint64_t bytes = 0;
       Stopwatch lw;
+      // As the dispatcher does it: a hit first, else a load that brings the coarse tail along.
       for (const Request& q : miss_set) {
         const server::LoadRequest lr{TextureId(q.texture), MipLevel(q.mip), Generation(1), q.priority, 0};
-        const CompletionRecord c = loader.load(lr, s.textures[q.texture], 0, slot);
+        CompletionRecord c = loader.serve_cached(lr, s.textures[q.texture], 0, slot);
+        if (c.status != static_cast<uint32_t>(CompletionStatus::kOk)) {
+          c = loader.load(lr, s.textures[q.texture], 0, slot, /*local_only=*/true, /*read_tail=*/true);
+        }
         if (c.status == static_cast<uint32_t>(CompletionStatus::kOk)) bytes += c.byte_size;
       }
       loader_bw = static_cast<double>(bytes) / lw.seconds() / 1e9;
@@ -869,6 +884,8 @@ int run_server_bench(const std::vector<std::string>& args) {
                 miss_set.size(), end - first, static_cast<double>(r.bytes) / 1e6, miss_bw,
                 static_cast<double>(read_bytes) / 1e6, read_bw, miss_bw / read_bw, read_amp,
                 static_cast<unsigned long long>(r.failures));
+    std::printf("  the server's statistics after the misses:\n");
+    print_indented(miss_report);
     std::printf("  (diagnostic) the same misses with the cache already full (steady state, 32 MiB): %.2f GB/s -> "
                 "ratio %.3f\n",
                 steady_bw, steady_bw / read_bw);

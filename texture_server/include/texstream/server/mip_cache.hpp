@@ -47,6 +47,7 @@ struct CachedMip {
 struct CachedCopy {
   uint64_t bytes = 0;
   uint64_t checksum = 0;
+  bool first_use_of_prefetch = false;  // the entry was inserted as `prefetched` and this is its first hit
 };
 
 struct MipCacheOptions {
@@ -60,6 +61,8 @@ struct MipCacheStats {
   uint64_t insertions = 0;
   uint64_t evictions = 0;
   uint64_t rejections = 0;  // insert() refused: larger than the budget, or the rest was pinned
+  uint64_t prefetched = 0;      // entries inserted ahead of any request (a coarse-tail read)
+  uint64_t prefetch_hits = 0;   // of the hits: first uses of such entries (the rest of the hits were asked before)
   uint64_t bytes = 0;       // payload bytes held now
   uint64_t entries = 0;
   uint64_t budget_bytes = 0;
@@ -81,14 +84,26 @@ class MipCache {
   bool contains(MipKey key) const;
   // Admits `mip`, evicting unpinned entries in policy order until it fits. Returns false if it was not
   // admitted. A key already cached keeps its entry (two loads of the same mip raced; both are equal).
-  bool insert(MipKey key, std::shared_ptr<const CachedMip> mip);
+  // `prefetched`: read ahead of any request (see CachedCopy::first_use_of_prefetch).
+  bool insert(MipKey key, std::shared_ptr<const CachedMip> mip, bool prefetched = false);
+  // insert() of several mips under one lock (a coarse-tail read brings up to a dozen); returns how many were
+  // admitted. Each entry is admitted or refused exactly as insert() would.
+  size_t insert_all(std::span<std::pair<MipKey, std::shared_ptr<const CachedMip>>> mips, bool prefetched);
+  // Bit l set: level l of `texture` is cached now (l < min(levels, 32)). One lock for all levels; counts
+  // nothing.
+  uint32_t cached_levels(TextureId texture, uint32_t levels) const;
   // True if a mip of this size could ever be admitted (callers skip the private copy otherwise).
   bool admissible(uint64_t bytes) const { return budget_ > 0 && bytes <= budget_; }
 
   // The hit path: if `key` is cached, copies it into the front of `dst`, touches it and counts a hit; else
   // counts a miss and returns nullopt. One lock, one hash lookup, no allocation. `dst` must hold the mip
   // (the dispatcher sizes slots for any mip of the scene).
-  std::optional<CachedCopy> copy_into(MipKey key, std::span<std::byte> dst);
+  // `prefetch_next`: a hint, the key most likely copied next (the scheduler's next request). Under the same
+  // lock its payload (if cached) starts loading into the CPU cache before this copy, so the next copy starts
+  // on cached lines instead of waiting for DRAM (texstream-bench server: hits are ~10 KiB payloads spread
+  // over the arena; a small gain, see copy_into()). Counts nothing for it.
+  std::optional<CachedCopy> copy_into(MipKey key, std::span<std::byte> dst,
+                                      std::optional<MipKey> prefetch_next = std::nullopt);
   // A payload of exactly `bytes` for a miss to read into and then insert(): from the warm arena when there is
   // one and `bytes` ≥ CacheArena::kMinBlock (evicting unpinned entries in policy order until a block is
   // free), else from the heap. nullptr when the mip is not admissible, or when the arena has no block even
@@ -105,6 +120,9 @@ class MipCache {
   // Removes one unpinned entry in policy order (lock held); its reference goes to `evicted`. False if every
   // entry is pinned.
   bool evict_one(std::vector<std::shared_ptr<const CachedMip>>& evicted);
+  // insert()'s body (lock held).
+  bool insert_locked(MipKey key, std::shared_ptr<const CachedMip> mip, bool prefetched,
+                     std::vector<std::shared_ptr<const CachedMip>>& evicted);
 
   // When the arena has no free block of a size (buddy fragmentation) although the byte budget has room, up to
   // budget / this many bytes of arena-sized payloads go on the heap before make_payload() evicts for a block.

@@ -28,7 +28,11 @@ struct alignas(64) MipCacheSlot {
   uint64_t checksum = 0;
   PolicyNode* node = nullptr;
   std::shared_ptr<const CachedMip> mip;
+  // Read ahead of any request (MipLoader's coarse-tail read) and not handed out yet: its first hit is the
+  // delivery its storage read paid for (read amplification counts it then, never if it is evicted unused).
+  bool prefetched = false;
 };
+static_assert(sizeof(MipCacheSlot) == 64, "a hit reads one cache line of the index");
 
 class MipCacheTable {
  public:

@@ -37,11 +37,36 @@ class MipLoader {
   // `local_only`: when a read it needs would go to a remote or slow origin (StorageFile::local() is false),
   // nothing is read and the completion is kUnfilled (not logged, not counted as a failure): the server then
   // hands the load to its bounded remote-fetch workers, or answers kUnfilled so the renderer asks again.
+  // `read_tail`: when the mip is a DDS mip served raw and at most kTailMipBytes, the mips next to it that are
+  // that small too and not cached yet (the texture's coarse tail, which lies back to back at the end of the
+  // file) are read in the same single read and inserted into the cache, marked prefetched: the renderer
+  // asks coarsest first (seed 000 §3.5), so they are its next requests, and each would otherwise cost a read
+  // and a trip through the pipeline. Read amplification counts a prefetched mip as delivered only when it
+  // is first served (MipCache::copy_into), so a tail nobody asks for shows up there. Only one thread may
+  // pass read_tail = true (the dispatcher): two tail reads of one texture at once would read it twice.
+  // `wanted_levels` (bit l = level l, with read_tail only): levels of the texture the renderer has asked for
+  // too and that wait in the queue. They join the same read whatever their size, as long as the range stays
+  // contiguous and within kMaxTailReadBytes: one read for what is asked anyway, no read amplification.
   CompletionRecord load(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot_index,
-                        std::span<std::byte> slot, bool local_only = false);
+                        std::span<std::byte> slot, bool local_only = false, bool read_tail = false,
+                        uint32_t wanted_levels = 0);
+
+  // The largest mip read as part of a coarse tail: 16 KiB = a 64x64 RGBA8 or 128x128 BC1 mip. A whole tail
+  // of such mips is at most 4/3 of it (~22 KiB), which is what a texture wanted only at a coarser level
+  // reads in vain (texstream-bench server's trace: read amplification stays near 1, see the bench note).
+  static constexpr uint64_t kTailMipBytes = 16 << 10;
+  // At most this many bytes in one tail read (the dispatcher makes it while hits wait behind it): 256 KiB
+  // from the page cache is ~40 µs at the ~7 GB/s of plain read() here.
+  static constexpr uint64_t kMaxTailReadBytes = 256 << 10;
+  // At most this many mips in one tail read (a mip chain of up to 2^31 x 2^31 texels has 32).
+  static constexpr size_t kMaxTailParts = 32;
   // Copies a cached mip into `slot`. Returns a kOk record, or a record with status 0 on a cache miss.
+  // True if the texture's file is known to be a DDS whose mips are served as they are stored (one pread per
+  // mip, no decode) for a texture of `format`. False for unknown textures and for decoded ones.
+  bool serves_raw(TextureId texture, TexelFormat format) const;
+  // `prefetch_next`: MipCache::copy_into()'s hint.
   CompletionRecord serve_cached(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot_index,
-                                std::span<std::byte> slot);
+                                std::span<std::byte> slot, std::optional<MipKey> prefetch_next = std::nullopt);
 
  private:
   struct Opened {
@@ -53,8 +78,19 @@ class MipLoader {
   // `error`.
   bool open_texture(const LoadRequest& request, Opened& opened, CompletionRecord& error);
   // Reads (or decodes) the mip into `target`; returns kOk or the failure's status (already logged).
+  // With `tail` (read_tail, see load()): may read the coarse tail around the mip too; its other mips come
+  // back in `tail` (checksummed by the caller, who inserts them).
+  struct TailMip {
+    uint32_t level = 0;
+    std::shared_ptr<CachedMip> mip;
+  };
+  using Tail = std::vector<TailMip>;
   CompletionStatus read_mip(const LoadRequest& request, const scene::TextureRecord& record, Opened& opened,
-                            std::span<std::byte> target, bool local_only);
+                            std::span<std::byte> target, bool local_only, Tail* tail = nullptr,
+                            uint32_t wanted_levels = 0);
+  // The coarse-tail read of read_mip(): levels around `request.mip` in one scatter read (see load()).
+  CompletionStatus read_tail(const LoadRequest& request, const scene::TextureRecord& record, Opened& opened,
+                             std::span<std::byte> target, bool local_only, Tail& tail, uint32_t wanted_levels);
   CompletionRecord fail(const LoadRequest& request, CompletionStatus status, const std::filesystem::path& path,
                         const std::string& why);
   CompletionStatus fail_status(const LoadRequest& request, CompletionStatus status, const std::filesystem::path& path,
@@ -68,6 +104,7 @@ class MipLoader {
   ServerStats& stats_;
   TextureFileIndex index_;
   OpenFileCache files_;  // files of recent misses, kept open for the texture's next mips
+  Tail tail_scratch_;    // read_tail's mips (used by the one thread that passes read_tail = true)
 };
 
 // The completion a request gets when it is answered without a payload.

@@ -41,7 +41,15 @@ class RequestScheduler {
   // The best pending request, without removing it.
   std::optional<LoadRequest> top();
   std::optional<LoadRequest> pop();
+  // The key of the heap's top node without checking that it is still pending (a stale node's key is
+  // possible): only a hint, e.g. for prefetching what pop() will most likely return next.
+  std::optional<MipKey> peek_key_hint() const {
+    if (heap_.empty()) return std::nullopt;
+    return heap_.front().key;
+  }
 
+  // True if a load of `key` is pending (queued, not yet popped).
+  bool contains(MipKey key) const { return pending_.find(key) != pending_.end(); }
   size_t size() const { return pending_.size(); }
   bool empty() const { return pending_.empty(); }
   Generation newest_generation() const { return newest_; }

@@ -21,6 +21,20 @@ class StorageFile {
   // ends before offset + out.size() (a caller that needs all of them treats that as truncation). Errors:
   // kIo (with the path and the reason).
   virtual Result<uint64_t> read_at(std::span<std::byte> out, uint64_t offset) = 0;
+  // Reads the consecutive bytes from `offset` on into `parts`, one after another (MipLoader's coarse-tail
+  // read: several mips that lie back to back, each into its own cache payload). Returns the bytes read, as
+  // read_at(). This default reads part by part through read_at(), so every wrapper (rate limit, disk cache,
+  // fault injection) sees the same reads; PosixStorage makes it one preadv().
+  virtual Result<uint64_t> read_scatter_at(std::span<const std::span<std::byte>> parts, uint64_t offset) {
+    uint64_t done = 0;
+    for (const std::span<std::byte> part : parts) {
+      Result<uint64_t> got = read_at(part, offset + done);
+      if (!got.ok()) return got.error();
+      done += *got;
+      if (*got < part.size()) break;  // the object ends here
+    }
+    return done;
+  }
   // The object's size in bytes (OpenImageIO's readers seek relative to the end). Errors: kIo.
   virtual Result<uint64_t> size() = 0;
   // True when the object lives on a far or slow origin (http, slow-storage emulation): reads may take long,

@@ -1,0 +1,270 @@
+// MipLoader's coarse-tail read (load(..., read_tail, wanted_levels)) over an in-memory storage: which mips
+// join the one read, that each lands in the cache with its own checksum and marked prefetched, that read
+// amplification counts a prefetched mip only once it is served, and that a truncated range caches nothing.
+// Also PosixStorage's preadv-based read_scatter_at on a real file, and MipCache's prefetched accounting.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "texstream/common/scene_format.hpp"
+#include "texstream/protocol/checksum.hpp"
+#include "texstream/protocol/segment_layout.hpp"
+#include "texstream/server/dds_layout.hpp"
+#include "texstream/server/lru_eviction_policy.hpp"
+#include "texstream/server/mip_cache.hpp"
+#include "texstream/server/mip_loader.hpp"
+#include "texstream/server/posix_storage.hpp"
+#include "texstream/server/server_stats.hpp"
+
+namespace texstream::server {
+namespace {
+
+struct Counters {
+  int opens = 0;
+  int reads = 0;          // read_at calls
+  int scatter_reads = 0;  // read_scatter_at calls
+};
+
+class MemoryFile final : public StorageFile {
+ public:
+  MemoryFile(const std::vector<std::byte>& bytes, Counters* counters) : bytes_(bytes), counters_(counters) {}
+  Result<uint64_t> read_at(std::span<std::byte> out, uint64_t offset) override {
+    ++counters_->reads;
+    return copy(out, offset);
+  }
+  Result<uint64_t> read_scatter_at(std::span<const std::span<std::byte>> parts, uint64_t offset) override {
+    ++counters_->scatter_reads;
+    uint64_t done = 0;
+    for (const std::span<std::byte> part : parts) {
+      const uint64_t got = copy(part, offset + done);
+      done += got;
+      if (got < part.size()) break;
+    }
+    return done;
+  }
+  Result<uint64_t> size() override { return uint64_t{bytes_.size()}; }
+
+ private:
+  uint64_t copy(std::span<std::byte> out, uint64_t offset) const {
+    if (offset >= bytes_.size()) return 0;
+    const uint64_t n = std::min<uint64_t>(out.size(), bytes_.size() - offset);
+    std::memcpy(out.data(), bytes_.data() + offset, n);
+    return n;
+  }
+  const std::vector<std::byte>& bytes_;
+  Counters* counters_;
+};
+
+class MemoryStorage final : public Storage {
+ public:
+  Result<std::unique_ptr<StorageFile>> open(const std::filesystem::path& path) override {
+    auto it = files.find(path.string());
+    if (it == files.end()) return make_error(ErrorCode::kNotFound, "no '" + path.string() + "'");
+    ++counters.opens;
+    return std::unique_ptr<StorageFile>(new MemoryFile(it->second, &counters));
+  }
+  std::map<std::string, std::vector<std::byte>> files;
+  Counters counters;
+};
+
+const std::filesystem::path kScene = "/scene";
+
+// An rgba8 DDS of the generator's layout whose every byte says which mip it belongs to (level * 16 + i % 16).
+std::vector<std::byte> make_dds(uint32_t width, uint32_t height, uint32_t mips) {
+  const auto header = scene::make_dds_header(TexelFormat::kRgba8, width, height, mips);
+  std::vector<std::byte> out(header.begin(), header.end());
+  for (uint32_t l = 0; l < mips; ++l) {
+    const uint64_t n = mip_bytes(TexelFormat::kRgba8, width, height, l);
+    for (uint64_t i = 0; i < n; ++i) out.push_back(static_cast<std::byte>(l * 16 + i % 16));
+  }
+  return out;
+}
+
+std::span<const std::byte> mip_of(const std::vector<std::byte>& file, const scene::TextureRecord& t, uint32_t l) {
+  const uint64_t offset = scene::kDdsHeaderBytes + mip_chain_offset(TexelFormat::kRgba8, t.width, t.height, l);
+  return std::span(file).subspan(offset, mip_bytes(TexelFormat::kRgba8, t.width, t.height, l));
+}
+
+class TailRead : public ::testing::Test {
+ protected:
+  void add_texture(uint32_t width, uint32_t height) {
+    record_ = scene::TextureRecord{width, height, full_mip_count(width, height),
+                                   static_cast<uint32_t>(TexelFormat::kRgba8)};
+    file_ = make_dds(width, height, record_.mip_count);
+    storage_.files[texture_file_path(kScene, TextureId(0), TextureFileKind::kDds).string()] = file_;
+  }
+  LoadRequest request(uint32_t mip) const { return LoadRequest{TextureId(0), MipLevel(mip), Generation(1), 1.0f, 0}; }
+  CompletionRecord load(uint32_t mip, bool tail, uint32_t wanted = 0) {
+    return loader_.load(request(mip), record_, 0, slot_, /*local_only=*/true, tail, wanted);
+  }
+  bool cached(uint32_t mip) { return cache_.contains(MipKey(TextureId(0), MipLevel(mip))); }
+  // Serves `mip` from the cache and checks the bytes and checksum against the file.
+  void expect_hit(uint32_t mip) {
+    const CompletionRecord c = loader_.serve_cached(request(mip), record_, 0, slot_);
+    ASSERT_EQ(c.status, static_cast<uint32_t>(CompletionStatus::kOk)) << "mip " << mip;
+    const std::span<const std::byte> want = mip_of(file_, record_, mip);
+    ASSERT_EQ(c.byte_size, want.size());
+    EXPECT_EQ(std::memcmp(slot_.data(), want.data(), want.size()), 0) << "mip " << mip;
+    EXPECT_EQ(c.checksum, payload_checksum(want.data(), want.size())) << "mip " << mip;
+  }
+
+  MemoryStorage storage_;
+  MipCache cache_{1 << 20, std::make_unique<LruEvictionPolicy>()};
+  ServerBlock block_{};
+  ServerStats stats_;
+  MipLoader loader_{kScene, storage_, cache_, block_, stats_};
+  std::vector<std::byte> slot_ = std::vector<std::byte>(1 << 20);
+  scene::TextureRecord record_{};
+  std::vector<std::byte> file_;
+};
+
+TEST_F(TailRead, TheCoarsestMipBringsEverySmallMipInOneRead) {
+  add_texture(64, 64);  // mips of 16 KiB (= kTailMipBytes), 4 KiB, ..., 4 bytes: 7 levels
+  const CompletionRecord c = load(6, /*tail=*/true);
+  ASSERT_EQ(c.status, static_cast<uint32_t>(CompletionStatus::kOk));
+  const std::span<const std::byte> m6 = mip_of(file_, record_, 6);
+  EXPECT_EQ(c.checksum, payload_checksum(m6.data(), m6.size()));
+  EXPECT_EQ(storage_.counters.reads, 1);          // the header
+  EXPECT_EQ(storage_.counters.scatter_reads, 1);  // every mip at once
+  for (uint32_t l = 0; l < 7; ++l) EXPECT_TRUE(cached(l)) << "mip " << l;
+  EXPECT_EQ(cache_.stats().prefetched, 6u);
+  // Read amplification so far: the whole chain read, one mip delivered.
+  const uint64_t chain = mip_chain_offset(TexelFormat::kRgba8, 64, 64, 7);
+  EXPECT_EQ(stats_.bytes_read.load(), kDdsMaxHeaderBytes + chain);  // the header read takes the DX10 size
+  EXPECT_EQ(stats_.bytes_loaded.load(), m6.size());
+  for (uint32_t l = 6; l-- > 0;) expect_hit(l);
+  // Each prefetched mip counted as delivered once, at its first hit; a second hit counts nothing.
+  EXPECT_EQ(stats_.bytes_loaded.load(), chain);
+  expect_hit(0);
+  EXPECT_EQ(stats_.bytes_loaded.load(), chain);
+  EXPECT_EQ(cache_.stats().prefetch_hits, 6u);
+  EXPECT_EQ(storage_.counters.scatter_reads + storage_.counters.reads, 2);  // nothing read again
+}
+
+TEST_F(TailRead, LargeMipsJoinOnlyWhenWanted) {
+  add_texture(256, 256);  // mip 0: 256 KiB, mip 1: 64 KiB, mip 2: 16 KiB, ...
+  // Mip 1 is asked for and queued: it joins; mip 0 is not asked for: it stays out although it is contiguous.
+  ASSERT_EQ(load(8, true, /*wanted=*/1u << 1).status, static_cast<uint32_t>(CompletionStatus::kOk));
+  for (uint32_t l = 1; l < 9; ++l) EXPECT_TRUE(cached(l)) << "mip " << l;
+  EXPECT_FALSE(cached(0));
+  for (uint32_t l = 8; l-- > 1;) expect_hit(l);
+}
+
+TEST_F(TailRead, AWantedMipBeyondTheReadLimitStaysOut) {
+  add_texture(256, 256);
+  // Mip 0 wanted as well would make the read 256 KiB + the rest > kMaxTailReadBytes: it is left to its own read.
+  ASSERT_EQ(load(8, true, (1u << 0) | (1u << 1)).status, static_cast<uint32_t>(CompletionStatus::kOk));
+  EXPECT_FALSE(cached(0));
+  EXPECT_TRUE(cached(1));
+  EXPECT_EQ(storage_.counters.scatter_reads, 1);
+}
+
+TEST_F(TailRead, WithoutReadTailOnlyTheAskedMipIsRead) {
+  add_texture(64, 64);
+  ASSERT_EQ(load(6, /*tail=*/false).status, static_cast<uint32_t>(CompletionStatus::kOk));
+  EXPECT_EQ(storage_.counters.scatter_reads, 0);
+  EXPECT_EQ(cache_.stats().entries, 1u);
+  EXPECT_EQ(stats_.bytes_loaded.load(), 4u);
+}
+
+TEST_F(TailRead, ACachedLevelEndsTheRange) {
+  add_texture(64, 64);
+  ASSERT_EQ(load(3, false).status, static_cast<uint32_t>(CompletionStatus::kOk));  // mip 3 cached first
+  const uint64_t read_before = stats_.bytes_read.load();
+  ASSERT_EQ(load(6, true).status, static_cast<uint32_t>(CompletionStatus::kOk));
+  // Mips 6, 5, 4 are read (contiguous up to the cached mip 3); mips 2..0 lie beyond it and are not.
+  EXPECT_EQ(stats_.bytes_read.load() - read_before, 4u + 16u + 64u);  // 1x1, 2x2, 4x4 texels
+  EXPECT_TRUE(cached(4));
+  EXPECT_FALSE(cached(2));
+  EXPECT_EQ(cache_.stats().prefetched, 2u);
+}
+
+TEST_F(TailRead, ATruncatedRangeIsCorruptAndCachesNothing) {
+  add_texture(64, 64);
+  // Cut the file inside mip 0: the asked mip 6 and the rest of the tail lie beyond the end.
+  storage_.files.begin()->second.resize(scene::kDdsHeaderBytes + 1000);
+  file_ = storage_.files.begin()->second;
+  const CompletionRecord c = load(6, true);
+  EXPECT_EQ(c.status, static_cast<uint32_t>(CompletionStatus::kCorrupt));
+  EXPECT_EQ(cache_.stats().entries, 0u);
+  EXPECT_EQ(cache_.stats().prefetched, 0u);
+}
+
+TEST(MipCachePrefetched, FirstUseIsReportedOnce) {
+  MipCache cache(1 << 20, std::make_unique<LruEvictionPolicy>());
+  auto mip = std::make_shared<CachedMip>();
+  mip->bytes.assign(100, std::byte{3});
+  mip->checksum = 77;
+  const MipKey key(TextureId(5), MipLevel(2));
+  ASSERT_TRUE(cache.insert(key, mip, /*prefetched=*/true));
+  std::vector<std::byte> dst(100);
+  const std::optional<CachedCopy> first = cache.copy_into(key, dst);
+  ASSERT_TRUE(first.has_value());
+  EXPECT_TRUE(first->first_use_of_prefetch);
+  EXPECT_EQ(first->checksum, 77u);
+  EXPECT_FALSE(cache.copy_into(key, dst)->first_use_of_prefetch);
+  EXPECT_EQ(cache.stats().prefetched, 1u);
+  EXPECT_EQ(cache.stats().prefetch_hits, 1u);
+  // An ordinary insert is never a prefetch; a hint for a key that is not cached changes nothing.
+  const MipKey other(TextureId(6), MipLevel(0));
+  ASSERT_TRUE(cache.insert(other, mip));
+  EXPECT_FALSE(cache.copy_into(other, dst, MipKey(TextureId(9), MipLevel(9)))->first_use_of_prefetch);
+  EXPECT_EQ(cache.stats().hits, 3u);
+}
+
+TEST(MipCacheBatch, InsertAllKeepsTheBudgetAndCachedLevelsSeesEveryLevel) {
+  MipCache cache(1000, std::make_unique<LruEvictionPolicy>());
+  std::vector<std::pair<MipKey, std::shared_ptr<const CachedMip>>> batch;
+  for (uint32_t l = 0; l < 4; ++l) {
+    auto m = std::make_shared<CachedMip>();
+    m->bytes.assign(400, std::byte{1});
+    batch.emplace_back(MipKey(TextureId(1), MipLevel(l)), m);
+  }
+  // 4 x 400 bytes into 1000: each insert evicts as needed, so the last two stay.
+  EXPECT_EQ(cache.insert_all(batch, true), 4u);
+  EXPECT_LE(cache.stats().bytes, 1000u);
+  EXPECT_EQ(cache.cached_levels(TextureId(1), 4), (1u << 2) | (1u << 3));
+  EXPECT_EQ(cache.cached_levels(TextureId(2), 4), 0u);
+}
+
+TEST(PosixScatterRead, FillsThePartsInOrderAndStopsAtTheEnd) {
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("texstream-scatter-" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const std::filesystem::path path = dir / "f.bin";
+  {
+    std::ofstream f(path, std::ios::binary);
+    for (int i = 0; i < 100; ++i) f.put(static_cast<char>(i));
+  }
+  PosixStorage storage;
+  auto file = storage.open(path);
+  ASSERT_TRUE(file.ok());
+  std::vector<std::byte> a(10), b(1), c(30);
+  const std::array<std::span<std::byte>, 3> parts{a, b, c};
+  Result<uint64_t> got = (*file)->read_scatter_at(parts, 5);
+  ASSERT_TRUE(got.ok());
+  EXPECT_EQ(*got, 41u);
+  EXPECT_EQ(a[0], std::byte{5});
+  EXPECT_EQ(b[0], std::byte{15});
+  EXPECT_EQ(c[29], std::byte{45});
+  // Past the end: fewer bytes, the rest of the parts untouched.
+  std::vector<std::byte> d(8, std::byte{0xee}), e(8, std::byte{0xee});
+  const std::array<std::span<std::byte>, 2> tail{d, e};
+  got = (*file)->read_scatter_at(tail, 90);
+  ASSERT_TRUE(got.ok());
+  EXPECT_EQ(*got, 10u);
+  EXPECT_EQ(d[7], std::byte{97});
+  EXPECT_EQ(e[1], std::byte{99});
+  EXPECT_EQ(e[2], std::byte{0xee});
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace texstream::server
