@@ -20,6 +20,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -124,8 +125,11 @@ T unwrap(Result<T> r, const char* what) {
 // Per-frame latency (frames.csv, latency_ms) of one texstream-render run over the scene's whole fly-through,
 // every texture resident first (render.preload_all) so that each frame samples its textures the way a streamed
 // frame does once the cache has converged. Empty on failure (the log is named).
+// preload = false: a plain streaming run instead (the frames then differ with and without feedback; used for
+// how many frames carry feedback, `cycles`: the renderer runs it only on frames that start a streaming cycle).
 std::vector<double> renderer_frame_latencies(const fs::path& profile, const fs::path& scene, const fs::path& out,
-                                             const Config& cfg, int frames, double path_seconds, bool feedback) {
+                                             const Config& cfg, int frames, double path_seconds, bool feedback,
+                                             bool preload = true, uint64_t* cycles = nullptr) {
   const fs::path bin = fs::read_symlink("/proc/self/exe").parent_path() / "texstream-render";
   std::error_code ec;
   fs::remove_all(out, ec);
@@ -134,7 +138,8 @@ std::vector<double> renderer_frame_latencies(const fs::path& profile, const fs::
   const std::string log = out.string() + ".log";
   const std::string cmd =
       bin.string() + " --config '" + profile.string() + "' --set scene.dir='" + scene.string() +
-      "' --set render.output_dir='" + out.string() + "' --set render.preload_all=true --set render.pace_frames=false --set render.feedback=" +
+      "' --set render.output_dir='" + out.string() + "' --set render.preload_all=" + (preload ? "true" : "false") +
+      " --set render.pace_frames=false --set render.feedback=" +
       (feedback ? "true" : "false") + " --set render.frames=" + std::to_string(frames) +
       " --set render.frame_time_ms=" + frame_ms + " --set render.write_every_frames=0 --set render.width_px=" +
       std::to_string(cfg.render.width_px) + " --set render.height_px=" + std::to_string(cfg.render.height_px) +
@@ -158,6 +163,11 @@ std::vector<double> renderer_frame_latencies(const fs::path& profile, const fs::
     size_t start = 0;
     for (int k = 0; k < column && start != std::string::npos; ++k) start = line.find(',', start) + 1;
     out_ms.push_back(std::strtod(line.c_str() + start, nullptr));
+  }
+  if (cycles) {
+    std::ifstream summary(out / "summary.json");
+    const auto j = nlohmann::json::parse(summary, nullptr, false);
+    *cycles = j.is_object() ? j.value("streaming_cycles", uint64_t{0}) : 0;
   }
   if (static_cast<int>(out_ms.size()) != frames) {
     std::fprintf(stderr, "visibility bench: %s has %zu frames, expected %d\n", (out / "frames.csv").c_str(),
@@ -407,6 +417,17 @@ int run_visibility(const std::vector<std::string>& args) {
                   "frame: with feedback %.2f ms, without %.2f ms per frame: %.3f\n",
                   frames - kRunWarmupFrames, static_cast<long long>(profile_cfg.render.width_px),
                   static_cast<long long>(profile_cfg.render.height_px), repeats, on_sum / n, off_sum / n, run_frac);
+      // The figure above is the worst case: with every texture resident nothing is in flight, so every frame
+      // starts a cycle and carries feedback. A streaming run says how many frames do in normal operation.
+      uint64_t cycles = 0;
+      const auto streamed = renderer_frame_latencies(profile, scene_dir, work / "streaming", profile_cfg, frames,
+                                                     path.duration_s(), true, false, &cycles);
+      if (!streamed.empty()) {
+        const double share = static_cast<double>(cycles) / static_cast<double>(frames);
+        std::printf("cost: a streaming run of the same frames carries feedback on %llu of %d frames (cycle starts): "
+                    "%.3f of the worst case above, ~%.3f of frame time over the fly-through\n",
+                    static_cast<unsigned long long>(cycles), frames, share, share * run_frac);
+      }
     }
     std::error_code ec;
     if (ok) fs::remove_all(work, ec);
