@@ -6,19 +6,34 @@ struct AnisoLod {
   float taps;  // N = min(ceil(p_max / p_min), max_aniso), at least 1
 };
 
-AnisoLod anisotropic_lod(vec2 dx, vec2 dy, float max_aniso) {
+// The part of the footprint both of a fragment's levels share (sampling with A_s, metadata with A_m): the
+// major axis and the rounded axis ratio, computed once per fragment (scene.frag). The C++ twin's
+// anisotropic_lod() is aniso_footprint() followed by anisotropic_lod_of(), in the same order.
+struct AnisoFootprint {
+  float pmax;
+  float pmin;
+  float ratio;  // ceil(p_max / p_min) (see anisotropic_lod_of); only meaningful when p_min > 0
+};
+
+AnisoFootprint aniso_footprint(vec2 dx, vec2 dy) {
   float px = length(dx);
   float py = length(dy);
-  float pmax = max(px, py);
-  float pmin = min(px, py);
-  // p_min = 0 (a degenerate footprint) is infinitely anisotropic: N = max_aniso.
+  AnisoFootprint f;
+  f.pmax = max(px, py);
+  f.pmin = min(px, py);
   // ceil() of a ratio that rounding pushed just above an integer would double N (and drop the level by one) for
   // an isotropic footprint whose two axes differ in the last bits: ratios within 1/256 of an integer count as it.
-  float n = pmin > 0.0 ? min(ceil(pmax / pmin - 1.0 / 256.0), max_aniso) : max_aniso;
+  f.ratio = f.pmin > 0.0 ? ceil(f.pmax / f.pmin - 1.0 / 256.0) : 0.0;
+  return f;
+}
+
+AnisoLod anisotropic_lod_of(AnisoFootprint f, float max_aniso) {
+  // p_min = 0 (a degenerate footprint) is infinitely anisotropic: N = max_aniso.
+  float n = f.pmin > 0.0 ? min(f.ratio, max_aniso) : max_aniso;
   n = max(n, 1.0);
   AnisoLod r;
   // p_max = 0 (no change across the pixel) is infinite magnification; -64 stands for it and is clamped later.
-  r.lod = pmax > 0.0 ? log2(pmax / n) : -64.0;
+  r.lod = f.pmax > 0.0 ? log2(f.pmax / n) : -64.0;
   // Non-finite derivatives (uv blowing up at a degenerate or near-plane triangle edge): ask for the coarsest
   // level rather than let a NaN reach clamp() (undefined) or the fixed-point conversion. 64 clamps to M_max.
   if (isnan(r.lod) || isinf(r.lod)) r.lod = isinf(r.lod) && r.lod < 0.0 ? -64.0 : 64.0;

@@ -63,6 +63,7 @@ void main() {
   // Derivatives first, in uniform control flow.
   vec2 dx = dFdx(in_uv) * extent;
   vec2 dy = dFdy(in_uv) * extent;
+  AnisoFootprint footprint = aniso_footprint(dx, dy);  // shared by the sampling level and the metadata's
   float mip_max = float(tex.placement.w - 1u);
   bool resident = tex.placement.y != kNotResident;
   bool feedback = (frame.flags.x & kFlagFeedback) != 0u;
@@ -88,7 +89,7 @@ void main() {
     // Sampling anisotropy A_s = A_m / 2, done as N taps of textureLod along the footprint's major axis rather
     // than by the sampler: hardware anisotropy may pick a finer level than our estimate, and without
     // shaderResourceMinLod (lavapipe lacks it) nothing else can clamp it per texture.
-    AnisoLod s = anisotropic_lod(dx, dy, frame.params.y);
+    AnisoLod s = anisotropic_lod_of(footprint, frame.params.y);
     float lod = clamp(s.lod, finest, coarsest);
     displayed = lod;
 #ifndef WIDE_PASS
@@ -139,13 +140,13 @@ void main() {
   vec2 st = (vec2(tex.region.xy) + in_uv * extent) / float(frame.cache.x);
   vec2 queried = textureQueryLod(probe_image, st);
   uint pixel = uint(gl_FragCoord.y) * frame.view.y + uint(gl_FragCoord.x);
-  probe[pixel] = LodProbeSample(anisotropic_lod(dx, dy, frame.params.x).lod, queried.y, mip_max, 1.0);
+  probe[pixel] = LodProbeSample(anisotropic_lod_of(footprint, frame.params.x).lod, queried.y, mip_max, 1.0);
 #endif
 #endif
 
   if (!feedback) return;
   // ---- visibility metadata ----
-  AnisoLod meta = anisotropic_lod(dx, dy, frame.params.x);
+  AnisoLod meta = anisotropic_lod_of(footprint, frame.params.x);
   float wanted = clamp(meta.lod + pc.pass.x, 0.0, mip_max);
   uint mip_fixed = uint(wanted * float(kMipFixedScale));
   uint weight_fixed = uint(weight * float(kWeightFixedScale) + 0.5);

@@ -85,7 +85,7 @@ struct FrameUniforms {
 // One fragment of the LOD_PROBE variant (tests and texstream-bench visibility): the metadata's level next to
 // the level the device's sampler would pick (textureQueryLod with anisotropy A_m) for the same fragment.
 struct LodProbeSample {
-  float computed;       // anisotropic_lod().lod, unclamped
+  float computed;       // anisotropic_lod_of().lod with A_m, unclamped
   float queried;        // textureQueryLod(...).y: the device's lambda for the same footprint
   float mip_max;        // the texture's coarsest level
   float written;        // 1 where a fragment was shaded
