@@ -153,31 +153,6 @@ TEST_F(SceneOpen, DroppingUnsampledMeshesChangesNoPixelAndNoMetadata) {
   EXPECT_GT(dropped, 100u) << "the test must drop meshes to show anything";
 }
 
-// TEXSTREAM_SCENE_1M=<scene folder> (e.g. /work/scale1m): the same comparison at the first pose of that scene's
-// path, the view texstream-bench cache starts with. Skipped without it (the scene is gigabytes).
-TEST_F(SceneOpen, LargeSceneDropsUnsampledMeshesExactly) {
-  const char* dir = std::getenv("TEXSTREAM_SCENE_1M");
-  if (dir == nullptr) GTEST_SKIP() << "TEXSTREAM_SCENE_1M not set";
-  auto path = CameraPath::load(fs::path(dir) / "camera_path.txt");
-  ASSERT_TRUE(path.ok());
-  const std::vector<CameraPose> pose{path->keys().front().pose};
-  for (const char* view : {"none", "mesh_id"}) {
-    Config cfg = view_config(view);
-    cfg.render.width_px = 640;
-    cfg.render.height_px = 360;
-    cfg.render.validation = false;  // 10^5 draws: the layer would take minutes
-    auto s = SceneData::open(dir);
-    ASSERT_TRUE(s.ok()) << s.error().message;
-    SceneData copy = *s;
-    const auto all = render_poses(cfg, std::move(*s), pose, false, false, /*drop_unsampled=*/false);
-    const auto kept = render_poses(cfg, std::move(copy), pose);
-    expect_same(all, kept, view, /*same_draws=*/false, 1);
-    ASSERT_EQ(kept.size(), 1u);
-    std::printf("%s: %zu meshes in the frusta, %zu dropped, main pass draws %u -> %u\n", view, kept[0].submitted,
-                kept[0].unsampled, all[0].main_draws, kept[0].main_draws);
-  }
-}
-
 TEST_F(SceneOpen, WithoutTheIndexTheTreeIsBuiltKeptAndTheSame) {
   const fs::path copy = dir_ / "no_index";
   fs::remove_all(copy);

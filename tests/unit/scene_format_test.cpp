@@ -7,6 +7,7 @@
 #include <cstring>
 #include <fstream>
 
+#include "test_temp_dir.hpp"
 #include "texstream/common/scene_format.hpp"
 
 namespace fs = std::filesystem;
@@ -17,13 +18,7 @@ namespace {
 
 class SceneFormatTest : public ::testing::Test {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("texstream_scene_format_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
+  void SetUp() override { dir_ = test::fresh_test_dir("texstream_scene_format"); }
   void TearDown() override { fs::remove_all(dir_); }
 
   std::vector<char> read_all(const fs::path& p) {

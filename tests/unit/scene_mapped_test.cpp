@@ -12,6 +12,7 @@
 #include <fstream>
 #include <random>
 
+#include "test_temp_dir.hpp"
 #include "texstream/common/mesh_index.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texstream/render/broad_phase.hpp"
@@ -28,13 +29,7 @@ constexpr double kX = 392000.0, kY = 5820000.0;  // map coordinates: floats have
 
 class SceneMappedTest : public ::testing::Test {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("texstream_scene_mapped_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
+  void SetUp() override { dir_ = test::fresh_test_dir("texstream_scene_mapped"); }
   void TearDown() override { fs::remove_all(dir_); }
 
   template <class T>

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "test_temp_dir.hpp"
 #include "texstream/server/disk_cache.hpp"
 
 namespace fs = std::filesystem;
@@ -19,12 +20,7 @@ namespace {
 
 class DiskCacheTest : public ::testing::Test {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("texstream_disk_cache_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-  }
+  void SetUp() override { dir_ = test::fresh_test_dir("texstream_disk_cache", /*create=*/false); }
   void TearDown() override { fs::remove_all(dir_); }
 
   std::unique_ptr<DiskCache> open(uint64_t budget = 1 << 20, DiskCachePolicy policy = DiskCachePolicy::kLru) {
