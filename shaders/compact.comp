@@ -1,14 +1,14 @@
 #version 450
-// Metadata compaction (seed 000 §3.3): one invocation per draw of the frame copies its mesh, if its weight is
+// Metadata compaction (seed 000 §3.3): one invocation per drawn mesh of the frame copies it, if its weight is
 // >= tau, into a dense list, then resets the mesh's sparse entry for the next frame. Only drawn meshes can have
-// metadata (and each mesh is drawn at most once per list), so visiting the draws instead of every mesh of the
-// scene is exact and costs what the view costs, not what the scene does.
+// metadata (and each mesh is drawn at most once per frame), so visiting the frame's drawn meshes instead of
+// every mesh of the scene is exact and costs what the view costs, not what the scene does.
 // Variants:
 //   (none)           into the device-local list (kBindingCompacted): frames whose list is not read back;
 //   COMPACT_TO_HOST  straight into the host-visible read-back list (kBindingReadback): frames that start a
 //                    streaming cycle. Only the used prefix is written, so the bytes crossing to the host grow
 //                    with the visible meshes, not the scene, without a separate copy dispatch.
-// Slots are claimed per workgroup (one atomicAdd on the list counter per 64 draws, not one per kept mesh):
+// Slots are claimed per workgroup (one atomicAdd on the list counter per 64 meshes, not one per kept mesh):
 // cheap on lavapipe, which runs atomics lane by lane, and kind to host memory on a discrete GPU.
 #include "bindings.glsl"
 #include "compact_list.glsl"
@@ -20,7 +20,7 @@ COMPACT_LIST_BLOCK(CompactBlock, kBindingReadback, ) compacted;
 #else
 COMPACT_LIST_BLOCK(CompactBlock, kBindingCompacted, ) compacted;
 #endif
-layout(set = 0, binding = kBindingDraws, std430) readonly buffer DrawBlock { uint draw_words[]; };
+layout(set = 0, binding = kBindingDrawn, std430) readonly buffer DrawnBlock { uint drawn_mesh[]; };
 
 shared uint group_kept;
 shared uint group_base;
@@ -29,11 +29,11 @@ void main() {
   if (gl_LocalInvocationIndex == 0u) group_kept = 0u;
   barrier();
   // No early return: the barriers below need every invocation.
-  uint draw = gl_GlobalInvocationID.x;
+  uint k = gl_GlobalInvocationID.x;
   uint mesh = 0u;
   MeshMeta m = MeshMeta(kNoMip, 0u);
-  if (draw < frame.view.z) {
-    mesh = draw_words[draw * kDrawWords + kDrawMeshWord];
+  if (k < frame.view.z) {
+    mesh = drawn_mesh[k];
     if (mesh < frame.flags.y) {
       m = mesh_meta[mesh];
       mesh_meta[mesh] = MeshMeta(kNoMip, 0u);

@@ -1,12 +1,14 @@
 #version 450
 // Scene vertices: positions relative to their mesh origin, moved by the mesh's camera-relative offset
 // (computed in double on the CPU), so the view matrix has no translation and nothing jitters at map
-// coordinates. firstInstance of each indirect draw is the mesh id.
+// coordinates. Each vertex carries its mesh's id (one indirect draw covers a run of meshes, SceneGpu::write_draws);
+// an instanced mesh, drawn alone, has its id in firstInstance instead.
 #include "bindings.glsl"
 
 layout(location = 0) in vec3 in_position;
 layout(location = 1) in vec3 in_normal;
 layout(location = 2) in vec2 in_uv;
+layout(location = kVertexMeshLocation) in uint in_mesh;
 
 // The depth pre-pass and the main pass run this same shader in two pipelines; invariance makes their depths
 // bit-identical, so the main pass's EQUAL depth test keeps exactly the fragments that ended up visible.
@@ -18,11 +20,14 @@ layout(location = 2) flat out uint out_mesh;
 layout(location = 3) out vec4 out_clip;
 
 void main() {
-  MeshGpu mesh = meshes[gl_InstanceIndex];
+  // firstInstance = mesh id + 1 for a mesh drawn alone that instances another's vertices (whose in_mesh is
+  // the owner's); 0 for runs of meshes, whose vertices carry their own ids.
+  uint id = gl_InstanceIndex > 0 ? uint(gl_InstanceIndex) - 1u : in_mesh;
+  MeshGpu mesh = meshes[id];
   vec3 relative = in_position + vec3(mesh.offset_x, mesh.offset_y, mesh.offset_z);
   gl_Position = pc.view_proj * vec4(relative, 1.0);
   out_uv = in_uv;
   out_normal = in_normal;
-  out_mesh = uint(gl_InstanceIndex);
+  out_mesh = id;
   out_clip = gl_Position;
 }

@@ -30,11 +30,12 @@ TS_CONST kBindingReadback = 6;     // buffer CompactList, host-visible: the used
 TS_CONST kBindingLodProbe = 7;     // buffer LodProbeSample[width * height] (LOD_PROBE variant only; else 1 entry)
 TS_CONST kBindingProbeSampler = 8; // sampler2DArray: the cache image through a sampler with anisotropy A_m
 TS_CONST kBindingOwner = 9;        // usubpassInput: the depth pre-pass's id buffer (mesh id + 1, 0 = none)
-TS_CONST kBindingDraws = 10;       // buffer: the frame's VkDrawIndexedIndirectCommand list (compact.comp reads ids)
+TS_CONST kBindingDrawn = 10;       // buffer uint[mesh_count]: the ids of the frame's drawn meshes (compact.comp)
 TS_CONST kBindingMetaImage = 11;   // usampler2D: the shading subpass's per-pixel metadata (meta_reduce.comp)
-// 32-bit words per VkDrawIndexedIndirectCommand, and the word holding firstInstance (= the mesh id).
-TS_CONST kDrawWords = 5u;
-TS_CONST kDrawMeshWord = 4u;
+// Vertex input: binding 0 holds scene::Vertex (locations 0-2), binding 1 the owning mesh's id per vertex
+// (location 3). A draw covers a run of meshes whose indices lie next to each other, so the mesh id comes with
+// each vertex, not with the draw (SceneGpu::write_draws).
+TS_CONST kVertexMeshLocation = 3u;
 
 // TextureGpu.placement.y when no mip of the texture is resident: the shader draws the colormap colour.
 TS_CONST kNotResident = 0xffffffffu;
@@ -79,7 +80,7 @@ struct FrameUniforms {
                         // w: capacity of the compacted list (entries)
   uvec4 cache;          // x: cache layer extent (px), y: cache mip count, z, w: 0
   uvec4 view;           // x: debug view (kDebugView*), y: viewport width (px, row pitch of the LOD probe),
-                        // z: draws in the frame's indirect list (compact.comp's invocations), w: 0
+                        // z: meshes drawn this frame (kBindingDrawn; compact.comp's invocations), w: 0
 };
 
 // One fragment of the LOD_PROBE variant (tests and texstream-bench visibility): the metadata's level next to

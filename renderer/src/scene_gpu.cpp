@@ -6,6 +6,8 @@
 #include <algorithm>
 #include <atomic>
 #include <cstring>
+#include <limits>
+#include <string>
 #include <vector>
 
 #include "texstream/render/broad_phase.hpp"
@@ -56,6 +58,28 @@ bool unified_memory(const VulkanContext& ctx) {
   return any;
 }
 
+// The absolute indices of mesh `m` (meshes.bin's, relative to its first vertex, plus that vertex) into `out`.
+// check_mesh guarantees each is below m.vertex_count and create() that first_vertex + vertex_count fits 32 bits.
+void absolute_indices(const scene::MeshRecord& m, std::span<const uint32_t> all, uint32_t* out) {
+  const uint32_t* in = all.data() + m.first_index;
+  for (uint32_t k = 0; k < m.index_count; ++k) out[k] = in[k] + m.first_vertex;
+}
+
+// Whether no element of [first, first + count) has an owner, and setting the owner (mesh id + 1; 0: none).
+bool range_free(const ZeroedArray<uint32_t>& owner, uint64_t first, uint64_t count) {
+  for (uint64_t i = first; i < first + count; ++i)
+    if (owner[i] != 0) return false;
+  return true;
+}
+void set_owner(ZeroedArray<uint32_t>& owner, uint64_t first, uint64_t count, uint32_t value) {
+  for (uint64_t i = first; i < first + count; ++i) owner[i] = value;
+}
+
+bool same_ranges(const scene::MeshRecord& a, const scene::MeshRecord& b) {
+  return a.first_vertex == b.first_vertex && a.vertex_count == b.vertex_count && a.first_index == b.first_index &&
+         a.index_count == b.index_count;
+}
+
 }  // namespace
 
 Result<SceneGpu> SceneGpu::create(const VulkanContext& ctx, const SceneData& scene, bool always_stage) {
@@ -75,16 +99,24 @@ Result<SceneGpu> SceneGpu::create(const VulkanContext& ctx, const SceneData& sce
   };
   // Allocated at the scene's size, filled only where meshes are used (make_resident): nothing is written here,
   // so creating them costs the same for any scene.
+  // Indices are stored absolute (first vertex added) in 32 bits, so every vertex must be addressable by one.
+  if (scene.vertices().size() > std::numeric_limits<uint32_t>::max())
+    return make_error(ErrorCode::kCorrupt, scene.dir.string() + "/meshes.bin: " +
+                                               std::to_string(scene.vertices().size()) +
+                                               " vertices; at most 2^32 - 1 can be drawn with 32-bit indices");
   const VkDeviceSize vbytes = std::max<VkDeviceSize>(scene.vertices().size() * sizeof(scene::Vertex), 4);
+  const VkDeviceSize vmbytes = std::max<VkDeviceSize>(scene.vertices().size() * sizeof(uint32_t), 4);
   const VkDeviceSize ibytes = std::max<VkDeviceSize>(scene.indices().size() * sizeof(uint32_t), 4);
   g.in_place_ = !always_stage && unified_memory(ctx);
   const MemoryUse geometry = g.in_place_ ? MemoryUse::kHostVisible : MemoryUse::kDeviceLocal;
   TS_TRY(make(g.vertices, vbytes, VK_BUFFER_USAGE_VERTEX_BUFFER_BIT | kDst, geometry));
+  TS_TRY(make(g.vertex_mesh, vmbytes, VK_BUFFER_USAGE_VERTEX_BUFFER_BIT | kDst, geometry));
   TS_TRY(make(g.indices, ibytes, VK_BUFFER_USAGE_INDEX_BUFFER_BIT | kDst, geometry));
   TS_TRY(make(g.meshes, n * sizeof(gpu::MeshGpu), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible));
-  // Also a storage buffer: compact.comp reads the frame's mesh ids from it.
-  TS_TRY(make(g.indirect, n * sizeof(VkDrawIndexedIndirectCommand),
-              VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT | VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible));
+  // Two lists (main pass, wide pass), each at most one draw per mesh.
+  TS_TRY(make(g.indirect, 2 * n * sizeof(VkDrawIndexedIndirectCommand), VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
+              MemoryUse::kHostVisible));
+  TS_TRY(make(g.drawn, n * sizeof(uint32_t), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible));
   TS_TRY(make(g.mesh_meta, n * sizeof(gpu::MeshMeta), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst, geometry));
   const VkDeviceSize list_bytes = sizeof(gpu::CompactListHeader) + n * sizeof(gpu::CompactEntry);
   TS_TRY(make(g.compacted, list_bytes,
@@ -96,6 +128,10 @@ Result<SceneGpu> SceneGpu::create(const VulkanContext& ctx, const SceneData& sce
   TS_TRY(make(g.frame_uniforms, sizeof(gpu::FrameUniforms), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT,
               MemoryUse::kHostVisible));
   g.resident_.assign((static_cast<size_t>(g.mesh_count) + 63) / 64, 0);
+  g.instanced_.assign((static_cast<size_t>(g.mesh_count) + 63) / 64, 0);
+  // Zero pages from the kernel: memory is committed only where the view's meshes lie.
+  g.vertex_owner_ = ZeroedArray<uint32_t>(scene.vertices().size());
+  g.index_owner_ = ZeroedArray<uint32_t>(scene.indices().size());
   return g;
 }
 
@@ -136,20 +172,56 @@ Status SceneGpu::make_resident(const SceneData& scene, std::span<const uint32_t>
     for (uint32_t id : fresh_) resident_[id >> 6] &= ~(uint64_t{1} << (id & 63));
     return scene.check_mesh(fresh_[first_bad.load()]);  // the same error, built once
   }
+  // Absolute indices and per-vertex mesh ids make the first mesh to use a vertex or index range its owner.
+  // meshes.bin allows sharing; the sharing a city needs is instancing (the same vertices and indices at
+  // another origin), and such a mesh reads its owner's absolute indices unchanged and is drawn alone, its id
+  // in firstInstance (scene.vert). Any other overlap would draw wrong geometry, so it is refused here, naming
+  // the mesh, before anything of the call is written: its claims are undone, none of its meshes is resident.
+  for (size_t k = 0; k < fresh_.size(); ++k) {
+    const uint32_t id = fresh_[k];
+    const scene::MeshRecord& m = records[id];
+    if (range_free(vertex_owner_, m.first_vertex, m.vertex_count) &&
+        range_free(index_owner_, m.first_index, m.index_count)) {
+      set_owner(vertex_owner_, m.first_vertex, m.vertex_count, id + 1);
+      set_owner(index_owner_, m.first_index, m.index_count, id + 1);
+      continue;
+    }
+    // An empty index range has no owner to compare with; such a mesh is never drawn.
+    const uint32_t owner = m.index_count > 0 ? index_owner_[m.first_index] : 0;
+    if (owner != 0 && same_ranges(records[owner - 1], m)) {
+      instanced_[id >> 6] |= uint64_t{1} << (id & 63);
+      continue;
+    }
+    for (size_t j = 0; j < k; ++j) {
+      const uint32_t c = fresh_[j];
+      const scene::MeshRecord& r = records[c];
+      instanced_[c >> 6] &= ~(uint64_t{1} << (c & 63));
+      if (vertex_owner_[r.first_vertex] == c + 1) set_owner(vertex_owner_, r.first_vertex, r.vertex_count, 0);
+      if (r.index_count > 0 && index_owner_[r.first_index] == c + 1)
+        set_owner(index_owner_, r.first_index, r.index_count, 0);
+    }
+    for (uint32_t c : fresh_) resident_[c >> 6] &= ~(uint64_t{1} << (c & 63));
+    return make_error(ErrorCode::kCorrupt, (scene.dir / "meshes.bin").string() + ": mesh " + std::to_string(id) +
+                                               ": its vertex or index range overlaps another mesh's without being "
+                                               "the same ranges (only whole-mesh instancing can share)");
+  }
 
   for (uint32_t id : fresh_) {
     const scene::MeshRecord& m = records[id];
-    if (in_place_) {
+    if (in_place_ && is_instanced(id)) {
+      mesh_meta.as<gpu::MeshMeta>()[id] = kEmptyMeta;  // its geometry is its owner's
+      stats_.bytes_uploaded += sizeof(gpu::MeshMeta);
+    } else if (in_place_) {
       // No submission reads a mesh before it is resident, so its ranges can be written now; the next
       // vkQueueSubmit makes the host writes visible to the GPU.
       const size_t vb = size_t{m.vertex_count} * sizeof(scene::Vertex);
       const size_t ib = size_t{m.index_count} * sizeof(uint32_t);
       std::memcpy(vertices.bytes().data() + size_t{m.first_vertex} * sizeof(scene::Vertex),
                   scene.vertices().data() + m.first_vertex, vb);
-      std::memcpy(indices.bytes().data() + size_t{m.first_index} * sizeof(uint32_t),
-                  scene.indices().data() + m.first_index, ib);
+      absolute_indices(m, scene.indices(), indices.as<uint32_t>() + m.first_index);
+      std::fill_n(vertex_mesh.as<uint32_t>() + m.first_vertex, m.vertex_count, id);
       mesh_meta.as<gpu::MeshMeta>()[id] = kEmptyMeta;
-      stats_.bytes_uploaded += vb + ib + sizeof(gpu::MeshMeta);
+      stats_.bytes_uploaded += vb + ib + size_t{m.vertex_count} * sizeof(uint32_t) + sizeof(gpu::MeshMeta);
     } else {
       queued_.push_back(id);
     }
@@ -166,12 +238,13 @@ Status SceneGpu::record_uploads(const SceneData& scene, VkCommandBuffer cmd) {
   std::sort(queued_.begin(), queued_.end());
   const auto records = scene.mesh_records();
   const auto verts = std::as_bytes(scene.vertices());
-  const auto idx = std::as_bytes(scene.indices());
   VkDeviceSize total = 0;
   for (uint32_t id : queued_) {
     const scene::MeshRecord& m = records[id];
-    total += uint64_t{m.vertex_count} * sizeof(scene::Vertex) + uint64_t{m.index_count} * sizeof(uint32_t) +
-             sizeof(gpu::MeshMeta);
+    total += sizeof(gpu::MeshMeta);
+    if (is_instanced(id)) continue;  // its geometry is its owner's
+    total += uint64_t{m.vertex_count} * (sizeof(scene::Vertex) + sizeof(uint32_t)) +
+             uint64_t{m.index_count} * sizeof(uint32_t);
   }
   if (staging_.size() < total) {
     // Grown, never shrunk: the largest frame so far (the first frame of a view) sets the size.
@@ -181,18 +254,24 @@ Status SceneGpu::record_uploads(const SceneData& scene, VkCommandBuffer cmd) {
     staging_ = std::move(*b);
   }
   std::byte* dst = staging_.bytes().data();
-  std::vector<VkBufferCopy> vregions, iregions, mregions;
+  std::vector<VkBufferCopy> vregions, idregions, iregions, mregions;
   VkDeviceSize at = 0;
   for (uint32_t id : queued_) {
+    if (is_instanced(id)) continue;
     const scene::MeshRecord& m = records[id];
     const VkDeviceSize vb = uint64_t{m.vertex_count} * sizeof(scene::Vertex);
     const VkDeviceSize voff = uint64_t{m.first_vertex} * sizeof(scene::Vertex);
     std::memcpy(dst + at, verts.data() + voff, vb);
     add_region(vregions, at, voff, vb);
     at += vb;
+    const VkDeviceSize idb = uint64_t{m.vertex_count} * sizeof(uint32_t);
+    const VkDeviceSize idoff = uint64_t{m.first_vertex} * sizeof(uint32_t);
+    std::fill_n(reinterpret_cast<uint32_t*>(dst + at), m.vertex_count, id);
+    add_region(idregions, at, idoff, idb);
+    at += idb;
     const VkDeviceSize ib = uint64_t{m.index_count} * sizeof(uint32_t);
     const VkDeviceSize ioff = uint64_t{m.first_index} * sizeof(uint32_t);
-    std::memcpy(dst + at, idx.data() + ioff, ib);
+    absolute_indices(m, scene.indices(), reinterpret_cast<uint32_t*>(dst + at));
     add_region(iregions, at, ioff, ib);
     at += ib;
   }
@@ -206,6 +285,8 @@ Status SceneGpu::record_uploads(const SceneData& scene, VkCommandBuffer cmd) {
 
   VkBuffer src = staging_.handle();
   if (!vregions.empty()) vkCmdCopyBuffer(cmd, src, vertices.handle(), static_cast<uint32_t>(vregions.size()), vregions.data());
+  if (!idregions.empty())
+    vkCmdCopyBuffer(cmd, src, vertex_mesh.handle(), static_cast<uint32_t>(idregions.size()), idregions.data());
   if (!iregions.empty()) vkCmdCopyBuffer(cmd, src, indices.handle(), static_cast<uint32_t>(iregions.size()), iregions.data());
   vkCmdCopyBuffer(cmd, src, mesh_meta.handle(), static_cast<uint32_t>(mregions.size()), mregions.data());
   VkMemoryBarrier b{};
@@ -224,40 +305,67 @@ void SceneGpu::write_draws(const SceneData& scene, std::span<const uint32_t> vis
                            const std::array<double, 3>& camera, const ViewportSplit& split, FrameRecording& rec) {
   const size_t main_end = std::min<size_t>(split.main_end, visible.size());
   const size_t wide_begin = std::min<size_t>(split.wide_begin, main_end);
-  // Draws written before each boundary = the boundary in draw positions (write_draws skips empty meshes).
-  const uint32_t before_wide = write_draws(scene, visible.first(wide_begin), camera);
-  auto* draws = indirect.as<VkDrawIndexedIndirectCommand>();
-  const uint32_t both = write_draws_at(scene, visible.subspan(wide_begin, main_end - wide_begin), camera,
-                                       draws + before_wide);
-  const uint32_t wide_only = write_draws_at(scene, visible.subspan(main_end), camera, draws + before_wide + both);
-  rec.wide_first = before_wide;
-  rec.main_count = before_wide + both;
-  rec.draw_count = before_wide + both + wide_only;
-}
-
-uint32_t SceneGpu::write_draws(const SceneData& scene, std::span<const uint32_t> visible,
-                               const std::array<double, 3>& camera) {
-  return write_draws_at(scene, visible, camera, indirect.as<VkDrawIndexedIndirectCommand>());
-}
-
-uint32_t SceneGpu::write_draws_at(const SceneData& scene, std::span<const uint32_t> visible,
-                                  const std::array<double, 3>& camera, VkDrawIndexedIndirectCommand* draws) {
   auto* mesh_out = meshes.as<gpu::MeshGpu>();
+  auto* drawn_out = drawn.as<uint32_t>();
   const auto records = scene.mesh_records();
-  uint32_t count = 0;
-  for (uint32_t id : visible) {
+  uint32_t drawn_count = 0;
+  for (const uint32_t id : visible) {
     const scene::MeshRecord& m = records[id];
-    if (m.index_count == 0) continue;
+    if (m.index_count == 0) continue;  // never drawn
     TS_ASSERT(is_resident(id), "mesh %u drawn before make_resident", id);
     gpu::MeshGpu& g = mesh_out[id];
     g.offset_x = static_cast<float>(m.origin[0] - camera[0]);
     g.offset_y = static_cast<float>(m.origin[1] - camera[1]);
     g.offset_z = static_cast<float>(m.origin[2] - camera[2]);
     g.texture_id = m.texture_id;
-    draws[count++] = VkDrawIndexedIndirectCommand{m.index_count, 1, m.first_index,
-                                                  static_cast<int32_t>(m.first_vertex), id};
+    drawn_out[drawn_count++] = id;  // each mesh once, whichever passes draw it
   }
-  return count;
+  // Two lists, one per pass: the straddling meshes are in both, so each pass's meshes sort and merge as one
+  // list (three separately merged parts break more runs).
+  const auto main_list = write_list(scene, visible.first(main_end), 0);
+  const auto wide_list = write_list(scene, visible.subspan(wide_begin), main_list.second);
+  rec.main_count = main_list.second;
+  rec.wide_first = main_list.second;
+  rec.draw_count = main_list.second + wide_list.second;
+  rec.mesh_count = drawn_count;
+  rec.main_meshes = main_list.first;
+  rec.wide_meshes = wide_list.first;
+}
+
+std::pair<uint32_t, uint32_t> SceneGpu::write_list(const SceneData& scene, std::span<const uint32_t> ids,
+                                                   uint32_t draw_at) {
+  const auto records = scene.mesh_records();
+  order_.clear();
+  for (uint32_t id : ids) {
+    const scene::MeshRecord& m = records[id];
+    if (m.index_count > 0) order_.push_back((uint64_t{m.first_index} << 32) | id);
+  }
+  // Index order: neighbours in meshes.bin become one draw. The broad phase returns the meshes in quadtree order,
+  // which splits such runs (on the default city a view's ~650 meshes are ~250 runs unsorted, ~70 sorted). Ties
+  // (an instance and its owner) go by mesh id. The order of the triangles a pass rasterizes is then the same
+  // whichever mesh owns shared ranges, and whatever order the broad phase returned.
+  std::sort(order_.begin(), order_.end());
+  auto* draws = indirect.as<VkDrawIndexedIndirectCommand>() + draw_at;
+  uint32_t count = 0;
+  bool open = false;  // whether draws[count - 1] is a run that the next adjacent mesh may extend
+  for (const uint64_t key : order_) {
+    const uint32_t id = static_cast<uint32_t>(key);
+    const scene::MeshRecord& m = records[id];
+    if (is_instanced(id)) {
+      // Its vertices carry the owner's id: drawn alone, its own id + 1 in firstInstance (scene.vert).
+      draws[count++] = VkDrawIndexedIndirectCommand{m.index_count, 1, m.first_index, 0, id + 1};
+      open = false;
+      continue;
+    }
+    // Owned ranges never overlap (make_resident), so "ends where this one starts" is exactly "adjacent".
+    if (open && draws[count - 1].firstIndex + draws[count - 1].indexCount == m.first_index) {
+      draws[count - 1].indexCount += m.index_count;
+    } else {
+      draws[count++] = VkDrawIndexedIndirectCommand{m.index_count, 1, m.first_index, 0, 0};
+      open = true;
+    }
+  }
+  return {static_cast<uint32_t>(order_.size()), count};
 }
 
 }  // namespace texstream::render

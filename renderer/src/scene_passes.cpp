@@ -27,9 +27,6 @@ constexpr VkFormat kDepthFormat = VK_FORMAT_D32_SFLOAT;
 constexpr VkFormat kOwnerFormat = VK_FORMAT_R32_UINT;
 // The shading subpass's per-pixel mesh and metadata (layout: gpu::kMetaMipShift in shared_structs.h).
 constexpr VkFormat kMetaFormat = VK_FORMAT_R32G32_UINT;
-// compact.comp reads the mesh id of each draw from the indirect list as 32-bit words.
-static_assert(sizeof(VkDrawIndexedIndirectCommand) == gpu::kDrawWords * sizeof(uint32_t));
-static_assert(offsetof(VkDrawIndexedIndirectCommand, firstInstance) == gpu::kDrawMeshWord * sizeof(uint32_t));
 
 constexpr VkShaderStageFlags kAllStages =
     VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT | VK_SHADER_STAGE_COMPUTE_BIT;
@@ -331,7 +328,7 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
       {gpu::kBindingLodProbe, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
       {gpu::kBindingProbeSampler, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr},
       {gpu::kBindingOwner, VK_DESCRIPTOR_TYPE_INPUT_ATTACHMENT, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr},
-      {gpu::kBindingDraws, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr},
+      {gpu::kBindingDrawn, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr},
       {gpu::kBindingMetaImage, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr},
   }};
   VkDescriptorSetLayoutCreateInfo li{};
@@ -370,7 +367,7 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
       {scene_.compacted.handle(), 0, VK_WHOLE_SIZE},
       {scene_.readback.handle(), 0, VK_WHOLE_SIZE},
       {probe_.handle(), 0, VK_WHOLE_SIZE},
-      {scene_.indirect.handle(), 0, VK_WHOLE_SIZE},
+      {scene_.drawn.handle(), 0, VK_WHOLE_SIZE},
   }};
   const VkDescriptorImageInfo image{sampler_.get(), cache.image_view(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
   const VkDescriptorImageInfo probe_image{probe_sampler_.get(), cache.image_view(),
@@ -381,7 +378,7 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
   const std::array<uint32_t, kBuffers> buffer_bindings{gpu::kBindingFrame,     gpu::kBindingMeshes,
                                                        gpu::kBindingTextures,  gpu::kBindingMeshMeta,
                                                        gpu::kBindingCompacted, gpu::kBindingReadback,
-                                                       gpu::kBindingLodProbe,  gpu::kBindingDraws};
+                                                       gpu::kBindingLodProbe,  gpu::kBindingDrawn};
   for (size_t i = 0; i < kBuffers; ++i) {
     writes[i] = {};
     writes[i].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
@@ -452,16 +449,21 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
   auto to_host = make_module(ctx, compiler, {"compact.comp", ShaderStage::kCompute, {"COMPACT_TO_HOST"}});
   if (!to_host) return to_host.error();
 
-  VkVertexInputBindingDescription vb{0, sizeof(scene::Vertex), VK_VERTEX_INPUT_RATE_VERTEX};
-  const std::array<VkVertexInputAttributeDescription, 3> va{{
+  // Binding 1: the owning mesh's id per vertex (SceneGpu::vertex_mesh), so one draw can cover many meshes.
+  const std::array<VkVertexInputBindingDescription, 2> vb{{
+      {0, sizeof(scene::Vertex), VK_VERTEX_INPUT_RATE_VERTEX},
+      {1, sizeof(uint32_t), VK_VERTEX_INPUT_RATE_VERTEX},
+  }};
+  const std::array<VkVertexInputAttributeDescription, 4> va{{
       {0, 0, VK_FORMAT_R32G32B32_SFLOAT, offsetof(scene::Vertex, pos)},
       {1, 0, VK_FORMAT_R32G32B32_SFLOAT, offsetof(scene::Vertex, normal)},
       {2, 0, VK_FORMAT_R32G32_SFLOAT, offsetof(scene::Vertex, uv)},
+      {gpu::kVertexMeshLocation, 1, VK_FORMAT_R32_UINT, 0},
   }};
   VkPipelineVertexInputStateCreateInfo vi{};
   vi.sType = VK_STRUCTURE_TYPE_PIPELINE_VERTEX_INPUT_STATE_CREATE_INFO;
-  vi.vertexBindingDescriptionCount = 1;
-  vi.pVertexBindingDescriptions = &vb;
+  vi.vertexBindingDescriptionCount = static_cast<uint32_t>(vb.size());
+  vi.pVertexBindingDescriptions = vb.data();
   vi.vertexAttributeDescriptionCount = static_cast<uint32_t>(va.size());
   vi.pVertexAttributeDescriptions = va.data();
   VkPipelineInputAssemblyStateCreateInfo ia{};
@@ -572,7 +574,7 @@ void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const
   // The fields of the frame uniforms that describe these passes (the caller fills the rest before record()).
   auto* fu = scene_.frame_uniforms.as<gpu::FrameUniforms>();
   fu->flags.x = frame.feedback ? (fu->flags.x | gpu::kFlagFeedback) : (fu->flags.x & ~gpu::kFlagFeedback);
-  fu->view = {options_.debug_view, options_.width, frame.draw_count, 0};
+  fu->view = {options_.debug_view, options_.width, frame.mesh_count, 0};
   if (timestamps_) {
     vkCmdResetQueryPool(cmd, timestamps_.get(), 0, kTimestampCount);
     vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, timestamps_.get(), 0);
@@ -589,7 +591,6 @@ void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const
   const GpuBuffer& list = frame.read_back_list ? scene_.readback : scene_.compacted;
   if (frame.feedback) vkCmdFillBuffer(cmd, list.handle(), 0, sizeof(gpu::CompactListHeader), 0);
 
-  const VkDeviceSize zero = 0;
   auto begin_pass = [&](VkRenderPass pass, VkFramebuffer fb, uint32_t w, uint32_t h, bool main) {
     std::array<VkClearValue, 4> clears{};
     // Sky colour in linear light (the attachment is sRGB); the id view clears to 0 = "no mesh". Depth 0 is
@@ -617,8 +618,9 @@ void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const
     if (count == 0) return;
     vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, layout_.get(), 0, 1, &set_, 0, nullptr);
     vkCmdPushConstants(cmd, layout_.get(), kAllStages, 0, sizeof pc, &pc);
-    VkBuffer vb = scene_.vertices.handle();
-    vkCmdBindVertexBuffers(cmd, 0, 1, &vb, &zero);
+    const std::array<VkBuffer, 2> vbs{scene_.vertices.handle(), scene_.vertex_mesh.handle()};
+    const std::array<VkDeviceSize, 2> offsets{0, 0};
+    vkCmdBindVertexBuffers(cmd, 0, 2, vbs.data(), offsets.data());
     vkCmdBindIndexBuffer(cmd, scene_.indices.handle(), 0, VK_INDEX_TYPE_UINT32);
     vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline);
     vkCmdDrawIndexedIndirect(cmd, scene_.indirect.handle(), VkDeviceSize{first} * sizeof(VkDrawIndexedIndirectCommand),
@@ -646,14 +648,14 @@ void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const
   const uint32_t runs = (options_.width + gpu::kMetaReduceRun - 1) / gpu::kMetaReduceRun * options_.height;
   vkCmdDispatch(cmd, (runs + gpu::kMetaReduceGroup - 1) / gpu::kMetaReduceGroup, 1, 1);
   // Compaction reads what the wide pass's fragment shader and meta_reduce wrote and the cleared counter. One
-  // invocation per draw of this frame (the only meshes that can have metadata), not per mesh of the scene.
+  // invocation per mesh drawn this frame (the only meshes that can have metadata), not per mesh of the scene.
   memory_barrier(cmd, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT |
                           VK_PIPELINE_STAGE_TRANSFER_BIT,
                  VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
                  VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
   vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE,
                     frame.read_back_list ? compact_to_host_pipeline_.get() : compact_pipeline_.get());
-  const uint32_t groups = (frame.draw_count + gpu::kCompactWorkgroupSize - 1) / gpu::kCompactWorkgroupSize;
+  const uint32_t groups = (frame.mesh_count + gpu::kCompactWorkgroupSize - 1) / gpu::kCompactWorkgroupSize;
   if (groups > 0) vkCmdDispatch(cmd, groups, 1, 1);
   if (frame.read_back_list) {
     memory_barrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT, VK_PIPELINE_STAGE_HOST_BIT,

@@ -183,6 +183,8 @@ Result<ViewResult> ViewRenderer::render(const CameraPose& pose, const ViewReques
   TS_TRY(m.gpu->make_resident(m.scene, m.visible, &m.new_textures));
   TS_TRY(m.cache->prepare_textures(m.new_textures));
   m.gpu->write_draws(m.scene, m.visible, cam.position, split, rec);
+  out.main_meshes = rec.main_meshes;
+  out.wide_meshes = rec.wide_meshes;
   out.main_draws = rec.main_count;
   out.wide_draws = rec.draw_count - rec.wide_first;
   rec.feedback = request.feedback;

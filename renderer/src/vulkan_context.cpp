@@ -157,7 +157,7 @@ Result<std::unique_ptr<VulkanContext>> VulkanContext::create(const VulkanContext
   VkPhysicalDeviceFeatures supported{};
   vkGetPhysicalDeviceFeatures(ctx->physical_, &supported);
   VkPhysicalDeviceFeatures features{};
-  // Indirect draws with one VkDrawIndexedIndirectCommand per mesh, firstInstance = mesh id.
+  // Multi-draw indirect over runs of meshes; firstInstance carries an instanced mesh's id (SceneGpu).
   if (!supported.multiDrawIndirect || !supported.drawIndirectFirstInstance)
     return make_error(ErrorCode::kUnsupported, "device lacks multiDrawIndirect / drawIndirectFirstInstance");
   features.multiDrawIndirect = VK_TRUE;

@@ -95,7 +95,7 @@ class SceneOpen : public ::testing::Test {
     for (size_t i = 0; i < a.size(); ++i) {
       EXPECT_EQ(a[i].submitted, b[i].submitted) << what << ", view " << i;
       if (same_draws) {
-        EXPECT_EQ(a[i].main_draws, b[i].main_draws) << what << ", view " << i;
+        EXPECT_EQ(a[i].main_meshes, b[i].main_meshes) << what << ", view " << i;
       }
       EXPECT_TRUE(a[i].rgba == b[i].rgba) << what << ", view " << i << ": pixels differ";
       // Workgroups claim list slots in the order they run: compare the entries as sets.
@@ -123,7 +123,7 @@ TEST_F(SceneOpen, OpenedSceneDrawsExactlyWhatTheLoadedSceneDraws) {
     // The discrete-GPU path: meshes copied through staging in the frame's command buffer.
     expect_same(a, render_all(view_config(view), std::move(staged), false, /*staged=*/true), "staged");
     uint64_t drawn = 0;
-    for (const auto& v : a) drawn += v.main_draws;
+    for (const auto& v : a) drawn += v.main_meshes;
     EXPECT_GT(drawn, 0u) << "the views must see the city";
   }
 }
@@ -145,7 +145,7 @@ TEST_F(SceneOpen, DroppingUnsampledMeshesChangesNoPixelAndNoMetadata) {
       expect_same(all, kept, view, /*same_draws=*/false);
       for (size_t i = 0; i < all.size() && i < kept.size(); ++i) {
         EXPECT_EQ(all[i].unsampled, 0u);
-        EXPECT_LE(kept[i].main_draws, all[i].main_draws);
+        EXPECT_LE(kept[i].main_meshes, all[i].main_meshes);
         dropped += kept[i].unsampled;
       }
     }

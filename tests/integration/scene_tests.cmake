@@ -7,3 +7,8 @@ target_link_libraries(scene_open_tests PRIVATE texstream::renderer)
 if(TARGET texstream-gen)
   add_dependencies(scene_open_tests texstream-gen)
 endif()
+
+# The draw list (issue 5, few draws): adjacent meshes merged per viewport part in index order, absolute indices
+# and per-vertex mesh ids, instances drawn alone, other shared ranges refused (SceneGpu on lavapipe).
+texstream_add_integration_test(scene_draws_tests ${CMAKE_CURRENT_LIST_DIR}/scene_draws_test.cpp)
+target_link_libraries(scene_draws_tests PRIVATE texstream::renderer)

@@ -305,7 +305,7 @@ int run_visibility(const std::vector<std::string>& args) {
   // another process delayed says nothing about what feedback costs.
   std::vector<double> best_on(poses.size(), std::numeric_limits<double>::max());
   std::vector<double> best_off(poses.size(), std::numeric_limits<double>::max());
-  uint64_t submitted = 0, visible = 0, main_draws = 0, wide_draws = 0;
+  uint64_t submitted = 0, visible = 0, main_meshes = 0, wide_meshes = 0, main_draws = 0, wide_draws = 0;
   {
     Config cc = cfg;
     cc.stream.tau = 0;  // count every mesh that got a fragment for the skipping ratio
@@ -345,6 +345,8 @@ int run_visibility(const std::vector<std::string>& args) {
             submitted += v.submitted;
             for (const auto& e : v.entries) visible += e.weight_fixed > 0 ? 1 : 0;
             broad_ms += v.broad_phase_ms;
+            main_meshes += v.main_meshes;
+            wide_meshes += v.wide_meshes;
             main_draws += v.main_draws;
             wide_draws += v.wide_draws;
           }
@@ -370,8 +372,10 @@ int run_visibility(const std::vector<std::string>& args) {
   std::printf("cost by pass (GPU timestamps, same sums): main pass %.2f ms with feedback (metadata writes) vs "
               "%.2f ms without; wide pass %.2f ms; compaction + prefix copy %.2f ms\n",
               on_main_ms, off_main_ms, wide_ms, compact_ms);
-  std::printf("draws: %llu submitted, %llu drawn by the main pass, %llu by the wide pass (views summed)\n",
-              static_cast<unsigned long long>(submitted), static_cast<unsigned long long>(main_draws),
+  std::printf("draws: %llu meshes submitted, %llu drawn by the main pass in %llu indirect draws, %llu by the wide "
+              "pass in %llu (views summed; a draw covers a run of meshes adjacent in meshes.bin)\n",
+              static_cast<unsigned long long>(submitted), static_cast<unsigned long long>(main_meshes),
+              static_cast<unsigned long long>(main_draws), static_cast<unsigned long long>(wide_meshes),
               static_cast<unsigned long long>(wide_draws));
   std::printf("skipping: %llu meshes submitted after the broad phase, %llu with weight > 0 (%.1f%% visible); "
               "broad phase %.3f ms per view\n",

@@ -10,7 +10,7 @@
 //      add metadata at W = 1 per viewport pixel (scene.frag with WIDE_PASS; seed 000 §3.2). It draws only the
 //      meshes that reach outside the viewport's frustum (FrameRecording::wide_first): a mesh inside it has no
 //      fragment outside the viewport, so it can neither add metadata there nor hide a mesh there;
-//   3. compaction of the metadata (compact.comp, seed 000 §3.3): one invocation per draw of the frame (the
+//   3. compaction of the metadata (compact.comp, seed 000 §3.3): one invocation per mesh drawn this frame (the
 //      only meshes that can have metadata), so its cost follows the view, not the scene. When a streaming
 //      cycle is about to start (FrameRecording::read_back_list) it compacts straight into the host-visible
 //      read-back list, so only the used prefix crosses to the host, in the same dispatch.
@@ -65,10 +65,14 @@ Result<uint32_t> debug_view_from_string(const std::string& name);
 inline constexpr uint32_t kAllDraws = 0xffffffffu;
 
 struct FrameRecording {
-  uint32_t draw_count = 0;      // draws written by SceneGpu::write_draws
-  // The list split by BroadPhase::split_by_viewport: draws [0, main_count) touch the viewport's frustum (the
-  // main pass draws them), draws [wide_first, draw_count) reach outside it (the wide pass draws them). The
-  // defaults draw every mesh in both passes (exact too, only slower).
+  uint32_t draw_count = 0;      // draws written by SceneGpu::write_draws (each covers a run of meshes)
+  uint32_t mesh_count = 0;      // meshes those draws cover (SceneGpu::drawn; compact.comp visits them)
+  uint32_t main_meshes = 0;     // of those, drawn by the main pass / by the wide pass (statistics)
+  uint32_t wide_meshes = 0;
+  // Draws [0, main_count) are the main pass's (meshes touching the viewport's frustum), draws
+  // [wide_first, draw_count) the wide pass's (meshes reaching outside it). SceneGpu::write_draws writes them
+  // as two lists (wide_first = main_count; the straddling meshes are in both). The defaults draw the whole
+  // list in both passes (exact too, only slower).
   uint32_t main_count = kAllDraws;
   uint32_t wide_first = 0;
   gpu::PassConstants main{};

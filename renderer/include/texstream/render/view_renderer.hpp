@@ -41,8 +41,10 @@ struct ViewResult {
   std::vector<gpu::LodProbeSample> probe;       // lod_probe: one per pixel
   size_t submitted = 0;                         // meshes the broad phase kept (wide frustum)
   size_t unsampled = 0;                         // of those, dropped: no pixel centre in their passes
-  uint32_t main_draws = 0;                      // of those, drawn by the main pass (touch the viewport frustum)
-  uint32_t wide_draws = 0;                      // drawn by the wide pass (reach outside the viewport frustum)
+  uint32_t main_meshes = 0;                     // of those, drawn by the main pass (touch the viewport frustum)
+  uint32_t wide_meshes = 0;                     // drawn by the wide pass (reach outside the viewport frustum)
+  uint32_t main_draws = 0;                      // the indirect draws those took (each covers a run of meshes)
+  uint32_t wide_draws = 0;
   PassTimes pass_times;                         // ViewRendererOptions::timestamps
   BroadPhaseStats broad_phase;
   double broad_phase_ms = 0;

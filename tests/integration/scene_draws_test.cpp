@@ -1,0 +1,179 @@
+// SceneGpu's draw list on lavapipe (issue 5, few draws): meshes whose index ranges lie next to each other in
+// meshes.bin become one indirect draw, per part of the viewport split and in index order whatever order the
+// broad phase gave; indices are stored absolute and every vertex carries its mesh's id; a mesh instancing
+// another's ranges is drawn alone with its id in firstInstance; any other sharing of ranges is refused naming
+// the mesh, and leaves nothing resident.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <memory>
+#include <vector>
+
+#include "texstream/render/broad_phase.hpp"
+#include "texstream/render/scene_data.hpp"
+#include "texstream/render/scene_gpu.hpp"
+#include "texstream/render/scene_passes.hpp"
+#include "texstream/render/vulkan_context.hpp"
+
+using namespace texstream;
+using namespace texstream::render;
+
+namespace {
+
+// `n` one-triangle meshes, mesh i owning vertices and indices [3i, 3i + 3) (indices 2, 1, 0: relative, and not
+// the identity, so an index left relative would show); then, per entry of `instances`, a mesh with the same
+// ranges as that mesh.
+SceneData triangles(uint32_t n, const std::vector<uint32_t>& instances = {}) {
+  SceneData s;
+  s.dir = "/nonexistent/test_scene";
+  s.manifest.texture_format = TexelFormat::kRgba8;
+  s.textures.push_back(scene::TextureRecord{16, 16, 5, static_cast<uint32_t>(TexelFormat::kRgba8)});
+  s.colormap.push_back(0xff808080u);
+  auto mesh = [](uint32_t first) {
+    scene::MeshRecord m{};
+    m.origin[0] = 100.0 * first;
+    for (int a = 0; a < 3; ++a) {
+      m.bounds_min[a] = -1;
+      m.bounds_max[a] = 1;
+    }
+    m.first_vertex = first;
+    m.vertex_count = 3;
+    m.first_index = first;
+    m.index_count = 3;
+    return m;
+  };
+  for (uint32_t i = 0; i < n; ++i) {
+    for (int k = 0; k < 3; ++k) {
+      scene::Vertex v{};
+      v.pos[0] = static_cast<float>(k);
+      v.pos[1] = static_cast<float>(k == 2);
+      s.meshes.vertices.push_back(v);
+    }
+    s.meshes.indices.insert(s.meshes.indices.end(), {2, 1, 0});
+    s.meshes.meshes.push_back(mesh(3 * i));
+  }
+  for (uint32_t owner : instances) s.meshes.meshes.push_back(mesh(3 * owner));
+  s.manifest.mesh_count = static_cast<uint32_t>(s.meshes.meshes.size());
+  s.manifest.texture_count = 1;
+  return s;
+}
+
+struct Gpu {
+  std::unique_ptr<VulkanContext> ctx;
+  SceneGpu scene;
+};
+
+std::unique_ptr<Gpu> make_gpu(const SceneData& s) {
+  VulkanContextOptions o;
+  o.validation = true;
+  auto ctx = VulkanContext::create(o);
+  EXPECT_TRUE(ctx.ok()) << (ctx.ok() ? "" : ctx.error().message);
+  if (!ctx.ok()) return nullptr;
+  auto g = std::make_unique<Gpu>();
+  g->ctx = std::move(*ctx);
+  auto sg = SceneGpu::create(*g->ctx, s);
+  EXPECT_TRUE(sg.ok()) << (sg.ok() ? "" : sg.error().message);
+  if (!sg.ok()) return nullptr;
+  g->scene = std::move(*sg);
+  return g;
+}
+
+struct Draw {
+  uint32_t first_index, index_count, first_instance;
+  bool operator==(const Draw&) const = default;
+};
+
+std::vector<Draw> draws_of(const SceneGpu& g, uint32_t count) {
+  std::vector<Draw> out;
+  const auto* d = g.indirect.as<VkDrawIndexedIndirectCommand>();
+  for (uint32_t i = 0; i < count; ++i) {
+    EXPECT_EQ(d[i].instanceCount, 1u);
+    EXPECT_EQ(d[i].vertexOffset, 0);
+    out.push_back({d[i].firstIndex, d[i].indexCount, d[i].firstInstance});
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST(SceneDraws, AdjacentMeshesMergePerPartInIndexOrderAndInstancesDrawAlone) {
+  // Meshes 0-6 own their ranges; mesh 7 has mesh 4's. Meshes 2 and 5 are not in view.
+  const SceneData s = triangles(7, {4});
+  auto g = make_gpu(s);
+  ASSERT_NE(g, nullptr);
+  // The broad phase's order, split: [6 3 7 | 0 4 | 1] = inside, straddling, outside. 7 comes before 4, so 7
+  // owns the shared ranges and 4 is the instance.
+  const std::vector<uint32_t> visible{6, 3, 7, 0, 4, 1};
+  ASSERT_TRUE(g->scene.make_resident(s, visible, nullptr).ok());
+  EXPECT_TRUE(g->scene.is_instanced(4));
+  EXPECT_FALSE(g->scene.is_instanced(7));
+  FrameRecording rec;
+  g->scene.write_draws(s, visible, {0, 0, 0}, ViewportSplit{5, 3}, rec);
+
+  // The main pass's list (inside and straddling: 6 3 7 0 4) in index order: 0 (indices 0-2); 3 (9-11); 4
+  // (12-14), the instance, alone with firstInstance 4 + 1, so 3 cannot extend into it; 7 (12-14), the owner,
+  // after its instance (ties by id) and so not joined to 3 either; 6 (18-20), not adjacent to 14 (5 is out of
+  // view). The wide pass's list (straddling and outside: 0 4 1): 0 and 1 (3-5) adjacent, one draw; 4 alone.
+  const std::vector<Draw> want{{0, 3, 0},  {9, 3, 0}, {12, 3, 5}, {12, 3, 0}, {18, 3, 0},  // main
+                               {0, 6, 0},  {12, 3, 5}};                                    // wide
+  EXPECT_EQ(draws_of(g->scene, rec.draw_count), want);
+  EXPECT_EQ(rec.main_count, 5u);
+  EXPECT_EQ(rec.wide_first, 5u);
+  EXPECT_EQ(rec.draw_count, 7u);
+  EXPECT_EQ(rec.mesh_count, 6u);
+  EXPECT_EQ(rec.main_meshes, 5u);
+  EXPECT_EQ(rec.wide_meshes, 3u);
+  // Each drawn mesh once, in the broad phase's order: what compact.comp visits.
+  const uint32_t* drawn = g->scene.drawn.as<uint32_t>();
+  EXPECT_EQ(std::vector<uint32_t>(drawn, drawn + rec.mesh_count), visible);
+
+  // Without 4 and 7, the main list's 3 and 6 stay apart (5 is not in view) and 0 merges with nothing.
+  const std::vector<uint32_t> fewer{6, 3, 0, 1};
+  g->scene.write_draws(s, fewer, {0, 0, 0}, ViewportSplit{4, 4}, rec);
+  EXPECT_EQ(draws_of(g->scene, rec.draw_count), (std::vector<Draw>{{0, 6, 0}, {9, 3, 0}, {18, 3, 0}}));
+  EXPECT_EQ(rec.wide_first, 3u);
+  EXPECT_EQ(rec.draw_count, 3u);  // nothing reaches outside
+
+  // Stored absolute (relative 2 1 0 + first vertex), each vertex carrying its owner's id.
+  const uint32_t* idx = g->scene.indices.as<uint32_t>();
+  const uint32_t* vm = g->scene.vertex_mesh.as<uint32_t>();
+  EXPECT_EQ((std::array<uint32_t, 3>{idx[12], idx[13], idx[14]}), (std::array<uint32_t, 3>{14, 13, 12}));
+  EXPECT_EQ((std::array<uint32_t, 3>{vm[12], vm[13], vm[14]}), (std::array<uint32_t, 3>{7, 7, 7}));
+  EXPECT_EQ((std::array<uint32_t, 3>{vm[18], vm[19], vm[20]}), (std::array<uint32_t, 3>{6, 6, 6}));
+  EXPECT_EQ(g->ctx->validation_errors(), 0u);
+}
+
+TEST(SceneDraws, AnInstanceSeenBeforeItsOwnerOwnsTheRangesInstead) {
+  // Whichever mesh is made resident first owns the ranges; the other is the instance.
+  const SceneData s = triangles(2, {1});
+  auto g = make_gpu(s);
+  ASSERT_NE(g, nullptr);
+  ASSERT_TRUE(g->scene.make_resident(s, std::vector<uint32_t>{2}, nullptr).ok());
+  ASSERT_TRUE(g->scene.make_resident(s, std::vector<uint32_t>{1, 0}, nullptr).ok());
+  EXPECT_TRUE(g->scene.is_instanced(1));
+  EXPECT_FALSE(g->scene.is_instanced(2));
+  EXPECT_EQ(g->scene.vertex_mesh.as<uint32_t>()[3], 2u);
+}
+
+TEST(SceneDraws, PartlySharedRangesAreRefusedNamingTheMeshAndLeaveNothingResident) {
+  SceneData s = triangles(3);
+  // Mesh 2's indices start inside mesh 1's: overlapping, not the same ranges. Its own check passes (its
+  // indices are below its vertex count).
+  s.meshes.meshes[2].first_index = 4;
+  s.meshes.meshes[2].index_count = 3;
+  s.meshes.indices[4] = 0;
+  s.meshes.indices[5] = 1;
+  s.meshes.indices[6] = 2;
+  auto g = make_gpu(s);
+  ASSERT_NE(g, nullptr);
+  const Status st = g->scene.make_resident(s, std::vector<uint32_t>{0, 1, 2}, nullptr);
+  ASSERT_FALSE(st.ok());
+  EXPECT_EQ(st.error().code, ErrorCode::kCorrupt);
+  EXPECT_NE(st.error().message.find("meshes.bin: mesh 2"), std::string::npos) << st.error().message;
+  for (uint32_t id = 0; id < 3; ++id) EXPECT_FALSE(g->scene.is_resident(id)) << "mesh " << id;
+  // The refused call's claims were undone: its other meshes can still become resident, as owners.
+  ASSERT_TRUE(g->scene.make_resident(s, std::vector<uint32_t>{1, 0}, nullptr).ok());
+  EXPECT_FALSE(g->scene.is_instanced(0));
+  EXPECT_FALSE(g->scene.is_instanced(1));
+  EXPECT_EQ(g->scene.vertex_mesh.as<uint32_t>()[3], 1u);
+}
