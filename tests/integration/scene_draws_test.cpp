@@ -1,5 +1,5 @@
 // SceneGpu's draw list on lavapipe (issue 5, few draws): meshes whose index ranges lie next to each other in
-// meshes.bin become one indirect draw, per part of the viewport split and in index order whatever order the
+// meshes.bin become one indirect draw, per pass's list and in mesh id order whatever order the
 // broad phase gave; indices are stored absolute and every vertex carries its mesh's id; a mesh instancing
 // another's ranges is drawn alone with its id in firstInstance; any other sharing of ranges is refused naming
 // the mesh, and leaves nothing resident.
@@ -110,11 +110,11 @@ TEST(SceneDraws, AdjacentMeshesMergePerPartInIndexOrderAndInstancesDrawAlone) {
   FrameRecording rec;
   g->scene.write_draws(s, visible, {0, 0, 0}, ViewportSplit{5, 3}, rec);
 
-  // The main pass's list (inside and straddling: 6 3 7 0 4) in index order: 0 (indices 0-2); 3 (9-11); 4
-  // (12-14), the instance, alone with firstInstance 4 + 1, so 3 cannot extend into it; 7 (12-14), the owner,
-  // after its instance (ties by id) and so not joined to 3 either; 6 (18-20), not adjacent to 14 (5 is out of
-  // view). The wide pass's list (straddling and outside: 0 4 1): 0 and 1 (3-5) adjacent, one draw; 4 alone.
-  const std::vector<Draw> want{{0, 3, 0},  {9, 3, 0}, {12, 3, 5}, {12, 3, 0}, {18, 3, 0},  // main
+  // The main pass's list (inside and straddling: 6 3 7 0 4) in id order: 0 (indices 0-2); 3 (9-11); 4
+  // (12-14), the instance, alone with firstInstance 4 + 1, so 3 cannot extend into it; 6 (18-20), a new run
+  // after the instance; 7 (12-14), the owner, not adjacent to 20. The wide pass's list (straddling and
+  // outside: 0 4 1): 0 and 1 (3-5) adjacent, one draw; 4 alone.
+  const std::vector<Draw> want{{0, 3, 0},  {9, 3, 0}, {12, 3, 5}, {18, 3, 0}, {12, 3, 0},  // main
                                {0, 6, 0},  {12, 3, 5}};                                    // wide
   EXPECT_EQ(draws_of(g->scene, rec.draw_count), want);
   EXPECT_EQ(rec.main_count, 5u);

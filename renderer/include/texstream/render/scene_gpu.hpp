@@ -5,7 +5,8 @@
 //
 // Few draws (seed 001): indices are stored absolute (each mesh's first vertex added at upload) and every vertex
 // carries its mesh's id (vertex_mesh), so one indirect draw covers any run of meshes whose indices lie next to
-// each other in meshes.bin. write_draws sorts each part of a frame's list by index offset and merges such runs:
+// each other in meshes.bin. write_draws lists each pass's meshes in id order (meshes.bin keeps neighbouring
+// meshes' indices together) and merges such runs:
 // on the default city a view's ~650 meshes become ~70 draws. A CPU rasterizer (lavapipe) pays a fixed cost per
 // draw, large next to a mesh of a few triangles; a GPU's multi-draw indirect gains less but loses nothing. A
 // mesh that instances another's ranges (same vertices and indices, another origin) is drawn alone, its id in
@@ -57,10 +58,10 @@ struct SceneGpu {
   // For a list split by BroadPhase::split_by_viewport: for each mesh, its offset = origin - camera, subtracted
   // in double and only then rounded to float (no jitter at map coordinates), its texture id, and its id in
   // `drawn` (once); then two draw lists, the main pass's (inside and straddling meshes) and the wide pass's
-  // (straddling and outside): each list's meshes in index order, one VkDrawIndexedIndirectCommand per run of
+  // (straddling and outside): each list's meshes in id order, one VkDrawIndexedIndirectCommand per run of
   // adjacent index ranges. Fills the draw ranges of `rec` (draw_count, main_count, wide_first = main_count),
   // rec.mesh_count and the per-pass mesh counts; meshes without indices are never drawn. A pass draws its
-  // meshes in index order (= meshes.bin order), whatever order the broad phase returned them in, so which of
+  // meshes in id order, whatever order the broad phase returned them in, so which of
   // two coplanar meshes owns a pixel does not depend on the spatial index. Every mesh must have been made
   // resident.
   void write_draws(const SceneData& scene, std::span<const uint32_t> visible, const std::array<double, 3>& camera,
@@ -90,13 +91,17 @@ struct SceneGpu {
  private:
   // One pass's list: the meshes' merged draws from draw position `draw_at`; returns {meshes, draws}.
   std::pair<uint32_t, uint32_t> write_list(const SceneData& scene, std::span<const uint32_t> ids, uint32_t draw_at);
+  // Appends mesh `id` (indices [first_index, + index_count)) to draws[0, count): extends the open run if it
+  // continues it, else starts a draw.
+  void emit_draw(uint32_t id, uint32_t first_index, uint32_t index_count, VkDrawIndexedIndirectCommand* draws,
+                 uint32_t& count, bool& open) const;
 
   const VulkanContext* ctx_ = nullptr;
   bool in_place_ = false;           // unified memory: make_resident writes the buffers, nothing is queued
   std::vector<uint64_t> resident_;  // one bit per mesh
   std::vector<uint32_t> queued_;    // checked, marked resident, not yet recorded
   std::vector<uint32_t> fresh_;     // make_resident's scratch: the call's meshes not resident before
-  std::vector<uint64_t> order_;     // write_list's scratch: (first index << 32) | mesh id, sorted
+  std::vector<uint64_t> in_list_;   // write_list's scratch: one bit per mesh, all clear between calls
   std::vector<uint64_t> instanced_;      // one bit per mesh: its ranges are another resident mesh's (instancing)
   ZeroedArray<uint32_t> vertex_owner_;   // per vertex / index of meshes.bin: the owning mesh's id + 1 (0: none)
   ZeroedArray<uint32_t> index_owner_;
