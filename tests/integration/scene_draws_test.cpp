@@ -156,7 +156,7 @@ TEST(SceneDraws, AnInstanceSeenBeforeItsOwnerOwnsTheRangesInstead) {
 }
 
 TEST(SceneDraws, PartlySharedRangesAreRefusedNamingTheMeshAndLeaveNothingResident) {
-  SceneData s = triangles(3);
+  SceneData s = triangles(3, {0});  // mesh 3 instances mesh 0
   // Mesh 2's indices start inside mesh 1's: overlapping, not the same ranges. Its own check passes (its
   // indices are below its vertex count).
   s.meshes.meshes[2].first_index = 4;
@@ -166,14 +166,21 @@ TEST(SceneDraws, PartlySharedRangesAreRefusedNamingTheMeshAndLeaveNothingResiden
   s.meshes.indices[6] = 2;
   auto g = make_gpu(s);
   ASSERT_NE(g, nullptr);
-  const Status st = g->scene.make_resident(s, std::vector<uint32_t>{0, 1, 2}, nullptr);
+  const Status st = g->scene.make_resident(s, std::vector<uint32_t>{0, 3, 1, 2}, nullptr);
   ASSERT_FALSE(st.ok());
   EXPECT_EQ(st.error().code, ErrorCode::kCorrupt);
   EXPECT_NE(st.error().message.find("meshes.bin: mesh 2"), std::string::npos) << st.error().message;
-  for (uint32_t id = 0; id < 3; ++id) EXPECT_FALSE(g->scene.is_resident(id)) << "mesh " << id;
-  // The refused call's claims were undone: its other meshes can still become resident, as owners.
-  ASSERT_TRUE(g->scene.make_resident(s, std::vector<uint32_t>{1, 0}, nullptr).ok());
-  EXPECT_FALSE(g->scene.is_instanced(0));
+  for (uint32_t id = 0; id < 4; ++id) {
+    EXPECT_FALSE(g->scene.is_resident(id)) << "mesh " << id;
+    EXPECT_FALSE(g->scene.is_instanced(id)) << "mesh " << id;
+  }
+  // The refused call's claims were undone: its other meshes can still become resident, and mesh 3 now owns
+  // the ranges it only instanced before.
+  ASSERT_TRUE(g->scene.make_resident(s, std::vector<uint32_t>{3, 1}, nullptr).ok());
+  ASSERT_TRUE(g->scene.make_resident(s, std::vector<uint32_t>{0}, nullptr).ok());
+  EXPECT_FALSE(g->scene.is_instanced(3));
+  EXPECT_TRUE(g->scene.is_instanced(0));
   EXPECT_FALSE(g->scene.is_instanced(1));
+  EXPECT_EQ(g->scene.vertex_mesh.as<uint32_t>()[0], 3u);
   EXPECT_EQ(g->scene.vertex_mesh.as<uint32_t>()[3], 1u);
 }

@@ -103,8 +103,9 @@ struct SceneGpu {
   std::vector<uint32_t> fresh_;     // make_resident's scratch: the call's meshes not resident before
   std::vector<uint64_t> in_list_;   // write_list's scratch: one bit per mesh, all clear between calls
   std::vector<uint64_t> instanced_;      // one bit per mesh: its ranges are another resident mesh's (instancing)
-  ZeroedArray<uint32_t> vertex_owner_;   // per vertex / index of meshes.bin: the owning mesh's id + 1 (0: none)
-  ZeroedArray<uint32_t> index_owner_;
+  std::vector<uint64_t> vertex_claimed_;  // one bit per vertex / index of meshes.bin: owned by a resident mesh
+  std::vector<uint64_t> index_claimed_;
+  ZeroedArray<uint32_t> range_owner_;     // at an owned index range's first index: the owner's id + 1 (0: none)
   GpuBuffer staging_;               // host-visible, grown to the largest frame's uploads
   SceneGpuStats stats_;
 };
