@@ -327,6 +327,8 @@ Status SceneGpu::record_uploads(const SceneData& scene, VkCommandBuffer cmd) {
 
 void SceneGpu::write_draws(const SceneData& scene, std::span<const uint32_t> visible,
                            const std::array<double, 3>& camera, const ViewportSplit& split, FrameRecording& rec) {
+  // `drawn` holds mesh_count ids: the broad phase returns each mesh at most once.
+  TS_ASSERT(visible.size() <= mesh_count, "write_draws of %zu meshes of %u", visible.size(), mesh_count);
   const size_t main_end = std::min<size_t>(split.main_end, visible.size());
   const size_t wide_begin = std::min<size_t>(split.wide_begin, main_end);
   auto* mesh_out = meshes.as<gpu::MeshGpu>();
