@@ -225,9 +225,11 @@ TEST(MipCacheTest, ArenaFullOfPinnedEntriesGivesNoPayloadInsteadOfOverflowing) {
 // key of the run findable, and no stale copy of a moved entry behind).
 TEST(MipCacheTableTest, AgreesWithAReferenceMapUnderRandomInsertsAndErases) {
   // 8 textures x 4 mips stay within the initial 64 slots, so probe runs often wrap around the table's end;
-  // 301 x 4 make it grow several times.
+  // 301 x 4 make it grow several times. A table sized up front (as MipCache sizes it for its budget) must
+  // behave the same without growing.
+  for (const size_t expected : {size_t{0}, size_t{2000}})
   for (const uint32_t textures : {8u, 301u}) {
-    MipCacheTable table;
+    MipCacheTable table(expected);
     std::unordered_map<uint64_t, uint64_t> reference;  // key value -> size
     std::mt19937 rng(11);
     // Few keys: keys come back after being erased, and runs of colliding homes form.

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <array>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -131,13 +132,13 @@ TEST_F(TailRead, TheCoarsestMipBringsEverySmallMipInOneRead) {
   ASSERT_EQ(c.status, static_cast<uint32_t>(CompletionStatus::kOk));
   const std::span<const std::byte> m6 = mip_of(file_, record_, 6);
   EXPECT_EQ(c.checksum, payload_checksum(m6.data(), m6.size()));
-  EXPECT_EQ(storage_.counters.reads, 1);          // the header
-  EXPECT_EQ(storage_.counters.scatter_reads, 1);  // every mip at once
+  EXPECT_EQ(storage_.counters.reads, 0);          // no header read of its own: the guessed layout held
+  EXPECT_EQ(storage_.counters.scatter_reads, 1);  // the header and every mip at once
   for (uint32_t l = 0; l < 7; ++l) EXPECT_TRUE(cached(l)) << "mip " << l;
   EXPECT_EQ(cache_.stats().prefetched, 6u);
   // Read amplification so far: the whole chain read, one mip delivered.
   const uint64_t chain = mip_chain_offset(TexelFormat::kRgba8, 64, 64, 7);
-  EXPECT_EQ(stats_.bytes_read.load(), kDdsMaxHeaderBytes + chain);  // the header read takes the DX10 size
+  EXPECT_EQ(stats_.bytes_read.load(), scene::kDdsHeaderBytes + chain);  // the legacy header, read along
   EXPECT_EQ(stats_.bytes_loaded.load(), m6.size());
   for (uint32_t l = 6; l-- > 0;) expect_hit(l);
   // Each prefetched mip counted as delivered once, at its first hit; a second hit counts nothing.
@@ -145,7 +146,7 @@ TEST_F(TailRead, TheCoarsestMipBringsEverySmallMipInOneRead) {
   expect_hit(0);
   EXPECT_EQ(stats_.bytes_loaded.load(), chain);
   EXPECT_EQ(cache_.stats().prefetch_hits, 6u);
-  EXPECT_EQ(storage_.counters.scatter_reads + storage_.counters.reads, 2);  // nothing read again
+  EXPECT_EQ(storage_.counters.scatter_reads + storage_.counters.reads, 1);  // nothing read again
 }
 
 TEST_F(TailRead, LargeMipsJoinOnlyWhenWanted) {
@@ -154,7 +155,57 @@ TEST_F(TailRead, LargeMipsJoinOnlyWhenWanted) {
   ASSERT_EQ(load(8, true, /*wanted=*/1u << 1).status, static_cast<uint32_t>(CompletionStatus::kOk));
   for (uint32_t l = 1; l < 9; ++l) EXPECT_TRUE(cached(l)) << "mip " << l;
   EXPECT_FALSE(cached(0));
+  // The range does not start at mip 0, so the header is not next to it: read on its own, before the range
+  // (the guess read nothing).
+  EXPECT_EQ(storage_.counters.reads, 1);
+  EXPECT_EQ(storage_.counters.scatter_reads, 1);
   for (uint32_t l = 8; l-- > 1;) expect_hit(l);
+}
+
+// The same texture stored with the DX10 header extension (148 bytes): the generator's layout guessed for it
+// does not hold, so the loader starts over with the header read on its own; the bytes delivered are exact
+// and the wasted read is counted in bytes_read (read amplification shows it).
+TEST_F(TailRead, AWrongLayoutGuessIsReadAgainTheOrdinaryWay) {
+  add_texture(64, 64);
+  std::vector<std::byte> dx10(file_.begin(), file_.begin() + scene::kDdsHeaderBytes);
+  const auto put = [&](size_t offset, uint32_t v) { std::memcpy(dx10.data() + offset, &v, 4); };
+  put(80, 0x4);          // pixel format flags: FourCC
+  put(84, 0x30315844u);  // "DX10"
+  dx10.resize(kDdsMaxHeaderBytes);
+  put(128, 28);  // DXGI_FORMAT_R8G8B8A8_UNORM
+  put(132, 3);   // texture 2D
+  put(136, 0);
+  put(140, 1);   // array size
+  put(144, 0);
+  dx10.insert(dx10.end(), file_.begin() + scene::kDdsHeaderBytes, file_.end());
+  storage_.files.begin()->second = dx10;
+  const CompletionRecord c = load(6, /*tail=*/true);
+  ASSERT_EQ(c.status, static_cast<uint32_t>(CompletionStatus::kOk));
+  EXPECT_EQ(storage_.counters.scatter_reads, 2);  // the guess, then the real range
+  EXPECT_EQ(storage_.counters.reads, 1);          // the header, on its own
+  const uint64_t chain = mip_chain_offset(TexelFormat::kRgba8, 64, 64, 7);
+  EXPECT_EQ(stats_.bytes_read.load(), (scene::kDdsHeaderBytes + chain) + kDdsMaxHeaderBytes + chain);
+  // Every mip's bytes are the file's own (mip_of() computes legacy offsets: the same bytes, 20 bytes later).
+  for (uint32_t l = 6; l-- > 0;) expect_hit(l);
+  // Known now: the next load of the texture neither guesses nor reads the header again.
+  storage_.counters = Counters{};
+  const uint64_t before = stats_.bytes_read.load();
+  ASSERT_EQ(load(6, /*tail=*/false).status, static_cast<uint32_t>(CompletionStatus::kOk));
+  EXPECT_EQ(storage_.counters.reads, 1);  // the mip alone
+  EXPECT_EQ(stats_.bytes_read.load() - before, 4u);
+}
+
+// A file whose header contradicts the texture table (fewer mips than the table says): the guess is
+// dropped and the ordinary path reports the file as corrupt, as it did before there was a guess.
+TEST_F(TailRead, AGuessTheHeaderContradictsEndsAsTheOrdinaryPathEnds) {
+  add_texture(64, 64);
+  std::vector<std::byte>& f = storage_.files.begin()->second;
+  const uint32_t fewer = 5;
+  std::memcpy(f.data() + 28, &fewer, 4);  // dwMipMapCount
+  const CompletionRecord c = load(6, /*tail=*/true);
+  EXPECT_EQ(c.status, static_cast<uint32_t>(CompletionStatus::kCorrupt));
+  EXPECT_EQ(cache_.stats().entries, 0u);
+  EXPECT_EQ(storage_.counters.reads, 1);  // the header, read the ordinary way after the guess failed
 }
 
 TEST_F(TailRead, AWantedMipBeyondTheReadLimitStaysOut) {
@@ -264,6 +315,47 @@ TEST(PosixScatterRead, FillsThePartsInOrderAndStopsAtTheEnd) {
   EXPECT_EQ(e[1], std::byte{99});
   EXPECT_EQ(e[2], std::byte{0xee});
   std::filesystem::remove_all(dir);
+}
+
+// PosixStorage opens files relative to a kept descriptor of their directory.
+TEST(PosixStorageDirectories, OpensThroughKeptDirectoriesAndForgetsNoneThatAreMissing) {
+  const std::filesystem::path root =
+      std::filesystem::temp_directory_path() / ("texstream-posix-dirs-" + std::to_string(::getpid()));
+  std::filesystem::remove_all(root);
+  std::filesystem::create_directories(root / "a");
+  { std::ofstream(root / "a" / "one.bin", std::ios::binary) << "0123456789"; }
+  PosixStorage storage;
+  Result<std::unique_ptr<StorageFile>> f = storage.open(root / "a" / "one.bin");
+  ASSERT_TRUE(f.ok()) << f.error().message;
+  std::array<std::byte, 4> buf{};
+  Result<uint64_t> got = (*f)->read_at(buf, 3);
+  ASSERT_TRUE(got.ok());
+  EXPECT_EQ(*got, 4u);
+  EXPECT_EQ(buf[0], std::byte{'3'});
+  EXPECT_EQ(storage.directories_kept(), 1u);
+  // A missing file in a kept directory, and a file in a directory that does not exist (yet): kNotFound
+  // naming the whole path; the missing directory is not remembered.
+  Result<std::unique_ptr<StorageFile>> missing = storage.open(root / "a" / "two.bin");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_EQ(missing.error().code, ErrorCode::kNotFound);
+  EXPECT_NE(missing.error().message.find((root / "a" / "two.bin").string()), std::string::npos);
+  Result<std::unique_ptr<StorageFile>> no_dir = storage.open(root / "b" / "x.bin");
+  ASSERT_FALSE(no_dir.ok());
+  EXPECT_EQ(no_dir.error().code, ErrorCode::kNotFound);
+  EXPECT_EQ(storage.directories_kept(), 1u);
+  // The directory appears later: its files open.
+  std::filesystem::create_directories(root / "b");
+  { std::ofstream(root / "b" / "x.bin", std::ios::binary) << "x"; }
+  EXPECT_TRUE(storage.open(root / "b" / "x.bin").ok());
+  EXPECT_EQ(storage.directories_kept(), 2u);
+  // A bare relative name has no directory to keep: opened as it is (and not found here).
+  EXPECT_EQ(storage.open("texstream-no-such-file.bin").error().code, ErrorCode::kNotFound);
+  // A kept directory replaced in place (a scene folder swapped): its new files still open, by the full path.
+  std::filesystem::rename(root / "a", root / "a-old");
+  std::filesystem::create_directories(root / "a");
+  { std::ofstream(root / "a" / "new.bin", std::ios::binary) << "n"; }
+  EXPECT_TRUE(storage.open(root / "a" / "new.bin").ok()) << "a replaced directory hid its new files";
+  std::filesystem::remove_all(root);
 }
 
 }  // namespace

@@ -1,5 +1,6 @@
 # texture_server unit tests: the RAM cache and its policies, the request scheduler, the slot pool, the rate
-# limiter, DDS layouts, texel conversion and the open-file cache — no shared memory, no clock.
+# limiter, DDS layouts, texel conversion, the open-file cache and the cache's pools (small payloads, policy
+# nodes) — no shared memory, no clock.
 texstream_add_unit_test(server_unit_tests
   ${CMAKE_CURRENT_LIST_DIR}/server_mip_cache_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/server_level_eviction_policy_test.cpp
@@ -9,5 +10,7 @@ texstream_add_unit_test(server_unit_tests
   ${CMAKE_CURRENT_LIST_DIR}/server_slot_pool_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/server_open_file_cache_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/server_fast_checksum_test.cpp
-  ${CMAKE_CURRENT_LIST_DIR}/server_tail_read_test.cpp)
+  ${CMAKE_CURRENT_LIST_DIR}/server_tail_read_test.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/server_small_payload_pool_test.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/server_node_pool_test.cpp)
 target_link_libraries(server_unit_tests PRIVATE texstream::server)

@@ -30,6 +30,17 @@ void LatencyHistogram::record(uint64_t micros) {
   }
 }
 
+void LatencyHistogram::record_one_writer(uint64_t micros) {
+  // relaxed everywhere: independent statistics; this thread is the only writer, so load + store loses nothing.
+  const auto bump = [](std::atomic<uint64_t>& a, uint64_t v) {
+    a.store(a.load(std::memory_order_relaxed) + v, std::memory_order_relaxed);
+  };
+  bump(buckets_[bucket_of(micros)], 1);
+  bump(count_, 1);
+  bump(sum_, micros);
+  if (micros > max_.load(std::memory_order_relaxed)) max_.store(micros, std::memory_order_relaxed);
+}
+
 double LatencyHistogram::mean_us() const {
   const uint64_t n = count();
   return n == 0 ? 0.0 : static_cast<double>(sum_.load(std::memory_order_relaxed)) / static_cast<double>(n);

@@ -4,10 +4,11 @@
 
 namespace texstream::server {
 
-LevelEvictionPolicy::LevelEvictionPolicy(std::function<uint32_t(MipKey)> level_of) : level_of_(std::move(level_of)) {}
+LevelEvictionPolicy::LevelEvictionPolicy(std::function<uint32_t(MipKey)> level_of)
+    : level_of_(std::move(level_of)), levels_(make_levels(pool_, std::make_index_sequence<kMaxLevels>{})) {}
 
 void LevelEvictionPolicy::touch(Node& n) {
-  std::list<Node>& list = levels_[n.level];
+  List& list = levels_[n.level];
   n.last_used = now_;
   n.sequence = ++sequence_;
   list.splice(list.begin(), list, n.self);
@@ -20,11 +21,18 @@ PolicyNode* LevelEvictionPolicy::on_insert(MipKey key) {
     touch(*where->second);
     return node_of(*where->second);
   }
+  PolicyNode* node = push(key, /*indexed=*/true);
+  where->second = element_of(node).self;
+  return node;
+}
+
+PolicyNode* LevelEvictionPolicy::insert_new(MipKey key) { return push(key, /*indexed=*/false); }
+
+PolicyNode* LevelEvictionPolicy::push(MipKey key, bool indexed) {
   const uint32_t level = std::min(level_of_(key), kMaxLevels - 1);
-  std::list<Node>& list = levels_[level];
-  list.push_front(Node{key, now_, ++sequence_, level, {}});
+  List& list = levels_[level];
+  list.push_front(Node{key, now_, ++sequence_, level, indexed, {}});
   list.front().self = list.begin();
-  where->second = list.begin();
   return node_of(list.front());
 }
 
@@ -32,9 +40,10 @@ void LevelEvictionPolicy::touch(PolicyNode* node) { touch(element_of(node)); }
 
 void LevelEvictionPolicy::erase(PolicyNode* node) {
   Node& n = element_of(node);
-  const MipKey key = n.key;  // a copy: the list erase below frees the node
+  const MipKey key = n.key;  // copies: the list erase below frees the node
+  const bool indexed = n.indexed;
   levels_[n.level].erase(n.self);
-  where_.erase(key);
+  if (indexed) where_.erase(key);
 }
 
 void LevelEvictionPolicy::on_access(MipKey key) {
@@ -54,7 +63,7 @@ std::optional<MipKey> LevelEvictionPolicy::pick_victim(const std::function<bool(
   const Node* best = nullptr;
   uint64_t best_priority = 0;
   for (uint32_t level = 0; level < kMaxLevels; ++level) {
-    const std::list<Node>& list = levels_[level];
+    const List& list = levels_[level];
     // The tail is this level's least recently used entry, the largest f; skip pinned ones.
     for (auto it = list.rbegin(); it != list.rend(); ++it) {
       if (!evictable(it->key)) continue;

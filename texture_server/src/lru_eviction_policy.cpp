@@ -7,22 +7,29 @@ PolicyNode* LruEvictionPolicy::on_insert(MipKey key) {
   const auto [it, fresh] = where_.try_emplace(key);
   if (!fresh) {
     order_.splice(order_.begin(), order_, it->second);
-    return node_of(*it);
+    return node_of(*it->second);
   }
-  order_.push_front(key);
+  PolicyNode* node = push(key, /*indexed=*/true);
   it->second = order_.begin();
-  return node_of(*it);
+  return node;
 }
 
-void LruEvictionPolicy::touch(PolicyNode* node) {
-  order_.splice(order_.begin(), order_, element_of(node).second);
+PolicyNode* LruEvictionPolicy::insert_new(MipKey key) { return push(key, /*indexed=*/false); }
+
+PolicyNode* LruEvictionPolicy::push(MipKey key, bool indexed) {
+  order_.push_front(Node{key, indexed, {}});
+  order_.front().self = order_.begin();
+  return node_of(order_.front());
 }
+
+void LruEvictionPolicy::touch(PolicyNode* node) { order_.splice(order_.begin(), order_, element_of(node).self); }
 
 void LruEvictionPolicy::erase(PolicyNode* node) {
-  Where::value_type& e = element_of(node);
-  order_.erase(e.second);
-  const MipKey key = e.first;  // a copy: erase() must not read the key of the element it frees
-  where_.erase(key);
+  Node& n = element_of(node);
+  const MipKey key = n.key;  // copies: the list erase below frees the node
+  const bool indexed = n.indexed;
+  order_.erase(n.self);
+  if (indexed) where_.erase(key);
 }
 
 void LruEvictionPolicy::on_access(MipKey key) {
@@ -38,7 +45,7 @@ void LruEvictionPolicy::on_erase(MipKey key) {
 
 std::optional<MipKey> LruEvictionPolicy::pick_victim(const std::function<bool(MipKey)>& evictable) {
   for (auto it = order_.rbegin(); it != order_.rend(); ++it) {
-    if (evictable(*it)) return *it;
+    if (evictable(it->key)) return it->key;
   }
   return std::nullopt;
 }

@@ -60,6 +60,18 @@ CompletionStatus read_status(ErrorCode code) {
 
 std::string extent_text(Extent2D e) { return std::to_string(e.width) + "x" + std::to_string(e.height); }
 
+// The layout texstream-gen writes for a texture table entry (scene_format.hpp: legacy header, mips finest
+// first, no DX10 extension): read_mip()'s guess before a texture's header has been read.
+DdsLayout generated_dds_layout(const scene::TextureRecord& record) {
+  DdsLayout l;
+  l.encoding = static_cast<TexelFormat>(record.format) == TexelFormat::kBc1 ? DdsEncoding::kBc1 : DdsEncoding::kRgba8;
+  l.width = record.width;
+  l.height = record.height;
+  l.mip_count = record.mip_count;
+  l.data_offset = MipLoader::kDdsGuessHeaderBytes;
+  return l;
+}
+
 }  // namespace
 
 MipLoader::MipLoader(std::filesystem::path scene_dir, Storage& storage, MipCache& cache, ServerBlock& block,
@@ -94,8 +106,11 @@ CompletionRecord MipLoader::serve_cached(const LoadRequest& request, const scene
   // One lookup, copied under the cache's lock: no pin, no allocation.
   const std::optional<CachedCopy> hit = cache_.copy_into(request.key(), slot, prefetch_next);
   if (!hit) return CompletionRecord{};
-  block_.ram_cache_hits.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: a statistic, read for reports
-  stats_.add(stats_.bytes_served_cached, hit->bytes);
+  // relaxed: statistics, read for reports. serve_cached() has one caller thread (the dispatcher, see the
+  // header): load + store, no locked read-modify-write per hit.
+  block_.ram_cache_hits.v.store(block_.ram_cache_hits.v.load(std::memory_order_relaxed) + 1,
+                                std::memory_order_relaxed);
+  ServerStats::add_one_writer(stats_.bytes_served_cached, hit->bytes);
   // A coarse-tail mip read ahead (load()'s read_tail) is delivered now: the read it came with counts it here.
   if (hit->first_use_of_prefetch) stats_.add(stats_.bytes_loaded, hit->bytes);
   return ok_completion(request, record, slot_index, hit->bytes, hit->checksum);
@@ -151,7 +166,8 @@ bool MipLoader::open_texture(const LoadRequest& request, Opened& opened, Complet
 
 CompletionStatus MipLoader::read_tail(const LoadRequest& request, const scene::TextureRecord& record, Opened& opened,
                                       std::span<std::byte> target, bool local_only, Tail& tail,
-                                      uint32_t wanted_levels) {
+                                      uint32_t wanted_levels, bool guessed, bool& retry) {
+  retry = false;
   // read_mip() checked the asked level against the file (extent, encoding). A neighbour joins the read only
   // if it is small or wanted (asked for and queued), not cached, has the texture table's extent and exactly
   // the bytes the table implies, fits kMaxTailReadBytes and gets a cache payload; the first that does not
@@ -187,15 +203,31 @@ CompletionStatus MipLoader::read_tail(const LoadRequest& request, const scene::T
     tail.push_back(TailMip{l, std::move(m)});
     finest = l;
   }
-  // Parts in file order: finest first.
-  std::array<std::span<std::byte>, kMaxTailParts> parts{};
+  // A guessed layout: the header is read along only if it lies right before the range (the range starts at
+  // mip 0); otherwise the caller reads it first, the ordinary way, and nothing was read here.
+  if (guessed && (finest != 0 || dds.data_offset != kDdsGuessHeaderBytes)) {
+    tail.clear();
+    retry = true;
+    return CompletionStatus::kOk;
+  }
+  // Parts in file order: (the header,) finest first.
+  std::array<std::byte, kDdsGuessHeaderBytes> header{};
+  std::array<std::span<std::byte>, kMaxTailParts + 1> parts{};
   size_t count = 0;
+  if (guessed) {
+    parts[count++] = header;
+    total += header.size();
+  }
   for (size_t i = tail.size(); i-- > coarser;) parts[count++] = tail[i].mip->bytes;
   parts[count++] = target;
   for (size_t i = 0; i < coarser; ++i) parts[count++] = tail[i].mip->bytes;
-  const uint64_t offset = dds.mip_offset(finest);
+  const uint64_t offset = guessed ? 0 : dds.mip_offset(finest);
   if (local_only && !opened.file->local(offset, total)) {
     tail.clear();
+    // A guess is only for ranges already here: otherwise the ordinary way decides, as it did before there
+    // was a guess (a cached header is read now and remembered, so the remote fetch that follows does not
+    // read it again; storage_origin_test's restart compares those byte counts).
+    if (guessed) retry = true;
     return CompletionStatus::kUnfilled;
   }
   Result<uint64_t> got = opened.file->read_scatter_at(std::span(parts).first(count), offset);
@@ -204,6 +236,19 @@ CompletionStatus MipLoader::read_tail(const LoadRequest& request, const scene::T
     return fail_status(request, read_status(got.error().code), opened.path, got.error().message);
   }
   count_read(*got);
+  if (guessed) {
+    // The guess holds only if the file's own header says exactly that; a short file, another header or any
+    // other difference: start over the ordinary way (header first), which reports what is wrong, if anything.
+    const Result<DdsLayout> real = parse_dds_layout(std::span(header).first(std::min<uint64_t>(*got, header.size())),
+                                                    opened.path.string());
+    if (*got != total || !real.ok() || *real != dds) {
+      tail.clear();
+      retry = true;
+      return CompletionStatus::kOk;
+    }
+    index_.remember(request.texture, opened.entry);
+    return CompletionStatus::kOk;
+  }
   if (*got != total) {
     tail.clear();
     index_.forget(request.texture);  // the file may have been replaced: look again next time
@@ -217,7 +262,7 @@ CompletionStatus MipLoader::read_tail(const LoadRequest& request, const scene::T
 
 CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::TextureRecord& record, Opened& opened,
                                      std::span<std::byte> target, bool local_only, Tail* tail,
-                                     uint32_t wanted_levels) {
+                                     uint32_t wanted_levels, bool guess_layout) {
   const TexelFormat format = static_cast<TexelFormat>(record.format);  // validated with the texture table
   const uint32_t level = request.mip.value;
   const Extent2D expected = mip_extent(record.width, record.height, level);
@@ -225,6 +270,9 @@ CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::Te
 
   bool decode = opened.entry.kind != TextureFileKind::kDds;
   if (opened.entry.kind == TextureFileKind::kDds) {
+    // See guess_layout (header). Checked below like a parsed layout; confirmed or dropped by read_tail.
+    const bool guessed = !opened.entry.dds && tail != nullptr && guess_layout;
+    if (guessed) opened.entry.dds = generated_dds_layout(record);
     if (!opened.entry.dds) {
       std::array<std::byte, kDdsMaxHeaderBytes> header{};
       if (local_only && !opened.file->local(0, header.size())) return CompletionStatus::kUnfilled;
@@ -255,7 +303,14 @@ CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::Te
     }
     decode = format == TexelFormat::kRgba8 && dds.encoding != DdsEncoding::kRgba8;
     if (!decode && tail != nullptr && (target.size() <= kTailMipBytes || wanted_levels != 0)) {
-      return read_tail(request, record, opened, target, local_only, *tail, wanted_levels);
+      bool retry = false;
+      const CompletionStatus s =
+          read_tail(request, record, opened, target, local_only, *tail, wanted_levels, guessed, retry);
+      if (!retry) return s;
+    }
+    if (guessed) {  // not confirmed: the ordinary way, the header first
+      opened.entry.dds.reset();
+      return read_mip(request, record, opened, target, local_only, tail, wanted_levels, /*guess_layout=*/false);
     }
     if (!decode) {
       // Exactly the mip's byte range.

@@ -89,11 +89,50 @@ class PosixFile final : public StorageFile {
 
 }  // namespace
 
-Result<std::unique_ptr<StorageFile>> PosixStorage::open(const std::filesystem::path& path) {
+PosixStorage::~PosixStorage() {
+  for (const auto& [dir, fd] : dirs_) ::close(fd);
+}
+
+size_t PosixStorage::directories_kept() const {
+  std::lock_guard lock(mutex_);
+  return dirs_.size();
+}
+
+int PosixStorage::directory_fd(std::string_view dir) {
+  std::lock_guard lock(mutex_);
+  if (auto it = dirs_.find(dir); it != dirs_.end()) return it->second;
+  if (dirs_.size() >= kMaxDirectories) return -1;
+  const std::string name(dir);
   int fd;
   do {
-    fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    // O_PATH: only a handle for openat(), no read permission on the directory needed.
+    fd = ::open(name.c_str(), O_PATH | O_DIRECTORY | O_CLOEXEC);
   } while (fd < 0 && errno == EINTR);
+  if (fd < 0) return -1;
+  dirs_.emplace(name, fd);
+  return fd;
+}
+
+Result<std::unique_ptr<StorageFile>> PosixStorage::open(const std::filesystem::path& path) {
+  const std::string& full = path.native();
+  const size_t slash = full.rfind('/');
+  // "dir/name": relative to dir's kept descriptor; a bare name, a path ending in '/', or a directory that
+  // cannot be kept: by the full path.
+  const int dir = slash != std::string::npos && slash > 0 && slash + 1 < full.size()
+                      ? directory_fd(std::string_view(full).substr(0, slash))
+                      : -1;
+  int fd;
+  do {
+    fd = dir >= 0 ? ::openat(dir, full.c_str() + slash + 1, O_RDONLY | O_CLOEXEC)
+                  : ::open(full.c_str(), O_RDONLY | O_CLOEXEC);
+  } while (fd < 0 && errno == EINTR);
+  if (fd < 0 && dir >= 0 && errno == ENOENT) {
+    // The kept descriptor names the directory as it was when first kept: if it has been replaced since (a
+    // scene folder swapped in place), the path may exist in the new one. Only a miss pays this second open.
+    do {
+      fd = ::open(full.c_str(), O_RDONLY | O_CLOEXEC);
+    } while (fd < 0 && errno == EINTR);
+  }
   if (fd < 0) {
     const int err = errno;
     const ErrorCode code = (err == ENOENT || err == ENOTDIR) ? ErrorCode::kNotFound : ErrorCode::kIo;

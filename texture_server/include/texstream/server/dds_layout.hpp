@@ -34,6 +34,7 @@ struct DdsLayout {
   // Byte range of `level` (< mip_count) for kBc1 / kRgba8.
   uint64_t mip_offset(uint32_t level) const;
   uint64_t mip_size(uint32_t level) const;
+  bool operator==(const DdsLayout&) const = default;
 };
 
 // Parses the first bytes of a DDS file (`bytes` may be longer than the header; shorter is kCorrupt). Errors

@@ -14,8 +14,10 @@
 #include <functional>
 #include <list>
 #include <unordered_map>
+#include <utility>
 
 #include "texstream/server/eviction_policy.hpp"
+#include "texstream/server/node_pool.hpp"
 
 namespace texstream::server {
 
@@ -26,22 +28,32 @@ class LevelEvictionPolicy final : public EvictionPolicy {
   explicit LevelEvictionPolicy(std::function<uint32_t(MipKey)> level_of);
 
   PolicyNode* on_insert(MipKey key) override;
+  PolicyNode* insert_new(MipKey key) override;
   void on_access(MipKey key) override;
   void on_erase(MipKey key) override;
   void touch(PolicyNode* node) override;
   void erase(PolicyNode* node) override;
   void on_tick(uint64_t now) override;
   std::optional<MipKey> pick_victim(const std::function<bool(MipKey)>& evictable) override;
+  void reserve(size_t entries) override { pool_.reserve(entries); }
 
  private:
+  struct Node;
+  using List = std::list<Node, PoolAllocator<Node>>;
   struct Node {
     MipKey key;
     uint64_t last_used;  // clock value of the last use (f = now - last_used)
     uint64_t sequence;   // global use order: the tie break
     uint32_t level;
-    std::list<Node>::iterator self;  // this node's own position (list iterators survive splices)
+    bool indexed;        // entered in where_ (on_insert), not only reachable through its node (insert_new)
+    List::iterator self;  // this node's own position (list iterators survive splices)
   };
-  using WhereMap = std::unordered_map<MipKey, std::list<Node>::iterator, MipKeyHash>;
+  using WhereMap = std::unordered_map<MipKey, List::iterator, MipKeyHash>;
+  template <size_t... I>
+  static std::array<List, kMaxLevels> make_levels(NodePool& pool, std::index_sequence<I...>) {
+    return {((void)I, List(PoolAllocator<Node>(pool)))...};
+  }
+  PolicyNode* push(MipKey key, bool indexed);
   // A policy node is the address of the list element itself (list elements never move), so a hit's touch
   // goes straight to it: no hop through where_'s hash node, which was one more cache miss per hit.
   static PolicyNode* node_of(Node& n) { return reinterpret_cast<PolicyNode*>(&n); }
@@ -49,7 +61,8 @@ class LevelEvictionPolicy final : public EvictionPolicy {
   void touch(Node& n);
 
   std::function<uint32_t(MipKey)> level_of_;
-  std::array<std::list<Node>, kMaxLevels> levels_;  // front = most recently used
+  NodePool pool_;  // the lists' nodes (before levels_: destroyed after them)
+  std::array<List, kMaxLevels> levels_;  // front = most recently used
   WhereMap where_;
   uint64_t now_ = 0;
   uint64_t sequence_ = 0;

@@ -12,9 +12,12 @@
 // - One evictor: eviction happens only inside insert() and make_payload(), under the cache's lock.
 // - Statistics: hits, misses, insertions, evictions, rejections, bytes and entries.
 // - Warm arena (MipCacheOptions::arena): payloads of ≥ 4 KiB come from one pre-faulted mapping of the budget
-//   (cache_arena.hpp) through make_payload(), so a miss never page-faults fresh memory; smaller ones and
-//   payloads made by the caller stay on the heap, and so may up to 1/8 of the budget when the arena is too
+//   (cache_arena.hpp) through make_payload(), so a miss never page-faults fresh memory; payloads made by the
+//   caller stay on the heap, and so may up to 1/8 of the budget when the arena is too
 //   fragmented for a block (see kHeapOverflowDivisor). The arena is resident for its whole capacity once warm.
+//   Payloads below 4 KiB come from warm slabs beside the arena (small_payload_pool.hpp), up to
+//   budget / kSmallPoolDivisor, then from the heap as before; the memory they hold is counted in the budget
+//   like any payload's, the pool's unused slab space is not (at most budget / kSmallPoolDivisor).
 // Thread-safe. No syscall is made while the lock is held.
 //
 // The hit path: copy_into() finds, touches and copies a mip into the caller's buffer under one lock with one
@@ -33,6 +36,7 @@
 #include "texstream/server/mip_cache_table.hpp"
 #include "texstream/server/mip_key.hpp"
 #include "texstream/server/payload_bytes.hpp"
+#include "texstream/server/small_payload_pool.hpp"
 
 namespace texstream::server {
 
@@ -72,6 +76,7 @@ struct MipCacheStats {
   uint64_t arena_evictions = 0;       // evictions make_payload() made to find a free block (fragmentation)
   uint64_t arena_fallbacks = 0;       // make_payload() found no block even after evicting (all pinned)
   uint64_t arena_overflows = 0;       // payloads put on the heap because no arena block was free
+  uint64_t small_pool_bytes = 0;      // slabs of the small payload pool in use (payloads < 4 KiB)
 };
 
 class MipCache {
@@ -120,6 +125,8 @@ class MipCache {
   // Removes one unpinned entry in policy order (lock held); its reference goes to `evicted`. False if every
   // entry is pinned.
   bool evict_one(std::vector<std::shared_ptr<const CachedMip>>& evicted);
+  // An empty CachedMip for make_payload() (its shared_ptr's block from the small payload pool if any).
+  std::shared_ptr<CachedMip> new_cached_mip() const;
   // insert()'s body (lock held).
   bool insert_locked(MipKey key, std::shared_ptr<const CachedMip> mip, bool prefetched,
                      std::vector<std::shared_ptr<const CachedMip>>& evicted);
@@ -130,6 +137,16 @@ class MipCache {
   // when make_payload() evicted at once, 0.572 with this heap share. Those heap bytes are outside the pre-faulted arena: the resident set of the cache can
   // reach budget * (1 + 1/8) plus its sub-4-KiB payloads.
   static constexpr uint64_t kHeapOverflowDivisor = 8;
+  // Payloads below CacheArena::kMinBlock come from a pool of warm slabs beside the arena
+  // (small_payload_pool.hpp), at most budget / this many bytes of them; past that from the heap, as before.
+  // The coarse mips of a texture are ~1/3 of its 4 KiB mip: far less than 1/8 of a cache of whole mip chains.
+  static constexpr uint64_t kSmallPoolDivisor = 8;
+  // The index is sized at construction for a budget full of mips of this size (the 64x64 RGBA8 tail mip,
+  // MipLoader::kTailMipBytes), so that it does not grow — and fault in fresh memory — while misses fill the
+  // cache (texstream-bench server, misses: the index's doublings were ~1/4 of the dispatcher's page faults).
+  // Capped at kMaxPresizedEntries (a 8 MiB index).
+  static constexpr uint64_t kPresizeEntryBytes = 16 << 10;
+  static constexpr uint64_t kMaxPresizedEntries = 1 << 16;
 
   const uint64_t budget_;
   // A heap payload the arena would have held (overflow_bytes_ counts those among the entries).
@@ -138,6 +155,7 @@ class MipCache {
   }
   uint64_t overflow_bytes_ = 0;
   std::shared_ptr<CacheArena> arena_;  // shared with the payloads it backs: they may outlive the cache
+  std::shared_ptr<SmallPayloadPool> small_pool_;  // with the arena only (null without one)
   mutable std::mutex mutex_;
   std::unique_ptr<EvictionPolicy> policy_;
   MipCacheTable entries_;  // each entry keeps the policy node of its key: a hit touches it without a lookup

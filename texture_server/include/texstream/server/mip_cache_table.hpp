@@ -7,6 +7,8 @@
 //
 // Not thread-safe: MipCache holds its lock around every call. Erasing moves later entries of the probe run
 // back one slot, so pointers to entries are valid only until the next insert or erase.
+#include <algorithm>
+#include <bit>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -36,7 +38,10 @@ static_assert(sizeof(MipCacheSlot) == 64, "a hit reads one cache line of the ind
 
 class MipCacheTable {
  public:
-  MipCacheTable() : slots_(kInitialSlots), mask_(kInitialSlots - 1) {}
+  // Room for `expected_entries` without growing (the table grows at half full); at least kInitialSlots.
+  // The slots are written here (value-initialised), so their pages are faulted in now, not by inserts.
+  explicit MipCacheTable(size_t expected_entries = 0)
+      : slots_(std::bit_ceil(std::max(kInitialSlots, 2 * expected_entries))), mask_(slots_.size() - 1) {}
 
   // The entry of `key`, or nullptr.
   MipCacheSlot* find(MipKey key) {
@@ -47,6 +52,9 @@ class MipCacheTable {
     }
   }
   const MipCacheSlot* find(MipKey key) const { return const_cast<MipCacheTable*>(this)->find(key); }
+
+  // Starts loading the slot where find(key) begins into the CPU cache (a hint: no effect on the contents).
+  void prefetch(MipKey key) const { __builtin_prefetch(&slots_[home(key)], 0, 3); }
 
   // Adds an entry for a key that is not in the table (the caller found none); `slot.mip` must be non-null.
   // Returns it (valid until the next insert or erase).

@@ -60,11 +60,15 @@ class MipLoader {
   static constexpr uint64_t kMaxTailReadBytes = 256 << 10;
   // At most this many mips in one tail read (a mip chain of up to 2^31 x 2^31 texels has 32).
   static constexpr size_t kMaxTailParts = 32;
+  // The header read along with a texture's first tail read when its layout is guessed (read_mip): the
+  // legacy DDS header texstream-gen writes (scene::kDdsHeaderBytes).
+  static constexpr uint64_t kDdsGuessHeaderBytes = scene::kDdsHeaderBytes;
   // Copies a cached mip into `slot`. Returns a kOk record, or a record with status 0 on a cache miss.
   // True if the texture's file is known to be a DDS whose mips are served as they are stored (one pread per
   // mip, no decode) for a texture of `format`. False for unknown textures and for decoded ones.
   bool serves_raw(TextureId texture, TexelFormat format) const;
-  // `prefetch_next`: MipCache::copy_into()'s hint.
+  // `prefetch_next`: MipCache::copy_into()'s hint. Called by one thread only (the dispatcher): the hit
+  // counters it bumps have that one writer (no locked read-modify-write per hit).
   CompletionRecord serve_cached(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot_index,
                                 std::span<std::byte> slot, std::optional<MipKey> prefetch_next = std::nullopt);
 
@@ -85,12 +89,22 @@ class MipLoader {
     std::shared_ptr<CachedMip> mip;
   };
   using Tail = std::vector<TailMip>;
+  // `guess_layout` (with `tail` only): a DDS file whose layout is not known yet is assumed to be laid out as
+  // texstream-gen writes it for the texture table's entry (legacy 128-byte header, the table's format, extent
+  // and mip count); when the tail read then starts at mip 0 its header is read in the same read and checked
+  // against the guess (read_tail). Saves the separate header read on a texture's first load: ~1 syscall of
+  // ~4 per texture (texstream-bench server, misses, perf: the header pread was ~5 % of the dispatcher).
   CompletionStatus read_mip(const LoadRequest& request, const scene::TextureRecord& record, Opened& opened,
                             std::span<std::byte> target, bool local_only, Tail* tail = nullptr,
-                            uint32_t wanted_levels = 0);
+                            uint32_t wanted_levels = 0, bool guess_layout = true);
   // The coarse-tail read of read_mip(): levels around `request.mip` in one scatter read (see load()).
+  // `guessed`: opened.entry.dds is read_mip()'s guess, not read from the file. Then the read must start at
+  // mip 0 and takes the header along; the header is parsed and must equal the guess, which is then
+  // remembered. Otherwise nothing is kept, `retry` is set and the caller reads the header the ordinary way
+  // (the bytes already read stay counted: read amplification sees a wrong guess).
   CompletionStatus read_tail(const LoadRequest& request, const scene::TextureRecord& record, Opened& opened,
-                             std::span<std::byte> target, bool local_only, Tail& tail, uint32_t wanted_levels);
+                             std::span<std::byte> target, bool local_only, Tail& tail, uint32_t wanted_levels,
+                             bool guessed, bool& retry);
   CompletionRecord fail(const LoadRequest& request, CompletionStatus status, const std::filesystem::path& path,
                         const std::string& why);
   CompletionStatus fail_status(const LoadRequest& request, CompletionStatus status, const std::filesystem::path& path,

@@ -13,12 +13,15 @@
 namespace texstream::server {
 
 class CacheArena;
+class SmallPayloadPool;
 
 class PayloadBytes {
  public:
   PayloadBytes() = default;
   // Takes a block of `arena` (from CacheArena::allocate(size)); the block goes back to the arena with this.
   PayloadBytes(std::shared_ptr<CacheArena> arena, std::byte* block, size_t size);
+  // Takes memory of `pool` (from SmallPayloadPool::allocate(size)); it goes back to the pool with this.
+  PayloadBytes(std::shared_ptr<SmallPayloadPool> pool, std::byte* memory, size_t size);
   ~PayloadBytes();
   PayloadBytes(PayloadBytes&& other) noexcept;
   PayloadBytes& operator=(PayloadBytes&& other) noexcept;
@@ -41,14 +44,17 @@ class PayloadBytes {
   const std::byte* end() const { return data_ + size_; }
   operator std::span<std::byte>() { return {data_, size_}; }  // NOLINT(google-explicit-constructor): vector-like
   operator std::span<const std::byte>() const { return {data_, size_}; }  // NOLINT(google-explicit-constructor)
+  // In an arena block of its own (not a small payload: those share slabs of the arena, see in_pool()).
   bool in_arena() const { return arena_ != nullptr; }
+  bool in_pool() const { return pool_ != nullptr; }
 
  private:
   void release();
 
   std::byte* data_ = nullptr;
   size_t size_ = 0;
-  std::shared_ptr<CacheArena> arena_;  // null: data_ is from operator new[]
+  std::shared_ptr<CacheArena> arena_;      // non-null: data_ is an arena block
+  std::shared_ptr<SmallPayloadPool> pool_;  // non-null: data_ is the pool's; both null: from operator new[]
 };
 
 }  // namespace texstream::server

@@ -26,9 +26,9 @@ struct ServerStats {
   // relaxed everywhere: statistics only, nothing is published through them.
   std::atomic<uint64_t> bytes_read{0};         // from storage: mip ranges, headers, OIIO's reads
   std::atomic<uint64_t> bytes_loaded{0};       // payload bytes of mips loaded from storage (kOk misses)
-  std::atomic<uint64_t> bytes_served_cached{0};// payload bytes served from the RAM cache
+  std::atomic<uint64_t> bytes_served_cached{0};// payload bytes served from the RAM cache (dispatcher only)
   std::atomic<uint64_t> loads_ok{0};           // misses answered kOk
-  std::atomic<uint64_t> hits_ok{0};            // hits answered kOk
+  std::atomic<uint64_t> hits_ok{0};            // hits answered kOk (dispatcher only)
   std::atomic<uint64_t> not_found{0};
   std::atomic<uint64_t> corrupt{0};
   std::atomic<uint64_t> io_errors{0};
@@ -37,10 +37,16 @@ struct ServerStats {
   QueueGauge pending;    // requests in the scheduler's heap
   QueueGauge in_flight;  // loads handed to workers
   QueueGauge overflow;   // completions waiting for room in the completion ring
+  // Recorded by the dispatcher alone (record_one_writer()).
   LatencyHistogram hit_latency;   // request taken off the ring → completion pushed, RAM-cache hits
   LatencyHistogram miss_latency;  // the same for loads from storage
 
   void add(std::atomic<uint64_t>& counter, uint64_t v) { counter.fetch_add(v, std::memory_order_relaxed); }
+  // add() for a counter only one thread ever writes (the dispatcher's per-hit counters): a plain load and
+  // store, no locked read-modify-write (see LatencyHistogram::record_one_writer()).
+  static void add_one_writer(std::atomic<uint64_t>& counter, uint64_t v) {
+    counter.store(counter.load(std::memory_order_relaxed) + v, std::memory_order_relaxed);
+  }
 };
 
 // Bytes read from storage ÷ bytes of mips delivered from storage (1.0 = exact reads; 0 when nothing loaded).
