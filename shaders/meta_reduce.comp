@@ -12,7 +12,7 @@
 
 layout(local_size_x = kMetaReduceGroup) in;
 
-layout(set = 0, binding = kBindingMetaImage) uniform usampler2D meta_image;
+layout(set = 0, binding = kBindingMetaImage, rg32ui) uniform readonly uimage2D meta_image;
 
 void flush(uint mesh, uint mip_fixed, uint weight_fixed) {
   if (mesh >= frame.flags.y) return;  // ids come from our own draws; never index past the mesh count
@@ -22,7 +22,7 @@ void flush(uint mesh, uint mip_fixed, uint weight_fixed) {
 }
 
 void main() {
-  ivec2 size = textureSize(meta_image, 0);
+  ivec2 size = imageSize(meta_image);
   int runs_per_row = (size.x + int(kMetaReduceRun) - 1) / int(kMetaReduceRun);
   int run = int(gl_GlobalInvocationID.x);
   int y = run / runs_per_row;
@@ -33,7 +33,7 @@ void main() {
   uint mip_fixed = kNoMip;
   uint weight_fixed = 0u;
   for (int x = x0; x < x1; ++x) {
-    uvec2 m = texelFetch(meta_image, ivec2(x, y), 0).xy;  // x: mesh id + 1 (0: no mesh), y: packed metadata
+    uvec2 m = imageLoad(meta_image, ivec2(x, y)).xy;  // x: mesh id + 1 (0: no mesh), y: packed metadata
     if (m.x == 0u) continue;
     if (m.x != current) {
       if (current != 0u) flush(current - 1u, mip_fixed, weight_fixed);

@@ -123,7 +123,6 @@ class ScenePasses {
   UniqueFramebuffer wide_fb_;
   UniqueSampler sampler_;
   UniqueSampler probe_sampler_;
-  UniqueSampler texel_sampler_;  // nearest: meta_reduce.comp's texelFetch of the integer target
   GpuBuffer probe_;
   bool probe_anisotropic_ = false;
   UniqueDescriptorSetLayout set_layout_;
