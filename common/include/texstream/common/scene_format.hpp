@@ -44,6 +44,9 @@ struct MeshRecord {
   double origin[3];       // map coordinates in metres (x east, y north, z up); vertices are relative to it
   float bounds_min[3];    // relative to origin
   float bounds_max[3];
+  // A mesh owns its vertex and index ranges, or shares all four fields with another mesh (instancing: the
+  // same geometry at another origin). Any other overlap is refused by the renderer when it first draws the
+  // mesh (it stores indices absolute and a mesh id per vertex, renderer/src/scene_gpu.cpp).
   uint32_t first_vertex;
   uint32_t vertex_count;
   uint32_t first_index;   // indices are relative to first_vertex
