@@ -130,6 +130,23 @@ TEST(TexelConversionTest, LinearFloatIsSrgbEncodedAndAlphaStaysLinear) {
   EXPECT_EQ(std::to_integer<int>(out[4]), 0);    // NaN
 }
 
+// texture_file_path() builds its text by hand (no path appends): it must name exactly the file
+// scene::texture_path() names, with the kind's suffix, for any scene folder spelling and any id.
+TEST(TextureFileIndexTest, FilePathIsTheSceneTexturePathWithTheKindsSuffix) {
+  for (const char* dir : {"", "/s", "/s/", "rel/dir", ".", "/a b/c.d", "//x//"}) {
+    for (uint32_t id : {0u, 1u, 0xfffu, 0x1000u, 0x1234u, 0xabcdefu, 0x7fffffffu, 0xffffffffu}) {
+      for (TextureFileKind kind : kTextureFileKinds) {
+        std::filesystem::path want = scene::texture_path(dir, TextureId(id));
+        want.replace_extension(suffix_of(kind));
+        const std::filesystem::path got = texture_file_path(dir, TextureId(id), kind);
+        EXPECT_EQ(got.native(), want.native()) << "dir '" << dir << "' id " << id;
+        EXPECT_EQ(got, want);
+        EXPECT_EQ(got.extension().string(), suffix_of(kind));
+      }
+    }
+  }
+}
+
 TEST(TextureFileIndexTest, SuffixesInLookupOrderAndRememberedEntries) {
   ASSERT_EQ(kTextureFileKinds.front(), TextureFileKind::kDds);
   EXPECT_EQ(texture_file_path("/s", TextureId(0x1234), TextureFileKind::kTx).string(), "/s/textures/001/00001234.tx");

@@ -18,7 +18,9 @@ class PosixFile final : public StorageFile {
  public:
   static constexpr size_t kMaxScatterParts = 32;  // a mip chain of up to 2^31 x 2^31 texels
 
-  PosixFile(int fd, std::filesystem::path path) : fd_(fd), path_(std::move(path)) {}
+  // The path as text, for error messages only: a std::filesystem::path copy also copies its list of
+  // components (an allocation per component), once per file opened.
+  PosixFile(int fd, std::string path) : fd_(fd), path_(std::move(path)) {}
   ~PosixFile() override { ::close(fd_); }
   PosixFile(const PosixFile&) = delete;
   PosixFile& operator=(const PosixFile&) = delete;
@@ -31,7 +33,7 @@ class PosixFile final : public StorageFile {
       if (n < 0) {
         if (errno == EINTR) continue;
         return make_error(ErrorCode::kIo, "cannot read " + std::to_string(out.size()) + " bytes at offset " +
-                                              std::to_string(offset) + " of '" + path_.string() +
+                                              std::to_string(offset) + " of '" + path_ +
                                               "': " + std::strerror(errno));
       }
       if (n == 0) break;  // end of file
@@ -58,7 +60,7 @@ class PosixFile final : public StorageFile {
       if (n < 0) {
         if (errno == EINTR) continue;
         return make_error(ErrorCode::kIo, "cannot read " + std::to_string(total) + " bytes at offset " +
-                                              std::to_string(offset) + " of '" + path_.string() +
+                                              std::to_string(offset) + " of '" + path_ +
                                               "': " + std::strerror(errno));
       }
       if (n == 0) break;  // end of file
@@ -77,14 +79,14 @@ class PosixFile final : public StorageFile {
   Result<uint64_t> size() override {
     struct stat st {};
     if (::fstat(fd_, &st) != 0) {
-      return make_error(ErrorCode::kIo, "cannot stat '" + path_.string() + "': " + std::strerror(errno));
+      return make_error(ErrorCode::kIo, "cannot stat '" + path_ + "': " + std::strerror(errno));
     }
     return static_cast<uint64_t>(st.st_size);
   }
 
  private:
   int fd_;
-  std::filesystem::path path_;
+  std::string path_;
 };
 
 }  // namespace
@@ -138,7 +140,7 @@ Result<std::unique_ptr<StorageFile>> PosixStorage::open(const std::filesystem::p
     const ErrorCode code = (err == ENOENT || err == ENOTDIR) ? ErrorCode::kNotFound : ErrorCode::kIo;
     return make_error(code, "cannot open '" + path.string() + "': " + std::strerror(err));
   }
-  return std::unique_ptr<StorageFile>(new PosixFile(fd, path));
+  return std::unique_ptr<StorageFile>(new PosixFile(fd, full));
 }
 
 }  // namespace texstream::server
