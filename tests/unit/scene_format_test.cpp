@@ -1,6 +1,8 @@
 // Scene format: every file round-trips, and every reader refuses truncated or corrupt input with an error that
 // names the file (and the record). The DDS files we write must be readable by OpenImageIO.
 #include <gtest/gtest.h>
+
+#include <cstdio>
 #include <unistd.h>
 
 #include <OpenImageIO/imageio.h>
@@ -280,6 +282,20 @@ TEST(TexturePath, SplitsIdIntoFolderAndFile) {
   EXPECT_EQ(texture_path("/s", TextureId{0}), fs::path("/s/textures/000/00000000.dds"));
   EXPECT_EQ(texture_path("/s", TextureId{0x12345}), fs::path("/s/textures/012/00012345.dds"));
   EXPECT_EQ(texture_path("/s", TextureId{0xffffffffu}), fs::path("/s/textures/fff/ffffffff.dds"));
+}
+
+// texture_path builds its text directly: it must equal what path appends give, for any folder spelling.
+TEST(TexturePath, EqualsThePathAppendsForEveryFolderSpelling) {
+  for (const char* dir : {"", "/s", "/s/", "rel/dir", ".", "/a b/c.d", "//x//"}) {
+    for (uint32_t id : {0u, 1u, 0xfffu, 0x1000u, 0x1234u, 0xabcdefu, 0x7fffffffu, 0xffffffffu}) {
+      char folder[8];
+      char file[16];
+      std::snprintf(folder, sizeof folder, "%03x", (id >> 12) & 0xfffu);
+      std::snprintf(file, sizeof file, "%08x.dds", id);
+      const fs::path want = fs::path(dir) / "textures" / folder / file;
+      EXPECT_EQ(texture_path(dir, TextureId{id}).native(), want.native()) << "dir '" << dir << "' id " << id;
+    }
+  }
 }
 
 TEST(DdsHeader, RoundTripsBothFormats) {
