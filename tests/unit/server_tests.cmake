@@ -7,6 +7,7 @@ texstream_add_unit_test(server_unit_tests
   ${CMAKE_CURRENT_LIST_DIR}/server_token_bucket_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/server_formats_unit_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/server_request_scheduler_test.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/server_flat_mip_map_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/server_slot_pool_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/server_open_file_cache_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/server_fast_checksum_test.cpp

@@ -144,10 +144,10 @@ bool MipLoader::open_texture(const LoadRequest& request, Opened& opened, Complet
   files_.take(request.texture);  // not remembered (forgotten after a failure): a kept file is stale, close it
   std::string tried;
   for (TextureFileKind kind : kTextureFileKinds) {
-    const std::filesystem::path path = texture_file_path(scene_dir_, request.texture, kind);
+    std::filesystem::path path = texture_file_path(scene_dir_, request.texture, kind);
     Result<std::unique_ptr<StorageFile>> f = storage_.open(path);
     if (f.ok()) {
-      opened.path = path;
+      opened.path = std::move(path);  // moved, not copied: a path copy allocates per component
       opened.entry = TextureFileEntry{kind, std::nullopt};
       opened.file = std::move(f).value();
       index_.remember(request.texture, opened.entry);

@@ -13,18 +13,18 @@ std::optional<LoadRequest> RequestScheduler::add(const LoadRequest& request) {
   if (request.generation < newest_) return request;  // stale on arrival: a newer cycle has already asked
   newest_ = request.generation;
   const MipKey key = request.key();
-  auto it = pending_.find(key);
-  if (it == pending_.end()) {
+  Pending* found = pending_.find(key);
+  if (found == nullptr) {
     const uint64_t sequence = next_sequence_++;
-    Pending p{request, sequence, sequence};
-    pending_.emplace(key, p);
+    const Pending p{request, sequence, sequence};
+    pending_.insert(key, p);
     push_node(p);
     compact_heap();
     return std::nullopt;
   }
   // Coalesce. The pending entry lives on with the newer generation and the larger priority; the request it
   // replaces is the one answered kCancelled (its generation is what the renderer will see echoed).
-  Pending& p = it->second;
+  Pending& p = *found;
   const LoadRequest superseded = p.request;
   const bool raise = request.priority > p.request.priority;
   p.request.generation = request.generation;
@@ -42,42 +42,35 @@ void RequestScheduler::supersede_older_than(Generation generation, std::vector<L
   // be pending: the dispatcher calls this after every batch it drains, and the scan is O(pending).
   if (generation <= superseded_through_) return;
   superseded_through_ = generation;
-  for (auto it = pending_.begin(); it != pending_.end();) {
-    if (it->second.request.generation < generation) {
-      cancelled.push_back(it->second.request);
-      it = pending_.erase(it);
-    } else {
-      ++it;
-    }
-  }
+  pending_.erase_if_not([generation](MipKey, const Pending& p) { return !(p.request.generation < generation); },
+                        [&cancelled](const Pending& p) { cancelled.push_back(p.request); });
   compact_heap();
 }
 
-void RequestScheduler::drop_stale_top() {
+const RequestScheduler::Pending* RequestScheduler::drop_stale_top() {
   while (!heap_.empty()) {
     const HeapNode& n = heap_.front();
-    auto it = pending_.find(n.key);
-    if (it != pending_.end() && it->second.version == n.version) return;
+    const Pending* p = pending_.find(n.key);
+    if (p != nullptr && p->version == n.version) return p;
     std::pop_heap(heap_.begin(), heap_.end(), NodeLess{});
     heap_.pop_back();
   }
+  return nullptr;
 }
 
 std::optional<LoadRequest> RequestScheduler::top() {
-  drop_stale_top();
-  if (heap_.empty()) return std::nullopt;
-  return pending_.at(heap_.front().key).request;
+  const Pending* p = drop_stale_top();
+  if (p == nullptr) return std::nullopt;
+  return p->request;
 }
 
 std::optional<LoadRequest> RequestScheduler::pop() {
-  drop_stale_top();
-  if (heap_.empty()) return std::nullopt;
-  const MipKey key = heap_.front().key;
+  const Pending* p = drop_stale_top();
+  if (p == nullptr) return std::nullopt;
+  const LoadRequest out = p->request;
   std::pop_heap(heap_.begin(), heap_.end(), NodeLess{});
   heap_.pop_back();
-  auto it = pending_.find(key);
-  const LoadRequest out = it->second.request;
-  pending_.erase(it);
+  pending_.erase(out.key());
   return out;
 }
 
@@ -86,7 +79,9 @@ void RequestScheduler::compact_heap() {
   // stays within about twice the live entries.
   if (heap_.size() <= 2 * pending_.size() + 64) return;
   heap_.clear();
-  for (const auto& [key, p] : pending_) heap_.push_back({p.request.priority, p.sequence, key, p.version});
+  pending_.for_each([this](MipKey key, const Pending& p) {
+    heap_.push_back({p.request.priority, p.sequence, key, p.version});
+  });
   std::make_heap(heap_.begin(), heap_.end(), NodeLess{});
 }
 

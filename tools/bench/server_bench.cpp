@@ -16,6 +16,7 @@
 //      texture set ≥ 4x the cache; peak RSS vs budget + staging + 64 MB
 // The scene is generated with texstream-gen (rgba8, so both caches hold the same bytes per mip) unless
 // --scene is given.
+#include <fcntl.h>
 #include <pthread.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -74,6 +75,10 @@ struct Options {
   fs::path scene;
   double memory_minutes = -1;  // < 0: the default for the mode
   uint32_t textures = 0;       // generated scene size (0: the default for the mode)
+  // --profile-misses N: before the misses phase, stream the miss set N more times, each through a fresh
+  // server (cold cache, warm arena), so that a profiler sees the miss stream's dispatcher for long enough
+  // (one stream is ~20 ms). Not counted in any result.
+  uint32_t profile_misses = 0;
   // --phases memory,hits,misses,trace: run only these (profiling one phase); skipped phases report 0.
   std::string phases = "memory,hits,misses,trace";
   bool runs(const char* phase) const {
@@ -272,8 +277,12 @@ struct StreamResult {
 };
 
 // Streams `requests` in order with at most `window` outstanding (window ≤ slots); one generation.
+// `record_poll_cost`: time each poll that finds completions (StreamResult::poll_us, the trace's renderer
+// polling cost per frame). Off for the throughput phases, which do not report it: two clock reads per poll
+// were ~1/5 of the bench thread's own samples in the hit phase (perf), time the server then waited for the
+// next requests and slot releases (the dispatcher yielded ~18 % of its samples).
 StreamResult stream(Harness& h, const std::vector<Request>& requests, uint32_t window, uint64_t generation,
-                    bool record_latency) {
+                    bool record_latency, bool record_poll_cost = false) {
   StreamResult out;
   std::unordered_map<uint64_t, uint64_t> pushed_at;  // key → push time
   size_t next = 0;
@@ -292,7 +301,7 @@ StreamResult stream(Harness& h, const std::vector<Request>& requests, uint32_t w
       ++next;
     }
     h.ring();
-    const uint64_t p0 = now_ns();
+    const uint64_t p0 = record_poll_cost ? now_ns() : 0;
     const uint32_t got = h.poll([&](const CompletionRecord& c) {
       if (record_latency) {
         auto it = pushed_at.find(MipKey(TextureId(c.texture_id), MipLevel(c.mip_level)).value);
@@ -310,7 +319,7 @@ StreamResult stream(Harness& h, const std::vector<Request>& requests, uint32_t w
       }
     });
     if (got > 0) {
-      out.poll_us.push_back(static_cast<double>(now_ns() - p0) / 1e3);
+      if (record_poll_cost) out.poll_us.push_back(static_cast<double>(now_ns() - p0) / 1e3);
       idle = 0;
     } else if (++idle > 64) {
       std::this_thread::yield();  // 2 cores shared with the server's dispatcher and workers
@@ -548,7 +557,7 @@ OursResult replay_ours(const Scene& s, const std::vector<Cycle>& trace, ServerCo
   const uint64_t t0 = now_ns();
   uint64_t generation = 1;
   for (const Cycle& c : trace) {
-    StreamResult r = stream(*h, c, h->slots(), generation++, false);
+    StreamResult r = stream(*h, c, h->slots(), generation++, false, /*record_poll_cost=*/true);
     out.stream.bytes += r.bytes;
     out.stream.completions += r.completions;
     out.stream.failures += r.failures;
@@ -679,12 +688,14 @@ std::optional<Options> parse(const std::vector<std::string>& args) {
       o.memory_minutes = std::atof(args[++i].c_str());
     } else if (a == "--phases" && has_value) {
       o.phases = args[++i];
+    } else if (a == "--profile-misses" && has_value) {
+      o.profile_misses = static_cast<uint32_t>(std::atoi(args[++i].c_str()));
     } else if (a == "--textures" && has_value) {
       o.textures = static_cast<uint32_t>(std::atoi(args[++i].c_str()));
     } else {
       std::fprintf(stderr,
                    "usage: texstream-bench server [--quick] [--scene DIR] [--memory-minutes M] [--textures N]\n"
-                   "                              [--phases memory,hits,misses,trace]\n"
+                   "                              [--phases memory,hits,misses,trace] [--profile-misses N]\n"
                    "unknown or incomplete argument '%s'\n",
                    a.c_str());
       return std::nullopt;
@@ -717,6 +728,15 @@ int run_server_bench(const std::vector<std::string>& args) {
     if (!generate_scene(temp, n)) {
       std::fprintf(stderr, "server bench: texstream-gen failed (is it built next to texstream-bench?)\n");
       return 1;
+    }
+    // The generator leaves ~177 MB of dirty page-cache pages (--quick) that the kernel writes back over the
+    // next seconds, while the phases run: disk I/O and flusher CPU on the 2 shared cores, landing on any phase
+    // by chance. Written back now, before anything is measured: the page cache stays warm (the issue measures
+    // misses from a warm OS page cache); only the writeback's timing moves, out of the measurements.
+    // syncfs (the scene's file system alone) rather than sync (every file system's dirty data).
+    if (const int fd = ::open(temp.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC); fd >= 0) {
+      ::syncfs(fd);
+      ::close(fd);
     }
     s.dir = temp;
   } else {
@@ -820,6 +840,12 @@ int run_server_bench(const std::vector<std::string>& args) {
     const std::vector<Request> miss_set = all_mips_until(s, first, opt->quick ? (64ull << 20) : (160ull << 20), &end);
     uint64_t read_bytes = 0;
     read_gbps(s, first, end, nullptr);  // warm
+    for (uint32_t k = 0; k < opt->profile_misses; ++k) {
+      auto hp = Harness::start(s.dir, config);
+      if (!hp) return 1;
+      wait_for_warm_arena(hp->server());
+      stream(*hp, miss_set, hp->slots(), 1, false);
+    }
     auto h = Harness::start(s.dir, config);
     if (!h) return 1;
     // A server with a warm cache arena pre-faults it at idle priority after start (cache_arena.hpp): a miss

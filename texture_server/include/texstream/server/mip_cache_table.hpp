@@ -5,8 +5,9 @@
 // bucket and a separate node, then the CachedMip behind the shared_ptr (texstream-bench server, perf:
 // the cache's metadata was 36 % of a hit's server time, mostly cache misses on those hops).
 //
-// Not thread-safe: MipCache holds its lock around every call. Erasing moves later entries of the probe run
-// back one slot, so pointers to entries are valid only until the next insert or erase.
+// The table itself is open_mip_table.hpp's. Not thread-safe: MipCache holds its lock around every call.
+// Erasing moves later entries of the probe run back one slot, so pointers to entries are valid only until the
+// next insert or erase.
 #include <algorithm>
 #include <bit>
 #include <cstddef>
@@ -15,6 +16,7 @@
 #include <vector>
 
 #include "texstream/server/mip_key.hpp"
+#include "texstream/server/open_mip_table.hpp"
 
 namespace texstream::server {
 
@@ -36,84 +38,39 @@ struct alignas(64) MipCacheSlot {
 };
 static_assert(sizeof(MipCacheSlot) == 64, "a hit reads one cache line of the index");
 
+struct MipCacheSlotUsed {
+  bool operator()(const MipCacheSlot& s) const { return s.mip != nullptr; }
+};
+
 class MipCacheTable {
  public:
   // Room for `expected_entries` without growing (the table grows at half full); at least kInitialSlots.
-  // The slots are written here (value-initialised), so their pages are faulted in now, not by inserts.
-  explicit MipCacheTable(size_t expected_entries = 0)
-      : slots_(std::bit_ceil(std::max(kInitialSlots, 2 * expected_entries))), mask_(slots_.size() - 1) {}
+  explicit MipCacheTable(size_t expected_entries = 0) : table_(expected_entries, kInitialSlots) {}
 
   // The entry of `key`, or nullptr.
-  MipCacheSlot* find(MipKey key) {
-    for (size_t i = home(key);; i = (i + 1) & mask_) {
-      MipCacheSlot& s = slots_[i];
-      if (!s.mip) return nullptr;
-      if (s.key == key) return &s;
-    }
-  }
-  const MipCacheSlot* find(MipKey key) const { return const_cast<MipCacheTable*>(this)->find(key); }
+  MipCacheSlot* find(MipKey key) { return table_.find(key); }
+  const MipCacheSlot* find(MipKey key) const { return table_.find(key); }
 
   // Starts loading the slot where find(key) begins into the CPU cache (a hint: no effect on the contents).
-  void prefetch(MipKey key) const { __builtin_prefetch(&slots_[home(key)], 0, 3); }
+  void prefetch(MipKey key) const { table_.prefetch(key); }
 
   // Adds an entry for a key that is not in the table (the caller found none); `slot.mip` must be non-null.
   // Returns it (valid until the next insert or erase).
-  MipCacheSlot* insert(MipCacheSlot slot) {
-    // Grown at half full: linear probing then averages ~1.5 probes for a hit and ~2.5 for a miss.
-    if ((size_ + 1) * 2 > slots_.size()) grow();
-    MipCacheSlot* s = place(std::move(slot));
-    ++size_;
-    return s;
-  }
+  MipCacheSlot* insert(MipCacheSlot slot) { return table_.insert(std::move(slot)); }
 
   // Removes the entry of `key` if there is one; its payload reference is moved to `out` (freed by the
   // caller after its lock is released). False if the key was not there.
   bool erase(MipKey key, std::shared_ptr<const CachedMip>& out) {
-    MipCacheSlot* found = find(key);
-    if (found == nullptr) return false;
-    size_t hole = static_cast<size_t>(found - slots_.data());
-    out = std::move(found->mip);
-    // Backward shift: an entry later in the run moves into the hole unless its home lies cyclically in
-    // (hole, j] — then the hole is not on its probe path and it must stay.
-    for (size_t j = (hole + 1) & mask_; slots_[j].mip; j = (j + 1) & mask_) {
-      const size_t h = home(slots_[j].key);
-      const bool stays = hole <= j ? (hole < h && h <= j) : (hole < h || h <= j);
-      if (stays) continue;
-      slots_[hole] = std::move(slots_[j]);
-      hole = j;
-    }
-    slots_[hole] = MipCacheSlot{};
-    --size_;
-    return true;
+    return table_.erase(key, [&out](MipCacheSlot& s) { out = std::move(s.mip); });
   }
 
-  size_t size() const { return size_; }
+  size_t size() const { return table_.size(); }
 
  private:
   // A small table for a small cache; doubles as it fills.
   static constexpr size_t kInitialSlots = 64;
 
-  size_t home(MipKey key) const { return MipKeyHash{}(key) & mask_; }
-
-  MipCacheSlot* place(MipCacheSlot&& slot) {
-    size_t i = home(slot.key);
-    while (slots_[i].mip) i = (i + 1) & mask_;
-    slots_[i] = std::move(slot);
-    return &slots_[i];
-  }
-
-  void grow() {
-    std::vector<MipCacheSlot> old(slots_.size() * 2);
-    old.swap(slots_);
-    mask_ = slots_.size() - 1;
-    for (MipCacheSlot& s : old) {
-      if (s.mip) place(std::move(s));
-    }
-  }
-
-  std::vector<MipCacheSlot> slots_;
-  size_t mask_;
-  size_t size_ = 0;
+  OpenMipTable<MipCacheSlot, MipCacheSlotUsed> table_;
 };
 
 }  // namespace texstream::server

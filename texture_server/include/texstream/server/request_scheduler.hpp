@@ -13,10 +13,10 @@
 // Only the dispatcher thread uses it (not thread-safe). Ties in priority are served first come, first served.
 #include <cstdint>
 #include <optional>
-#include <unordered_map>
 #include <vector>
 
 #include "texstream/protocol/ids.hpp"
+#include "texstream/server/flat_mip_map.hpp"
 #include "texstream/server/mip_key.hpp"
 
 namespace texstream::server {
@@ -49,7 +49,7 @@ class RequestScheduler {
   }
 
   // True if a load of `key` is pending (queued, not yet popped).
-  bool contains(MipKey key) const { return pending_.find(key) != pending_.end(); }
+  bool contains(MipKey key) const { return pending_.find(key) != nullptr; }
   size_t size() const { return pending_.size(); }
   bool empty() const { return pending_.empty(); }
   Generation newest_generation() const { return newest_; }
@@ -77,10 +77,11 @@ class RequestScheduler {
   };
 
   void push_node(const Pending& p);
-  void drop_stale_top();
+  // Pops stale nodes off the heap; the top node's pending entry (valid until the next change), or nullptr.
+  const Pending* drop_stale_top();
   void compact_heap();
 
-  std::unordered_map<MipKey, Pending, MipKeyHash> pending_;
+  FlatMipMap<Pending> pending_;  // (flat_mip_map.hpp: no allocation per request)
   // Lazy deletion: nodes of removed or re-prioritised entries stay until they reach the top or the heap is
   // rebuilt (when stale nodes outnumber live ones), so every operation stays O(log n) amortised.
   std::vector<HeapNode> heap_;
