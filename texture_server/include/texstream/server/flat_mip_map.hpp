@@ -10,10 +10,7 @@
 //
 // Not thread-safe. Pointers to values are valid only until the next insert or erase (erasing moves later
 // entries of the probe run back one slot; inserting may grow the table).
-#include <algorithm>
-#include <bit>
 #include <cstddef>
-#include <cstdint>
 #include <utility>
 #include <vector>
 

@@ -8,12 +8,10 @@
 // The table itself is open_mip_table.hpp's. Not thread-safe: MipCache holds its lock around every call.
 // Erasing moves later entries of the probe run back one slot, so pointers to entries are valid only until the
 // next insert or erase.
-#include <algorithm>
-#include <bit>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
-#include <vector>
+#include <utility>
 
 #include "texstream/server/mip_key.hpp"
 #include "texstream/server/open_mip_table.hpp"
