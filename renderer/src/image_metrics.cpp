@@ -85,7 +85,7 @@ Result<double> ssim(std::span<const float> a, std::span<const float> b, uint32_t
     for (size_t c = 0; c < ow; ++c) {
       std::array<double, 5> m{};
       for (size_t k = 0; k < static_cast<size_t>(kSsimWindow); ++k) {
-        const double x = ra[c + k], y = rb[c + k], wk = g[k];
+        const double x = static_cast<double>(ra[c + k]), y = static_cast<double>(rb[c + k]), wk = g[k];
         m[0] += wk * x;
         m[1] += wk * y;
         m[2] += wk * x * x;

@@ -208,7 +208,7 @@ Result<std::unique_ptr<ScenePasses>> ScenePasses::create(const VulkanContext& ct
     if (ctx.properties().limits.timestampComputeAndGraphics != VK_TRUE) {
       return make_error(ErrorCode::kUnsupported, "device '" + ctx.device_name() + "' has no timestamps on its queue");
     }
-    p->timestamp_period_ns_ = ctx.properties().limits.timestampPeriod;
+    p->timestamp_period_ns_ = static_cast<double>(ctx.properties().limits.timestampPeriod);
     VkQueryPoolCreateInfo qi{};
     qi.sType = VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO;
     qi.queryType = VK_QUERY_TYPE_TIMESTAMP;
