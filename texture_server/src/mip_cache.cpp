@@ -91,7 +91,7 @@ bool MipCache::evict_one(std::vector<std::shared_ptr<const CachedMip>>& evicted)
   fault_point(FaultPoint::kEviction);  // victim picked, not yet erased
   policy_->erase(e->node);
   std::shared_ptr<const CachedMip> gone;
-  entries_.erase(*victim, gone);
+  entries_.erase(e, gone);  // the entry found above: no second lookup
   evicted.push_back(std::move(gone));
   ++stats_.evictions;
   return true;

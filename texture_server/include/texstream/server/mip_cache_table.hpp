@@ -59,7 +59,15 @@ class MipCacheTable {
   // Removes the entry of `key` if there is one; its payload reference is moved to `out` (freed by the
   // caller after its lock is released). False if the key was not there.
   bool erase(MipKey key, std::shared_ptr<const CachedMip>& out) {
-    return table_.erase(key, [&out](MipCacheSlot& s) { out = std::move(s.mip); });
+    MipCacheSlot* found = find(key);
+    if (found == nullptr) return false;
+    erase(found, out);
+    return true;
+  }
+  // The same for an entry find() returned (no second lookup).
+  void erase(MipCacheSlot* entry, std::shared_ptr<const CachedMip>& out) {
+    out = std::move(entry->mip);
+    table_.erase(entry);
   }
 
   size_t size() const { return table_.size(); }

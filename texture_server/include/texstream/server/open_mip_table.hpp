@@ -49,13 +49,9 @@ class OpenMipTable {
     return s;
   }
 
-  // Removes the entry of `key`, first handing it to gone(Slot&) (which may move from it). False if absent.
-  template <class Gone>
-  bool erase(MipKey key, Gone&& gone) {
-    Slot* found = find(key);
-    if (found == nullptr) return false;
-    gone(*found);
-    size_t hole = static_cast<size_t>(found - slots_.data());
+  // Removes the entry in `slot` (a pointer find() returned since the last insert or erase).
+  void erase(Slot* slot) {
+    size_t hole = static_cast<size_t>(slot - slots_.data());
     // Backward shift: an entry later in the run moves into the hole unless its home lies cyclically in
     // (hole, j] — then the hole is not on its probe path and it must stay.
     for (size_t j = (hole + 1) & mask_; Used{}(slots_[j]); j = (j + 1) & mask_) {
@@ -67,10 +63,13 @@ class OpenMipTable {
     }
     slots_[hole] = Slot{};
     --size_;
-    return true;
   }
+  // Removes the entry of `key`; false if there was none.
   bool erase(MipKey key) {
-    return erase(key, [](Slot&) {});
+    Slot* found = find(key);
+    if (found == nullptr) return false;
+    erase(found);
+    return true;
   }
 
   // Calls f(slot) for every entry, in slot order (not insertion order).
