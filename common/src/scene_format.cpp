@@ -751,8 +751,8 @@ Result<MappedMeshIndex> map_mesh_index(const fs::path& dir, uint64_t mesh_count)
 
 // ---------------------------------------------------------------- texture files
 
-fs::path texture_path(const fs::path& dir, TextureId id) {
-  // Built as one string: the server makes one path per texture it opens, and snprintf plus three path
+std::string texture_path_text(const fs::path& dir, TextureId id) {
+  // Built as one string: the server makes one name per texture it opens, and snprintf plus three path
   // appends (each re-splitting the path into components) were ~5 % of its dispatcher's time in
   // texstream-bench server's miss stream. The text is what dir / "textures" / folder / file gives on POSIX.
   static constexpr char kHex[] = "0123456789abcdef";
@@ -767,8 +767,10 @@ fs::path texture_path(const fs::path& dir, TextureId id) {
   s += '/';
   for (int shift = 28; shift >= 0; shift -= 4) s += kHex[(id.value >> shift) & 0xfu];
   s += ".dds";
-  return fs::path(std::move(s));
+  return s;
 }
+
+fs::path texture_path(const fs::path& dir, TextureId id) { return fs::path(texture_path_text(dir, id)); }
 
 std::array<std::byte, kDdsHeaderBytes> make_dds_header(TexelFormat format, uint32_t width, uint32_t height,
                                                        uint32_t mip_count) {

@@ -130,7 +130,7 @@ TEST(TexelConversionTest, LinearFloatIsSrgbEncodedAndAlphaStaysLinear) {
   EXPECT_EQ(std::to_integer<int>(out[4]), 0);    // NaN
 }
 
-// texture_file_path() builds its text by hand (no path appends): it must name exactly the file
+// texture_file_path() / texture_file_path_text() build their text by hand (no path appends): it must name exactly the file
 // scene::texture_path() names, with the kind's suffix, for any scene folder spelling and any id.
 TEST(TextureFileIndexTest, FilePathIsTheSceneTexturePathWithTheKindsSuffix) {
   for (const char* dir : {"", "/s", "/s/", "rel/dir", ".", "/a b/c.d", "//x//"}) {
@@ -140,6 +140,8 @@ TEST(TextureFileIndexTest, FilePathIsTheSceneTexturePathWithTheKindsSuffix) {
         want.replace_extension(suffix_of(kind));
         const std::filesystem::path got = texture_file_path(dir, TextureId(id), kind);
         EXPECT_EQ(got.native(), want.native()) << "dir '" << dir << "' id " << id;
+        // The text the loader opens (Storage::open_text) is the same name.
+        EXPECT_EQ(texture_file_path_text(dir, TextureId(id), kind), want.native()) << "dir '" << dir << "' id " << id;
         EXPECT_EQ(got, want);
         EXPECT_EQ(got.extension().string(), suffix_of(kind));
       }

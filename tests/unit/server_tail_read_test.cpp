@@ -149,6 +149,95 @@ TEST_F(TailRead, TheCoarsestMipBringsEverySmallMipInOneRead) {
   EXPECT_EQ(storage_.counters.scatter_reads + storage_.counters.reads, 1);  // nothing read again
 }
 
+TEST_F(TailRead, AHeldReadServesItsLevelsWithoutTheCacheThenInsertsThemTogether) {
+  add_texture(64, 64);  // 7 levels, all in one read (see above)
+  const CompletionRecord c =
+      loader_.load(request(6), record_, 0, slot_, /*local_only=*/true, /*read_tail=*/true, 0, /*hold_read=*/true);
+  ASSERT_EQ(c.status, static_cast<uint32_t>(CompletionStatus::kOk));
+  const std::span<const std::byte> m6 = mip_of(file_, record_, 6);
+  EXPECT_EQ(std::memcmp(slot_.data(), m6.data(), m6.size()), 0);
+  EXPECT_EQ(c.checksum, payload_checksum(m6.data(), m6.size()));
+  // Held back: nothing is in the cache yet, but the loader has every level.
+  for (uint32_t l = 0; l < 7; ++l) {
+    EXPECT_FALSE(cached(l)) << "mip " << l;
+    EXPECT_TRUE(loader_.holds(MipKey(TextureId(0), MipLevel(l)))) << "mip " << l;
+  }
+  EXPECT_FALSE(loader_.holds(MipKey(TextureId(1), MipLevel(0))));
+  EXPECT_EQ(cache_.stats().insertions, 0u);
+  // Levels 5 and 3 are served from the held read: the file's bytes and checksums, counted as hits.
+  for (const uint32_t l : {5u, 3u}) {
+    std::fill(slot_.begin(), slot_.end(), std::byte{0xee});
+    const CompletionRecord h = loader_.serve_held(request(l), record_, 0, slot_);
+    ASSERT_EQ(h.status, static_cast<uint32_t>(CompletionStatus::kOk)) << "mip " << l;
+    const std::span<const std::byte> want = mip_of(file_, record_, l);
+    ASSERT_EQ(h.byte_size, want.size());
+    EXPECT_EQ(std::memcmp(slot_.data(), want.data(), want.size()), 0) << "mip " << l;
+    EXPECT_EQ(h.checksum, payload_checksum(want.data(), want.size())) << "mip " << l;
+  }
+  EXPECT_EQ(block_.ram_cache_hits.v.load(), 2u);
+  EXPECT_EQ(stats_.bytes_loaded.load(), m6.size() + mip_of(file_, record_, 5).size() + mip_of(file_, record_, 3).size());
+  // A level served once (or the asked one) is not served from the held read again: the held read goes into
+  // the cache and the caller asks the cache, which then has it.
+  EXPECT_EQ(loader_.serve_held(request(6), record_, 0, slot_).status, 0u);
+  EXPECT_FALSE(loader_.holds(MipKey(TextureId(0), MipLevel(0))));
+  for (uint32_t l = 0; l < 7; ++l) EXPECT_TRUE(cached(l)) << "mip " << l;
+  // Counted as if each had been inserted first and copied out then: 2 hits, both first uses of read-ahead
+  // mips; the 4 levels not served yet are prefetched entries whose first hit counts their bytes.
+  MipCacheStats st = cache_.stats();
+  EXPECT_EQ(st.insertions, 7u);
+  EXPECT_EQ(st.hits, 2u);
+  EXPECT_EQ(st.prefetch_hits, 2u);
+  EXPECT_EQ(st.prefetched, 6u);
+  for (const uint32_t l : {4u, 2u, 1u, 0u}) expect_hit(l);
+  expect_hit(5);  // a second use: counts no bytes as loaded
+  EXPECT_EQ(stats_.bytes_loaded.load(), mip_chain_offset(TexelFormat::kRgba8, 64, 64, 7));
+  st = cache_.stats();
+  EXPECT_EQ(st.prefetch_hits, 6u);
+  EXPECT_EQ(st.hits, 7u);
+  EXPECT_EQ(storage_.counters.scatter_reads + storage_.counters.reads, 1);  // one read for everything
+}
+
+TEST_F(TailRead, ANewHeldReadReleasesThePreviousOneFirst) {
+  add_texture(64, 64);
+  ASSERT_EQ(loader_.load(request(6), record_, 0, slot_, true, true, 0, /*hold_read=*/true).status,
+            static_cast<uint32_t>(CompletionStatus::kOk));
+  // The next tail load (here of the same texture's finest level, which the held read already has) first puts
+  // the held mips into the cache, so it sees them cached and reads nothing again.
+  ASSERT_EQ(loader_.load(request(0), record_, 0, slot_, true, true, 0, /*hold_read=*/true).status,
+            static_cast<uint32_t>(CompletionStatus::kOk));
+  EXPECT_EQ(cache_.stats().insertions, 7u);
+  EXPECT_EQ(storage_.counters.scatter_reads + storage_.counters.reads, 2);
+  EXPECT_EQ(stats_.bytes_read.load(), scene::kDdsHeaderBytes + mip_chain_offset(TexelFormat::kRgba8, 64, 64, 7) +
+                                          mip_of(file_, record_, 0).size());
+  loader_.release_held();
+  loader_.release_held();  // nothing held: a no-op
+  EXPECT_EQ(cache_.stats().insertions, 7u);  // mip 0's second copy found its key cached (as a raced load)
+}
+
+TEST_F(TailRead, AFileIsKeptOpenOnlyWhileSomeOfItsLevelsAreNotRead) {
+  add_texture(256, 256);  // 9 levels; mip 0 (256 KiB) joins a tail read only when wanted
+  ASSERT_EQ(load(8, true).status, static_cast<uint32_t>(CompletionStatus::kOk));
+  EXPECT_FALSE(cached(0));
+  EXPECT_EQ(storage_.counters.opens, 1);
+  // Mip 0 is still to come: the file was kept open, so its load opens nothing.
+  ASSERT_EQ(load(0, true).status, static_cast<uint32_t>(CompletionStatus::kOk));
+  EXPECT_EQ(storage_.counters.opens, 1);
+}
+
+TEST_F(TailRead, AFileReadWholeByOneTailReadIsClosedAtOnce) {
+  add_texture(64, 64);  // 7 levels, all in one tail read
+  ASSERT_EQ(load(6, true).status, static_cast<uint32_t>(CompletionStatus::kOk));
+  for (uint32_t l = 0; l < 7; ++l) ASSERT_TRUE(cached(l)) << "mip " << l;
+  EXPECT_EQ(storage_.counters.opens, 1);
+  // Nothing was left to read, so the file was closed rather than kept: a later load (as after an eviction)
+  // opens it again.
+  ASSERT_EQ(load(0, false).status, static_cast<uint32_t>(CompletionStatus::kOk));
+  EXPECT_EQ(storage_.counters.opens, 2);
+  // Without a tail read nothing says what is cached: that file is kept, as before.
+  ASSERT_EQ(load(1, false).status, static_cast<uint32_t>(CompletionStatus::kOk));
+  EXPECT_EQ(storage_.counters.opens, 2);
+}
+
 TEST_F(TailRead, LargeMipsJoinOnlyWhenWanted) {
   add_texture(256, 256);  // mip 0: 256 KiB, mip 1: 64 KiB, mip 2: 16 KiB, ...
   // Mip 1 is asked for and queued: it joins; mip 0 is not asked for: it stays out although it is contiguous.

@@ -22,6 +22,7 @@ MipCache::MipCache(uint64_t budget_bytes, std::unique_ptr<EvictionPolicy> policy
       arena_.reset();  // no address space: heap payloads, as without the option
     } else {
       small_pool_ = std::make_shared<SmallPayloadPool>(budget_ / kSmallPoolDivisor);
+      block_allocator_.emplace(small_pool_);
     }
   }
 }
@@ -99,7 +100,7 @@ bool MipCache::evict_one(std::vector<std::shared_ptr<const CachedMip>>& evicted)
 
 std::shared_ptr<CachedMip> MipCache::new_cached_mip() const {
   // The control block and CachedMip in one allocation, from the small payload pool when there is one.
-  if (small_pool_) return std::allocate_shared<CachedMip>(SmallPoolAllocator<CachedMip>(small_pool_));
+  if (small_pool_) return std::allocate_shared<CachedMip>(*block_allocator_);
   return std::make_shared<CachedMip>();
 }
 
@@ -161,6 +162,21 @@ size_t MipCache::insert_all(std::span<std::pair<MipKey, std::shared_ptr<const Ca
   size_t admitted = 0;
   std::lock_guard lock(mutex_);
   for (auto& [key, mip] : mips) admitted += insert_locked(key, std::move(mip), prefetched, evicted) ? 1 : 0;
+  return admitted;
+}
+
+size_t MipCache::insert_loaded(std::span<LoadedMip> mips) {
+  std::vector<std::shared_ptr<const CachedMip>> evicted;  // freed after the lock, as in insert()
+  size_t admitted = 0;
+  std::lock_guard lock(mutex_);
+  for (LoadedMip& m : mips) {
+    if (m.use == LoadedUse::kServed) {
+      ++stats_.hits;
+      ++stats_.prefetch_hits;
+      ++stats_.prefetched;  // it was read ahead (stats_.prefetched counts entries read ahead of a request)
+    }
+    admitted += insert_locked(m.key, std::move(m.mip), m.use == LoadedUse::kReadAhead, evicted) ? 1 : 0;
+  }
   return admitted;
 }
 

@@ -116,7 +116,10 @@ int PosixStorage::directory_fd(std::string_view dir) {
 }
 
 Result<std::unique_ptr<StorageFile>> PosixStorage::open(const std::filesystem::path& path) {
-  const std::string& full = path.native();
+  return open_text(path.native());
+}
+
+Result<std::unique_ptr<StorageFile>> PosixStorage::open_text(const std::string& full) {
   const size_t slash = full.rfind('/');
   // "dir/name": relative to dir's kept descriptor; a bare name, a path ending in '/', or a directory that
   // cannot be kept: by the full path.
@@ -138,7 +141,7 @@ Result<std::unique_ptr<StorageFile>> PosixStorage::open(const std::filesystem::p
   if (fd < 0) {
     const int err = errno;
     const ErrorCode code = (err == ENOENT || err == ENOTDIR) ? ErrorCode::kNotFound : ErrorCode::kIo;
-    return make_error(code, "cannot open '" + path.string() + "': " + std::strerror(err));
+    return make_error(code, "cannot open '" + full + "': " + std::strerror(err));
   }
   return std::unique_ptr<StorageFile>(new PosixFile(fd, full));
 }

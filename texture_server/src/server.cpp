@@ -428,8 +428,10 @@ void Server::load_inline(const LoadRequest& request, const scene::TextureRecord&
   for (uint32_t l = 0; l < std::min<uint32_t>(record.mip_count, 32); ++l) {
     if (l != request.mip.value && scheduler_.contains(MipKey(request.texture, MipLevel(l)))) wanted |= 1u << l;
   }
+  // hold_read: the levels read along are answered from the read's own bytes while they are the queue's
+  // next requests (dispatch(): serve_held), then inserted into the cache together at the end of the pass.
   const CompletionRecord c = loader_.load(request, record, slot, segment_.slot(slot), /*local_only=*/true,
-                                          /*read_tail=*/true, wanted);
+                                          /*read_tail=*/true, wanted, /*hold_read=*/true);
   if (steady_now_ns() - start > kInlineSlowNs) inline_ok_[request.texture.value] = false;
   // A texture that is decoded (TIFF, OpenEXR, a DDS encoding served as RGBA8) or was not found goes to the
   // workers from now on, however fast this load was: a decode must never hold up the hits behind it.
@@ -477,7 +479,7 @@ bool Server::dispatch() {
     const bool inline_left = inline_loads < kInlineMissesPerPass;
     if (workers_full || !inline_left) {
       const LoadRequest top = *scheduler_.top();
-      if (!cache_.contains(top.key())) {
+      if (!loader_.holds(top.key()) && !cache_.contains(top.key())) {
         // A small local miss waits for the next pass's inline loads rather than going to a worker: the
         // hand-off to a worker and back costs more than the read itself (see kInlineMissBytes).
         if (inline_candidate(top) ? !inline_left : workers_full) break;
@@ -487,9 +489,13 @@ bool Server::dispatch() {
     const scene::TextureRecord& record = textures_[request.texture.value];
     const uint32_t slot = *slots_.acquire();
     any = true;
-    // The next request's payload starts loading into the CPU cache while this one is copied.
+    // A level the last inline load brought along is copied from that read's bytes (no cache lookup);
+    // otherwise from the cache, where the next request's payload starts loading into the CPU cache while
+    // this one is copied.
     const CompletionRecord hit =
-        loader_.serve_cached(request, record, slot, segment_.slot(slot), scheduler_.peek_key_hint());
+        loader_.holds(request.key())
+            ? serve_held(request, record, slot)
+            : loader_.serve_cached(request, record, slot, segment_.slot(slot), scheduler_.peek_key_hint());
     if (hit.status == static_cast<uint32_t>(CompletionStatus::kOk)) {
       slots_.hand_to_renderer(slot);
       ServerStats::add_one_writer(stats_.hits_ok, 1);
@@ -507,7 +513,15 @@ bool Server::dispatch() {
     ++loads_in_flight_;
     workers_->submit(LoadJob{request, record, slot});
   }
+  // What the pass's last inline load held back goes into the cache now (MipLoader::load's hold_read).
+  if (loader_.holding()) loader_.release_held();
   return any;
+}
+
+CompletionRecord Server::serve_held(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot) {
+  const CompletionRecord held = loader_.serve_held(request, record, slot, segment_.slot(slot));
+  if (held.status == static_cast<uint32_t>(CompletionStatus::kOk)) return held;
+  return loader_.serve_cached(request, record, slot, segment_.slot(slot), scheduler_.peek_key_hint());
 }
 
 bool Server::push_completion(const CompletionRecord& c) {

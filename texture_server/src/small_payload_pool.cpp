@@ -50,25 +50,40 @@ std::byte* SmallPayloadPool::allocate(uint64_t bytes) {
   const uint32_t c = class_of(bytes);
   const uint64_t size = kMinClass << c;
   std::lock_guard lock(mutex_);
-  if (free_[c] == nullptr) {
-    if (slabs_used_ + kSlabBytes > capacity_) return nullptr;
+  in_use_ += size;
+  if (FreeNode* n = free_[c]) {  // a freed payload first (its line is likely still in the CPU cache)
+    free_[c] = n->next;
+    return reinterpret_cast<std::byte*>(n);
+  }
+  if (bump_[c] == bump_end_[c]) {
+    if (slabs_used_ + kSlabBytes > capacity_) {
+      in_use_ -= size;
+      return nullptr;
+    }
     std::byte* slab = base_ + slabs_used_;
     slabs_used_ += kSlabBytes;
     if (slabs_used_ > warm_) {  // past the part faulted in at construction: this slab's pages in one call
       populate(slab, kSlabBytes);
       warm_ = slabs_used_;
     }
-    // Threaded back to front so that allocation walks the slab from its start.
-    for (uint64_t o = kSlabBytes; o >= size; o -= size) {
-      auto* n = reinterpret_cast<FreeNode*>(slab + o - size);
-      n->next = free_[c];
-      free_[c] = n;
+    bump_[c] = slab;
+    bump_end_[c] = slab + kSlabBytes;
+  }
+  // The class's current slab is carved from its start, and its never-used memory is not read: threading a
+  // new slab onto the free list wrote every block of it, and each pop then read a line not touched since
+  // (a cache miss per payload: texstream-bench server, misses, perf: ~3 % of the dispatcher in the pops of
+  // fresh blocks, mostly the cache's shared_ptr control blocks).
+  std::byte* p = bump_[c];
+  bump_[c] += size;
+  // The class's next block is written by the next allocation's owner (a cache entry's control block is
+  // constructed at once): ask for its first lines now, with intent to write, so that the write-allocate miss
+  // overlaps whatever comes in between instead of stalling the constructor.
+  if (bump_[c] != bump_end_[c]) {
+    for (uint64_t o = 0; o < std::min<uint64_t>(size, kPrefetchBytes); o += kLineBytes) {
+      __builtin_prefetch(bump_[c] + o, 1, 3);
     }
   }
-  FreeNode* n = free_[c];
-  free_[c] = n->next;
-  in_use_ += size;
-  return reinterpret_cast<std::byte*>(n);
+  return p;
 }
 
 void SmallPayloadPool::free(std::byte* p, uint64_t bytes) {

@@ -14,12 +14,16 @@ const char* suffix_of(TextureFileKind kind) {
   return ".dds";
 }
 
-std::filesystem::path texture_file_path(const std::filesystem::path& scene_dir, TextureId id, TextureFileKind kind) {
-  // scene::texture_path with its ".dds" swapped as text (replace_extension would re-split the path).
-  std::string s = scene::texture_path(scene_dir, id).native();
+std::string texture_file_path_text(const std::filesystem::path& scene_dir, TextureId id, TextureFileKind kind) {
+  // scene::texture_path_text() with its ".dds" swapped for the kind's suffix, as text (see Storage::open_text).
+  std::string s = scene::texture_path_text(scene_dir, id);
   s.resize(s.size() - 4);
   s += suffix_of(kind);
-  return std::filesystem::path(std::move(s));
+  return s;
+}
+
+std::filesystem::path texture_file_path(const std::filesystem::path& scene_dir, TextureId id, TextureFileKind kind) {
+  return std::filesystem::path(texture_file_path_text(scene_dir, id, kind));
 }
 
 TextureFileIndex::TextureFileIndex() : slots_(kEntries) {}

@@ -172,6 +172,9 @@ Status write_colormap(const std::filesystem::path& dir, std::span<const uint32_t
 
 // <dir>/textures/<id>>12 as 3 hex digits>/<id as 8 hex digits>.dds
 std::filesystem::path texture_path(const std::filesystem::path& dir, TextureId id);
+// The same name as text, made without a std::filesystem::path (which splits its text into components, an
+// allocation each): what the server opens per miss (Storage::open_text).
+std::string texture_path_text(const std::filesystem::path& dir, TextureId id);
 
 // ---- DDS (the generator's per-texture file; also readable by OpenImageIO and image viewers) ----
 inline constexpr uint64_t kDdsHeaderBytes = 128;  // "DDS " + DDS_HEADER (124 bytes), no DX10 extension

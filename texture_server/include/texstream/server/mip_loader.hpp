@@ -47,9 +47,28 @@ class MipLoader {
   // `wanted_levels` (bit l = level l, with read_tail only): levels of the texture the renderer has asked for
   // too and that wait in the queue. They join the same read whatever their size, as long as the range stays
   // contiguous and within kMaxTailReadBytes: one read for what is asked anyway, no read amplification.
+  // `hold_read` (with read_tail, the dispatcher only): the mips of this read are not inserted into the cache
+  // yet but held back (the loader's "held read"), so that the texture's queued levels can be answered from
+  // them by serve_held() without a cache lookup each; release_held() inserts them all under one lock. Any
+  // later load() with read_tail releases the previous held read first; the dispatcher releases it at the end
+  // of every dispatch pass, so the cache never waits long for them.
   CompletionRecord load(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot_index,
                         std::span<std::byte> slot, bool local_only = false, bool read_tail = false,
-                        uint32_t wanted_levels = 0);
+                        uint32_t wanted_levels = 0, bool hold_read = false);
+
+  // If the held read (see load()'s hold_read) brought `request`'s mip and it has not been served from there
+  // yet: copies it into `slot` and returns its kOk record, counted as serve_cached() counts a first hit of a
+  // prefetched mip. Otherwise a record with status 0 (the caller asks the cache). Dispatcher only.
+  CompletionRecord serve_held(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot_index,
+                              std::span<std::byte> slot);
+  // True if the held read has `key`'s mip (served from there or not): it is as good as cached.
+  bool holds(MipKey key) const {
+    return !held_.empty() && key.texture() == held_texture_ && key.mip().value < 32 &&
+           ((held_levels_ >> key.mip().value) & 1u) != 0;
+  }
+  // Inserts the held read's mips into the cache (one lock) and forgets them. Cheap when nothing is held.
+  void release_held();
+  bool holding() const { return !held_.empty(); }
 
   // The largest mip read as part of a coarse tail: 16 KiB = a 64x64 RGBA8 or 128x128 BC1 mip. A whole tail
   // of such mips is at most 4/3 of it (~22 KiB), which is what a texture wanted only at a coarser level
@@ -74,7 +93,7 @@ class MipLoader {
 
  private:
   struct Opened {
-    std::filesystem::path path;
+    std::string path;  // as text (Storage::open_text)
     TextureFileEntry entry;
     std::unique_ptr<StorageFile> file;
   };
@@ -105,6 +124,10 @@ class MipLoader {
   CompletionStatus read_tail(const LoadRequest& request, const scene::TextureRecord& record, Opened& opened,
                              std::span<std::byte> target, bool local_only, Tail& tail, uint32_t wanted_levels,
                              bool guessed, bool& retry);
+  // After a tail read of `request`'s texture: true if every level of the texture (record.mip_count) is now
+  // cached, held or in `tail` (the levels cached before come from read_tail's look at the cache).
+  bool every_level_cached_after(const LoadRequest& request, const scene::TextureRecord& record,
+                                const Tail& tail) const;
   CompletionRecord fail(const LoadRequest& request, CompletionStatus status, const std::filesystem::path& path,
                         const std::string& why);
   CompletionStatus fail_status(const LoadRequest& request, CompletionStatus status, const std::filesystem::path& path,
@@ -119,6 +142,12 @@ class MipLoader {
   TextureFileIndex index_;
   OpenFileCache files_;  // files of recent misses, kept open for the texture's next mips
   Tail tail_scratch_;    // read_tail's mips (used by the one thread that passes read_tail = true)
+  uint32_t tail_cached_levels_ = 0;  // the last read_tail's cached_levels() (same thread as tail_scratch_)
+  // The held read (load()'s hold_read): its mips in the order read, each with how it has been used so far.
+  // Only the dispatcher touches these. held_levels_: bit l = level l of held_texture_ is in held_.
+  std::vector<LoadedMip> held_;
+  TextureId held_texture_{0};
+  uint32_t held_levels_ = 0;
 };
 
 // The completion a request gets when it is answered without a payload.

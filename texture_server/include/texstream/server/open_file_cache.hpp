@@ -16,6 +16,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <string>
 #include <unordered_map>
 
 #include "texstream/protocol/ids.hpp"
@@ -24,7 +25,7 @@
 namespace texstream::server {
 
 struct OpenTextureFile {
-  std::filesystem::path path;
+  std::string path;  // as text (Storage::open_text): for messages only
   std::unique_ptr<StorageFile> file;
 };
 

@@ -30,6 +30,7 @@ class PosixStorage final : public Storage {
   PosixStorage& operator=(const PosixStorage&) = delete;
 
   Result<std::unique_ptr<StorageFile>> open(const std::filesystem::path& path) override;
+  Result<std::unique_ptr<StorageFile>> open_text(const std::string& path) override;
   size_t directories_kept() const;
 
  private:

@@ -88,6 +88,9 @@ class Server {
   // True if the dispatcher may load this miss itself (kInlineMissBytes, server.cpp), budget per pass aside.
   bool inline_candidate(const LoadRequest& request) const;
   void load_inline(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot);
+  // dispatch()'s copy of a mip the last inline load holds (MipLoader::serve_held), or from the cache when it
+  // was served from there already.
+  CompletionRecord serve_held(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot);
   void finish(const LoadResult& r);
   bool dispatch_remote();
   bool dispatch();

@@ -14,8 +14,8 @@
 //
 // Size classes: the powers of two from kMinClass (16 B) to CacheArena::kMinBlock (4 KiB); a payload takes the
 // smallest class that holds it (mip sizes are powers of two times 4 or 8 bytes, so nearly all fill their
-// class exactly). Each class takes slabs of kSlabBytes as it needs them and keeps freed payloads on an
-// intrusive free list (a free payload's first bytes hold the link; a payload in use is never written by the
+// class exactly). Each class takes slabs of kSlabBytes as it needs them, carves its newest slab from the
+// start, and keeps freed payloads on an intrusive free list (a free payload's first bytes hold the link; a payload in use is never written by the
 // pool). The mapping goes away with the pool, once the cache and every payload (each holds the pool) are gone.
 //
 // Bounded: at most `max_bytes` of slabs (the cache passes a share of its budget: like the heap payloads they
@@ -67,6 +67,10 @@ class SmallPayloadPool {
 
  private:
   static constexpr uint32_t kMinShift = 4;  // log2(kMinClass)
+  // allocate() prefetches the first this many bytes of the class's next block (a control block of the cache
+  // is ~100 bytes: two lines), in lines of kLineBytes.
+  static constexpr uint64_t kPrefetchBytes = 128;
+  static constexpr uint64_t kLineBytes = 64;
   static constexpr uint32_t kClasses = 9;   // 16 B .. 4 KiB
   static uint32_t class_of(uint64_t bytes);
   struct FreeNode {
@@ -77,7 +81,10 @@ class SmallPayloadPool {
   uint64_t capacity_ = 0;
   uint64_t warm_ = 0;  // bytes from base_ faulted in so far
   mutable std::mutex mutex_;
-  FreeNode* free_[kClasses] = {};
+  FreeNode* free_[kClasses] = {};  // freed payloads of each class
+  // The part of each class's newest slab not handed out yet: [bump_, bump_end_) (empty: take a new slab).
+  std::byte* bump_[kClasses] = {};
+  std::byte* bump_end_[kClasses] = {};
   uint64_t slabs_used_ = 0;  // bytes from base_ handed to the classes
   uint64_t in_use_ = 0;
 };

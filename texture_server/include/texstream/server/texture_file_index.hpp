@@ -15,6 +15,7 @@
 #include <filesystem>
 #include <mutex>
 #include <optional>
+#include <string>
 #include <vector>
 
 #include "texstream/protocol/ids.hpp"
@@ -29,6 +30,9 @@ const char* suffix_of(TextureFileKind kind);
 
 // <scene>/textures/XXX/YYYYYYYY<suffix>
 std::filesystem::path texture_file_path(const std::filesystem::path& scene_dir, TextureId id, TextureFileKind kind);
+// The same path as text (what texture_file_path(...).native() is), made without a std::filesystem::path
+// (see Storage::open_text).
+std::string texture_file_path_text(const std::filesystem::path& scene_dir, TextureId id, TextureFileKind kind);
 
 struct TextureFileEntry {
   TextureFileKind kind = TextureFileKind::kDds;
