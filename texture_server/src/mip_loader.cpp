@@ -106,14 +106,18 @@ CompletionRecord MipLoader::serve_cached(const LoadRequest& request, const scene
   // One lookup, copied under the cache's lock: no pin, no allocation.
   const std::optional<CachedCopy> hit = cache_.copy_into(request.key(), slot, prefetch_next);
   if (!hit) return CompletionRecord{};
-  // relaxed: statistics, read for reports. serve_cached() has one caller thread (the dispatcher, see the
-  // header): load + store, no locked read-modify-write per hit.
+  count_served_cached(hit->bytes, hit->first_use_of_prefetch);
+  return ok_completion(request, record, slot_index, hit->bytes, hit->checksum);
+}
+
+void MipLoader::count_served_cached(uint64_t bytes, bool first_use_of_prefetch) {
+  // relaxed: statistics, read for reports. Hits are served by one thread (the dispatcher, see the header):
+  // load + store, no locked read-modify-write per hit.
   block_.ram_cache_hits.v.store(block_.ram_cache_hits.v.load(std::memory_order_relaxed) + 1,
                                 std::memory_order_relaxed);
-  ServerStats::add_one_writer(stats_.bytes_served_cached, hit->bytes);
+  ServerStats::add_one_writer(stats_.bytes_served_cached, bytes);
   // A coarse-tail mip read ahead (load()'s read_tail) is delivered now: the read it came with counts it here.
-  if (hit->first_use_of_prefetch) stats_.add(stats_.bytes_loaded, hit->bytes);
-  return ok_completion(request, record, slot_index, hit->bytes, hit->checksum);
+  if (first_use_of_prefetch) stats_.add(stats_.bytes_loaded, bytes);
 }
 
 bool MipLoader::every_level_cached_after(const LoadRequest& request, const scene::TextureRecord& record,
@@ -141,11 +145,7 @@ CompletionRecord MipLoader::serve_held(const LoadRequest& request, const scene::
               static_cast<unsigned long long>(bytes), slot.size());
     copy_into_slot(slot.data(), m.mip->bytes.data(), bytes);  // kSlotWrite halfway
     m.use = LoadedUse::kServed;
-    // Counted as serve_cached() counts the first hit of a prefetched mip (one writer: the dispatcher).
-    block_.ram_cache_hits.v.store(block_.ram_cache_hits.v.load(std::memory_order_relaxed) + 1,
-                                  std::memory_order_relaxed);
-    ServerStats::add_one_writer(stats_.bytes_served_cached, bytes);
-    stats_.add(stats_.bytes_loaded, bytes);
+    count_served_cached(bytes, /*first_use_of_prefetch=*/true);  // as serve_cached() counts it
     return ok_completion(request, record, slot_index, bytes, m.mip->checksum);
   }
   return CompletionRecord{};
@@ -439,36 +439,32 @@ CompletionRecord MipLoader::load(const LoadRequest& request, const scene::Textur
   // The checksum is of the bytes we meant to hand over (equal to the slot's unless the renderer wrote into a
   // slot it does not own, which the renderer's own check then catches).
   const uint64_t checksum = fast_payload_checksum(target.data(), bytes);
-  if (keep && tail && hold_read) {
-    // Held back (see hold_read): the asked mip and its tail go into the cache together in release_held().
+  if (keep) {
     keep->checksum = checksum;
     copy_into_slot(slot.data(), keep->bytes.data(), bytes);  // kSlotWrite halfway
+  }
+  if (tail) {
+    for (TailMip& t : *tail) t.mip->checksum = fast_payload_checksum(t.mip->bytes.data(), t.mip->bytes.size());
+  }
+  if (keep && tail && hold_read) {
+    // Held back (see hold_read): the asked mip and its tail go into the cache together in release_held().
     held_texture_ = request.texture;
     held_levels_ = request.mip.value < 32 ? 1u << request.mip.value : 0;
     held_.push_back(LoadedMip{request.key(), std::move(keep), LoadedUse::kAsked});
     for (TailMip& t : *tail) {
-      t.mip->checksum = fast_payload_checksum(t.mip->bytes.data(), t.mip->bytes.size());
       if (t.level < 32) held_levels_ |= 1u << t.level;
       held_.push_back(LoadedMip{MipKey(request.texture, MipLevel(t.level)), std::move(t.mip), LoadedUse::kReadAhead});
     }
     tail->clear();
-    stats_.add(stats_.bytes_loaded, bytes);
-    return ok_completion(request, record, slot_index, bytes, checksum);
-  }
-  if (keep) {
-    keep->checksum = checksum;
-    copy_into_slot(slot.data(), keep->bytes.data(), bytes);  // kSlotWrite halfway
-    cache_.insert(request.key(), std::move(keep));
-  }
-  if (tail && !tail->empty()) {
-    std::array<std::pair<MipKey, std::shared_ptr<const CachedMip>>, kMaxTailParts> batch;
-    size_t n = 0;
-    for (TailMip& t : *tail) {
-      t.mip->checksum = fast_payload_checksum(t.mip->bytes.data(), t.mip->bytes.size());
-      batch[n++] = {MipKey(request.texture, MipLevel(t.level)), std::move(t.mip)};
+  } else {
+    if (keep) cache_.insert(request.key(), std::move(keep));
+    if (tail && !tail->empty()) {
+      std::array<std::pair<MipKey, std::shared_ptr<const CachedMip>>, kMaxTailParts> batch;
+      size_t n = 0;
+      for (TailMip& t : *tail) batch[n++] = {MipKey(request.texture, MipLevel(t.level)), std::move(t.mip)};
+      tail->clear();
+      cache_.insert_all(std::span(batch).first(n), /*prefetched=*/true);
     }
-    tail->clear();
-    cache_.insert_all(std::span(batch).first(n), /*prefetched=*/true);
   }
   stats_.add(stats_.bytes_loaded, bytes);
   return ok_completion(request, record, slot_index, bytes, checksum);

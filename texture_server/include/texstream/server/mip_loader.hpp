@@ -126,6 +126,9 @@ class MipLoader {
                              bool guessed, bool& retry);
   // After a tail read of `request`'s texture: true if every level of the texture (record.mip_count) is now
   // cached, held or in `tail` (the levels cached before come from read_tail's look at the cache).
+  // The statistics of a mip served from memory (serve_cached, serve_held): a RAM cache hit, and its bytes as
+  // loaded if it is the first use of a mip read ahead.
+  void count_served_cached(uint64_t bytes, bool first_use_of_prefetch);
   bool every_level_cached_after(const LoadRequest& request, const scene::TextureRecord& record,
                                 const Tail& tail) const;
   CompletionRecord fail(const LoadRequest& request, CompletionStatus status, const std::filesystem::path& path,
