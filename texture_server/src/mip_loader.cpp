@@ -121,10 +121,10 @@ void MipLoader::count_served_cached(uint64_t bytes, bool first_use_of_prefetch) 
 }
 
 bool MipLoader::every_level_cached_after(const LoadRequest& request, const scene::TextureRecord& record,
-                                         const Tail& tail) const {
+                                         const Tail& tail) {
   if (record.mip_count > 32) return false;  // not tracked (cached_levels covers 32 levels)
-  uint32_t have = tail_cached_levels_ | (1u << request.mip.value);
-  for (const TailMip& t : tail) have |= 1u << t.level;
+  uint32_t have = tail.cached_levels | (1u << request.mip.value);
+  for (const TailMip& t : tail.mips) have |= 1u << t.level;
   const uint32_t all = record.mip_count == 32 ? ~0u : (1u << record.mip_count) - 1;
   return (have & all) == all;
 }
@@ -219,37 +219,37 @@ CompletionStatus MipLoader::read_tail(const LoadRequest& request, const scene::T
   const uint32_t level = request.mip.value;
   const uint32_t levels = std::min(dds.mip_count, record.mip_count);
   const uint32_t cached = cache_.cached_levels(request.texture, levels);  // one lock for all levels
-  tail_cached_levels_ = cached;
+  tail.cached_levels = cached;
   uint64_t total = target.size();
   const auto joins = [&](uint32_t l) -> std::shared_ptr<CachedMip> {
     const uint64_t bytes = mip_bytes(format, record.width, record.height, l);
     const bool wanted = l < 32 && ((wanted_levels >> l) & 1u) != 0;
     if ((bytes > kTailMipBytes && !wanted) || dds.mip_size(l) != bytes) return nullptr;
-    if (total + bytes > kMaxTailReadBytes || tail.size() + 1 >= kMaxTailParts) return nullptr;
+    if (total + bytes > kMaxTailReadBytes || tail.mips.size() + 1 >= kMaxTailParts) return nullptr;
     if (mip_extent(dds.width, dds.height, l) != mip_extent(record.width, record.height, l)) return nullptr;
     if (l < 32 && ((cached >> l) & 1u) != 0) return nullptr;
     std::shared_ptr<CachedMip> payload = cache_.make_payload(bytes);  // null: no room, or not admissible
     if (payload) total += bytes;
     return payload;
   };
-  tail.clear();
+  tail.mips.clear();
   uint32_t finest = level;
   for (uint32_t l = level + 1; l < levels; ++l) {  // coarser: after the asked mip in the file
     std::shared_ptr<CachedMip> m = joins(l);
     if (!m) break;
-    tail.push_back(TailMip{l, std::move(m)});
+    tail.mips.push_back(TailMip{l, std::move(m)});
   }
-  const size_t coarser = tail.size();
+  const size_t coarser = tail.mips.size();
   for (uint32_t l = level; l-- > 0;) {  // finer: before it in the file
     std::shared_ptr<CachedMip> m = joins(l);
     if (!m) break;
-    tail.push_back(TailMip{l, std::move(m)});
+    tail.mips.push_back(TailMip{l, std::move(m)});
     finest = l;
   }
   // A guessed layout: the header is read along only if it lies right before the range (the range starts at
   // mip 0); otherwise the caller reads it first, the ordinary way, and nothing was read here.
   if (guessed && (finest != 0 || dds.data_offset != kDdsGuessHeaderBytes)) {
-    tail.clear();
+    tail.mips.clear();
     retry = true;
     return CompletionStatus::kOk;
   }
@@ -261,12 +261,12 @@ CompletionStatus MipLoader::read_tail(const LoadRequest& request, const scene::T
     parts[count++] = header;
     total += header.size();
   }
-  for (size_t i = tail.size(); i-- > coarser;) parts[count++] = tail[i].mip->bytes;
+  for (size_t i = tail.mips.size(); i-- > coarser;) parts[count++] = tail.mips[i].mip->bytes;
   parts[count++] = target;
-  for (size_t i = 0; i < coarser; ++i) parts[count++] = tail[i].mip->bytes;
+  for (size_t i = 0; i < coarser; ++i) parts[count++] = tail.mips[i].mip->bytes;
   const uint64_t offset = guessed ? 0 : dds.mip_offset(finest);
   if (local_only && !opened.file->local(offset, total)) {
-    tail.clear();
+    tail.mips.clear();
     // A guess is only for ranges already here: otherwise the ordinary way decides, as it did before there
     // was a guess (a cached header is read now and remembered, so the remote fetch that follows does not
     // read it again; storage_origin_test's restart compares those byte counts).
@@ -275,7 +275,7 @@ CompletionStatus MipLoader::read_tail(const LoadRequest& request, const scene::T
   }
   Result<uint64_t> got = opened.file->read_scatter_at(std::span(parts).first(count), offset);
   if (!got.ok()) {
-    tail.clear();
+    tail.mips.clear();
     return fail_status(request, read_status(got.error().code), opened.path, got.error().message);
   }
   count_read(*got);
@@ -285,7 +285,7 @@ CompletionStatus MipLoader::read_tail(const LoadRequest& request, const scene::T
     const Result<DdsLayout> real = parse_dds_layout(std::span(header).first(std::min<uint64_t>(*got, header.size())),
                                                     opened.path);
     if (*got != total || !real.ok() || *real != dds) {
-      tail.clear();
+      tail.mips.clear();
       retry = true;
       return CompletionStatus::kOk;
     }
@@ -293,7 +293,7 @@ CompletionStatus MipLoader::read_tail(const LoadRequest& request, const scene::T
     return CompletionStatus::kOk;
   }
   if (*got != total) {
-    tail.clear();
+    tail.mips.clear();
     index_.forget(request.texture);  // the file may have been replaced: look again next time
     return fail_status(request, CompletionStatus::kCorrupt, opened.path,
                        "truncated: mips " + std::to_string(finest) + ".." + std::to_string(finest + count - 1) +
@@ -414,9 +414,9 @@ CompletionRecord MipLoader::load(const LoadRequest& request, const scene::Textur
   // Only with a cache payload: the tail is read for the cache. tail_scratch_ is the dispatcher's (read_tail
   // is its alone, see the header): no allocation per load once warm; other threads never touch it.
   Tail* const tail = read_tail && keep ? &tail_scratch_ : nullptr;
-  if (tail) {  // the read_tail caller's own members (workers never touch them)
-    tail->clear();
-    tail_cached_levels_ = 0;
+  if (tail) {
+    tail->mips.clear();
+    tail->cached_levels = 0;
   }
   const CompletionStatus status = read_mip(request, record, opened, target, local_only, tail, wanted_levels);
   if (status == CompletionStatus::kUnfilled) {  // nothing was read: the file is as good as before
@@ -444,25 +444,25 @@ CompletionRecord MipLoader::load(const LoadRequest& request, const scene::Textur
     copy_into_slot(slot.data(), keep->bytes.data(), bytes);  // kSlotWrite halfway
   }
   if (tail) {
-    for (TailMip& t : *tail) t.mip->checksum = fast_payload_checksum(t.mip->bytes.data(), t.mip->bytes.size());
+    for (TailMip& t : tail->mips) t.mip->checksum = fast_payload_checksum(t.mip->bytes.data(), t.mip->bytes.size());
   }
   if (keep && tail && hold_read) {
     // Held back (see hold_read): the asked mip and its tail go into the cache together in release_held().
     held_texture_ = request.texture;
     held_levels_ = request.mip.value < 32 ? 1u << request.mip.value : 0;
     held_.push_back(LoadedMip{request.key(), std::move(keep), LoadedUse::kAsked});
-    for (TailMip& t : *tail) {
+    for (TailMip& t : tail->mips) {
       if (t.level < 32) held_levels_ |= 1u << t.level;
       held_.push_back(LoadedMip{MipKey(request.texture, MipLevel(t.level)), std::move(t.mip), LoadedUse::kReadAhead});
     }
-    tail->clear();
+    tail->mips.clear();
   } else {
     if (keep) cache_.insert(request.key(), std::move(keep));
-    if (tail && !tail->empty()) {
+    if (tail && !tail->mips.empty()) {
       std::array<std::pair<MipKey, std::shared_ptr<const CachedMip>>, kMaxTailParts> batch;
       size_t n = 0;
-      for (TailMip& t : *tail) batch[n++] = {MipKey(request.texture, MipLevel(t.level)), std::move(t.mip)};
-      tail->clear();
+      for (TailMip& t : tail->mips) batch[n++] = {MipKey(request.texture, MipLevel(t.level)), std::move(t.mip)};
+      tail->mips.clear();
       cache_.insert_all(std::span(batch).first(n), /*prefetched=*/true);
     }
   }

@@ -107,7 +107,12 @@ class MipLoader {
     uint32_t level = 0;
     std::shared_ptr<CachedMip> mip;
   };
-  using Tail = std::vector<TailMip>;
+  // read_tail's result: the mips read along, and the texture's levels the cache held when read_tail looked
+  // (bit l = level l; load() uses it to decide whether the file can be closed at once).
+  struct Tail {
+    std::vector<TailMip> mips;
+    uint32_t cached_levels = 0;
+  };
   // `guess_layout` (with `tail` only): a DDS file whose layout is not known yet is assumed to be laid out as
   // texstream-gen writes it for the texture table's entry (legacy 128-byte header, the table's format, extent
   // and mip count); when the tail read then starts at mip 0 its header is read in the same read and checked
@@ -124,13 +129,13 @@ class MipLoader {
   CompletionStatus read_tail(const LoadRequest& request, const scene::TextureRecord& record, Opened& opened,
                              std::span<std::byte> target, bool local_only, Tail& tail, uint32_t wanted_levels,
                              bool guessed, bool& retry);
-  // After a tail read of `request`'s texture: true if every level of the texture (record.mip_count) is now
-  // cached, held or in `tail` (the levels cached before come from read_tail's look at the cache).
   // The statistics of a mip served from memory (serve_cached, serve_held): a RAM cache hit, and its bytes as
   // loaded if it is the first use of a mip read ahead.
   void count_served_cached(uint64_t bytes, bool first_use_of_prefetch);
-  bool every_level_cached_after(const LoadRequest& request, const scene::TextureRecord& record,
-                                const Tail& tail) const;
+  // After a tail read of `request`'s texture: true if every level of the texture (record.mip_count) is now
+  // cached, held or in `tail` (the levels cached before are tail.cached_levels).
+  static bool every_level_cached_after(const LoadRequest& request, const scene::TextureRecord& record,
+                                       const Tail& tail);
   CompletionRecord fail(const LoadRequest& request, CompletionStatus status, const std::filesystem::path& path,
                         const std::string& why);
   CompletionStatus fail_status(const LoadRequest& request, CompletionStatus status, const std::filesystem::path& path,
@@ -145,7 +150,6 @@ class MipLoader {
   TextureFileIndex index_;
   OpenFileCache files_;  // files of recent misses, kept open for the texture's next mips
   Tail tail_scratch_;    // read_tail's mips (used by the one thread that passes read_tail = true)
-  uint32_t tail_cached_levels_ = 0;  // the last read_tail's cached_levels() (same thread as tail_scratch_)
   // The held read (load()'s hold_read): its mips in the order read, each with how it has been used so far.
   // Only the dispatcher touches these. held_levels_: bit l = level l of held_texture_ is in held_.
   std::vector<LoadedMip> held_;
