@@ -63,9 +63,10 @@ constexpr int kCostRepeatsFull = 8;
 constexpr int kRunFramesQuick = 24;
 constexpr int kRunFramesFull = 60;
 // With 3 and 4 runs, --quick gave 0.079 to 0.114 on the same code (the fastest of few runs still carried
-// whatever the shared machine did then); with 6 runs 0.093, 0.095, 0.095.
+// whatever the shared machine did then); with 6 runs 0.093, 0.095, 0.095. Without --quick, 8 runs gave 0.075
+// to 0.108 over five back-to-back runs, 16 runs 0.089, 0.091, 0.097 (~85 s instead of ~50 s).
 constexpr int kRunRepeatsQuick = 6;
-constexpr int kRunRepeatsFull = 8;
+constexpr int kRunRepeatsFull = 16;
 constexpr int kRunWarmupFrames = 2;
 // The seed's test (seed 000 §4) offsets: a city at map coordinates 10^6..10^7 m.
 constexpr double kFarOffset[3] = {4.0e6, 5.0e6, 0.0};
