@@ -6,7 +6,7 @@
 //   1. memcpy of exactly the hit set's mips, vs cache hits into staging slots        → hit_vs_memcpy
 //      (alternating passes of each, so that both see the same machine load)
 //   2. plain sequential read() of whole texture files (page cache warm), vs misses   → miss_vs_read, read_amp
-//      (3 rounds, 5 without --quick: a fresh server's misses between two read() passes; all summed)
+//      (3 rounds, 5 without --quick: a fresh server's misses between two read() passes; the median round)
 //   3. request→completion latency p50/p99 (hits, misses) with a window of kLatencyWindow requests
 //   4. a realistic access trace (the scene's camera path, a renderer with a bounded GPU cache, Algorithm 1:
 //      one mip per texture per cycle, coarsest first) replayed through our server and through OpenImageIO's
@@ -861,7 +861,7 @@ int run_server_bench(const std::vector<std::string>& args) {
       stream(*hp, miss_set, hp->slots(), 1, false);
     }
     // Rounds, each a fresh server (cold cache) streaming the whole miss set between two read() passes over the
-    // same files; all rounds' bytes and times are summed on both sides. One pass is ~50 ms: on this shared VM
+    // same files; the summary takes the median round, the sums are printed too. One pass is ~50 ms: on this VM
     // either side alone swung by up to 2x between back-to-back runs (read() 3.9-8.0 GB/s, misses 2.5-3.8 GB/s
     // over 6 runs, each side moving on its own), so a single pass of each decided the ratio by chance.
     const int rounds = opt->quick ? 3 : 5;
