@@ -107,6 +107,11 @@ const char* to_string(ServerState state) {
 
 ServerProcess::ServerProcess(ServerCommand command, RestartPolicy policy)
     : command_(std::move(command)), policy_(policy) {
+  // spdlog's registry (the default logger) is made on first use. Made here, before the spawner thread
+  // starts, its creation happens-before the thread's first log line for every tool, TSan included: the
+  // function-local static's guard lives in the uninstrumented libspdlog, so when the spawner and this
+  // thread logged first at the same moment, TSan reported the logger's level as a race (CI, twice in a run).
+  spdlog::default_logger_raw();
   spawner_ = std::thread([this] { spawner_main(); });
 }
 
