@@ -106,15 +106,16 @@ class TailRead : public ::testing::Test {
     return loader_.load(request(mip), record_, 0, slot_, /*local_only=*/true, tail, wanted);
   }
   bool cached(uint32_t mip) { return cache_.contains(MipKey(TextureId(0), MipLevel(mip))); }
-  // Serves `mip` from the cache and checks the bytes and checksum against the file.
-  void expect_hit(uint32_t mip) {
-    const CompletionRecord c = loader_.serve_cached(request(mip), record_, 0, slot_);
+  // Checks that `c` delivered `mip` into the slot: its status, size, bytes and checksum against the file.
+  void expect_delivered(const CompletionRecord& c, uint32_t mip) {
     ASSERT_EQ(c.status, static_cast<uint32_t>(CompletionStatus::kOk)) << "mip " << mip;
     const std::span<const std::byte> want = mip_of(file_, record_, mip);
     ASSERT_EQ(c.byte_size, want.size());
     EXPECT_EQ(std::memcmp(slot_.data(), want.data(), want.size()), 0) << "mip " << mip;
     EXPECT_EQ(c.checksum, payload_checksum(want.data(), want.size())) << "mip " << mip;
   }
+  // Serves `mip` from the cache and checks it (expect_delivered).
+  void expect_hit(uint32_t mip) { expect_delivered(loader_.serve_cached(request(mip), record_, 0, slot_), mip); }
 
   MemoryStorage storage_;
   MipCache cache_{1 << 20, std::make_unique<LruEvictionPolicy>()};
@@ -167,12 +168,7 @@ TEST_F(TailRead, AHeldReadServesItsLevelsWithoutTheCacheThenInsertsThemTogether)
   // Levels 5 and 3 are served from the held read: the file's bytes and checksums, counted as hits.
   for (const uint32_t l : {5u, 3u}) {
     std::fill(slot_.begin(), slot_.end(), std::byte{0xee});
-    const CompletionRecord h = loader_.serve_held(request(l), record_, 0, slot_);
-    ASSERT_EQ(h.status, static_cast<uint32_t>(CompletionStatus::kOk)) << "mip " << l;
-    const std::span<const std::byte> want = mip_of(file_, record_, l);
-    ASSERT_EQ(h.byte_size, want.size());
-    EXPECT_EQ(std::memcmp(slot_.data(), want.data(), want.size()), 0) << "mip " << l;
-    EXPECT_EQ(h.checksum, payload_checksum(want.data(), want.size())) << "mip " << l;
+    ASSERT_NO_FATAL_FAILURE(expect_delivered(loader_.serve_held(request(l), record_, 0, slot_), l));
   }
   EXPECT_EQ(block_.ram_cache_hits.v.load(), 2u);
   EXPECT_EQ(stats_.bytes_loaded.load(), m6.size() + mip_of(file_, record_, 5).size() + mip_of(file_, record_, 3).size());
