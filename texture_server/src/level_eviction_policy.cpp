@@ -1,6 +1,7 @@
 #include "texstream/server/level_eviction_policy.hpp"
 
 #include <algorithm>
+#include <array>
 
 namespace texstream::server {
 
@@ -60,24 +61,32 @@ void LevelEvictionPolicy::on_erase(MipKey key) {
 void LevelEvictionPolicy::on_tick(uint64_t now) { now_ = std::max(now_, now); }
 
 std::optional<MipKey> LevelEvictionPolicy::pick_victim(const std::function<bool(MipKey)>& evictable) {
-  const Node* best = nullptr;
-  uint64_t best_priority = 0;
-  for (uint32_t level = 0; level < kMaxLevels; ++level) {
-    const List& list = levels_[level];
-    // The tail is this level's least recently used entry, the largest f; skip pinned ones.
-    for (auto it = list.rbegin(); it != list.rend(); ++it) {
-      if (!evictable(it->key)) continue;
-      const uint64_t frames = now_ - std::min(now_, it->last_used);
+  // Each level's candidate is its least recently used entry that nobody holds (the tail, the largest f, unless
+  // pinned); the victim is the candidate with the largest p_d. Only the winner is asked whether it is pinned:
+  // asking every level's tail (a hash lookup each) was most of an eviction (perf of misses into a full
+  // cache). A pinned winner gives way to the next entry of its level and the candidates are compared again,
+  // which picks the same victim as asking every tail first.
+  std::array<List::const_reverse_iterator, kMaxLevels> at;
+  for (uint32_t level = 0; level < kMaxLevels; ++level) at[level] = levels_[level].crbegin();
+  for (;;) {
+    const Node* best = nullptr;
+    uint32_t best_level = 0;
+    uint64_t best_priority = 0;
+    for (uint32_t level = 0; level < kMaxLevels; ++level) {
+      if (at[level] == levels_[level].crend()) continue;
+      const Node& n = *at[level];
+      const uint64_t frames = now_ - std::min(now_, n.last_used);
       const uint64_t priority = frames * (uint64_t{level} + 1);  // Eq. 4: p_d = f (l + 1)
-      if (!best || priority > best_priority || (priority == best_priority && it->sequence < best->sequence)) {
-        best = &*it;
+      if (!best || priority > best_priority || (priority == best_priority && n.sequence < best->sequence)) {
+        best = &n;
+        best_level = level;
         best_priority = priority;
       }
-      break;
     }
+    if (!best) return std::nullopt;
+    if (evictable(best->key)) return best->key;
+    ++at[best_level];
   }
-  if (!best) return std::nullopt;
-  return best->key;
 }
 
 }  // namespace texstream::server
