@@ -29,6 +29,12 @@ void WorkerPool::submit(const LoadJob& job) {
 }
 
 void WorkerPool::take_results(std::vector<LoadResult>& out) {
+  // No lock when there is nothing to take: the dispatcher asks every pass, and with its misses loaded inline
+  // the pool's lock was 10 % of the dispatcher's lock calls (perf probe on pthread_mutex_lock, misses). A
+  // worker stores ready_ under the lock right after each push, and only this function resets it (under the
+  // lock, after taking everything): a result is never left behind unseen, at worst it waits for the next pass
+  // (the worker's on_result_ wakes a sleeping dispatcher, as before).
+  if (ready_.load(std::memory_order_acquire) == 0) return;
   std::lock_guard lock(mutex_);
   out.insert(out.end(), results_.begin(), results_.end());
   results_.clear();
