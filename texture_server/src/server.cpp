@@ -31,24 +31,27 @@ constexpr std::chrono::microseconds kRemoteBusyWait{10000};
 // worker lets it go on at once; the cost is that up to this many jobs per worker can no longer be superseded.
 constexpr uint32_t kJobsPerWorker = 2;
 
-// The dispatcher loads a miss itself when it is this small: a hand-off to a worker and back costs two
-// wake-ups and context switches, which on the 2-core machine were most of a miss (texstream-bench server,
-// misses: 0.64-0.69 GB/s with workers only, 0.79-0.93 GB/s inline once every worker's queue was full; the
-// loader alone does ~2.4 GB/s). So: inline first, workers only for what is not small, not local or not raw,
-// and an inline load of a raw DDS mip brings the texture's coarse tail and its queued levels along in one
-// read (MipLoader::load, read_tail), after which the renderer's next requests for the texture are hits.
-// (Tried: tail reads on a free worker, the texture's other misses parked until it finished: misses at 0.26
-// of read() against 0.28 inline, 4 runs each: the hand-off costs what the overlap gains on 2 cores.)
-// 64 KiB from the page cache is a few µs, about one hit's worth of delay for the requests behind it (a tail
-// read is at most MipLoader::kMaxTailReadBytes). A remote mip is never read here (the attempt is local-only:
-// it comes back kUnfilled at once and goes to the remote path), and a texture whose inline load was slow or
-// that is not a DDS served raw is not loaded inline again (inline_ok_): a cold disk or a decoded format
-// costs the dispatcher at most one load per texture.
-constexpr uint64_t kInlineMissBytes = 64 << 10;
+// The dispatcher loads a local miss itself, up to this size; workers take the rest (a decode, a remote or slow
+// texture, a mip larger than this). A hand-off to a worker and back costs two wake-ups and context switches,
+// and on the 2-core machine that was most of a miss (texstream-bench server, misses: 0.64-0.69 GB/s with
+// workers only, 0.79-0.93 GB/s inline once every worker's queue was full; the loader alone does ~2.4 GB/s).
+// An inline load of a raw DDS mip brings the texture's coarse tail and its queued levels along in one read
+// (MipLoader::load, read_tail), after which the renderer's next requests for the texture are hits.
+// The limit was 64 KiB, so the finest mips of 256^2 and 512^2 RGBA8 textures (256 KiB, 1 MiB: most of a
+// city's bytes) went to the workers. Raised to 1 MiB, misses gained 8-10 % (texstream-bench server --phases
+// misses, median of rounds over alternating runs: 0.456 -> 0.513 of plain read() in 6 runs each, 0.466 ->
+// 0.515 in 8). 1 MiB from the page cache is 60-150 us: hits queued behind it wait that long, against a
+// renderer that takes completions once per 16-33 ms frame. (Tried: tail reads on a free worker, the texture's
+// other misses parked until it finished: misses at 0.26 of read() against 0.28 inline, 4 runs each: the
+// hand-off costs what the overlap gains on 2 cores.) A remote mip is never read here (the attempt is
+// local-only: it comes back kUnfilled at once and goes to the remote path), and a texture whose inline load
+// was slow or that is not a DDS served raw is not loaded inline again (inline_ok_): a cold disk or a decoded
+// format costs the dispatcher at most one load per texture.
+constexpr uint64_t kInlineMissBytes = 1 << 20;
 // An inline load that took longer than this (a disk read, a decode) marks its texture as not for inline loads.
 constexpr uint64_t kInlineSlowNs = 250'000;
-// At most this many inline loads per pass, so that worker results, completions and the request ring are
-// still looked at every few tens of µs while the dispatcher loads.
+// Inline loads per pass end after this many, or once they asked for kInlineMissBytes, so that worker results,
+// completions and the request ring are still looked at every ~100 us at most while the dispatcher loads.
 constexpr uint32_t kInlineMissesPerPass = 4;
 
 // Completions are published in groups of at most this many (and at the end of every pass): one release-store
@@ -412,10 +415,11 @@ void Server::handle_local_result(const LoadResult& r) {
   }
 }
 
-bool Server::inline_candidate(const LoadRequest& request) const {
-  if (inline_loading_ == nullptr || !inline_ok_[request.texture.value]) return false;
+uint64_t Server::inline_bytes(const LoadRequest& request) const {
+  if (inline_loading_ == nullptr || !inline_ok_[request.texture.value]) return 0;
   const scene::TextureRecord& t = textures_[request.texture.value];
-  return mip_bytes(static_cast<TexelFormat>(t.format), t.width, t.height, request.mip.value) <= kInlineMissBytes;
+  const uint64_t bytes = mip_bytes(static_cast<TexelFormat>(t.format), t.width, t.height, request.mip.value);
+  return bytes <= kInlineMissBytes ? bytes : 0;
 }
 
 void Server::load_inline(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot) {
@@ -469,20 +473,22 @@ bool Server::dispatch() {
   bool any = false;
   const uint32_t workers = workers_->threads();
   uint32_t inline_loads = 0;
+  uint64_t inline_asked = 0;  // bytes of the pass's inline loads
   while (!scheduler_.empty() && slots_.free_count() > 0) {
     // A RAM-cache hit is always served here at once: a slow read must not hold up a fast hit (seed 002 §3.2,
-    // the bimodal access problem). A small miss of a local texture is loaded here too (kInlineMissBytes),
-    // at most kInlineMissesPerPass per pass; anything else goes to a worker. Only when the top may have to
-    // stay queued (every worker's queue full, or no inline load left this pass) is it peeked at first: with
-    // room for it either way it is taken whatever it is (a peek + pop is two more hash lookups per request).
+    // the bimodal access problem). A miss of a local texture up to kInlineMissBytes is loaded here too, at
+    // most kInlineMissesPerPass loads or kInlineMissBytes asked per pass; anything else goes to a worker. Only
+    // when the top may have to stay queued (every worker's queue full, or no inline load left this pass) is it
+    // peeked at first: with room for it either way it is taken whatever it is (a peek + pop is two more hash
+    // lookups per request).
     const bool workers_full = loads_in_flight_ >= workers * kJobsPerWorker;
-    const bool inline_left = inline_loads < kInlineMissesPerPass;
+    const bool inline_left = inline_loads < kInlineMissesPerPass && inline_asked < kInlineMissBytes;
     if (workers_full || !inline_left) {
       const LoadRequest top = *scheduler_.top();
       if (!loader_.holds(top.key()) && !cache_.contains(top.key())) {
-        // A small local miss waits for the next pass's inline loads rather than going to a worker: the
-        // hand-off to a worker and back costs more than the read itself (see kInlineMissBytes).
-        if (inline_candidate(top) ? !inline_left : workers_full) break;
+        // A local miss that may load inline waits for the next pass's inline loads rather than go to a worker:
+        // the hand-off to a worker and back costs more than the read itself (see kInlineMissBytes).
+        if (inline_bytes(top) != 0 ? !inline_left : workers_full) break;
       }
     }
     const LoadRequest request = *scheduler_.pop();
@@ -504,8 +510,9 @@ bool Server::dispatch() {
       complete(hit);
       continue;
     }
-    if (inline_left && inline_candidate(request)) {
+    if (const uint64_t bytes = inline_left ? inline_bytes(request) : 0; bytes != 0) {
       ++inline_loads;
+      inline_asked += bytes;
       load_inline(request, record, slot);
       continue;
     }

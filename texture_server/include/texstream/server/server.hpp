@@ -85,8 +85,9 @@ class Server {
   bool collect_results();
   // A local worker's (or an inline load's) result: finished, or handed on to the remote path if kUnfilled.
   void handle_local_result(const LoadResult& r);
-  // True if the dispatcher may load this miss itself (kInlineMissBytes, server.cpp), budget per pass aside.
-  bool inline_candidate(const LoadRequest& request) const;
+  // The mip's bytes if the dispatcher may load this miss itself (kInlineMissBytes, server.cpp), budget per
+  // pass aside; 0 if it may not.
+  uint64_t inline_bytes(const LoadRequest& request) const;
   void load_inline(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot);
   // dispatch()'s copy of a mip the last inline load holds (MipLoader::serve_held), or from the cache when it
   // was served from there already.
