@@ -92,6 +92,16 @@ struct Rig {
   }
 };
 
+// What the hung-server test allows beyond protocol.heartbeat_timeout_ms. Sanitizer builds run several times
+// slower and CI runs their tests two at a time on 2 cores: 100 ms was exceeded there once (told after 1504.7 ms
+// against 1400 + 100: CI's tsan stage, beside the two-process ring stress test). 400 ms still tells the
+// timeout from the startup grace or a second timeout.
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+constexpr auto kWatchdogSlack = 400ms;
+#else
+constexpr auto kWatchdogSlack = 100ms;
+#endif
+
 double ms(Clock::duration d) { return std::chrono::duration<double, std::milli>(d).count(); }
 
 TEST(ChaosRecovery, DeathIsToldWithin100MsAndTheRestartedServerAnswersTheLostRequests) {
@@ -148,8 +158,9 @@ TEST(ChaosRecovery, AStoppedServerIsKilledByTheWatchdogWithinTheHeartbeatTimeout
               Config{}.protocol.heartbeat_timeout_ms);
   ASSERT_EQ(rig.client->stats().server_deaths, 1u);
   // The watchdog fires once the heartbeat has not moved for the timeout; one poll (1 ms here) and the
-  // reap follow. 100 ms covers the server's heartbeat period (server.idle_wait_ms = 20 ms) and scheduling.
-  EXPECT_LT(told, std::chrono::milliseconds(static_cast<int64_t>(Config{}.protocol.heartbeat_timeout_ms)) + 100ms);
+  // reap follow. kWatchdogSlack covers the server's heartbeat period (server.idle_wait_ms = 20 ms) and scheduling.
+  EXPECT_LT(told, std::chrono::milliseconds(static_cast<int64_t>(Config{}.protocol.heartbeat_timeout_ms)) +
+                      kWatchdogSlack);
   EXPECT_GT(told, std::chrono::milliseconds(static_cast<int64_t>(Config{}.protocol.heartbeat_timeout_ms)) - 100ms)
       << "killed before the heartbeat timeout";
   EXPECT_EQ(rig.client->stats().server_crashes, 1u) << "a hung server is a crash";
