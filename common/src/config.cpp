@@ -60,6 +60,7 @@ void visit_keys(Config& c, V&& v) {
   v("render", "headlight_ambient", c.render.headlight_ambient, "fraction", "Headlight: camera-facing surfaces keep all their colour, edge-on ones this fraction (1 = unlit)", Range{0, 1});
   v("render", "debug_view", c.render.debug_view, "name", "none, mip (displayed mip as grey), weight (heat map) or mesh_id", kAny);
   v("render", "feedback", c.render.feedback, "bool", "Visibility metadata pass and compaction (off only to measure their cost)", kAny);
+  v("render", "feedback_pairs", c.render.feedback_pairs, "bool", "Measurement of what feedback costs: each frame is drawn twice from the same pose, once as usual and once without feedback (the order alternates; the uploads go in a submission of their own, timed in neither), and the second one's latency goes to frames.csv's latency_off_ms (texstream-bench visibility; not with a window)", kAny);
   v("render", "preload_all", c.render.preload_all, "bool", "Before frame 0, load every mip of every texture through the server and wait (the cache must hold the scene): reference frames and the all-resident baseline", kAny);
   v("render", "blocking_loads", c.render.blocking_loads, "bool", "Blocking baseline (seed 002 §2): each frame loads the full mip chain of every texture the last visibility list named before drawing", kAny);
   v("render", "reference_dir", c.render.reference_dir, "path", "Output folder of a preload_all run of the same path and size; non-empty: each frame's MSE, PSNR and SSIM against its frames/frame_NNNNN.png go to frames.csv", kAny);

@@ -41,6 +41,7 @@ const std::vector<Column>& columns() {
       {"psnr_db", &FrameRecord::psnr_db},
       {"ssim", &FrameRecord::ssim},
       {"popin_mse", &FrameRecord::popin_mse},
+      {"latency_off_ms", &FrameRecord::latency_off_ms},
   };
   return c;
 }

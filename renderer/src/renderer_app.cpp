@@ -142,6 +142,12 @@ class Renderer {
   std::vector<StreamCandidate> read_candidates();
   // Submits cmd_ (recorded) after the cache's sparse binds, waits for it and publishes its uploads.
   Status submit_and_wait();
+  // What a submission uploads before its passes: everything committed so far (the texture cache's mips and
+  // the meshes made resident), only the meshes' geometry, or nothing.
+  enum class Uploads { kAll, kGeometry, kNone };
+  // One submission: `uploads`, then `rec`'s passes if given, then the colour capture if `capture`. `first`
+  // marks frame 0's stages.
+  Status record_and_submit(const FrameRecording* rec, Uploads uploads, bool capture, bool first);
   // A submission that only carries the uploads committed so far (no drawing).
   Status upload_now();
   // Loads the whole mip chain (down to level 0) of every texture in `wanted`, waiting for the server and
@@ -232,6 +238,10 @@ Status Renderer::set_up() {
   vo.device_substring = cfg_.render.device;
   vo.validation = cfg_.render.validation;
   vo.need_bc1 = *format == TexelFormat::kBc1;
+  if (cfg_.render.window && cfg_.render.feedback_pairs) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "render.feedback_pairs: a measurement of headless runs; it cannot be used with render.window");
+  }
   if (cfg_.render.window) {
     // The window first: the Vulkan instance needs its extensions. R records the flight next to the frames.
     auto session = InteractiveSession::open(static_cast<uint32_t>(cfg_.render.width_px),
@@ -383,6 +393,27 @@ Status Renderer::submit_and_wait() {
   TS_VK_TRY(vkQueueSubmit(ctx_->queue(), 1, &si, fence));
   TS_VK_TRY(vkWaitForFences(device, 1, &fence, VK_TRUE, UINT64_MAX));
   cache_->on_submission_complete(serial_);
+  return ok_status();
+}
+
+Status Renderer::record_and_submit(const FrameRecording* rec, Uploads uploads, bool capture, bool first) {
+  ++serial_;
+  TS_VK_TRY(vkResetCommandBuffer(cmd_, 0));
+  VkCommandBufferBeginInfo bi{};
+  bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
+  bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  TS_VK_TRY(vkBeginCommandBuffer(cmd_, &bi));
+  if (uploads == Uploads::kAll) {
+    TS_TRY(cache_->prepare_uploads(serial_));  // this frame's sparse binds: one vkQueueBindSparse
+    cache_->record_uploads(cmd_, serial_);
+  }
+  if (uploads != Uploads::kNone) TS_TRY(scene_gpu_->record_uploads(scene_, cmd_));
+  if (first) first_frame_stage("frame0_record_uploads");
+  if (rec) passes_->record(cmd_, *rec);
+  if (capture) capture_->record(cmd_, passes_->colour().handle());
+  TS_VK_TRY(vkEndCommandBuffer(cmd_));
+  TS_TRY(submit_and_wait());
+  if (first) first_frame_stage("frame0_gpu");
   return ok_status();
 }
 
@@ -566,28 +597,39 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   const bool write = last || (cfg_.render.write_every_frames > 0 &&
                               index % static_cast<uint64_t>(cfg_.render.write_every_frames) == 0);
 
-  ++serial_;
-  TS_VK_TRY(vkResetCommandBuffer(cmd_, 0));
-  VkCommandBufferBeginInfo bi{};
-  bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
-  bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
-  TS_VK_TRY(vkBeginCommandBuffer(cmd_, &bi));
-  TS_TRY(cache_->prepare_uploads(serial_));  // this frame's sparse binds: one vkQueueBindSparse
-  cache_->record_uploads(cmd_, serial_);
-  TS_TRY(scene_gpu_->record_uploads(scene_, cmd_));
+  // render.feedback_pairs: the frame is drawn a second time without feedback, from the same pose and draw
+  // lists, before or after the real one (alternating, so neither always runs on warmer caches). Its latency is
+  // the frame's CPU part up to here plus its own submission. The geometry of meshes drawn for the first time
+  // goes first, in a submission of its own that neither latency counts (the first drawing would otherwise pay
+  // it alone); the texture cache's uploads stay in the real frame, which is then exactly the frame a run
+  // without pairs draws (its new mips show from the next frame on; the twin uploads nothing).
+  const bool pairs = cfg_.render.feedback_pairs;
+  Clock::duration not_frame_time = waited;  // in neither latency
+  Clock::duration twin_time{0};
+  auto draw_twin = [&]() -> Status {
+    FrameRecording off = rec;
+    off.feedback = off.read_back_list = false;
+    const auto d0 = Clock::now();
+    TS_TRY(record_and_submit(&off, Uploads::kNone, false, false));
+    twin_time = Clock::now() - d0;
+    return ok_status();
+  };
+  if (pairs) {
+    const auto u0 = Clock::now();
+    TS_TRY(record_and_submit(nullptr, Uploads::kGeometry, false, false));
+    not_frame_time += Clock::now() - u0;
+  }
+  const bool twin_first = pairs && index % 2 == 0;
+  if (twin_first) TS_TRY(draw_twin());
+  const auto own_start = Clock::now();
+  // Every frame is captured when it is measured against a reference (the copy is part of every measured
+  // configuration alike, so ratios between them are unaffected).
+  TS_TRY(record_and_submit(&rec, Uploads::kAll, write || measure_, index == 0));
   if (index == 0) {
-    first_frame_stage("frame0_record_uploads");
     spdlog::info("first frame: {} meshes in the wide frustum ({} in the viewport's), {} meshes of {} uploaded ({:.1f} MB)",
                  visible_.size(), split.main_end, scene_gpu_->stats().meshes_resident, scene_gpu_->mesh_count,
                  static_cast<double>(scene_gpu_->stats().bytes_uploaded) / 1e6);
   }
-  passes_->record(cmd_, rec);
-  // Every frame is captured when it is measured against a reference (the copy is part of every measured
-  // configuration alike, so ratios between them are unaffected).
-  if (write || measure_) capture_->record(cmd_, passes_->colour().handle());
-  TS_VK_TRY(vkEndCommandBuffer(cmd_));
-  TS_TRY(submit_and_wait());
-  if (index == 0) first_frame_stage("frame0_gpu");
   if (interactive_) {
     InteractiveReadout r;
     r.frame_latency_ms = latencies_ms_.empty() ? 0.0 : latencies_ms_.back();
@@ -605,8 +647,11 @@ Status Renderer::render_frame(uint64_t index, bool last) {
     }
   }
   if (index == 0) first_frame_stage("frame0_cycle");
+  const auto own_end = Clock::now();
+  if (pairs && !twin_first) TS_TRY(draw_twin());
   // Lock-step waits for the server are not frame latency: they would not exist in real time.
-  latencies_ms_.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0 - waited).count());
+  const Clock::duration shared = own_start - t0 - not_frame_time - (twin_first ? twin_time : Clock::duration{0});
+  latencies_ms_.push_back(std::chrono::duration<double, std::milli>(shared + (own_end - own_start)).count());
   // Δt of Eq. 4-7 is in seconds; the next cycle uses the s and b this frame leads to.
   controller_->on_frame(latencies_ms_.back() / 1e3);
   sum_load_mb_ += controller_->load_size_bytes() / 1e6;
@@ -615,6 +660,7 @@ Status Renderer::render_frame(uint64_t index, bool last) {
 
   const auto measure_start = Clock::now();
   TS_TRY(record_frame(index, time_s, pose, latencies_ms_.back(), std::chrono::duration<double, std::milli>(waited).count()));
+  if (pairs) frames_.back().latency_off_ms = std::chrono::duration<double, std::milli>(shared + twin_time).count();
   if (write) {
     char name[32];
     std::snprintf(name, sizeof name, "frame_%05llu.png", static_cast<unsigned long long>(index));
@@ -653,7 +699,7 @@ Status Renderer::record_frame(uint64_t index, double time_s, const CameraPose& p
   f.camera_still = prev_pose_ && same_pose(*prev_pose_, pose);
   prev_pose_ = pose;
   constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-  f.mse = f.psnr_db = f.ssim = f.popin_mse = kNaN;
+  f.mse = f.psnr_db = f.ssim = f.popin_mse = f.latency_off_ms = kNaN;
   if (measure_) TS_TRY(measure_->add(capture_->pixels().first(size_t{capture_->width()} * capture_->height() * 4)));
   frames_.push_back(f);
   return ok_status();

@@ -7,6 +7,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -115,5 +116,86 @@ TEST(RenderLockstep, TwoRunsGiveIdenticalFrames) {
     ++compared;
   }
   EXPECT_EQ(compared, 7);  // frames 0, 4, ..., 20 and the last (23)
+  fs::remove_all(dir);
+}
+
+namespace {
+// The values of one column of frames.csv, as text (empty: NaN, not measured).
+std::vector<std::string> frame_column(const fs::path& csv, const std::string& name) {
+  std::istringstream in(slurp(csv));
+  std::string line;
+  std::getline(in, line);
+  auto split = [](const std::string& l) {
+    std::vector<std::string> out;
+    std::stringstream ss(l);
+    std::string field;
+    while (std::getline(ss, field, ',')) out.push_back(field);
+    if (!l.empty() && l.back() == ',') out.emplace_back();
+    return out;
+  };
+  const auto header = split(line);
+  const auto at = std::find(header.begin(), header.end(), name);
+  if (at == header.end()) return {};
+  const size_t column = static_cast<size_t>(at - header.begin());
+  std::vector<std::string> values;
+  while (std::getline(in, line)) {
+    const auto fields = split(line);
+    values.push_back(column < fields.size() ? fields[column] : "");
+  }
+  return values;
+}
+}  // namespace
+
+// render.feedback_pairs (texstream-bench visibility's cost measurement): each frame is drawn a second time
+// without feedback. The second drawing must change nothing the run shows or streams (lock-step: the same frames
+// byte for byte and the same mips as a run without pairs), and frames.csv carries both latencies.
+TEST(RenderLockstep, FeedbackPairsDrawTheSameFramesAndLogBothLatencies) {
+  const fs::path dir = fresh_dir("pairs");
+  ASSERT_EQ(run((kBin / "texstream-gen").string() + " --out " + (dir / "scene").string() +
+                    " --textures 300 --seed 11 --threads 2",
+                dir / "gen.log"),
+            0)
+      << slurp(dir / "gen.log");
+  std::vector<nlohmann::json> summaries;
+  for (const char* pairs : {"false", "true"}) {
+    const fs::path out = dir / (std::string("pairs_") + pairs);
+    const std::string cmd = (kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
+                            " --set render.lockstep=true --set controller.mode=none --set render.frames=16" +
+                            " --set render.width_px=320 --set render.height_px=180 --set render.validation=true" +
+                            " --set render.feedback_pairs=" + pairs +
+                            " --set render.write_every_frames=5 --set render.output_dir=" + out.string();
+    ASSERT_EQ(run(cmd, dir / "render.log"), 0) << slurp(dir / "render.log");
+    summaries.push_back(nlohmann::json::parse(slurp(out / "summary.json")));
+  }
+  EXPECT_GT(summaries[0]["mips_streamed"].get<int>(), 0);
+  EXPECT_EQ(summaries[0]["mips_streamed"], summaries[1]["mips_streamed"]);
+  EXPECT_EQ(summaries[0]["streaming_cycles"], summaries[1]["streaming_cycles"]);
+  EXPECT_EQ(summaries[1]["validation_errors"].get<int>(), 0);
+  int compared = 0;
+  for (const auto& entry : fs::directory_iterator(dir / "pairs_false" / "frames")) {
+    const fs::path other = dir / "pairs_true" / "frames" / entry.path().filename();
+    ASSERT_TRUE(fs::exists(other)) << other;
+    EXPECT_TRUE(slurp(entry.path()) == slurp(other)) << entry.path().filename() << " differs with render.feedback_pairs";
+    ++compared;
+  }
+  EXPECT_EQ(compared, 4);  // frames 0, 5, 10 and the last (15)
+  const auto off = frame_column(dir / "pairs_true" / "frames.csv", "latency_off_ms");
+  const auto on = frame_column(dir / "pairs_true" / "frames.csv", "latency_ms");
+  ASSERT_EQ(off.size(), 16u);
+  ASSERT_EQ(on.size(), 16u);
+  for (size_t f = 0; f < off.size(); ++f) {
+    EXPECT_GT(std::atof(off[f].c_str()), 0.0) << "frame " << f << ": latency_off_ms '" << off[f] << "'";
+    EXPECT_GT(std::atof(on[f].c_str()), 0.0) << "frame " << f;
+  }
+  for (const std::string& v : frame_column(dir / "pairs_false" / "frames.csv", "latency_off_ms")) {
+    EXPECT_EQ(v, "") << "latency_off_ms without render.feedback_pairs";
+  }
+  // Not with a window: refused at start, naming the key.
+  const int rc = run((kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
+                         " --set render.window=true --set render.feedback_pairs=true --set render.output_dir=" +
+                         (dir / "win").string(),
+                     dir / "win.log");
+  EXPECT_NE(rc, 0);
+  EXPECT_NE(slurp(dir / "win.log").find("render.feedback_pairs"), std::string::npos) << slurp(dir / "win.log");
   fs::remove_all(dir);
 }

@@ -10,10 +10,11 @@
 //      nothing), the meshes with weight > 0 must be exactly the ids found in a mesh-id render of the same view.
 //   3. offset_psnr_db: the same view with the city centred at (0,0,0) and at (4e6, 5e6, 0): PSNR of the two
 //      pictures (inf when identical; reported as 999).
-//   4. feedback_cost_frac: frame GPU time with feedback (metadata + wide pass + compaction + prefix read-back,
-//      and the CPU merge + parallel sort of the list) against the same views without, alternated view by view:
-//      (on - off) / on over the fastest of the repeats of each view (the machine is shared; the sums over all
-//      repeats and the process CPU time are printed too), with GPU timestamps per pass.
+//   4. feedback_cost_frac: frame time with feedback (metadata + wide pass + compaction + prefix read-back, and
+//      the CPU merge + parallel sort of the list) against the same frames without: texstream-render's frames
+//      over the fly-through, each drawn both ways back to back (render.feedback_pairs), every frame a cycle (the
+//      worst case); (on - off) / on, the median of the runs. Printed besides: the offline views' GPU time per
+//      pass (GPU timestamps) and a streaming run's figure (feedback only where a cycle starts).
 //   5. submitted_per_visible: meshes the broad phase submits (wide frustum) per mesh with weight > 0.
 // The scene is generated with texstream-gen into a temp dir unless --scene is given.
 #include <cstdlib>
@@ -39,6 +40,7 @@
 #include "bench_util.hpp"
 #include "texstream/common/camera_path.hpp"
 #include "texstream/common/config.hpp"
+#include "texstream/render/frame_log.hpp"
 #include "texstream/render/scene_data.hpp"
 #include "texstream/render/view_renderer.hpp"
 #include "texstream/render/visibility_list.hpp"
@@ -57,16 +59,15 @@ constexpr uint32_t kSceneTextures = 4000;
 // Cost: each view rendered this many times with and without feedback, alternating, to average out noise.
 constexpr int kCostRepeatsQuick = 5;
 constexpr int kCostRepeatsFull = 8;
-// Cost in the renderer's own frames: frames over the whole fly-through, and runs of each configuration
-// (alternating on, off, off, on, ...); per frame the fastest run counts. The first frames are left out (pipeline
-// and page-cache warm-up after the preload).
+// Cost in the renderer's own frames: frames over the whole fly-through, each drawn with and without feedback
+// back to back (render.feedback_pairs), and runs of that; the summary takes the median run. The first frames
+// are left out (pipeline and page-cache warm-up after the preload). Before the pairs, separate runs with and
+// without feedback were compared frame by frame (fastest of 6 runs each): --quick gave 0.024 to 0.150 on the
+// same code within one hour on this machine; paired runs of 60 frames gave 0.082 to 0.114 per run.
 constexpr int kRunFramesQuick = 24;
 constexpr int kRunFramesFull = 60;
-// With 3 and 4 runs, --quick gave 0.079 to 0.114 on the same code (the fastest of few runs still carried
-// whatever the shared machine did then); with 6 runs 0.093, 0.095, 0.095. Without --quick, 8 runs gave 0.075
-// to 0.108 over five back-to-back runs, 16 runs 0.089, 0.091, 0.097 (~85 s instead of ~50 s).
-constexpr int kRunRepeatsQuick = 6;
-constexpr int kRunRepeatsFull = 16;
+constexpr int kRunRepeatsQuick = 10;
+constexpr int kRunRepeatsFull = 12;
 constexpr int kRunWarmupFrames = 2;
 // The seed's test (seed 000 §4) offsets: a city at map coordinates 10^6..10^7 m.
 constexpr double kFarOffset[3] = {4.0e6, 5.0e6, 0.0};
@@ -127,14 +128,29 @@ T unwrap(Result<T> r, const char* what) {
   return std::move(*r);
 }
 
-// Per-frame latency (frames.csv, latency_ms) of one texstream-render run over the scene's whole fly-through,
-// every texture resident first (render.preload_all) so that each frame samples its textures the way a streamed
-// frame does once the cache has converged. Empty on failure (the log is named).
-// preload = false: a plain streaming run instead (the frames then differ with and without feedback; used for
-// how many frames carry feedback, `cycles`: the renderer runs it only on frames that start a streaming cycle).
-std::vector<double> renderer_frame_latencies(const fs::path& profile, const fs::path& scene, const fs::path& out,
-                                             const Config& cfg, int frames, double path_seconds, bool feedback,
-                                             bool preload = true, uint64_t* cycles = nullptr) {
+// Per-frame latencies of one texstream-render run over the scene's whole fly-through with render.feedback_pairs:
+// each frame drawn as usual (`on`, frames.csv latency_ms) and once more from the same pose without feedback
+// (`off`, latency_off_ms), the two back to back in one process, the order alternating. With preload (every
+// texture resident first, render.preload_all) nothing is in flight, so every frame starts a streaming cycle and
+// carries feedback: the worst case. Without, a plain streaming run: feedback only on the frames that start a
+// cycle (`cycles`), as in normal operation. Empty on failure (the log is named).
+struct PairedRun {
+  std::vector<double> on, off;
+  uint64_t cycles = 0;
+  bool ok() const { return !on.empty(); }
+  // (on - off) / on over the frames after the warm-up.
+  double cost_fraction(int warmup) const {
+    double a = 0, b = 0;
+    for (size_t f = static_cast<size_t>(warmup); f < on.size(); ++f) {
+      a += on[f];
+      b += off[f];
+    }
+    return a > 0 ? (a - b) / a : 0.0;
+  }
+};
+
+PairedRun renderer_frame_pairs(const fs::path& profile, const fs::path& scene, const fs::path& out, const Config& cfg,
+                               int frames, double path_seconds, bool preload) {
   const fs::path bin = fs::read_symlink("/proc/self/exe").parent_path() / "texstream-render";
   std::error_code ec;
   fs::remove_all(out, ec);
@@ -144,42 +160,40 @@ std::vector<double> renderer_frame_latencies(const fs::path& profile, const fs::
   const std::string cmd =
       bin.string() + " --config '" + profile.string() + "' --set scene.dir='" + scene.string() +
       "' --set render.output_dir='" + out.string() + "' --set render.preload_all=" + (preload ? "true" : "false") +
-      " --set render.pace_frames=false --set render.feedback=" +
-      (feedback ? "true" : "false") + " --set render.frames=" + std::to_string(frames) +
-      " --set render.frame_time_ms=" + frame_ms + " --set render.write_every_frames=0 --set render.width_px=" +
-      std::to_string(cfg.render.width_px) + " --set render.height_px=" + std::to_string(cfg.render.height_px) +
+      " --set render.pace_frames=false --set render.feedback=true --set render.feedback_pairs=true" +
+      " --set render.frames=" + std::to_string(frames) + " --set render.frame_time_ms=" + frame_ms +
+      " --set render.write_every_frames=0 --set render.width_px=" + std::to_string(cfg.render.width_px) +
+      " --set render.height_px=" + std::to_string(cfg.render.height_px) +
       " --set cache.memory_bytes=1073741824 > '" + log + "' 2>&1";
   const int status = std::system(cmd.c_str());
   if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
     std::fprintf(stderr, "visibility bench: texstream-render failed, see %s\n", log.c_str());
     return {};
   }
-  std::ifstream in(out / "frames.csv");
-  std::string line;
-  std::getline(in, line);
-  int column = -1, c = 0;
-  for (size_t start = 0; start <= line.size(); ++c) {
-    const size_t comma = std::min(line.find(',', start), line.size());
-    if (line.substr(start, comma - start) == "latency_ms") column = c;
-    start = comma + 1;
-  }
-  std::vector<double> out_ms;
-  while (column >= 0 && std::getline(in, line)) {
-    size_t start = 0;
-    for (int k = 0; k < column && start != std::string::npos; ++k) start = line.find(',', start) + 1;
-    out_ms.push_back(std::strtod(line.c_str() + start, nullptr));
-  }
-  if (cycles) {
-    std::ifstream summary(out / "summary.json");
-    const auto j = nlohmann::json::parse(summary, nullptr, false);
-    *cycles = j.is_object() ? j.value("streaming_cycles", uint64_t{0}) : 0;
-  }
-  if (static_cast<int>(out_ms.size()) != frames) {
-    std::fprintf(stderr, "visibility bench: %s has %zu frames, expected %d\n", (out / "frames.csv").c_str(),
-                 out_ms.size(), frames);
+  auto frames_log = render::read_frame_log(out / "frames.csv");
+  if (!frames_log) {
+    std::fprintf(stderr, "visibility bench: %s\n", frames_log.error().message.c_str());
     return {};
   }
-  return out_ms;
+  PairedRun r;
+  for (const render::FrameRecord& f : *frames_log) {
+    if (!std::isfinite(f.latency_off_ms)) {
+      std::fprintf(stderr, "visibility bench: %s: frame %llu has no latency_off_ms\n", (out / "frames.csv").c_str(),
+                   static_cast<unsigned long long>(f.index));
+      return {};
+    }
+    r.on.push_back(f.latency_ms);
+    r.off.push_back(f.latency_off_ms);
+  }
+  if (static_cast<int>(r.on.size()) != frames) {
+    std::fprintf(stderr, "visibility bench: %s has %zu frames, expected %d\n", (out / "frames.csv").c_str(),
+                 r.on.size(), frames);
+    return {};
+  }
+  std::ifstream summary(out / "summary.json");
+  const auto j = nlohmann::json::parse(summary, nullptr, false);
+  r.cycles = j.is_object() ? j.value("streaming_cycles", uint64_t{0}) : 0;
+  return r;
 }
 
 int run_visibility(const std::vector<std::string>& args) {
@@ -395,54 +409,61 @@ int run_visibility(const std::vector<std::string>& args) {
   // The views above show every texture as its colormap colour (ViewRenderer streams nothing), so their frames
   // are far cheaper than the renderer's, which sample resident mips with up to A_s taps. "Fraction of frame
   // time" is measured where the frames are real: texstream-render (with its server) over the fly-through with
-  // every texture resident, feedback on (metadata, wide pass, compaction, read-back and the CPU sort on every
-  // frame: in_flight stays 0, so each frame starts a cycle, the worst case) against the same frames with
-  // render.feedback = false.
+  // every texture resident, each frame drawn with feedback (metadata, wide pass, compaction, read-back and the
+  // CPU sort: in_flight stays 0, so each frame starts a cycle, the worst case) and again without, back to back
+  // (render.feedback_pairs). The summary takes the median of the runs' fractions.
   double run_frac = -1;
   {
     const int frames = quick ? kRunFramesQuick : kRunFramesFull;
-    const int repeats = quick ? kRunRepeatsQuick : kRunRepeatsFull;
+    const int runs = quick ? kRunRepeatsQuick : kRunRepeatsFull;
     const fs::path work = fs::temp_directory_path() / ("texstream_vis_runs_" + std::to_string(::getpid()));
     fs::create_directories(work);
-    std::vector<double> best_on_run(static_cast<size_t>(frames), std::numeric_limits<double>::max());
-    std::vector<double> best_off_run(best_on_run);
-    bool ok = true;
-    for (int rep = 0; rep < repeats && ok; ++rep) {
-      for (int k = 0; k < 2 && ok; ++k) {
-        const bool on = (k == 0) == (rep % 2 == 0);
-        const auto ms = renderer_frame_latencies(profile, scene_dir, work / (on ? "on" : "off"), profile_cfg, frames,
-                                                 path.duration_s(), on);
-        ok = !ms.empty();
-        auto& best = on ? best_on_run : best_off_run;
-        for (size_t f = 0; ok && f < ms.size(); ++f) best[f] = std::min(best[f], ms[f]);
+    std::vector<double> fracs;
+    double on_sum = 0, off_sum = 0;
+    std::vector<double> best_on_frame(static_cast<size_t>(frames), std::numeric_limits<double>::max());
+    std::vector<double> best_off_frame(best_on_frame);
+    for (int k = 0; k < runs; ++k) {
+      const PairedRun r = renderer_frame_pairs(profile, scene_dir, work / "resident", profile_cfg, frames,
+                                               path.duration_s(), true);
+      if (!r.ok()) break;
+      fracs.push_back(r.cost_fraction(kRunWarmupFrames));
+      for (size_t f = kRunWarmupFrames; f < r.on.size(); ++f) {
+        on_sum += r.on[f];
+        off_sum += r.off[f];
+        best_on_frame[f] = std::min(best_on_frame[f], r.on[f]);
+        best_off_frame[f] = std::min(best_off_frame[f], r.off[f]);
       }
     }
-    if (ok) {
-      double on_sum = 0, off_sum = 0;
-      for (size_t f = kRunWarmupFrames; f < best_on_run.size(); ++f) {
-        on_sum += best_on_run[f];
-        off_sum += best_off_run[f];
+    if (static_cast<int>(fracs.size()) == runs) {
+      run_frac = percentile(fracs, 50);
+      double best_on_sum = 0, best_off_sum = 0;
+      for (size_t f = kRunWarmupFrames; f < best_on_frame.size(); ++f) {
+        best_on_sum += best_on_frame[f];
+        best_off_sum += best_off_frame[f];
       }
-      run_frac = on_sum > 0 ? (on_sum - off_sum) / on_sum : 0.0;
-      const double n = static_cast<double>(frames - kRunWarmupFrames);
-      std::printf("cost (renderer frames, textures resident): %d frames of %lldx%lld x %d runs each; fastest per "
-                  "frame: with feedback %.2f ms, without %.2f ms per frame: %.3f\n",
+      const double n = static_cast<double>((frames - kRunWarmupFrames) * runs);
+      std::printf("cost (renderer frames, textures resident, every frame a cycle): %d frames of %lldx%lld x %d runs, "
+                  "each frame drawn with and without feedback back to back: with %.2f ms, without %.2f ms per "
+                  "frame; median of the runs' fractions %.3f (goal <= 0.1)\n",
                   frames - kRunWarmupFrames, static_cast<long long>(profile_cfg.render.width_px),
-                  static_cast<long long>(profile_cfg.render.height_px), repeats, on_sum / n, off_sum / n, run_frac);
-      // The figure above is the worst case: with every texture resident nothing is in flight, so every frame
-      // starts a cycle and carries feedback. A streaming run says how many frames do in normal operation.
-      uint64_t cycles = 0;
-      const auto streamed = renderer_frame_latencies(profile, scene_dir, work / "streaming", profile_cfg, frames,
-                                                     path.duration_s(), true, false, &cycles);
-      if (!streamed.empty()) {
-        const double share = static_cast<double>(cycles) / static_cast<double>(frames);
-        std::printf("cost: a streaming run of the same frames carries feedback on %llu of %d frames (cycle starts): "
-                    "%.3f of the worst case above, ~%.3f of frame time over the fly-through\n",
-                    static_cast<unsigned long long>(cycles), frames, share, share * run_frac);
+                  static_cast<long long>(profile_cfg.render.height_px), runs, on_sum / n, off_sum / n, run_frac);
+      std::sort(fracs.begin(), fracs.end());
+      std::printf("  per run:");
+      for (double f : fracs) std::printf(" %.3f", f);
+      std::printf("; all frames summed %.3f; fastest per frame %.3f\n", on_sum > 0 ? (on_sum - off_sum) / on_sum : 0.0,
+                  best_on_sum > 0 ? (best_on_sum - best_off_sum) / best_on_sum : 0.0);
+      // Normal operation: a streaming run carries feedback only on the frames that start a cycle.
+      const PairedRun streamed = renderer_frame_pairs(profile, scene_dir, work / "streaming", profile_cfg, frames,
+                                                      path.duration_s(), false);
+      if (streamed.ok()) {
+        std::printf("cost in normal operation (a streaming run, feedback on the %llu of %d frames that start a "
+                    "cycle, paired the same way): %.3f of frame time\n",
+                    static_cast<unsigned long long>(streamed.cycles), frames,
+                    streamed.cost_fraction(kRunWarmupFrames));
       }
     }
     std::error_code ec;
-    if (ok) fs::remove_all(work, ec);
+    if (static_cast<int>(fracs.size()) == runs) fs::remove_all(work, ec);
   }
   std::printf("elapsed %.1f s\n", total.seconds());
   if (!temp.empty()) {

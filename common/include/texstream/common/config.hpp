@@ -58,6 +58,7 @@ struct RenderConfig {
   int64_t staging_bytes = 32ll << 20;   // host-visible staging ring for uploads into the cache
   std::string debug_view = "none";      // none, mip (displayed mip as grey), weight (heat map), mesh_id
   bool feedback = true;                 // visibility metadata pass + compaction (off: for cost measurements)
+  bool feedback_pairs = false;          // measurement: each frame also drawn without feedback (latency_off_ms)
   bool preload_all = false;             // load every mip of every texture before frame 0: no streaming (reference frames)
   bool blocking_loads = false;          // each frame loads the full chain of every visible texture before drawing
   std::string reference_dir;            // a preload_all run's output folder: per-frame MSE/PSNR/SSIM against its frames

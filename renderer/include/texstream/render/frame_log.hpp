@@ -33,6 +33,7 @@ struct FrameRecord {
   double psnr_db = 0;
   double ssim = 0;
   double popin_mse = 0;       // MSE to the previous frame while the camera is still (NaN otherwise)
+  double latency_off_ms = 0;  // render.feedback_pairs: the same frame drawn without feedback (NaN otherwise)
 };
 
 // Column names, in file order.
