@@ -1,6 +1,10 @@
 // From the compacted per-mesh metadata to the sorted per-texture candidate list.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <map>
+#include <random>
+
 #include "texstream/render/visibility_list.hpp"
 
 using namespace texstream;
@@ -56,4 +60,53 @@ TEST(VisibilityList, MergedWeightsDoNotDependOnEntryOrder) {
   // Equal sums: the tie goes to the lower texture id, whatever the order.
   EXPECT_EQ(first[0].texture, TextureId(0));
   EXPECT_FLOAT_EQ(first[0].weight, 16777218.0f);
+}
+
+// The list against a model built the plain way (a map per texture, then std::sort with the documented order:
+// weight descending, ties by texture id), on random lists with shared textures, equal weights and bad ids; short
+// lists take the radix sort, long ones (>= 2^15) TBB's parallel sort: both must give the model's order.
+TEST(VisibilityList, AgreesWithAPlainModelOnRandomLists) {
+  std::mt19937 rng(5);
+  for (const size_t n : {size_t{0}, size_t{1}, size_t{2}, size_t{300}, size_t{5000}, size_t{40000}}) {
+    for (const uint32_t textures : {3u, 1000u, 3000000u}) {
+      std::vector<scene::MeshRecord> meshes(std::max<size_t>(n, 1));
+      for (auto& m : meshes) m.texture_id = static_cast<uint32_t>(rng() % textures);
+      std::vector<gpu::CompactEntry> entries(n);
+      for (auto& e : entries) {
+        const uint32_t mesh = rng() % 50 == 0 ? static_cast<uint32_t>(meshes.size() + rng() % 9)  // bad id
+                                              : static_cast<uint32_t>(rng() % meshes.size());
+        // Few distinct weights, so that equal sums (ties) are common.
+        e = {mesh, static_cast<uint32_t>(rng() % (12 * gpu::kMipFixedScale)),
+             static_cast<uint32_t>((rng() % 8) * gpu::kWeightFixedScale + (rng() % 3)), 0};
+      }
+      std::map<uint32_t, std::pair<uint32_t, uint64_t>> model_sums;  // texture -> (min mip, weight sum)
+      uint64_t model_bad = 0;
+      for (const auto& e : entries) {
+        if (e.mesh_id >= meshes.size() || e.mip_fixed == gpu::kNoMip) {
+          ++model_bad;
+          continue;
+        }
+        auto [it, fresh] = model_sums.try_emplace(meshes[e.mesh_id].texture_id, e.mip_fixed, 0);
+        it->second.first = std::min(it->second.first, e.mip_fixed);
+        it->second.second += e.weight_fixed;
+      }
+      std::vector<StreamCandidate> model;
+      for (const auto& [t, v] : model_sums) {
+        model.push_back({TextureId(t), static_cast<float>(v.first) / static_cast<float>(gpu::kMipFixedScale),
+                         static_cast<float>(static_cast<double>(v.second) / gpu::kWeightFixedScale)});
+      }
+      std::sort(model.begin(), model.end(), [](const StreamCandidate& a, const StreamCandidate& b) {
+        return a.weight != b.weight ? a.weight > b.weight : a.texture < b.texture;
+      });
+      uint64_t bad = 0;
+      const auto got = build_candidates(entries, meshes, &bad);
+      EXPECT_EQ(bad, model_bad);
+      ASSERT_EQ(got.size(), model.size()) << "n " << n << ", textures " << textures;
+      for (size_t i = 0; i < got.size(); ++i) {
+        ASSERT_EQ(got[i].texture, model[i].texture) << "n " << n << ", textures " << textures << ", position " << i;
+        ASSERT_EQ(got[i].weight, model[i].weight) << "position " << i;
+        ASSERT_EQ(got[i].desired_mip, model[i].desired_mip) << "position " << i;
+      }
+    }
+  }
 }
