@@ -46,5 +46,8 @@ void main() {
   barrier();
   uint slot = group_base + local;
   // The counter may run past the capacity: entries past it are dropped, the CPU reads min(count, capacity).
-  if (keep && slot < frame.flags.w) compacted.entries[slot] = CompactEntry(mesh, m.mip_fixed, m.weight_fixed, 0u);
+  // With the mesh's texture id: the CPU merges the meshes of a texture without reading the mesh records.
+  if (keep && slot < frame.flags.w) {
+    compacted.entries[slot] = CompactEntry(mesh, m.mip_fixed, m.weight_fixed, meshes[mesh].texture_id);
+  }
 }

@@ -123,7 +123,7 @@ struct CompactEntry {
   uint mesh_id;
   uint mip_fixed;
   uint weight_fixed;
-  uint reserved;
+  uint texture_id;      // the mesh's texture (MeshGpu::texture_id): the CPU merges by it without the mesh records
 };
 
 #ifdef __cplusplus

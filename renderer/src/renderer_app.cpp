@@ -712,7 +712,8 @@ std::vector<StreamCandidate> Renderer::read_candidates() {
   const auto* entries = reinterpret_cast<const gpu::CompactEntry*>(scene_gpu_->readback.bytes().data() +
                                                                    sizeof(gpu::CompactListHeader));
   uint64_t skipped = 0;
-  const auto candidates = build_candidates({entries, count}, scene_.mesh_records(), &skipped);
+  const auto candidates =
+      build_candidates({entries, count}, scene_.mesh_records().size(), scene_.texture_records().size(), &skipped);
   if (skipped) spdlog::warn("visibility list: {} entries with a bad mesh id skipped", skipped);
   return candidates;
 }

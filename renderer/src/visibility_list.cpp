@@ -31,8 +31,8 @@ void sort_list(It first, It last, Less less) {
 
 }  // namespace
 
-std::vector<StreamCandidate> build_candidates(std::span<const gpu::CompactEntry> entries,
-                                              std::span<const scene::MeshRecord> meshes, uint64_t* skipped) {
+std::vector<StreamCandidate> build_candidates(std::span<const gpu::CompactEntry> entries, size_t mesh_count,
+                                              size_t texture_count, uint64_t* skipped) {
   // Meshes sharing a texture merge by sorting on the texture id and combining neighbours: no hash table and no
   // allocation per entry (this runs on the frame thread every streaming cycle). Weights are summed in the GPU's
   // fixed point (exact, so the sum, and with it the order, does not depend on the order the compaction's
@@ -41,11 +41,11 @@ std::vector<StreamCandidate> build_candidates(std::span<const gpu::CompactEntry>
   sums.reserve(entries.size());
   uint64_t bad = 0;
   for (const gpu::CompactEntry& e : entries) {
-    if (e.mesh_id >= meshes.size() || e.mip_fixed == gpu::kNoMip) {
+    if (e.mesh_id >= mesh_count || e.texture_id >= texture_count || e.mip_fixed == gpu::kNoMip) {
       ++bad;
       continue;
     }
-    sums.push_back(TextureSum{meshes[e.mesh_id].texture_id, e.mip_fixed, e.weight_fixed});
+    sums.push_back(TextureSum{e.texture_id, e.mip_fixed, e.weight_fixed});
   }
   sort_list(sums.begin(), sums.end(), [](const TextureSum& a, const TextureSum& b) { return a.texture < b.texture; });
   std::vector<StreamCandidate> out;

@@ -290,6 +290,11 @@ TEST_F(RenderVisibilityCity, WeightedSetEqualsTheIdBufferSet) {
     ASSERT_TRUE(v.ok()) << v.error().message;
     const std::set<uint32_t> meta = weighted_set(*v), ids = id_buffer_set(*v);
     EXPECT_EQ(meta, ids);
+    // The compaction writes each mesh's texture id into its entry (the CPU merges by it).
+    for (const auto& e : v->entries) {
+      ASSERT_LT(e.mesh_id, scene_->meshes.meshes.size());
+      EXPECT_EQ(e.texture_id, scene_->meshes.meshes[e.mesh_id].texture_id) << "mesh " << e.mesh_id;
+    }
     if (ids.empty()) continue;  // a view of the small city's outskirts may see nothing
     ++views_with_meshes;
     // Occlusion matters: the broad phase submits more than is visible.

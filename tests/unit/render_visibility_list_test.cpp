@@ -16,16 +16,18 @@ TEST(VisibilityList, MergesMeshesOfOneTextureAndSortsByWeight) {
   meshes[1].texture_id = 3;
   meshes[2].texture_id = 7;  // shares texture 7 with mesh 0
   meshes[3].texture_id = 1;
+  // compact.comp writes each mesh's texture id into its entry.
   const std::vector<gpu::CompactEntry> entries{
-      {0, 3 * gpu::kMipFixedScale, 100 * gpu::kWeightFixedScale, 0},
-      {1, 2 * gpu::kMipFixedScale + gpu::kMipFixedScale / 2, 500 * gpu::kWeightFixedScale, 0},
-      {2, 1 * gpu::kMipFixedScale, 450 * gpu::kWeightFixedScale, 0},
-      {3, 0, 8, 0},      // weight 0.5
-      {99, 0, 1000, 0},  // bad mesh id from the GPU: skipped
+      {0, 3 * gpu::kMipFixedScale, 100 * gpu::kWeightFixedScale, 7},
+      {1, 2 * gpu::kMipFixedScale + gpu::kMipFixedScale / 2, 500 * gpu::kWeightFixedScale, 3},
+      {2, 1 * gpu::kMipFixedScale, 450 * gpu::kWeightFixedScale, 7},
+      {3, 0, 8, 1},       // weight 0.5
+      {99, 0, 1000, 1},   // bad mesh id from the GPU: skipped
+      {3, 0, 1000, 8},    // bad texture id from the GPU (the scene has 8 textures): skipped
   };
   uint64_t skipped = 0;
-  const auto c = build_candidates(entries, meshes, &skipped);
-  EXPECT_EQ(skipped, 1u);
+  const auto c = build_candidates(entries, meshes.size(), 8, &skipped);
+  EXPECT_EQ(skipped, 2u);
   ASSERT_EQ(c.size(), 3u);
   EXPECT_EQ(c[0].texture, TextureId(7));  // 100 + 450
   EXPECT_FLOAT_EQ(c[0].weight, 550.0f);
@@ -46,11 +48,11 @@ TEST(VisibilityList, MergedWeightsDoNotDependOnEntryOrder) {
   const uint32_t one = gpu::kWeightFixedScale;  // weight 1.0 in fixed point
   const uint32_t big = (1u << 24) * one;         // weight 2^24
   const std::vector<gpu::CompactEntry> entries{
-      {0, 0, big, 0}, {1, 0, one, 0}, {2, 0, one, 0}, {3, 0, big + 2 * one, 0},
+      {0, 0, big, 0}, {1, 0, one, 0}, {2, 0, one, 0}, {3, 0, big + 2 * one, 1},
   };
-  const auto first = build_candidates(entries, meshes);
+  const auto first = build_candidates(entries, meshes.size(), 2);
   const std::vector<gpu::CompactEntry> reversed(entries.rbegin(), entries.rend());
-  const auto second = build_candidates(reversed, meshes);
+  const auto second = build_candidates(reversed, meshes.size(), 2);
   ASSERT_EQ(first.size(), 2u);
   ASSERT_EQ(second.size(), 2u);
   for (size_t i = 0; i < 2; ++i) {
@@ -76,17 +78,19 @@ TEST(VisibilityList, AgreesWithAPlainModelOnRandomLists) {
         const uint32_t mesh = rng() % 50 == 0 ? static_cast<uint32_t>(meshes.size() + rng() % 9)  // bad id
                                               : static_cast<uint32_t>(rng() % meshes.size());
         // Few distinct weights, so that equal sums (ties) are common.
+        const uint32_t texture = mesh < meshes.size() ? meshes[mesh].texture_id : 0;
         e = {mesh, static_cast<uint32_t>(rng() % (12 * gpu::kMipFixedScale)),
-             static_cast<uint32_t>((rng() % 8) * gpu::kWeightFixedScale + (rng() % 3)), 0};
+             static_cast<uint32_t>((rng() % 8) * gpu::kWeightFixedScale + (rng() % 3)),
+             rng() % 50 == 0 ? textures + static_cast<uint32_t>(rng() % 9) : texture};  // or a bad texture id
       }
       std::map<uint32_t, std::pair<uint32_t, uint64_t>> model_sums;  // texture -> (min mip, weight sum)
       uint64_t model_bad = 0;
       for (const auto& e : entries) {
-        if (e.mesh_id >= meshes.size() || e.mip_fixed == gpu::kNoMip) {
+        if (e.mesh_id >= meshes.size() || e.texture_id >= textures || e.mip_fixed == gpu::kNoMip) {
           ++model_bad;
           continue;
         }
-        auto [it, fresh] = model_sums.try_emplace(meshes[e.mesh_id].texture_id, e.mip_fixed, 0);
+        auto [it, fresh] = model_sums.try_emplace(e.texture_id, e.mip_fixed, 0);
         it->second.first = std::min(it->second.first, e.mip_fixed);
         it->second.second += e.weight_fixed;
       }
@@ -99,7 +103,7 @@ TEST(VisibilityList, AgreesWithAPlainModelOnRandomLists) {
         return a.weight != b.weight ? a.weight > b.weight : a.texture < b.texture;
       });
       uint64_t bad = 0;
-      const auto got = build_candidates(entries, meshes, &bad);
+      const auto got = build_candidates(entries, meshes.size(), textures, &bad);
       EXPECT_EQ(bad, model_bad);
       ASSERT_EQ(got.size(), model.size()) << "n " << n << ", textures " << textures;
       for (size_t i = 0; i < got.size(); ++i) {

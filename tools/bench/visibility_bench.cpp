@@ -357,7 +357,8 @@ int run_visibility(const std::vector<std::string>& args) {
           wide_ms += v.pass_times.wide_ms;
           compact_ms += v.pass_times.compact_ms;
           Stopwatch sw;
-          const auto candidates = render::build_candidates(v.entries, vr->scene().meshes.meshes);
+          const auto candidates = render::build_candidates(v.entries, vr->scene().meshes.meshes.size(),
+                                                           vr->scene().textures.size());
           const double s = sw.seconds() * 1e3;
           on_ms += v.gpu_ms + s;
           on_cpu_ms += cpu + s;

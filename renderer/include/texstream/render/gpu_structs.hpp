@@ -38,6 +38,7 @@ static_assert(offsetof(MeshMeta, weight_fixed) == 4);
 static_assert(sizeof(CompactEntry) == 16);
 static_assert(offsetof(CompactEntry, mip_fixed) == 4);
 static_assert(offsetof(CompactEntry, weight_fixed) == 8);
+static_assert(offsetof(CompactEntry, texture_id) == 12);
 static_assert(sizeof(CompactListHeader) == 16);  // compact.comp: four uints, then the entries
 static_assert(offsetof(CompactListHeader, reserved) == 4);
 
