@@ -63,11 +63,12 @@ constexpr int kCostRepeatsFull = 8;
 // back to back (render.feedback_pairs), and runs of that; the summary takes the median run. The first frames
 // are left out (pipeline and page-cache warm-up after the preload). Before the pairs, separate runs with and
 // without feedback were compared frame by frame (fastest of 6 runs each): --quick gave 0.024 to 0.150 on the
-// same code within one hour on this machine; paired runs of 60 frames gave 0.082 to 0.114 per run.
+// same code within one hour on this machine; paired runs of 60 frames gave 0.082 to 0.114 per run, and the
+// median of 10 paired --quick runs 0.075, 0.094, 0.089 in three back-to-back invocations: 16 runs (~35 s).
 constexpr int kRunFramesQuick = 24;
 constexpr int kRunFramesFull = 60;
-constexpr int kRunRepeatsQuick = 10;
-constexpr int kRunRepeatsFull = 12;
+constexpr int kRunRepeatsQuick = 16;
+constexpr int kRunRepeatsFull = 16;
 constexpr int kRunWarmupFrames = 2;
 // The seed's test (seed 000 §4) offsets: a city at map coordinates 10^6..10^7 m.
 constexpr double kFarOffset[3] = {4.0e6, 5.0e6, 0.0};
