@@ -143,12 +143,12 @@ class Renderer {
   // Submits cmd_ (recorded) after the cache's sparse binds, waits for it and publishes its uploads.
   Status submit_and_wait();
   // What a submission uploads before its passes: everything committed so far (the texture cache's mips and
-  // the meshes made resident), only the meshes' geometry, or nothing.
-  enum class Uploads { kAll, kGeometry, kNone };
+  // the meshes made resident), only the mips, only the meshes' geometry, or nothing.
+  enum class Uploads { kAll, kMips, kGeometry, kNone };
   // One submission: `uploads`, then `rec`'s passes if given, then the colour capture if `capture`. `first`
   // marks frame 0's stages.
   Status record_and_submit(const FrameRecording* rec, Uploads uploads, bool capture, bool first);
-  // A submission that only carries the uploads committed so far (no drawing).
+  // A submission that only carries the mips committed so far (no drawing, no geometry).
   Status upload_now();
   // Loads the whole mip chain (down to level 0) of every texture in `wanted`, waiting for the server and
   // uploading as it goes: render.preload_all before frame 0 and render.blocking_loads each frame. With
@@ -403,11 +403,11 @@ Status Renderer::record_and_submit(const FrameRecording* rec, Uploads uploads, b
   bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
   bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
   TS_VK_TRY(vkBeginCommandBuffer(cmd_, &bi));
-  if (uploads == Uploads::kAll) {
+  if (uploads == Uploads::kAll || uploads == Uploads::kMips) {
     TS_TRY(cache_->prepare_uploads(serial_));  // this frame's sparse binds: one vkQueueBindSparse
     cache_->record_uploads(cmd_, serial_);
   }
-  if (uploads != Uploads::kNone) TS_TRY(scene_gpu_->record_uploads(scene_, cmd_));
+  if (uploads == Uploads::kAll || uploads == Uploads::kGeometry) TS_TRY(scene_gpu_->record_uploads(scene_, cmd_));
   if (first) first_frame_stage("frame0_record_uploads");
   if (rec) passes_->record(cmd_, *rec);
   if (capture) capture_->record(cmd_, passes_->colour().handle());
@@ -417,18 +417,7 @@ Status Renderer::record_and_submit(const FrameRecording* rec, Uploads uploads, b
   return ok_status();
 }
 
-Status Renderer::upload_now() {
-  ++serial_;
-  TS_VK_TRY(vkResetCommandBuffer(cmd_, 0));
-  VkCommandBufferBeginInfo bi{};
-  bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
-  bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
-  TS_VK_TRY(vkBeginCommandBuffer(cmd_, &bi));
-  TS_TRY(cache_->prepare_uploads(serial_));
-  cache_->record_uploads(cmd_, serial_);
-  TS_VK_TRY(vkEndCommandBuffer(cmd_));
-  return submit_and_wait();
-}
+Status Renderer::upload_now() { return record_and_submit(nullptr, Uploads::kMips, false, false); }
 
 Status Renderer::load_fully(std::vector<StreamCandidate> wanted, bool no_evictions) {
   // Desired level 0 and no bias: Algorithm 1 then refines each texture one level per round, coarsest first,
