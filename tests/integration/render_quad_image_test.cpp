@@ -22,8 +22,7 @@
 
 #define STB_IMAGE_IMPLEMENTATION
 #include <stb_image.h>
-#define STB_IMAGE_WRITE_IMPLEMENTATION
-#include <stb_image_write.h>
+#include <stb_image_write.h>  // its implementation comes with texstream::renderer (frame_capture.cpp)
 
 #include "texstream/common/scene_format.hpp"
 

@@ -4,10 +4,11 @@
 #include <gtest/gtest.h>
 
 #include "process_test_support.hpp"
+#include "texstream/render/frame_log.hpp"
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -27,6 +28,28 @@ int run(const std::string& cmd, const fs::path& log) { return texstream::test::r
 fs::path fresh_dir(const std::string& name) { return texstream::test::fresh_dir("texstream_render_it_", name); }
 
 class RenderScene : public ::testing::TestWithParam<std::string> {};
+
+// The lock-step tests' city: texstream-gen into dir/scene.
+::testing::AssertionResult generate_lockstep_city(const fs::path& dir) {
+  if (run((kBin / "texstream-gen").string() + " --out " + (dir / "scene").string() +
+              " --textures 300 --seed 11 --threads 2",
+          dir / "gen.log") == 0) {
+    return ::testing::AssertionSuccess();
+  }
+  return ::testing::AssertionFailure() << "texstream-gen failed:\n" << slurp(dir / "gen.log");
+}
+
+// Every PNG in a/frames must exist in b/frames with the same bytes; returns how many were compared.
+int expect_same_frames(const fs::path& a, const fs::path& b, const std::string& what) {
+  int compared = 0;
+  for (const auto& entry : fs::directory_iterator(a / "frames")) {
+    const fs::path other = b / "frames" / entry.path().filename();
+    EXPECT_TRUE(fs::exists(other)) << other;
+    EXPECT_TRUE(slurp(entry.path()) == slurp(other)) << entry.path().filename() << " differs " << what;
+    ++compared;
+  }
+  return compared;
+}
 
 }  // namespace
 
@@ -90,11 +113,7 @@ TEST(RenderCli, MissingSceneNamesThePath) {
 TEST(RenderLockstep, TwoRunsGiveIdenticalFrames) {
   const std::string lockstep = std::getenv("TEXSTREAM_TEST_REALTIME") ? "false" : "true";  // to show it can fail
   const fs::path dir = fresh_dir("lockstep");
-  ASSERT_EQ(run((kBin / "texstream-gen").string() + " --out " + (dir / "scene").string() +
-                    " --textures 300 --seed 11 --threads 2",
-                dir / "gen.log"),
-            0)
-      << slurp(dir / "gen.log");
+  ASSERT_TRUE(generate_lockstep_city(dir));
   std::vector<nlohmann::json> summaries;
   for (int i = 0; i < 2; ++i) {
     const fs::path out = dir / ("out" + std::to_string(i));
@@ -108,54 +127,17 @@ TEST(RenderLockstep, TwoRunsGiveIdenticalFrames) {
   EXPECT_GT(summaries[0]["mips_streamed"].get<int>(), 0);
   EXPECT_EQ(summaries[0]["mips_streamed"], summaries[1]["mips_streamed"]);
   EXPECT_EQ(summaries[0]["textures_resident"], summaries[1]["textures_resident"]);
-  int compared = 0;
-  for (const auto& entry : fs::directory_iterator(dir / "out0" / "frames")) {
-    const fs::path other = dir / "out1" / "frames" / entry.path().filename();
-    ASSERT_TRUE(fs::exists(other)) << other;
-    EXPECT_EQ(slurp(entry.path()), slurp(other)) << entry.path().filename() << " differs between two lock-step runs";
-    ++compared;
-  }
-  EXPECT_EQ(compared, 7);  // frames 0, 4, ..., 20 and the last (23)
+  // frames 0, 4, ..., 20 and the last (23)
+  EXPECT_EQ(expect_same_frames(dir / "out0", dir / "out1", "between two lock-step runs"), 7);
   fs::remove_all(dir);
 }
-
-namespace {
-// The values of one column of frames.csv, as text (empty: NaN, not measured).
-std::vector<std::string> frame_column(const fs::path& csv, const std::string& name) {
-  std::istringstream in(slurp(csv));
-  std::string line;
-  std::getline(in, line);
-  auto split = [](const std::string& l) {
-    std::vector<std::string> out;
-    std::stringstream ss(l);
-    std::string field;
-    while (std::getline(ss, field, ',')) out.push_back(field);
-    if (!l.empty() && l.back() == ',') out.emplace_back();
-    return out;
-  };
-  const auto header = split(line);
-  const auto at = std::find(header.begin(), header.end(), name);
-  if (at == header.end()) return {};
-  const size_t column = static_cast<size_t>(at - header.begin());
-  std::vector<std::string> values;
-  while (std::getline(in, line)) {
-    const auto fields = split(line);
-    values.push_back(column < fields.size() ? fields[column] : "");
-  }
-  return values;
-}
-}  // namespace
 
 // render.feedback_pairs (texstream-bench visibility's cost measurement): each frame is drawn a second time
 // without feedback. The second drawing must change nothing the run shows or streams (lock-step: the same frames
 // byte for byte and the same mips as a run without pairs), and frames.csv carries both latencies.
 TEST(RenderLockstep, FeedbackPairsDrawTheSameFramesAndLogBothLatencies) {
   const fs::path dir = fresh_dir("pairs");
-  ASSERT_EQ(run((kBin / "texstream-gen").string() + " --out " + (dir / "scene").string() +
-                    " --textures 300 --seed 11 --threads 2",
-                dir / "gen.log"),
-            0)
-      << slurp(dir / "gen.log");
+  ASSERT_TRUE(generate_lockstep_city(dir));
   std::vector<nlohmann::json> summaries;
   for (const char* pairs : {"false", "true"}) {
     const fs::path out = dir / (std::string("pairs_") + pairs);
@@ -171,24 +153,19 @@ TEST(RenderLockstep, FeedbackPairsDrawTheSameFramesAndLogBothLatencies) {
   EXPECT_EQ(summaries[0]["mips_streamed"], summaries[1]["mips_streamed"]);
   EXPECT_EQ(summaries[0]["streaming_cycles"], summaries[1]["streaming_cycles"]);
   EXPECT_EQ(summaries[1]["validation_errors"].get<int>(), 0);
-  int compared = 0;
-  for (const auto& entry : fs::directory_iterator(dir / "pairs_false" / "frames")) {
-    const fs::path other = dir / "pairs_true" / "frames" / entry.path().filename();
-    ASSERT_TRUE(fs::exists(other)) << other;
-    EXPECT_TRUE(slurp(entry.path()) == slurp(other)) << entry.path().filename() << " differs with render.feedback_pairs";
-    ++compared;
+  // frames 0, 5, 10 and the last (15)
+  EXPECT_EQ(expect_same_frames(dir / "pairs_false", dir / "pairs_true", "with render.feedback_pairs"), 4);
+  const auto paired = texstream::render::read_frame_log(dir / "pairs_true" / "frames.csv");
+  ASSERT_TRUE(paired.ok()) << paired.error().message;
+  ASSERT_EQ(paired->size(), 16u);
+  for (const auto& f : *paired) {
+    EXPECT_GT(f.latency_off_ms, 0.0) << "frame " << f.index << ": latency_off_ms";  // NaN fails too
+    EXPECT_GT(f.latency_ms, 0.0) << "frame " << f.index;
   }
-  EXPECT_EQ(compared, 4);  // frames 0, 5, 10 and the last (15)
-  const auto off = frame_column(dir / "pairs_true" / "frames.csv", "latency_off_ms");
-  const auto on = frame_column(dir / "pairs_true" / "frames.csv", "latency_ms");
-  ASSERT_EQ(off.size(), 16u);
-  ASSERT_EQ(on.size(), 16u);
-  for (size_t f = 0; f < off.size(); ++f) {
-    EXPECT_GT(std::atof(off[f].c_str()), 0.0) << "frame " << f << ": latency_off_ms '" << off[f] << "'";
-    EXPECT_GT(std::atof(on[f].c_str()), 0.0) << "frame " << f;
-  }
-  for (const std::string& v : frame_column(dir / "pairs_false" / "frames.csv", "latency_off_ms")) {
-    EXPECT_EQ(v, "") << "latency_off_ms without render.feedback_pairs";
+  const auto plain = texstream::render::read_frame_log(dir / "pairs_false" / "frames.csv");
+  ASSERT_TRUE(plain.ok()) << plain.error().message;
+  for (const auto& f : *plain) {
+    EXPECT_TRUE(std::isnan(f.latency_off_ms)) << "frame " << f.index << ": latency_off_ms without pairs";
   }
   // Not with a window: refused at start, naming the key.
   const int rc = run((kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +

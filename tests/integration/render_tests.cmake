@@ -4,7 +4,7 @@
 texstream_add_integration_test(render_integration_tests
   ${CMAKE_CURRENT_LIST_DIR}/render_scene_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/render_quad_image_test.cpp)
-target_link_libraries(render_integration_tests PRIVATE texstream::common nlohmann_json::nlohmann_json texstream_stb)
+target_link_libraries(render_integration_tests PRIVATE texstream::renderer nlohmann_json::nlohmann_json texstream_stb)
 
 # GPU visibility (issue 5): analytic plane mips, extremes, textureQueryLod agreement, the id-buffer set, large
 # coordinates, through the renderer's passes in-process (render::ViewRenderer); and the window under Xvfb.
