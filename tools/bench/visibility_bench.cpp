@@ -135,18 +135,21 @@ T unwrap(Result<T> r, const char* what) {
 // texture resident first, render.preload_all) nothing is in flight, so every frame starts a streaming cycle and
 // carries feedback: the worst case. Without, a plain streaming run: feedback only on the frames that start a
 // cycle (`cycles`), as in normal operation. Empty on failure (the log is named).
+// What feedback costs as a fraction of frame time, from summed times with and without it.
+double cost_fraction(double on_ms, double off_ms) { return on_ms > 0 ? (on_ms - off_ms) / on_ms : 0.0; }
+
 struct PairedRun {
   std::vector<double> on, off;
   uint64_t cycles = 0;
   bool ok() const { return !on.empty(); }
-  // (on - off) / on over the frames after the warm-up.
+  // Over the frames after the warm-up.
   double cost_fraction(int warmup) const {
     double a = 0, b = 0;
     for (size_t f = static_cast<size_t>(warmup); f < on.size(); ++f) {
       a += on[f];
       b += off[f];
     }
-    return a > 0 ? (a - b) / a : 0.0;
+    return bench::cost_fraction(a, b);
   }
 };
 
@@ -383,9 +386,9 @@ int run_visibility(const std::vector<std::string>& args) {
     best_on_ms += best_on[i];
     best_off_ms += best_off[i];
   }
-  const double cost_frac = best_on_ms > 0 ? (best_on_ms - best_off_ms) / best_on_ms : 0.0;
-  const double sum_frac = on_ms > 0 ? (on_ms - off_ms) / on_ms : 0.0;
-  const double cpu_frac = on_cpu_ms > 0 ? (on_cpu_ms - off_cpu_ms) / on_cpu_ms : 0.0;
+  const double cost_frac = cost_fraction(best_on_ms, best_off_ms);
+  const double sum_frac = cost_fraction(on_ms, off_ms);
+  const double cpu_frac = cost_fraction(on_cpu_ms, off_cpu_ms);
   const double per_visible = visible ? static_cast<double>(submitted) / static_cast<double>(visible) : 0.0;
   std::printf("cost (colormap-only views, no texture sampled): fastest frame per view with feedback %.2f ms, "
               "without %.2f ms (summed over views): %.3f\n",
@@ -452,8 +455,8 @@ int run_visibility(const std::vector<std::string>& args) {
       std::sort(fracs.begin(), fracs.end());
       std::printf("  per run:");
       for (double f : fracs) std::printf(" %.3f", f);
-      std::printf("; all frames summed %.3f; fastest per frame %.3f\n", on_sum > 0 ? (on_sum - off_sum) / on_sum : 0.0,
-                  best_on_sum > 0 ? (best_on_sum - best_off_sum) / best_on_sum : 0.0);
+      std::printf("; all frames summed %.3f; fastest per frame %.3f\n", cost_fraction(on_sum, off_sum),
+                  cost_fraction(best_on_sum, best_off_sum));
       // Normal operation: a streaming run carries feedback only on the frames that start a cycle. (Its own
       // pairs are no measure of feedback: the real frame of a pair also uploads the mips that arrived, the twin
       // does not, and on the GPU that was larger than the feedback.)
