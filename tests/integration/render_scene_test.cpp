@@ -39,6 +39,16 @@ class RenderScene : public ::testing::TestWithParam<std::string> {};
   return ::testing::AssertionFailure() << "texstream-gen failed:\n" << slurp(dir / "gen.log");
 }
 
+// One texstream-render run over the lock-step city at 320x180 into `out`, controller off; `sets` adds options.
+// Its summary.json (discarded, so that the caller's checks fail, if the run failed).
+nlohmann::json render_lockstep_city(const fs::path& dir, const fs::path& out, const std::string& sets) {
+  const std::string cmd = (kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
+                          " --set controller.mode=none --set render.width_px=320 --set render.height_px=180" +
+                          " --set render.output_dir=" + out.string() + sets;
+  EXPECT_EQ(run(cmd, dir / "render.log"), 0) << slurp(dir / "render.log");
+  return nlohmann::json::parse(slurp(out / "summary.json"), nullptr, false);
+}
+
 // Every PNG in a/frames must exist in b/frames with the same bytes; returns how many were compared.
 int expect_same_frames(const fs::path& a, const fs::path& b, const std::string& what) {
   int compared = 0;
@@ -116,13 +126,9 @@ TEST(RenderLockstep, TwoRunsGiveIdenticalFrames) {
   ASSERT_TRUE(generate_lockstep_city(dir));
   std::vector<nlohmann::json> summaries;
   for (int i = 0; i < 2; ++i) {
-    const fs::path out = dir / ("out" + std::to_string(i));
-    const std::string cmd = (kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
-                            " --set render.lockstep=" + lockstep + " --set controller.mode=none --set render.frames=24" +
-                            " --set render.width_px=320 --set render.height_px=180" +
-                            " --set render.write_every_frames=4 --set render.output_dir=" + out.string();
-    ASSERT_EQ(run(cmd, dir / "render.log"), 0) << slurp(dir / "render.log");
-    summaries.push_back(nlohmann::json::parse(slurp(out / "summary.json")));
+    summaries.push_back(render_lockstep_city(dir, dir / ("out" + std::to_string(i)),
+                                             " --set render.lockstep=" + lockstep +
+                                                 " --set render.frames=24 --set render.write_every_frames=4"));
   }
   EXPECT_GT(summaries[0]["mips_streamed"].get<int>(), 0);
   EXPECT_EQ(summaries[0]["mips_streamed"], summaries[1]["mips_streamed"]);
@@ -140,14 +146,10 @@ TEST(RenderLockstep, FeedbackPairsDrawTheSameFramesAndLogBothLatencies) {
   ASSERT_TRUE(generate_lockstep_city(dir));
   std::vector<nlohmann::json> summaries;
   for (const char* pairs : {"false", "true"}) {
-    const fs::path out = dir / (std::string("pairs_") + pairs);
-    const std::string cmd = (kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
-                            " --set render.lockstep=true --set controller.mode=none --set render.frames=16" +
-                            " --set render.width_px=320 --set render.height_px=180 --set render.validation=true" +
-                            " --set render.feedback_pairs=" + pairs +
-                            " --set render.write_every_frames=5 --set render.output_dir=" + out.string();
-    ASSERT_EQ(run(cmd, dir / "render.log"), 0) << slurp(dir / "render.log");
-    summaries.push_back(nlohmann::json::parse(slurp(out / "summary.json")));
+    summaries.push_back(render_lockstep_city(dir, dir / (std::string("pairs_") + pairs),
+                                             std::string(" --set render.lockstep=true --set render.frames=16") +
+                                                 " --set render.validation=true --set render.feedback_pairs=" + pairs +
+                                                 " --set render.write_every_frames=5"));
   }
   EXPECT_GT(summaries[0]["mips_streamed"].get<int>(), 0);
   EXPECT_EQ(summaries[0]["mips_streamed"], summaries[1]["mips_streamed"]);
