@@ -6,8 +6,9 @@
 // the pre-pass wrote, prepass.frag) goes on: coplanar surfaces both pass EQUAL, yet one pixel has one owner. A
 // mesh gets metadata exactly when it owns a pixel, which is what the mesh-id view shows.
 // Variants:
-//   WIDE_PASS  the small off-screen pass at the wider FOV: metadata only, W = 1 per viewport pixel, and only
-//              outside the viewport (seed 000 §3.2);
+//   WIDE_PASS  the small off-screen pass at the wider FOV: metadata only, W = 1 per viewport pixel, for the
+//              meshes entirely outside the viewport (seed 000 §3.2; the broad phase sends only those, and a
+//              fragment inside the viewport, which only a box's rounding could let through, adds nothing);
 //   SUBGROUP_FEEDBACK  (with WIDE_PASS) the wide pass's atomics combined per subgroup first;
 //   LOD_PROBE  also writes, per pixel, the metadata's level next to the device's textureQueryLod (tests and
 //              texstream-bench visibility check the formula against the hardware).

@@ -143,21 +143,21 @@ void BroadPhase::query(const Frustum& frustum, const std::array<double, 3>& came
 
 ViewportSplit BroadPhase::split_by_viewport(const Frustum& viewport, const std::array<double, 3>& camera,
                                            std::vector<uint32_t>& ids) const {
-  std::vector<uint32_t> straddle, outside;
-  uint32_t inside = 0;
+  std::vector<uint32_t> outside;
+  uint32_t touching = 0;
   for (uint32_t id : ids) {
     if (id >= meshes_.size()) continue;  // not a mesh of this tree: dropped, as query() never returns it
-    switch (classify_mesh(viewport, id, camera)) {
-      case Frustum::Side::kInside: ids[inside++] = id; break;  // inside <= position read: in-place is safe
-      case Frustum::Side::kIntersects: straddle.push_back(id); break;
-      case Frustum::Side::kOutside: outside.push_back(id); break;
+    if (classify_mesh(viewport, id, camera) == Frustum::Side::kOutside) {
+      outside.push_back(id);
+    } else {
+      ids[touching++] = id;  // touching <= position read: in-place is safe
     }
   }
-  ids.resize(inside);
-  ids.insert(ids.end(), straddle.begin(), straddle.end());
-  const auto main_end = static_cast<uint32_t>(ids.size());
+  ids.resize(touching);
   ids.insert(ids.end(), outside.begin(), outside.end());
-  return ViewportSplit{main_end, inside};
+  // The wide pass draws only the meshes entirely outside: seed 000 §3.2 gives W = 1 to "meshes that lie outside
+  // of the viewport", and a mesh straddling its edge is in it, with the main pass's metadata alone.
+  return ViewportSplit{touching};
 }
 
 bool BroadPhase::covers_sample(const SampleGrid& grid, uint32_t id, const std::array<double, 3>& camera) const {
@@ -204,13 +204,10 @@ ViewportSplit BroadPhase::drop_unsampled(const SampleGrid& main, const SampleGri
                                          const std::array<double, 3>& camera, std::vector<uint32_t>& ids,
                                          ViewportSplit split) const {
   const size_t main_end = std::min<size_t>(split.main_end, ids.size());
-  const size_t wide_begin = std::min<size_t>(split.wide_begin, main_end);
   auto keep = [&](size_t i) {
     const uint32_t id = ids[i];
     if (id >= meshes_.size()) return false;
-    if (i < wide_begin) return covers_sample(main, id, camera);
-    if (i < main_end) return covers_sample(main, id, camera) || covers_sample(wide, id, camera);
-    return covers_sample(wide, id, camera);
+    return covers_sample(i < main_end ? main : wide, id, camera);
   };
   // The tests on every core for a large view (eight corner projections a mesh), the compaction in order.
   std::vector<uint8_t> kept_flags(ids.size());
@@ -226,11 +223,9 @@ ViewportSplit BroadPhase::drop_unsampled(const SampleGrid& main, const SampleGri
   size_t kept = 0;
   ViewportSplit out;
   for (size_t i = 0; i < ids.size(); ++i) {
-    if (i == wide_begin) out.wide_begin = static_cast<uint32_t>(kept);
     if (i == main_end) out.main_end = static_cast<uint32_t>(kept);
     if (kept_flags[i]) ids[kept++] = ids[i];  // kept <= i: in place, order kept
   }
-  if (wide_begin == ids.size()) out.wide_begin = static_cast<uint32_t>(kept);
   if (main_end == ids.size()) out.main_end = static_cast<uint32_t>(kept);
   ids.resize(kept);
   return out;

@@ -518,8 +518,8 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   // Broad phase over the wide frustum: the wide pass needs those meshes too.
   broad_phase_->query(Frustum::from_matrix(cam.wide_proj * cam.view), cam.position, visible_);
   FrameRecording rec;
-  // Inside / straddling / outside the viewport's frustum: the main pass draws the first two runs, the wide
-  // pass the last two (a mesh wholly inside the viewport adds nothing the main pass does not already count).
+  // Touching / outside the viewport's frustum: the main pass draws the first run, the wide pass the second
+  // (W = 1 for meshes outside the viewport, seed 000 §3.2).
   ViewportSplit split =
       broad_phase_->split_by_viewport(Frustum::from_matrix(cam.proj * cam.view), cam.position, visible_);
   rec.main = main_pass_constants(cam);

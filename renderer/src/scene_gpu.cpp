@@ -330,7 +330,6 @@ void SceneGpu::write_draws(const SceneData& scene, std::span<const uint32_t> vis
   // `drawn` holds mesh_count ids: the broad phase returns each mesh at most once.
   TS_ASSERT(visible.size() <= mesh_count, "write_draws of %zu meshes of %u", visible.size(), mesh_count);
   const size_t main_end = std::min<size_t>(split.main_end, visible.size());
-  const size_t wide_begin = std::min<size_t>(split.wide_begin, main_end);
   auto* mesh_out = meshes.as<gpu::MeshGpu>();
   auto* drawn_out = drawn.as<uint32_t>();
   const auto records = scene.mesh_records();
@@ -346,10 +345,9 @@ void SceneGpu::write_draws(const SceneData& scene, std::span<const uint32_t> vis
     g.texture_id = m.texture_id;
     drawn_out[drawn_count++] = id;  // each mesh once, whichever passes draw it
   }
-  // Two lists, one per pass: the straddling meshes are in both, so each pass's meshes sort and merge as one
-  // list (three separately merged parts break more runs).
+  // Two lists, one per pass, each sorted and merged on its own.
   const auto main_list = write_list(scene, visible.first(main_end), 0);
-  const auto wide_list = write_list(scene, visible.subspan(wide_begin), main_list.second);
+  const auto wide_list = write_list(scene, visible.subspan(main_end), main_list.second);
   rec.main_count = main_list.second;
   rec.wide_first = main_list.second;
   rec.draw_count = main_list.second + wide_list.second;

@@ -630,7 +630,8 @@ void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const
   if (timestamps_) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps_.get(), 1);
   timestamps_written_ = 2;
   if (!frame.feedback) return;
-  // Wide pass: only the draws that reach outside the viewport's frustum can have a fragment outside it.
+  // Wide pass: the meshes entirely outside the viewport's frustum (seed 000 §3.2: W = 1 for meshes that lie
+  // outside of the viewport).
   begin_pass(wide_pass_.get(), wide_fb_.get(), options_.wide_width, options_.wide_height, false);
   draw(wide_pipeline_.get(), frame.wide, wide_first, frame.draw_count - wide_first);
   vkCmdEndRenderPass(cmd);

@@ -17,6 +17,7 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <map>
 #include <set>
 #include <vector>
 #include <sstream>
@@ -229,6 +230,51 @@ TEST(RenderVisibility, CoincidentMeshesTheShownOneIsTheCountedOne) {
     EXPECT_EQ(ids.size(), 1u) << copies << " coincident quads";
     EXPECT_EQ(meta, ids) << copies << " coincident quads";
   }
+}
+
+// The wider off-screen FOV gives W = 1 per viewport pixel to meshes that lie outside the viewport (seed 000
+// §3.2), at the level the viewport would need; a mesh straddling the viewport's edge is in the viewport and
+// keeps exactly the main pass's metadata. Looking north at 960x540 with FOV 60, the viewport's edge runs at
+// |x| = 1.026 y, the wide FOV's (75) at |x| = 1.364 y. Quads of 10 m facing the camera:
+//   0: straight ahead, 40 m north;
+//   1: across the viewport's left edge (x -36..-26 at 30 m: the edge is at -30.8);
+//   2: outside the viewport, inside the wide FOV (x 43..53 at 40 m: 1.075 y .. 1.325 y).
+TEST(RenderVisibility, OnlyMeshesOutsideTheViewportGetTheOffScreenWeight) {
+  const double side = 10.0;
+  SceneData scene = plane_scene(40.0, side, 0);
+  scene::MeshRecord ahead = scene.meshes.meshes[0];
+  ahead.bounds_min[1] = ahead.bounds_max[1] = 0.0f;  // the quads are flat: a box 10 m deep would reach the viewport
+  scene::MeshRecord across = ahead, outside = ahead;  // the same vertices, moved
+  across.origin[0] = kX - 31.0;
+  across.origin[1] = kY + 30.0;
+  outside.origin[0] = kX + 48.0;
+  scene.meshes.meshes = {ahead, across, outside};
+  scene.manifest.mesh_count = 3;
+  auto by_mesh = [](const ViewResult& v) {
+    std::map<uint32_t, gpu::CompactEntry> out;
+    for (const auto& e : v.entries) out[e.mesh_id] = e;
+    return out;
+  };
+  const int width = 960, height = 540;  // the wide pass at 240x135: the off-screen quad is ~22 of its pixels wide
+  Config wide = base_config(width, height);
+  wide.render.offscreen_fov_y_deg = 75.0;
+  const auto narrow_meta = by_mesh(render_one(base_config(width, height), scene));  // wide FOV = viewport: no off-screen mesh
+  const auto wide_meta = by_mesh(render_one(wide, scene));
+  ASSERT_EQ(narrow_meta.size(), 2u);
+  ASSERT_EQ(wide_meta.size(), 3u);
+  for (uint32_t mesh : {0u, 1u}) {
+    ASSERT_EQ(narrow_meta.count(mesh), 1u) << "mesh " << mesh;
+    EXPECT_EQ(wide_meta.at(mesh).mip_fixed, narrow_meta.at(mesh).mip_fixed) << "mesh " << mesh;
+    EXPECT_EQ(wide_meta.at(mesh).weight_fixed, narrow_meta.at(mesh).weight_fixed) << "mesh " << mesh;
+  }
+  // Mesh 2 is parallel to the image plane, so it projects to a square of side * f / 40 viewport pixels, f the
+  // focal length in pixels, and needs the level log2(texels per pixel) there. The wide pass rasterizes it at
+  // a quarter of the resolution (about 22 x 22 of its pixels): its edges decide up to ~10 % of the area.
+  const gpu::CompactEntry& off = wide_meta.at(2);
+  const double f = focal_px(height), pixels = std::pow(side * f / 40.0, 2.0);
+  EXPECT_NEAR(off.weight_fixed / static_cast<double>(gpu::kWeightFixedScale), pixels, 0.15 * pixels);
+  const double level = std::log2(kTex / side * 40.0 / f);
+  EXPECT_NEAR(off.mip_fixed / static_cast<double>(gpu::kMipFixedScale), level, 0.5);
 }
 
 class RenderVisibilityCity : public ::testing::Test {

@@ -101,35 +101,34 @@ TEST(SceneDraws, AdjacentMeshesMergePerPartInIndexOrderAndInstancesDrawAlone) {
   const SceneData s = triangles(7, {4});
   auto g = make_gpu(s);
   ASSERT_NE(g, nullptr);
-  // The broad phase's order, split: [6 3 7 | 0 4 | 1] = inside, straddling, outside. 7 comes before 4, so 7
+  // The broad phase's order, split: [6 7 0 1 | 3 4] = touching the viewport, outside. 7 comes before 4, so 7
   // owns the shared ranges and 4 is the instance.
-  const std::vector<uint32_t> visible{6, 3, 7, 0, 4, 1};
+  const std::vector<uint32_t> visible{6, 7, 0, 1, 3, 4};
   ASSERT_TRUE(g->scene.make_resident(s, visible, nullptr).ok());
   EXPECT_TRUE(g->scene.is_instanced(4));
   EXPECT_FALSE(g->scene.is_instanced(7));
   FrameRecording rec;
-  g->scene.write_draws(s, visible, {0, 0, 0}, ViewportSplit{5, 3}, rec);
+  g->scene.write_draws(s, visible, {0, 0, 0}, ViewportSplit{4}, rec);
 
-  // The main pass's list (inside and straddling: 6 3 7 0 4) in id order: 0 (indices 0-2); 3 (9-11); 4
-  // (12-14), the instance, alone with firstInstance 4 + 1, so 3 cannot extend into it; 6 (18-20), a new run
-  // after the instance; 7 (12-14), the owner, not adjacent to 20. The wide pass's list (straddling and
-  // outside: 0 4 1): 0 and 1 (3-5) adjacent, one draw; 4 alone.
-  const std::vector<Draw> want{{0, 3, 0},  {9, 3, 0}, {12, 3, 5}, {18, 3, 0}, {12, 3, 0},  // main
-                               {0, 6, 0},  {12, 3, 5}};                                    // wide
+  // The main pass's list (6 7 0 1) in id order: 0 and 1 (indices 0-5) adjacent, one draw; 6 (18-20); 7
+  // (12-14), the owner, not adjacent to 20. The wide pass's list (3 4): 3 (9-11); 4 (12-14), the instance,
+  // alone with firstInstance 4 + 1, so 3 cannot extend into it.
+  const std::vector<Draw> want{{0, 6, 0}, {18, 3, 0}, {12, 3, 0},  // main
+                               {9, 3, 0}, {12, 3, 5}};             // wide
   EXPECT_EQ(draws_of(g->scene, rec.draw_count), want);
-  EXPECT_EQ(rec.main_count, 5u);
-  EXPECT_EQ(rec.wide_first, 5u);
-  EXPECT_EQ(rec.draw_count, 7u);
+  EXPECT_EQ(rec.main_count, 3u);
+  EXPECT_EQ(rec.wide_first, 3u);
+  EXPECT_EQ(rec.draw_count, 5u);
   EXPECT_EQ(rec.mesh_count, 6u);
-  EXPECT_EQ(rec.main_meshes, 5u);
-  EXPECT_EQ(rec.wide_meshes, 3u);
+  EXPECT_EQ(rec.main_meshes, 4u);
+  EXPECT_EQ(rec.wide_meshes, 2u);
   // Each drawn mesh once, in the broad phase's order: what compact.comp visits.
   const uint32_t* drawn = g->scene.drawn.as<uint32_t>();
   EXPECT_EQ(std::vector<uint32_t>(drawn, drawn + rec.mesh_count), visible);
 
   // Without 4 and 7, the main list's 3 and 6 stay apart (5 is not in view) and 0 merges with nothing.
   const std::vector<uint32_t> fewer{6, 3, 0, 1};
-  g->scene.write_draws(s, fewer, {0, 0, 0}, ViewportSplit{4, 4}, rec);
+  g->scene.write_draws(s, fewer, {0, 0, 0}, ViewportSplit{4}, rec);
   EXPECT_EQ(draws_of(g->scene, rec.draw_count), (std::vector<Draw>{{0, 6, 0}, {9, 3, 0}, {18, 3, 0}}));
   EXPECT_EQ(rec.wide_first, 3u);
   EXPECT_EQ(rec.draw_count, 3u);  // nothing reaches outside

@@ -303,20 +303,19 @@ TEST(DropUnsampled, KeepsExactlyTheMeshesThatCanCoverAPixelCentre) {
   };
   const render::BroadPhase bp(meshes);
   std::vector<uint32_t> ids = {0, 1, 2, 3, 4, 5};
-  // Runs: 0..1 inside (main grid), 2..3 straddling (either grid), 4..5 outside (wide grid = the same here).
-  const render::ViewportSplit split = bp.drop_unsampled(grid, grid, cam, ids, render::ViewportSplit{4, 2});
+  // Runs: 0..3 touching the viewport (main grid), 4..5 outside (wide grid = the same here).
+  const render::ViewportSplit split = bp.drop_unsampled(grid, grid, cam, ids, render::ViewportSplit{4});
   EXPECT_EQ(ids, (std::vector<uint32_t>{1, 2, 4}));
-  EXPECT_EQ(split.wide_begin, 1u);
   EXPECT_EQ(split.main_end, 2u);
   // A rectangle ending 1/64 pixel short of a centre is kept (snapping may reach it) ...
   meshes[5] = quad(23.72, 25.0, 100, 0.5f);  // pixel x up to 2.4844
   const render::BroadPhase bp2(meshes);
   ids = {5};
-  bp2.drop_unsampled(grid, grid, cam, ids, render::ViewportSplit{1, 0});
+  bp2.drop_unsampled(grid, grid, cam, ids, render::ViewportSplit{1});
   EXPECT_EQ(ids, (std::vector<uint32_t>{5}));
   // ... but not on a device snapping to 1/256 pixel, whose margin is 1/128.
   grid.margin_px = render::SampleGrid::margin_px_for(8);
   EXPECT_DOUBLE_EQ(grid.margin_px, 1.0 / 128.0);
-  bp2.drop_unsampled(grid, grid, cam, ids, render::ViewportSplit{1, 0});
+  bp2.drop_unsampled(grid, grid, cam, ids, render::ViewportSplit{1});
   EXPECT_TRUE(ids.empty());
 }

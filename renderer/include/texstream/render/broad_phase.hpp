@@ -30,8 +30,8 @@ struct BroadPhaseStats {
 
 // Where the runs of BroadPhase::split_by_viewport end, as positions in the id list it reordered.
 struct ViewportSplit {
-  uint32_t main_end = 0;    // ids [0, main_end) touch the viewport's frustum: the main pass draws them
-  uint32_t wide_begin = 0;  // ids [wide_begin, size) reach outside it: the wide pass draws them
+  uint32_t main_end = 0;  // ids [0, main_end) touch the viewport's frustum: the main pass draws them; ids
+                          // [main_end, size) lie entirely outside it: the wide pass draws them
 };
 
 // A pass's raster: its view-projection (camera-relative, as the vertex shader uses it) and its size in pixels.
@@ -88,18 +88,17 @@ class BroadPhase {
   void query(const Frustum& frustum, const std::array<double, 3>& camera, std::vector<uint32_t>& out,
              BroadPhaseStats* stats = nullptr, bool parallel = true) const;
 
-  // Reorders `ids` (meshes the wide frustum kept, from query()) into three runs, each in its previous order:
-  // meshes entirely inside `viewport` (only the main pass can see them), meshes straddling it (both passes),
-  // meshes entirely outside it (only the wide pass). A mesh inside the viewport's frustum has no fragment
-  // outside the viewport in the wide pass, so leaving it out there changes no metadata; one outside it has
-  // no fragment in the viewport. One box test per id.
+  // Reorders `ids` (meshes the wide frustum kept, from query()) into two runs, each in its previous order:
+  // meshes touching `viewport` (inside or straddling it: the main pass draws them) and meshes entirely outside
+  // it (the wide pass draws them, W = 1 per viewport pixel: seed 000 §3.2 "meshes that lie outside of the
+  // viewport"). A straddling mesh is in the viewport: its part beyond the edge adds nothing, and the wide pass
+  // draws only what can count there. One box test per id.
   ViewportSplit split_by_viewport(const Frustum& viewport, const std::array<double, 3>& camera,
                                   std::vector<uint32_t>& ids) const;
 
   // Drops from `ids` (the runs of split_by_viewport) the meshes that cannot produce a fragment in the passes
   // that would draw them: the screen rectangle of the mesh's box, widened by the grid's margin_px, holds no
-  // pixel centre of that pass's grid (main for the inside run, wide for the outside run, either for the
-  // straddling one). A mesh without a sample has no fragment, so no depth, colour or metadata: the frame is
+  // pixel centre of that pass's grid (main for the first run, wide for the outside run). A mesh without a sample has no fragment, so no depth, colour or metadata: the frame is
   // the same, and the meshes of a far horizon (10^5 of them a few tenths of a pixel wide in a 10^6-mesh city)
   // are neither uploaded nor drawn. Boxes reaching behind the camera plane are kept. Returns the runs' new ends.
   ViewportSplit drop_unsampled(const SampleGrid& main, const SampleGrid& wide, const std::array<double, 3>& camera,

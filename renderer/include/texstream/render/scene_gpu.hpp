@@ -57,8 +57,8 @@ struct SceneGpu {
 
   // For a list split by BroadPhase::split_by_viewport: for each mesh, its offset = origin - camera, subtracted
   // in double and only then rounded to float (no jitter at map coordinates), its texture id, and its id in
-  // `drawn` (once); then two draw lists, the main pass's (inside and straddling meshes) and the wide pass's
-  // (straddling and outside): each list's meshes in id order, one VkDrawIndexedIndirectCommand per run of
+  // `drawn` (once); then two draw lists, the main pass's (meshes touching the viewport) and the wide pass's
+  // (meshes outside it): each list's meshes in id order, one VkDrawIndexedIndirectCommand per run of
   // adjacent index ranges. Fills the draw ranges of `rec` (draw_count, main_count, wide_first = main_count),
   // rec.mesh_count and the per-pass mesh counts; meshes without indices are never drawn. A pass draws its
   // meshes in id order, whatever order the broad phase returned them in, so which of

@@ -70,9 +70,8 @@ struct FrameRecording {
   uint32_t main_meshes = 0;     // of those, drawn by the main pass / by the wide pass (statistics)
   uint32_t wide_meshes = 0;
   // Draws [0, main_count) are the main pass's (meshes touching the viewport's frustum), draws
-  // [wide_first, draw_count) the wide pass's (meshes reaching outside it). SceneGpu::write_draws writes them
-  // as two lists (wide_first = main_count; the straddling meshes are in both). The defaults draw the whole
-  // list in both passes (exact too, only slower).
+  // [wide_first, draw_count) the wide pass's (meshes entirely outside it). SceneGpu::write_draws writes them
+  // as two lists (wide_first = main_count). The defaults draw the whole list in both passes.
   uint32_t main_count = kAllDraws;
   uint32_t wide_first = 0;
   gpu::PassConstants main{};
