@@ -121,6 +121,13 @@ constexpr std::chrono::seconds kLockstepTimeout{60};
 // just loaded). A healthy round publishes at least one mip; 64 rounds is far beyond any retry burst.
 constexpr uint32_t kMaxFruitlessLoadRounds = 64;
 
+// Runs that must wait for the server (render.preload_all, render.lockstep) end with an error once this many
+// spawned servers in a row died before attaching to the segment: a server that cannot start (a bad option,
+// a missing library, a wrong binary) does not start on the next try either, and the restart back-off would
+// otherwise stretch each round to the colormap-only retry period (30 s). A streaming run goes on drawing the
+// colormap and keeps retrying, as after any crash.
+constexpr uint64_t kMaxDeathsBeforeAttach = 3;
+
 bool same_pose(const CameraPose& a, const CameraPose& b) {
   return a.position[0] == b.position[0] && a.position[1] == b.position[1] && a.position[2] == b.position[2] &&
          a.yaw_deg == b.yaw_deg && a.pitch_deg == b.pitch_deg;
@@ -155,6 +162,8 @@ class Renderer {
   // `no_evictions`, an eviction on the way is an error (the preload must fit the cache); otherwise the load
   // stops at the first eviction (a visible set larger than the cache cannot be made fully resident).
   Status load_fully(std::vector<StreamCandidate> wanted, bool no_evictions);
+  // An error once kMaxDeathsBeforeAttach servers in a row died before attaching (for runs that wait on it).
+  Status server_can_start() const;
   // Frame 0's parts go into the summary after set_up()'s stages (where a start's first frame goes):
   // the time since the previous part, under `name`.
   void first_frame_stage(const char* name);
@@ -419,6 +428,15 @@ Status Renderer::record_and_submit(const FrameRecording* rec, Uploads uploads, b
 
 Status Renderer::upload_now() { return record_and_submit(nullptr, Uploads::kMips, false, false); }
 
+Status Renderer::server_can_start() const {
+  const uint64_t deaths = client_->stats().server_deaths_before_attach;
+  if (deaths < kMaxDeathsBeforeAttach) return ok_status();
+  return make_error(ErrorCode::kPeerDead,
+                    "texstream-server died before attaching to the segment " + std::to_string(deaths) +
+                        " times in a row (last: " + client_->last_server_exit() +
+                        "); its own messages are above. Check server.executable and the [server] keys");
+}
+
 Status Renderer::load_fully(std::vector<StreamCandidate> wanted, bool no_evictions) {
   // Desired level 0 and no bias: Algorithm 1 then refines each texture one level per round, coarsest first,
   // until its base level is resident (Final). Each round waits for every answer before the next, so the
@@ -459,6 +477,7 @@ Status Renderer::load_fully(std::vector<StreamCandidate> wanted, bool no_evictio
                               std::to_string(kLockstepTimeout.count()) + " s");
       }
       client_->poll(*cache_, 0);  // supervision: reap, restart
+      TS_TRY(server_can_start());
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
       continue;
     }
@@ -469,6 +488,7 @@ Status Renderer::load_fully(std::vector<StreamCandidate> wanted, bool no_evictio
     while (client_->stats().in_flight > 0) {
       LoadTimeSink all(ordered, Clock::time_point::max());
       client_->poll(all, std::numeric_limits<size_t>::max());
+      TS_TRY(server_can_start());
       if (all.no_room()) {  // only if one mip is above half the ring: upload to free it
         ordered.flush();
         TS_TRY(upload_now());
@@ -559,6 +579,7 @@ Status Renderer::render_frame(uint64_t index, bool last) {
     LoadTimeSink all(ordered, Clock::time_point::max());
     while (client_->stats().in_flight > 0) {
       client_->poll(all, std::numeric_limits<size_t>::max());
+      TS_TRY(server_can_start());
       if (all.no_room() || client_->stats().in_flight == 0) break;
       if (Clock::now() - wait_start > kLockstepTimeout) {
         return make_error(ErrorCode::kTimeout, "render.lockstep: " + std::to_string(client_->stats().in_flight) +

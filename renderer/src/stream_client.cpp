@@ -452,8 +452,13 @@ void StreamClient::supervise(MipSink& sink) {
     // Before on_server_gone (a quarantined texture's lost requests fail for good) and before the reset
     // (which zeroes the words).
     if (!exit->killed_by_us) charge_crash(exit->term_signal);
-    on_server_gone(sink, "pid " + std::to_string(exit->pid) + " " + exit->how +
-                             (exit->killed_by_us ? " after we killed it: " + exit->kill_reason : ""));
+    // The server writes its pid when it attaches and leaves it there when it detaches; the reset clears it.
+    const bool attached = exit->pid > 0 && segment_->server_block().pid.v.load(std::memory_order_relaxed) ==
+                                               static_cast<uint32_t>(exit->pid);
+    stats_.server_deaths_before_attach = attached ? 0 : stats_.server_deaths_before_attach + 1;
+    last_server_exit_ = "pid " + std::to_string(exit->pid) + " " + exit->how +
+                        (exit->killed_by_us ? " after we killed it: " + exit->kill_reason : "");
+    on_server_gone(sink, last_server_exit_);
     // Only now, with the process reaped, are its words in the segment ours to reset.
     segment_->reset_after_server_death();
     attach_rings();
@@ -715,6 +720,7 @@ std::string StreamClient::stats_text() const {
     << "server_restarts " << s.server_restarts << "\n"
     << "server_deaths " << s.server_deaths << "\n"
     << "server_crashes " << s.server_crashes << "\n"
+    << "server_deaths_before_attach " << s.server_deaths_before_attach << "\n"
     << "crash_signal_deaths " << s.crash_signal_deaths << "\n"
     << "textures_quarantined " << s.textures_quarantined << "\n"
     << "lost_resent " << s.lost_resent << "\n"

@@ -132,6 +132,9 @@ struct StreamStats {
   uint64_t server_restarts = 0;                          // spawns after the first
   uint64_t server_deaths = 0;
   uint64_t server_crashes = 0;                           // deaths counted as crashes (RestartPolicy)
+  // Servers in a row (up to now) that died before attaching to the segment: a binary that cannot start (a
+  // bad option, a missing library) rather than one that crashed while serving. 0 once one attached.
+  uint64_t server_deaths_before_attach = 0;
   uint64_t crash_signal_deaths = 0;                      // deaths by a crash signal the server raised itself
   uint64_t textures_quarantined = 0;                     // loaded during kQuarantineAfterCrashes such deaths
   // Recovery (issue 9): a request in flight when the server died, sent again to a later server, must be
@@ -214,6 +217,8 @@ class StreamClient {
   const Segment& segment() const { return *segment_; }
   Segment& segment() { return *segment_; }
   int server_pid() const { return process_ ? process_->pid() : -1; }
+  // How the last spawned server ended ("pid 12 exited with status 2"); empty if none has.
+  const std::string& last_server_exit() const { return last_server_exit_; }
 
   // Kills the spawned server as if it had hung (tests of the restart path; a renderer's "restart server"
   // key). With spawn_server = false: marks everything in flight lost and resets the segment's rings — the
@@ -283,6 +288,7 @@ class StreamClient {
   StreamStats stats_;
   // ServerBlock counters of servers that have died (the block is zeroed by the reset).
   uint64_t past_hits_ = 0, past_misses_ = 0, past_bytes_read_ = 0, past_cancelled_ = 0;
+  std::string last_server_exit_;
   std::unordered_map<uint64_t, Lost> lost_;
   IpcTimeHistogram ipc_time_;
   uint64_t frame_ipc_ns_ = 0;   // the open frame's client time so far
