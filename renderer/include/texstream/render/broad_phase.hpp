@@ -98,9 +98,9 @@ class BroadPhase {
 
   // Drops from `ids` (the runs of split_by_viewport) the meshes that cannot produce a fragment in the passes
   // that would draw them: the screen rectangle of the mesh's box, widened by the grid's margin_px, holds no
-  // pixel centre of that pass's grid (main for the first run, wide for the outside run). A mesh without a sample has no fragment, so no depth, colour or metadata: the frame is
-  // the same, and the meshes of a far horizon (10^5 of them a few tenths of a pixel wide in a 10^6-mesh city)
-  // are neither uploaded nor drawn. Boxes reaching behind the camera plane are kept. Returns the runs' new ends.
+  // pixel centre of that pass's grid (main for the first run, wide for the outside run). A mesh without a
+  // sample has no fragment, so no depth, colour or metadata: the frame is the same, and the meshes of a far
+  // horizon (10^5 of them a few tenths of a pixel wide in a 10^6-mesh city) are neither uploaded nor drawn. Boxes reaching behind the camera plane are kept. Returns the runs' new ends.
   ViewportSplit drop_unsampled(const SampleGrid& main, const SampleGrid& wide, const std::array<double, 3>& camera,
                                std::vector<uint32_t>& ids, ViewportSplit split) const;
 
