@@ -6,7 +6,7 @@
 //   1. memcpy of exactly the hit set's mips, vs cache hits into staging slots        → hit_vs_memcpy
 //      (alternating passes of each, so that both see the same machine load)
 //   2. plain sequential read() of whole texture files (page cache warm), vs misses   → miss_vs_read, read_amp
-//      (3 rounds, 5 without --quick: a fresh server's misses between two read() passes; the median round)
+//      (5 rounds, 7 without --quick: a fresh server's misses between two read() passes; the median round)
 //   3. request→completion latency p50/p99 (hits, misses) with a window of kLatencyWindow requests
 //   4. a realistic access trace (the scene's camera path, a renderer with a bounded GPU cache, Algorithm 1:
 //      one mip per texture per cycle, coarsest first) replayed through our server and through OpenImageIO's
@@ -887,8 +887,9 @@ int run_server_bench(const std::vector<std::string>& args) {
     // Rounds, each a fresh server (cold cache) streaming the whole miss set between two read() passes over the
     // same files; the summary takes the median round, the sums are printed too. One pass is ~50 ms: on this VM
     // either side alone swung by up to 2x between back-to-back runs (read() 3.9-8.0 GB/s, misses 2.5-3.8 GB/s
-    // over 6 runs, each side moving on its own), so a single pass of each decided the ratio by chance.
-    const int rounds = opt->quick ? 3 : 5;
+    // over 6 runs, each side moving on its own), so a single pass of each decided the ratio by chance. Rounds
+    // of one run still spread by 0.1-0.3 (e.g. 0.459 0.712 0.734): 5 rounds (7 in full mode), ~0.3 s each.
+    const int rounds = opt->quick ? 5 : 7;
     std::unique_ptr<Harness> h;
     double arena_wait_s = 0, read_s = 0;
     uint64_t read_total = 0;
