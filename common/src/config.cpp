@@ -48,7 +48,7 @@ void visit_keys(Config& c, V&& v) {
   v("render", "height_px", c.render.height_px, "px", "Framebuffer height", Range{16, 16384});
   v("render", "frames", c.render.frames, "frames", "Headless: frames to render; 0 = the whole camera path", Range{0, 1e9});
   v("render", "frame_time_ms", c.render.frame_time_ms, "ms", "Virtual time per frame along the camera path", Range{0.01, 10000});
-  v("render", "lockstep", c.render.lockstep, "bool", "Each frame first takes every answer to the previous streaming cycle, so a run depends on the frame index only (false: real time, never waits)", kAny);
+  v("render", "lockstep", c.render.lockstep, "bool", "Each frame first takes every answer to the previous streaming cycle, so a run depends on the frame index only; a server death after the preload ends the run with an error (false: real time, never waits)", kAny);
   v("render", "pace_frames", c.render.pace_frames, "bool", "Real time: frame N starts no earlier than N x frame_time_ms after frame 0, like a display at 1000/frame_time_ms Hz, so a fast device does not fly the camera path faster than its speed (ignored in lock-step and window mode)", kAny);
   v("render", "camera_path", c.render.camera_path, "path", "Camera path file; empty: <scene>/camera_path.txt", kAny);
   v("render", "output_dir", c.render.output_dir, "path", "Folder for frames and the run summary", kAny);

@@ -121,11 +121,11 @@ constexpr std::chrono::seconds kLockstepTimeout{60};
 // just loaded). A healthy round publishes at least one mip; 64 rounds is far beyond any retry burst.
 constexpr uint32_t kMaxFruitlessLoadRounds = 64;
 
-// Runs that must wait for the server (render.preload_all, render.lockstep) end with an error once this many
-// spawned servers in a row died before attaching to the segment: a server that cannot start (a bad option,
-// a missing library, a wrong binary) does not start on the next try either, and the restart back-off would
-// otherwise stretch each round to the colormap-only retry period (30 s). A streaming run goes on drawing the
-// colormap and keeps retrying, as after any crash.
+// render.preload_all ends with an error once this many spawned servers in a row died before attaching to the
+// segment: a server that cannot start (a bad option, a missing library, a wrong binary) does not start on the
+// next try either, and the restart back-off would otherwise stretch each round to the colormap-only retry
+// period (30 s). A streaming run goes on drawing the colormap and keeps retrying, as after any crash; a
+// lock-step run ends at the first death (render_frame).
 constexpr uint64_t kMaxDeathsBeforeAttach = 3;
 
 bool same_pose(const CameraPose& a, const CameraPose& b) {
@@ -162,7 +162,7 @@ class Renderer {
   // `no_evictions`, an eviction on the way is an error (the preload must fit the cache); otherwise the load
   // stops at the first eviction (a visible set larger than the cache cannot be made fully resident).
   Status load_fully(std::vector<StreamCandidate> wanted, bool no_evictions);
-  // An error once kMaxDeathsBeforeAttach servers in a row died before attaching (for runs that wait on it).
+  // An error once kMaxDeathsBeforeAttach servers in a row died before attaching (render.preload_all).
   Status server_can_start() const;
   // Frame 0's parts go into the summary after set_up()'s stages (where a start's first frame goes):
   // the time since the previous part, under `name`.
@@ -205,6 +205,7 @@ class Renderer {
   // Per-frame measurements (frame_log.hpp).
   std::vector<FrameRecord> frames_;
   Clock::time_point run_start_{};
+  uint64_t deaths_before_frames_ = 0;  // server deaths before frame 0 (render.lockstep allows none after it)
   Clock::duration excluded_{0};  // measurement and PNG time: not part of wall_s
   uint64_t prev_mips_ = 0, prev_bytes_ = 0, prev_hits_ = 0, prev_misses_ = 0;
   std::optional<CameraPose> prev_pose_;
@@ -579,7 +580,6 @@ Status Renderer::render_frame(uint64_t index, bool last) {
     LoadTimeSink all(ordered, Clock::time_point::max());
     while (client_->stats().in_flight > 0) {
       client_->poll(all, std::numeric_limits<size_t>::max());
-      TS_TRY(server_can_start());
       if (all.no_room() || client_->stats().in_flight == 0) break;
       if (Clock::now() - wait_start > kLockstepTimeout) {
         return make_error(ErrorCode::kTimeout, "render.lockstep: " + std::to_string(client_->stats().in_flight) +
@@ -590,6 +590,14 @@ Status Renderer::render_frame(uint64_t index, bool last) {
     }
     ordered.flush();  // the whole frame's arrivals, in (texture, mip) order
     waited = Clock::now() - wait_start;
+    // A server that died took its requests along: what the next frames show would depend on when it came
+    // back, which is what lock-step promises to rule out (and a server that cannot start would leave a run of
+    // colormap frames that reports success).
+    if (client_->stats().server_deaths != deaths_before_frames_) {
+      return make_error(ErrorCode::kPeerDead, "render.lockstep: texstream-server died during the run (" +
+                                                  client_->last_server_exit() +
+                                                  "); its frames would depend on when it came back");
+    }
   } else {
     LoadTimeSink timed(*cache_, Clock::now() + std::chrono::duration_cast<Clock::duration>(
                                                    std::chrono::duration<double, std::milli>(cfg_.controller.load_time_ms)));
@@ -763,6 +771,7 @@ Result<RunSummary> Renderer::run() {
   prev_bytes_ = cache_->stats().bytes_uploaded;
   prev_hits_ = client_->stats().server_ram_cache_hits;
   prev_misses_ = client_->stats().server_ram_cache_misses;
+  deaths_before_frames_ = client_->stats().server_deaths;
   // render.pace_frames: the camera path advances frame_time_ms per frame, so without pacing a device that
   // draws a frame in 0.5 ms flies the path 60x faster than real time and the streaming never keeps up. The
   // wait is not part of the frame's latency (render_frame measures from its own start).

@@ -117,10 +117,11 @@ TEST(RenderCli, MissingSceneNamesThePath) {
 }
 
 // A server that cannot start (here a script that exits with status 2 at once, as texstream-server does on a
-// bad option) ends a render.preload_all run within a second or so, naming how it ended and the key to check.
-// Before, each preload round waited out the restart back-off, up to the colormap-only retry of 30 s, for up
-// to 64 rounds. `timeout` keeps a regression from hanging the suite.
-TEST(RenderCli, AServerThatCannotStartEndsAPreloadRunWithItsReason) {
+// bad option) ends a render.preload_all run within a second or so, naming how it ended and the key to check
+// (before, each preload round waited out the restart back-off, up to the colormap-only retry of 30 s, for up
+// to 64 rounds), and a lock-step run at its first death (before, it drew colormap frames and reported
+// success). `timeout` keeps a regression from hanging the suite.
+TEST(RenderCli, AServerThatCannotStartEndsPreloadAndLockstepRunsWithItsReason) {
   const fs::path dir = fresh_dir("badserver");
   ASSERT_TRUE(generate_lockstep_city(dir));
   const fs::path fake = dir / "refusing-server.sh";
@@ -128,19 +129,25 @@ TEST(RenderCli, AServerThatCannotStartEndsAPreloadRunWithItsReason) {
     std::ofstream(fake) << "#!/bin/sh\necho 'refusing-server: unknown option' >&2\nexit 2\n";
   }
   fs::permissions(fake, fs::perms::owner_all);
-  const auto t0 = std::chrono::steady_clock::now();
-  const int rc = run("timeout 120 " + (kBin / "texstream-render").string() + " --set scene.dir=" +
-                         (dir / "scene").string() + " --set render.frames=5 --set render.width_px=160" +
-                         " --set render.height_px=90 --set render.output_dir=" + (dir / "out").string() +
-                         " --set server.executable=" + fake.string() + " --set render.preload_all=true",
-                     dir / "render.log");
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  const std::string log = slurp(dir / "render.log");
-  EXPECT_EQ(rc, 1) << log;
-  EXPECT_LT(seconds, 60.0);
-  EXPECT_NE(log.find("died before attaching to the segment 3 times in a row"), std::string::npos) << log;
-  EXPECT_NE(log.find("exited with status 2"), std::string::npos) << log;
-  EXPECT_NE(log.find("server.executable"), std::string::npos) << log;
+  const std::vector<std::pair<std::string, std::vector<std::string>>> runs = {
+      {"render.preload_all=true", {"died before attaching to the segment 3 times in a row", "server.executable"}},
+      {"render.lockstep=true", {"render.lockstep: texstream-server died during the run"}}};
+  for (const auto& [mode, messages] : runs) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const int rc = run("timeout 120 " + (kBin / "texstream-render").string() + " --set scene.dir=" +
+                           (dir / "scene").string() + " --set render.frames=5 --set render.width_px=160" +
+                           " --set render.height_px=90 --set render.output_dir=" + (dir / "out").string() +
+                           " --set server.executable=" + fake.string() + " --set " + mode,
+                       dir / "render.log");
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const std::string log = slurp(dir / "render.log");
+    EXPECT_EQ(rc, 1) << mode << "\n" << log;
+    EXPECT_LT(seconds, 60.0) << mode;
+    for (const std::string& message : messages) {
+      EXPECT_NE(log.find(message), std::string::npos) << mode << "\n" << log;
+    }
+    EXPECT_NE(log.find("exited with status 2"), std::string::npos) << mode << "\n" << log;
+  }
   fs::remove_all(dir);
 }
 
