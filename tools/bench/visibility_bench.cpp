@@ -129,19 +129,14 @@ T unwrap(Result<T> r, const char* what) {
   return std::move(*r);
 }
 
-// Per-frame latencies of one texstream-render run over the scene's whole fly-through with render.feedback_pairs:
-// each frame drawn as usual (`on`, frames.csv latency_ms) and once more from the same pose without feedback
-// (`off`, latency_off_ms), the two back to back in one process, the order alternating. With preload (every
-// texture resident first, render.preload_all) nothing is in flight, so every frame starts a streaming cycle and
-// carries feedback: the worst case. Without, a plain streaming run: feedback only on the frames that start a
-// cycle (`cycles`), as in normal operation. Empty on failure (the log is named).
 // What feedback costs as a fraction of frame time, from summed times with and without it.
 double cost_fraction(double on_ms, double off_ms) { return on_ms > 0 ? (on_ms - off_ms) / on_ms : 0.0; }
 
 struct PairedRun {
-  std::vector<double> on, off;
+  std::vector<double> on, off;  // with preload only
   uint64_t cycles = 0;
-  bool ok() const { return !on.empty(); }
+  int frames = 0;  // 0: the run failed
+  bool ok() const { return frames > 0; }
   // Over the frames after the warm-up.
   double cost_fraction(int warmup) const {
     double a = 0, b = 0;
@@ -153,6 +148,13 @@ struct PairedRun {
   }
 };
 
+// One texstream-render run over the scene's whole fly-through. With preload (every texture resident first,
+// render.preload_all) nothing is in flight, so every frame starts a streaming cycle and carries feedback: the
+// worst case; the run has render.feedback_pairs, so each frame is drawn as usual (`on`, frames.csv latency_ms)
+// and once more from the same pose without feedback (`off`, latency_off_ms), back to back in one process, the
+// order alternating. Without preload, a plain streaming run: feedback only on the frames that start a cycle, and
+// only `cycles` is filled (its pairs would be no measure of feedback: the real frame also uploads the mips that
+// arrived, the twin does not). Empty on failure (the log is named).
 PairedRun renderer_frame_pairs(const fs::path& profile, const fs::path& scene, const fs::path& out, const Config& cfg,
                                int frames, double path_seconds, bool preload) {
   const fs::path bin = fs::read_symlink("/proc/self/exe").parent_path() / "texstream-render";
@@ -164,7 +166,8 @@ PairedRun renderer_frame_pairs(const fs::path& profile, const fs::path& scene, c
   const std::string cmd =
       bin.string() + " --config '" + profile.string() + "' --set scene.dir='" + scene.string() +
       "' --set render.output_dir='" + out.string() + "' --set render.preload_all=" + (preload ? "true" : "false") +
-      " --set render.pace_frames=false --set render.feedback=true --set render.feedback_pairs=true" +
+      " --set render.pace_frames=false --set render.feedback=true --set render.feedback_pairs=" +
+      (preload ? "true" : "false") +
       " --set render.frames=" + std::to_string(frames) + " --set render.frame_time_ms=" + frame_ms +
       " --set render.write_every_frames=0 --set render.width_px=" + std::to_string(cfg.render.width_px) +
       " --set render.height_px=" + std::to_string(cfg.render.height_px) +
@@ -180,6 +183,16 @@ PairedRun renderer_frame_pairs(const fs::path& profile, const fs::path& scene, c
     return {};
   }
   PairedRun r;
+  if (static_cast<int>(frames_log->size()) != frames) {
+    std::fprintf(stderr, "visibility bench: %s has %zu frames, expected %d\n", (out / "frames.csv").c_str(),
+                 frames_log->size(), frames);
+    return {};
+  }
+  std::ifstream summary(out / "summary.json");
+  const auto j = nlohmann::json::parse(summary, nullptr, false);
+  r.cycles = j.is_object() ? j.value("streaming_cycles", uint64_t{0}) : 0;
+  r.frames = frames;
+  if (!preload) return r;
   for (const render::FrameRecord& f : *frames_log) {
     if (!std::isfinite(f.latency_off_ms)) {
       std::fprintf(stderr, "visibility bench: %s: frame %llu has no latency_off_ms\n", (out / "frames.csv").c_str(),
@@ -189,14 +202,6 @@ PairedRun renderer_frame_pairs(const fs::path& profile, const fs::path& scene, c
     r.on.push_back(f.latency_ms);
     r.off.push_back(f.latency_off_ms);
   }
-  if (static_cast<int>(r.on.size()) != frames) {
-    std::fprintf(stderr, "visibility bench: %s has %zu frames, expected %d\n", (out / "frames.csv").c_str(),
-                 r.on.size(), frames);
-    return {};
-  }
-  std::ifstream summary(out / "summary.json");
-  const auto j = nlohmann::json::parse(summary, nullptr, false);
-  r.cycles = j.is_object() ? j.value("streaming_cycles", uint64_t{0}) : 0;
   return r;
 }
 
@@ -457,9 +462,7 @@ int run_visibility(const std::vector<std::string>& args) {
       for (double f : fracs) std::printf(" %.3f", f);
       std::printf("; all frames summed %.3f; fastest per frame %.3f\n", cost_fraction(on_sum, off_sum),
                   cost_fraction(best_on_sum, best_off_sum));
-      // Normal operation: a streaming run carries feedback only on the frames that start a cycle. (Its own
-      // pairs are no measure of feedback: the real frame of a pair also uploads the mips that arrived, the twin
-      // does not, and on the GPU that was larger than the feedback.)
+      // Normal operation: a streaming run carries feedback only on the frames that start a cycle.
       const PairedRun streamed = renderer_frame_pairs(profile, scene_dir, work / "streaming", profile_cfg, frames,
                                                       path.duration_s(), false);
       if (streamed.ok()) {
