@@ -1,6 +1,7 @@
 #include "texstream/protocol/segment.hpp"
 
 #include <dirent.h>
+#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -128,6 +129,23 @@ Status validate_header(const SegmentHeader& h, uint64_t mapped_bytes) {
   return ok_status();
 }
 
+// Faults the whole mapping in, writable, without touching a byte (MADV_POPULATE_WRITE, Linux 5.14). tmpfs
+// files are sparse: truncate() reserves nothing, so a segment larger than the free space of /dev/shm used to
+// be created without complaint, and the first write past the free space raised SIGBUS in whichever process
+// made it, mostly the server copying a mip into a slot (a crash loop, each restart dying the same way). Here
+// the kernel refuses with EFAULT instead, and the creator reports it naming the size and the keys. In the
+// attacher the pages exist already: this fills its page tables in one call, not one trap per 4 KiB of a slot
+// inside the server's copies. Kernels before 5.14 (EINVAL) fault on first touch, as before.
+Status populate(const std::string& name, void* base, uint64_t bytes) {
+  if (::madvise(base, bytes, MADV_POPULATE_WRITE) == 0 || errno == EINVAL) return ok_status();
+  const std::string why = errno == EFAULT ? "/dev/shm has less free space than that"
+                                          : std::string("MADV_POPULATE_WRITE: ") + std::strerror(errno);
+  return make_error(ErrorCode::kIo, "shared segment '" + name + "': cannot back its " + std::to_string(bytes) +
+                                        " bytes with memory (" + why +
+                                        "): make /dev/shm larger or lower protocol.staging_slot_count x "
+                                        "protocol.staging_slot_bytes");
+}
+
 Result<std::unique_ptr<Segment>> Segment::create(const std::string& name, const SegmentParams& params) {
   if (!is_pow2(params.request_capacity) || params.request_capacity > kMaxRingCapacity ||
       !is_pow2(params.completion_capacity) || params.completion_capacity > kMaxRingCapacity ||
@@ -149,6 +167,7 @@ Result<std::unique_ptr<Segment>> Segment::create(const std::string& name, const 
     return make_error(ErrorCode::kIo, "cannot create shared segment '" + name + "': " + e.what());
   }
   auto* base = static_cast<std::byte*>(seg->impl_->region.get_address());
+  if (auto st = populate(name, base, layout.total_bytes); !st.ok()) return st.error();
   std::random_device rd;
   const uint64_t epoch = (uint64_t{rd()} << 32) ^ rd() ^ static_cast<uint64_t>(getpid());
   const SegmentHeader h = make_header(params, epoch);
@@ -201,6 +220,7 @@ Result<std::unique_ptr<Segment>> Segment::open(const std::string& name) {
   if (auto st = validate_header(seg->header_copy_, mapped); !st.ok()) {
     return make_error(ErrorCode::kProtocol, "shared segment '" + name + "': " + st.error().message);
   }
+  if (auto st = populate(name, base, seg->header_copy_.segment_bytes); !st.ok()) return st.error();
   const SegmentHeader& h = seg->header_copy_;
   seg->base_ = base;
   seg->renderer_block_ = rb;

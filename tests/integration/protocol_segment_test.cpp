@@ -2,12 +2,15 @@
 // segments of killed owners removed, identity that survives pid reuse, a futex doorbell across processes,
 // and rings whose peer is SIGKILLed mid-stream.
 #include <gtest/gtest.h>
+#include <sched.h>
 #include <signal.h>
+#include <sys/mount.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
 #include <cstring>
+#include <string>
 #include <thread>
 
 #include <boost/interprocess/shared_memory_object.hpp>
@@ -110,6 +113,54 @@ TEST(Segment, ASegmentBeingCreatedIsNotTakenForStale) {
   shm.truncate(static_cast<boost::interprocess::offset_t>(compute_layout({16, 16, 1, 4096}).total_bytes));
   EXPECT_EQ(Segment::remove_stale(prefix), 0) << "a sized but not yet ready segment was removed";
   EXPECT_TRUE(Segment::remove(name));
+}
+
+TEST(Segment, ASegmentLargerThanDevShmIsRefusedAtCreationNamingTheKeys) {
+  // In a child with a mount namespace of its own and a 1 MiB tmpfs on /dev/shm (root only: skipped
+  // otherwise). A segment that does not fit must fail create() with an error naming /dev/shm and the config
+  // keys, and leave no object behind: before, truncate() succeeded (tmpfs files are sparse) and the first
+  // write past the free space raised SIGBUS in whichever process made it, usually the server copying a mip.
+  int pipe_fds[2];
+  ASSERT_EQ(pipe(pipe_fds), 0);
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    close(pipe_fds[0]);
+    const auto say = [&](const std::string& text, int code) {
+      (void)!write(pipe_fds[1], text.data(), text.size());
+      _exit(code);
+    };
+    // Private propagation first, or the tmpfs would be mounted over the host's /dev/shm too.
+    if (unshare(CLONE_NEWNS) != 0 || mount(nullptr, "/", nullptr, MS_REC | MS_PRIVATE, nullptr) != 0 ||
+        mount("tmpfs", "/dev/shm", "tmpfs", 0, "size=1m") != 0) {
+      say(std::string("no mount namespace here: ") + std::strerror(errno), 77);
+    }
+    const std::string name = unique_name("toolarge");
+    auto small = Segment::create(name + "-small", {64, 64, 4, 1 << 16});  // ~0.3 MiB: fits
+    if (!small.ok()) say("a segment that fits was refused: " + small.error().message, 1);
+    small.value().reset();
+    auto big = Segment::create(name, {64, 64, 4, 1 << 20});  // ~4 MiB
+    if (big.ok()) say("a 4 MiB segment was created on a 1 MiB /dev/shm", 1);
+    const std::string& m = big.error().message;
+    if (m.find("/dev/shm") == std::string::npos || m.find("protocol.staging_slot_count") == std::string::npos ||
+        m.find(name) == std::string::npos) {
+      say("the error does not name the segment, /dev/shm and the keys: " + m, 1);
+    }
+    if (Segment::open(name).ok()) say("the refused segment was left behind", 1);
+    say(m, 0);
+  }
+  close(pipe_fds[1]);
+  std::string text;
+  char buf[512];
+  ssize_t n;
+  while ((n = read(pipe_fds[0], buf, sizeof buf)) > 0) text.append(buf, static_cast<size_t>(n));
+  close(pipe_fds[0]);
+  int status = 0;
+  ASSERT_EQ(waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFEXITED(status)) << "the child died by signal " << WTERMSIG(status) << " (SIGBUS is " << SIGBUS << ")";
+  if (WEXITSTATUS(status) == 77) GTEST_SKIP() << text;
+  EXPECT_EQ(WEXITSTATUS(status), 0) << text;
+  std::printf("  create() said: %s\n", text.c_str());
 }
 
 TEST(Liveness, IdentityIsPidPlusStartTime) {
