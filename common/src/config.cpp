@@ -34,7 +34,7 @@ void visit_keys(Config& c, V&& v) {
 
   v("server", "executable", c.server.executable, "path", "texstream-server binary; empty: next to texstream-render", kAny);
   v("server", "worker_threads", c.server.worker_threads, "threads", "Read/decode workers (default fits a 2-core machine)", Range{1, 64});
-  v("server", "ram_cache_bytes", c.server.ram_cache_bytes, "bytes", "Byte budget of the server's RAM cache of mips", Range{0, 1ll << 40});
+  v("server", "ram_cache_bytes", c.server.ram_cache_bytes, "bytes", "Byte budget of the server's RAM cache of mips, pre-faulted at start. With the staging pool and 64 MiB it must fit physical memory and any memory cgroup limit (else an error at start); more than is free now, less a reserve, is lowered with a warning", Range{0, 1ll << 40});
   v("server", "idle_wait_ms", c.server.idle_wait_ms, "ms", "Longest futex wait for new requests when idle", Range{0.1, 1000});
   v("server", "log_level", c.server.log_level, "level", "trace, debug, info, warn or error", kAny);
   v("server", "cache_policy", c.server.cache_policy, "name", "RAM cache eviction: level (seed 002 Eq. 4 discard priority; measured higher hit rates than lru at every budget) or lru", kAny);

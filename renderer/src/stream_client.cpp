@@ -14,6 +14,7 @@
 #include <utility>
 
 #include "texstream/common/contract.hpp"
+#include "texstream/common/memory_info.hpp"
 #include "texstream/protocol/checksum.hpp"
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/texel_format.hpp"
@@ -180,6 +181,8 @@ Result<std::unique_ptr<StreamClient>> StreamClient::start(const Config& config, 
     auto exe = resolve_server_executable(config);
     if (!exe) return exe.error();
     executable = *exe;
+    // The server would refuse it at start (exit 2), and be spawned again and again: said once, here.
+    TS_TRY(check_server_memory(config, read_memory_info()));
   }
 
   // Segments of renderers that died without cleaning up (pid + start time no longer alive).

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "process_test_support.hpp"
+#include "texstream/common/memory_info.hpp"
 #include "texstream/render/frame_log.hpp"
 #include <sys/wait.h>
 #include <unistd.h>
@@ -148,6 +149,36 @@ TEST(RenderCli, AServerThatCannotStartEndsPreloadAndLockstepRunsWithItsReason) {
     }
     EXPECT_NE(log.find("exited with status 2"), std::string::npos) << mode << "\n" << log;
   }
+  fs::remove_all(dir);
+}
+
+// A RAM cache budget no machine here can hold (1 TiB, the key's maximum): the renderer refuses before it
+// spawns a server, and a server started by hand refuses too, both naming the key and the limit. Before, the
+// server pre-faulted its cache until the kernel OOM-killed it, and the renderer restarted it for ever.
+TEST(RenderCli, ARamCacheLargerThanTheMachineIsRefusedNamingTheKey) {
+  if (texstream::read_memory_info().limit > (1ull << 40) + (1ull << 30)) GTEST_SKIP() << "more than 1 TiB of memory";
+  const fs::path dir = fresh_dir("hugecache");
+  ASSERT_TRUE(generate_lockstep_city(dir));
+  const std::string huge = " --set server.ram_cache_bytes=1099511627776";
+  const auto t0 = std::chrono::steady_clock::now();
+  const int rc = run("timeout 120 " + (kBin / "texstream-render").string() + " --set scene.dir=" +
+                         (dir / "scene").string() + " --set render.frames=5 --set render.width_px=160" +
+                         " --set render.height_px=90 --set render.output_dir=" + (dir / "out").string() + huge,
+                     dir / "render.log");
+  const std::string log = slurp(dir / "render.log");
+  EXPECT_NE(rc, 0) << log;
+  EXPECT_NE(rc, 124) << "timed out:\n" << log;
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 60.0);
+  EXPECT_NE(log.find("config: key 'server.ram_cache_bytes': the server needs"), std::string::npos) << log;
+  EXPECT_NE(log.find("but this machine allows"), std::string::npos) << log;
+  EXPECT_EQ(log.find("[server]"), std::string::npos) << "a server was spawned:\n" << log;
+
+  const int server_rc = run("timeout 60 " + (kBin / "texstream-server").string() + " --segment texstream-none-" +
+                                std::to_string(getpid()) + " --scene " + (dir / "scene").string() + huge,
+                            dir / "server.log");
+  const std::string server_log = slurp(dir / "server.log");
+  EXPECT_EQ(server_rc, 2) << server_log;
+  EXPECT_NE(server_log.find("config: key 'server.ram_cache_bytes'"), std::string::npos) << server_log;
   fs::remove_all(dir);
 }
 

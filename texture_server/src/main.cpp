@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "texstream/common/config.hpp"
+#include "texstream/common/memory_info.hpp"
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
 #include "texstream/server/server.hpp"
@@ -138,6 +139,12 @@ int main(int argc, char** argv) {
   }
   setup_logging(config->server.log_level);
   install_stop_handlers();
+  // A RAM cache that cannot fit this machine (or the memory cgroup of a container) would be OOM-killed once
+  // it filled, and again after every restart: refused here (the renderer checks the same before spawning).
+  if (texstream::Status fits = texstream::check_server_memory(*config, texstream::read_memory_info()); !fits.ok()) {
+    spdlog::error("{}", fits.error().message);
+    return kExitBadArguments;
+  }
 
   texstream::Result<std::unique_ptr<texstream::Segment>> segment = texstream::Segment::open(segment_name);
   if (!segment.ok()) {
@@ -154,7 +161,14 @@ int main(int argc, char** argv) {
   spdlog::info("storage: {}", (*stack)->describe());
   std::unique_ptr<texstream::Segment> current = std::move(segment).value();
   for (;;) {
-    auto server = texstream::server::Server::create(*current, (*stack)->scene_dir, config->server, (*stack)->storage());
+    // The cache pre-faults its whole budget (cache_arena.hpp): one that fits the limit but not what is free
+    // now is lowered, with a warning, rather than taking the last of the memory (memory_info.hpp).
+    texstream::ServerConfig server_config = config->server;
+    std::string lowered;
+    server_config.ram_cache_bytes = static_cast<int64_t>(texstream::server_cache_budget(
+        static_cast<uint64_t>(server_config.ram_cache_bytes), texstream::read_memory_info(), &lowered));
+    if (!lowered.empty()) spdlog::warn("{}", lowered);
+    auto server = texstream::server::Server::create(*current, (*stack)->scene_dir, server_config, (*stack)->storage());
     if (!server.ok()) {
       spdlog::error("{}", server.error().message);
       return kExitBadArguments;
@@ -162,7 +176,7 @@ int main(int argc, char** argv) {
     spdlog::info("serving segment '{}' (epoch {:016x}) from scene '{}' ({} workers, RAM cache {} bytes, {} policy, "
                  "rate limit {} MB/s)",
                  segment_name, current->header().epoch, config->scene.dir, config->server.worker_threads,
-                 config->server.ram_cache_bytes, config->server.cache_policy, config->server.rate_limit_mb_s);
+                 server_config.ram_cache_bytes, config->server.cache_policy, config->server.rate_limit_mb_s);
     const texstream::server::RunOutcome outcome = (*server)->run(g_stop, &g_print_stats);
     if (outcome == texstream::server::RunOutcome::kPeerCorrupt) return kExitProtocol;
     if (outcome == texstream::server::RunOutcome::kStopped || spawned) return kExitOk;
