@@ -6,7 +6,7 @@
 //   1. memcpy of exactly the hit set's mips, vs cache hits into staging slots        → hit_vs_memcpy
 //      (alternating passes of each, so that both see the same machine load)
 //   2. plain sequential read() of whole texture files (page cache warm), vs misses   → miss_vs_read, read_amp
-//      (5 rounds, 7 without --quick: a fresh server's misses between two read() passes; the median round)
+//      (9 rounds, 15 without --quick: a fresh server's misses between two read() passes; the median round)
 //   3. request→completion latency p50/p99 (hits, misses) with a window of kLatencyWindow requests
 //   4. a realistic access trace (the scene's camera path, a renderer with a bounded GPU cache, Algorithm 1:
 //      one mip per texture per cycle, coarsest first) replayed through our server and through OpenImageIO's
@@ -80,6 +80,8 @@ struct Options {
   // server (cold cache, warm arena), so that a profiler sees the miss stream's dispatcher for long enough
   // (one stream is ~20 ms). Not counted in any result.
   uint32_t profile_misses = 0;
+  // --miss-rounds N: rounds of the misses phase (0: the mode's default).
+  uint32_t miss_rounds = 0;
   // --phases memory,hits,misses,trace: run only these (profiling one phase); skipped phases report 0.
   std::string phases = "memory,hits,misses,trace";
   bool runs(const char* phase) const {
@@ -718,12 +720,14 @@ std::optional<Options> parse(const std::vector<std::string>& args) {
       o.phases = args[++i];
     } else if (a == "--profile-misses" && has_value) {
       o.profile_misses = static_cast<uint32_t>(std::atoi(args[++i].c_str()));
+    } else if (a == "--miss-rounds" && has_value) {
+      o.miss_rounds = static_cast<uint32_t>(std::atoi(args[++i].c_str()));
     } else if (a == "--textures" && has_value) {
       o.textures = static_cast<uint32_t>(std::atoi(args[++i].c_str()));
     } else {
       std::fprintf(stderr,
                    "usage: texstream-bench server [--quick] [--scene DIR] [--memory-minutes M] [--textures N]\n"
-                   "                              [--phases memory,hits,misses,trace] [--profile-misses N]\n"
+                   "                              [--phases memory,hits,misses,trace] [--profile-misses N] [--miss-rounds N]\n"
                    "unknown or incomplete argument '%s'\n",
                    a.c_str());
       return std::nullopt;
@@ -888,8 +892,10 @@ int run_server_bench(const std::vector<std::string>& args) {
     // same files; the summary takes the median round, the sums are printed too. One pass is ~50 ms: on this VM
     // either side alone swung by up to 2x between back-to-back runs (read() 3.9-8.0 GB/s, misses 2.5-3.8 GB/s
     // over 6 runs, each side moving on its own), so a single pass of each decided the ratio by chance. Rounds
-    // of one run still spread by 0.1-0.3 (e.g. 0.459 0.712 0.734): 5 rounds (7 in full mode), ~0.3 s each.
-    const int rounds = opt->quick ? 5 : 7;
+    // of one run still spread by 0.1-0.3 and fall in two clusters at times (15 rounds of one run: eleven at
+    // 0.36-0.49, four at 0.53-0.68), so a median of 5 moved with how many rounds a run caught of each: 9 rounds
+    // (15 in full mode), ~0.25 s each.
+    const int rounds = opt->miss_rounds > 0 ? static_cast<int>(opt->miss_rounds) : opt->quick ? 9 : 15;
     std::unique_ptr<Harness> h;
     double arena_wait_s = 0, read_s = 0;
     uint64_t read_total = 0;
