@@ -87,7 +87,7 @@ void visit_keys(Config& c, V&& v) {
   v("cache", "memory_bytes", c.cache.memory_bytes, "bytes", "GPU memory for the cache's bound sparse pages (and mip tail); the oldest layer is evicted when full", Range{1 << 20, 1ll << 40});
   v("storage", "origin", c.storage.origin, "path/URL", "Where texture files come from: empty = scene.dir; a folder; or an http(s):// base URL (textures/... fetched with range requests)", kAny);
   v("storage", "disk_cache_dir", c.storage.disk_cache_dir, "path", "Disk cache of fetched ranges for a remote or slow origin (empty: none); one server per folder (flock)", kAny);
-  v("storage", "disk_cache_bytes", c.storage.disk_cache_bytes, "bytes", "Byte budget of the disk cache", Range{1 << 20, 1ll << 44});
+  v("storage", "disk_cache_bytes", c.storage.disk_cache_bytes, "bytes", "Disk space budget of the disk cache: each entry counts its file in whole blocks of the file system; lowered with a warning to what the file system can hold", Range{1 << 20, 1ll << 44});
   v("storage", "disk_cache_policy", c.storage.disk_cache_policy, "name", "Disk cache eviction: lru or fifo (seed 002's)", kAny);
   v("storage", "connect_timeout_ms", c.storage.connect_timeout_ms, "ms", "http origin: connect timeout", Range{1, 600000});
   v("storage", "request_timeout_ms", c.storage.request_timeout_ms, "ms", "http origin: longest time for one range request", Range{1, 3600000});

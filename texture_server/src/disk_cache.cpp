@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <sys/file.h>
 #include <sys/stat.h>
+#include <sys/statvfs.h>
 #include <unistd.h>
 #include <xxhash.h>
 
@@ -151,6 +152,10 @@ fs::path DiskCache::entry_path(const std::string& key) const {
 
 Status DiskCache::load_index() {
   const fs::path index = dir_ / "index";
+  // The file system's block: every entry file takes whole blocks (a 148-byte DDS header entry takes 4 KiB).
+  struct statvfs fsinfo {};
+  const bool have_fs = ::statvfs(dir_.c_str(), &fsinfo) == 0;
+  if (have_fs && fsinfo.f_bsize >= 512 && fsinfo.f_bsize <= (1u << 20)) block_ = fsinfo.f_bsize;
   uint64_t good_bytes = 0;
   uint64_t lines = 0;
   bool torn = false;
@@ -175,11 +180,11 @@ Status DiskCache::load_index() {
         std::getline(fields, key);
         if (auto it = entries_.find(key); it != entries_.end()) {
           order_.erase(it->second.seq);
-          bytes_ -= it->second.size;
+          bytes_ -= footprint(key, it->second.size);
         }
         entries_[key] = Entry{seq, size};
         order_[seq] = key;
-        bytes_ += size;
+        bytes_ += footprint(key, size);
         next_seq_ = std::max(next_seq_, seq + 1);
       } else if (op == 'T') {
         uint64_t seq = 0;
@@ -199,7 +204,7 @@ Status DiskCache::load_index() {
         std::getline(fields, key);
         if (auto it = entries_.find(key); it != entries_.end()) {
           order_.erase(it->second.seq);
-          bytes_ -= it->second.size;
+          bytes_ -= footprint(key, it->second.size);
           entries_.erase(it);
         }
       } else {
@@ -230,12 +235,25 @@ Status DiskCache::load_index() {
   for (const fs::directory_entry& f : fs::directory_iterator(dir_ / "entries", ec)) {
     if (!named.count(f.path().filename().string())) fs::remove(f.path(), ec);
   }
+  // A budget the file system cannot hold: lowered to its free space plus what the entries already take, less
+  // a sixteenth for the index, directories and other writers. A first guess: a full disk lowers it again.
+  if (have_fs && ::statvfs(dir_.c_str(), &fsinfo) == 0) {
+    const uint64_t room = static_cast<uint64_t>(fsinfo.f_bavail) * fsinfo.f_frsize + bytes_;
+    const uint64_t usable = room - room / 16;
+    if (usable < budget_.load(std::memory_order_relaxed)) {
+      spdlog::warn("disk cache '{}': storage.disk_cache_bytes = {} is more than its file system can hold ({} bytes "
+                   "free, {} in entries already); using {}",
+                   dir_.string(), budget_.load(std::memory_order_relaxed), room - bytes_, bytes_, usable);
+      budget_.store(usable, std::memory_order_relaxed);
+    }
+  }
   evict_locked();  // the budget may be smaller than last time
   if (Status s = rewrite_index_locked(); !s.ok()) return s;
   if (!gone.empty()) {
     spdlog::warn("disk cache '{}': dropped {} entries whose files were missing or torn", dir_.string(), gone.size());
   }
-  spdlog::info("disk cache '{}': {} entries, {} of {} bytes ({})", dir_.string(), entries_.size(), bytes_, budget_,
+  spdlog::info("disk cache '{}': {} entries, {} of {} bytes ({})", dir_.string(), entries_.size(), bytes_,
+               budget_.load(std::memory_order_relaxed),
                policy_ == DiskCachePolicy::kLru ? "lru" : "fifo");
   return ok_status();
 }
@@ -263,9 +281,22 @@ Status DiskCache::rewrite_index_locked() {
 
 void DiskCache::append_locked(const std::string& line) {
   if (journal_fd_ < 0) return;
+  if (append_failed_) {
+    // The failed append may have left half a line, which would end the replay at the next start there (and
+    // drop every entry after it): the journal is written whole instead, until that works. The state it
+    // writes already holds this line's change.
+    if (rewrite_index_locked().ok()) {
+      append_failed_ = false;
+      spdlog::info("disk cache '{}': the index is written again", dir_.string());
+    }
+    return;
+  }
   const std::string sealed = seal(line);
   if (!write_all(journal_fd_, sealed.data(), sealed.size())) {
-    spdlog::warn("disk cache '{}': cannot append to the index: {}", dir_.string(), errno_text());
+    spdlog::warn("disk cache '{}': cannot append to the index: {}; it is rewritten whole until that works",
+                 dir_.string(), errno_text());
+    append_failed_ = true;
+    return;
   }
   if (++journal_lines_ > order_.size() * 2 + kJournalSlack) {
     if (Status s = rewrite_index_locked(); !s.ok()) spdlog::warn("{}", s.error().message);
@@ -276,15 +307,26 @@ void DiskCache::erase_locked(const std::string& key, bool journal) {
   auto it = entries_.find(key);
   if (it == entries_.end()) return;
   order_.erase(it->second.seq);
-  bytes_ -= it->second.size;
+  bytes_ -= footprint(key, it->second.size);
   entries_.erase(it);
   std::error_code ec;
   fs::remove(entry_path(key), ec);
   if (journal) append_locked("E " + key);
 }
 
+void DiskCache::shrink_for_space_locked() {
+  const uint64_t before = budget_.load(std::memory_order_relaxed);
+  // Nothing held: the disk is someone else's, and evicting cannot make room; store nothing more.
+  const uint64_t lowered = bytes_ - bytes_ / 8;
+  if (lowered >= before) return;
+  budget_.store(lowered, std::memory_order_relaxed);
+  spdlog::warn("disk cache '{}': its file system is full with {} bytes of entries; budget lowered from {} to {} "
+               "bytes{}",
+               dir_.string(), bytes_, before, lowered, lowered == 0 ? " (the disk cache stores nothing more)" : "");
+}
+
 void DiskCache::evict_locked() {
-  while (bytes_ > budget_ && !order_.empty()) {
+  while (bytes_ > budget_.load(std::memory_order_relaxed) && !order_.empty()) {
     const std::string victim = order_.begin()->second;
     erase_locked(victim, true);
     counters_.evictions.fetch_add(1, std::memory_order_relaxed);
@@ -294,6 +336,11 @@ void DiskCache::evict_locked() {
 bool DiskCache::contains(const std::string& key) const {
   std::lock_guard lock(mutex_);
   return entries_.count(key) > 0;
+}
+
+uint64_t DiskCache::footprint(const std::string& key, uint64_t payload_bytes) const {
+  const uint64_t file = sizeof(EntryHeader) + key.size() + payload_bytes;
+  return (file + block_ - 1) / block_ * block_;
 }
 
 uint64_t DiskCache::bytes() const {
@@ -367,7 +414,7 @@ std::optional<uint64_t> DiskCache::read(const std::string& key, std::span<std::b
 }
 
 void DiskCache::insert(const std::string& key, std::span<const std::byte> data) {
-  if (data.size() > budget_ || key.find_first_of("\n\t") != std::string::npos || key.empty()) return;
+  if (footprint(key, data.size()) > budget_.load(std::memory_order_relaxed) || key.find_first_of("\n\t") != std::string::npos || key.empty()) return;
   EntryHeader h{};
   std::memcpy(h.magic, kMagic, sizeof kMagic);
   h.payload_bytes = data.size();
@@ -383,11 +430,18 @@ void DiskCache::insert(const std::string& key, std::span<const std::byte> data) 
   }
   const bool ok = write_all(fd, &h, sizeof h) && write_all(fd, key.data(), key.size()) &&
                   write_all(fd, data.data(), data.size());
+  const int write_errno = errno;
   ::close(fd);
   std::error_code ec;
   if (!ok) {
-    spdlog::warn("disk cache: cannot write '{}': {}", tmp.string(), errno_text());
     fs::remove(tmp, ec);
+    if (write_errno == ENOSPC || write_errno == EDQUOT) {
+      std::lock_guard lock(mutex_);
+      shrink_for_space_locked();
+      evict_locked();
+      return;
+    }
+    spdlog::warn("disk cache: cannot write '{}': {}", tmp.string(), std::strerror(write_errno));
     return;
   }
   std::lock_guard lock(mutex_);
@@ -398,13 +452,13 @@ void DiskCache::insert(const std::string& key, std::span<const std::byte> data) 
   }
   if (auto it = entries_.find(key); it != entries_.end()) {  // replaced: the file is already the new one
     order_.erase(it->second.seq);
-    bytes_ -= it->second.size;
+    bytes_ -= footprint(key, it->second.size);
     entries_.erase(it);
   }
   const uint64_t seq = next_seq_++;
   entries_[key] = Entry{seq, data.size()};
   order_[seq] = key;
-  bytes_ += data.size();
+  bytes_ += footprint(key, data.size());
   counters_.inserts.fetch_add(1, std::memory_order_relaxed);
   counters_.bytes_inserted.fetch_add(data.size(), std::memory_order_relaxed);
   append_locked("I " + std::to_string(seq) + " " + std::to_string(data.size()) + " " + key);

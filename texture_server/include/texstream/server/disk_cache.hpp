@@ -16,9 +16,16 @@
 //                   included); a torn or corrupt line ends the replay there. Entries whose files are missing or
 //                   the wrong size are dropped, files no line names are deleted, and the journal is rewritten
 //                   compactly (temporary file + rename).
-// Eviction keeps the total payload bytes within the budget: LRU (a hit refreshes an entry) or FIFO (seed
-// 002's: insertion order only). Thread-safe: workers read and insert concurrently; file I/O runs outside the
-// lock.
+// Eviction keeps the disk space of the entries within the budget: each entry counts its file (header, key,
+// payload) rounded up to whole blocks of the file system, so a 148-byte DDS header entry counts 4 KiB, what
+// it takes on disk. (Counting payload bytes alone let a cache of many small mips take tens of times its
+// budget.) LRU (a hit refreshes an entry) or FIFO (seed 002's: insertion order only). The budget is what
+// storage.disk_cache_bytes asks for, lowered (with a warning) to what the folder's file system can hold: at
+// open, to the free space plus what the entries already take, less a sixteenth; and whenever an entry's write
+// fails with ENOSPC/EDQUOT (another process filled the disk), to seven eighths of what the cache takes,
+// evicting the rest so that new entries fit again. Before, a budget larger than the disk left every later
+// entry unwritten, with one warning per attempt. Thread-safe: workers read and insert concurrently; file I/O
+// runs outside the lock.
 #include <atomic>
 #include <cstdint>
 #include <filesystem>
@@ -68,9 +75,11 @@ class DiskCache {
   // budget, or a key with a newline or tab, is not stored. A write failure is logged and the entry skipped.
   void insert(const std::string& key, std::span<const std::byte> data);
 
+  // Disk space the entries take (what the budget bounds), and what one entry of this key and payload takes.
   uint64_t bytes() const;
+  uint64_t footprint(const std::string& key, uint64_t payload_bytes) const;
   size_t entries() const;
-  uint64_t budget() const { return budget_; }
+  uint64_t budget() const { return budget_.load(std::memory_order_relaxed); }  // relaxed: a gauge
   const DiskCacheCounters& counters() const { return counters_; }
   const std::filesystem::path& dir() const { return dir_; }
 
@@ -85,10 +94,13 @@ class DiskCache {
   void append_locked(const std::string& line);
   void erase_locked(const std::string& key, bool journal);
   void evict_locked();
+  // An entry's write ran out of space: lower the budget below what is held (see the header comment).
+  void shrink_for_space_locked();
   std::filesystem::path entry_path(const std::string& key) const;
 
   const std::filesystem::path dir_;
-  const uint64_t budget_;
+  // Written under mutex_; read without it by insert()'s size check.
+  std::atomic<uint64_t> budget_;
   const DiskCachePolicy policy_;
   const int lock_fd_;
   mutable std::mutex mutex_;
@@ -98,6 +110,8 @@ class DiskCache {
   uint64_t bytes_ = 0;
   int journal_fd_ = -1;
   uint64_t journal_lines_ = 0;
+  bool append_failed_ = false;
+  uint64_t block_ = 4096;  // the file system's block size (statvfs f_bsize at open)  // the last journal append failed (logged once until one succeeds again)
   DiskCacheCounters counters_;
 };
 
