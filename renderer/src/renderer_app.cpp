@@ -164,6 +164,11 @@ class Renderer {
   Status load_fully(std::vector<StreamCandidate> wanted, bool no_evictions);
   // An error once kMaxDeathsBeforeAttach servers in a row died before attaching (render.preload_all).
   Status server_can_start() const;
+  // An error once `limit` servers in a row refused their configuration (exit status 2) before attaching: a
+  // streaming run would otherwise draw the colormap for ever, restarting a server that can never start, and
+  // report success. kMaxDeathsBeforeAttach during the run; 1 at its end (a short run ends before a third
+  // spawn). Crashes keep the colormap-and-retry rule (docs/faults.md).
+  Status server_not_refusing(uint64_t limit) const;
   // Frame 0's parts go into the summary after set_up()'s stages (where a start's first frame goes):
   // the time since the previous part, under `name`.
   void first_frame_stage(const char* name);
@@ -438,6 +443,17 @@ Status Renderer::server_can_start() const {
                         "); its own messages are above. Check server.executable and the [server] keys");
 }
 
+Status Renderer::server_not_refusing(uint64_t limit) const {
+  const uint64_t refusals = client_->stats().server_refusals_before_attach;
+  if (refusals < limit) return ok_status();
+  return make_error(ErrorCode::kPeerDead,
+                    "texstream-server refused to start, " + std::to_string(refusals) +
+                        (refusals == 1 ? " time" : " times") + " in a row (last: " +
+                        client_->last_server_exit() +
+                        ": bad arguments, configuration or scene); its own messages are above. Check the "
+                        "[server] and [storage] keys and scene.dir");
+}
+
 Status Renderer::load_fully(std::vector<StreamCandidate> wanted, bool no_evictions) {
   // Desired level 0 and no bias: Algorithm 1 then refines each texture one level per round, coarsest first,
   // until its base level is resident (Final). Each round waits for every answer before the next, so the
@@ -603,6 +619,7 @@ Status Renderer::render_frame(uint64_t index, bool last) {
                                                    std::chrono::duration<double, std::milli>(cfg_.controller.load_time_ms)));
     client_->poll(timed, static_cast<size_t>(cfg_.stream.max_mips_per_cycle));
     if (timed.limited()) ++load_time_limited_frames_;
+    TS_TRY(server_not_refusing(kMaxDeathsBeforeAttach));
   }
   const uint64_t in_flight = client_->stats().in_flight;
   // Only a frame that starts a streaming cycle has its compacted list read; any other frame's list would be
@@ -785,6 +802,7 @@ Result<RunSummary> Renderer::run() {
   frames = rendered;
   if (interactive_) TS_TRY(interactive_->finish());
   TS_VK_TRY(vkDeviceWaitIdle(ctx_->device()));
+  TS_TRY(server_not_refusing(1));  // the run ended with no server since the last refusal
 
   const StreamStats ss = client_->stats();
   RunSummary s;

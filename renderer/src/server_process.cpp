@@ -174,7 +174,7 @@ void ServerProcess::run_child() {
     spdlog::error("texstream-server '{}' could not be spawned: {}", command_.executable.string(), std::strerror(err));
     std::lock_guard lock(mutex_);
     shared_.spawning = false;
-    shared_.exit = ServerExit{0, std::string("could not be spawned: ") + std::strerror(err), 0, false, {}};
+    shared_.exit = ServerExit{0, std::string("could not be spawned: ") + std::strerror(err), 0, -1, false, {}};
     changed_.notify_all();
     return;
   }
@@ -210,6 +210,7 @@ void ServerProcess::run_child() {
   if (w == pid) {
     e.how = describe_status(status);
     e.term_signal = WIFSIGNALED(status) ? WTERMSIG(status) : 0;
+    e.exit_status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   } else {
     // ECHILD: someone else reaped it (SIGCHLD set to SIG_IGN auto-reaps). The waitid answer, if any, still
     // says how it ended.
@@ -278,6 +279,7 @@ std::optional<ServerExit> ServerProcess::reap(SteadyTime now) {
         early.pid = shared_.pid;
         if (info.si_code == CLD_EXITED) {
           early.how = "exited with status " + std::to_string(info.si_status);
+          early.exit_status = info.si_status;
         } else {
           early.term_signal = info.si_status;
           early.how = "killed by signal " + std::to_string(info.si_status) + " (" + strsignal(info.si_status) + ")";

@@ -459,6 +459,8 @@ void StreamClient::supervise(MipSink& sink) {
     const bool attached = exit->pid > 0 && segment_->server_block().pid.v.load(std::memory_order_relaxed) ==
                                                static_cast<uint32_t>(exit->pid);
     stats_.server_deaths_before_attach = attached ? 0 : stats_.server_deaths_before_attach + 1;
+    const bool refused = !attached && !exit->killed_by_us && exit->exit_status == kServerExitBadConfig;
+    stats_.server_refusals_before_attach = refused ? stats_.server_refusals_before_attach + 1 : 0;
     last_server_exit_ = "pid " + std::to_string(exit->pid) + " " + exit->how +
                         (exit->killed_by_us ? " after we killed it: " + exit->kill_reason : "");
     on_server_gone(sink, last_server_exit_);
@@ -724,6 +726,7 @@ std::string StreamClient::stats_text() const {
     << "server_deaths " << s.server_deaths << "\n"
     << "server_crashes " << s.server_crashes << "\n"
     << "server_deaths_before_attach " << s.server_deaths_before_attach << "\n"
+    << "server_refusals_before_attach " << s.server_refusals_before_attach << "\n"
     << "crash_signal_deaths " << s.crash_signal_deaths << "\n"
     << "textures_quarantined " << s.textures_quarantined << "\n"
     << "lost_resent " << s.lost_resent << "\n"

@@ -120,9 +120,9 @@ TEST(RenderCli, MissingSceneNamesThePath) {
 // A server that cannot start (here a script that exits with status 2 at once, as texstream-server does on a
 // bad option) ends a render.preload_all run within a second or so, naming how it ended and the key to check
 // (before, each preload round waited out the restart back-off, up to the colormap-only retry of 30 s, for up
-// to 64 rounds), and a lock-step run at its first death (before, it drew colormap frames and reported
-// success). `timeout` keeps a regression from hanging the suite.
-TEST(RenderCli, AServerThatCannotStartEndsPreloadAndLockstepRunsWithItsReason) {
+// to 64 rounds), a lock-step run at its first death (before, it drew colormap frames and reported success),
+// and a streaming run at its third refusal or at its end. `timeout` keeps a regression from hanging the suite.
+TEST(RenderCli, AServerThatCannotStartEndsPreloadLockstepAndStreamingRunsWithItsReason) {
   const fs::path dir = fresh_dir("badserver");
   ASSERT_TRUE(generate_lockstep_city(dir));
   const fs::path fake = dir / "refusing-server.sh";
@@ -130,10 +130,22 @@ TEST(RenderCli, AServerThatCannotStartEndsPreloadAndLockstepRunsWithItsReason) {
     std::ofstream(fake) << "#!/bin/sh\necho 'refusing-server: unknown option' >&2\nexit 2\n";
   }
   fs::permissions(fake, fs::perms::owner_all);
-  const std::vector<std::pair<std::string, std::vector<std::string>>> runs = {
-      {"render.preload_all=true", {"died before attaching to the segment 3 times in a row", "server.executable"}},
-      {"render.lockstep=true", {"render.lockstep: texstream-server died during the run"}}};
-  for (const auto& [mode, messages] : runs) {
+  struct Case {
+    std::string sets;
+    std::vector<std::string> messages;
+    double within_s;
+  };
+  const std::vector<Case> runs = {
+      {"render.preload_all=true", {"died before attaching to the segment 3 times in a row", "server.executable"}, 60},
+      {"render.lockstep=true", {"render.lockstep: texstream-server died during the run"}, 60},
+      // Streaming runs: a server that exits with status 2 (bad arguments, configuration or scene) refuses for
+      // good; before, the run drew colormap frames, restarting it, and reported success. A long run (400 paced
+      // frames: 6.7 s) ends at the third refusal, within a second (back-off 50 + 100 ms); a run shorter than
+      // that ends with the refusal it saw.
+      {"render.lockstep=false --set render.frames=400",
+       {"texstream-server refused to start, 3 times in a row", "[server] and [storage] keys"}, 5},
+      {"render.lockstep=false", {"texstream-server refused to start, 1 time in a row"}, 60}};
+  for (const auto& [mode, messages, within_s] : runs) {
     const auto t0 = std::chrono::steady_clock::now();
     const int rc = run("timeout 120 " + (kBin / "texstream-render").string() + " --set scene.dir=" +
                            (dir / "scene").string() + " --set render.frames=5 --set render.width_px=160" +
@@ -143,7 +155,7 @@ TEST(RenderCli, AServerThatCannotStartEndsPreloadAndLockstepRunsWithItsReason) {
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const std::string log = slurp(dir / "render.log");
     EXPECT_EQ(rc, 1) << mode << "\n" << log;
-    EXPECT_LT(seconds, 60.0) << mode;
+    EXPECT_LT(seconds, within_s) << mode;
     for (const std::string& message : messages) {
       EXPECT_NE(log.find(message), std::string::npos) << mode << "\n" << log;
     }

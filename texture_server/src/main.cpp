@@ -9,7 +9,8 @@
 //
 // Exit codes: 0 stopped (SIGTERM/SIGINT) or the renderer exited; 2 bad arguments, configuration or scene;
 // 3 the segment cannot be opened or its header does not match this build (the message names the field);
-// 4 the renderer broke the ring protocol.
+// 4 the renderer broke the ring protocol; 5 the storage origin did not answer at start (a restart may
+// succeed: the renderer retries it like a crash, while 2 ends its run after three in a row).
 #include <signal.h>
 #include <sys/prctl.h>
 #include <unistd.h>
@@ -37,6 +38,7 @@ constexpr int kExitOk = 0;
 constexpr int kExitBadArguments = 2;
 constexpr int kExitSegment = 3;
 constexpr int kExitProtocol = 4;
+constexpr int kExitStorageUnavailable = 5;
 
 // Standalone: how often to look for the next client's segment. A renderer start takes far longer.
 constexpr std::chrono::milliseconds kNextClientPoll{100};
@@ -156,7 +158,7 @@ int main(int argc, char** argv) {
   auto stack = texstream::server::make_storage_stack(config->storage, config->scene.dir);
   if (!stack.ok()) {
     spdlog::error("{}", stack.error().message);
-    return kExitBadArguments;
+    return stack.error().code == texstream::ErrorCode::kPeerDead ? kExitStorageUnavailable : kExitBadArguments;
   }
   spdlog::info("storage: {}", (*stack)->describe());
   std::unique_ptr<texstream::Segment> current = std::move(segment).value();

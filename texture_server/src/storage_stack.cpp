@@ -71,7 +71,14 @@ Result<std::unique_ptr<StorageStack>> make_storage_stack(const StorageConfig& c,
                                                              ("texstream-origin-" + std::to_string(::getpid()))
                                                        : fs::path(c.disk_cache_dir)) / "scene";
       Result<std::string> table = stack->http->fetch_all(kTextureTable);
-      if (!table.ok()) return make_error(table.error().code, "storage.origin: " + table.error().message);
+      // kPeerDead: the origin did not answer (texstream-server exits with its "storage unavailable" status,
+      // which the renderer retries like a crash); an answer that is wrong keeps its own code.
+      if (!table.ok()) {
+        const ErrorCode code = table.error().code == ErrorCode::kIo || table.error().code == ErrorCode::kTimeout
+                                   ? ErrorCode::kPeerDead
+                                   : table.error().code;
+        return make_error(code, "storage.origin: " + table.error().message);
+      }
       std::error_code ec;
       fs::create_directories(local, ec);
       std::ofstream out(local / kTextureTable, std::ios::binary | std::ios::trunc);

@@ -73,10 +73,16 @@ enum class ServerState : uint8_t {
 };
 const char* to_string(ServerState state);
 
+// texstream-server's exit status for bad arguments, configuration or scene (texture_server/src/main.cpp):
+// a refusal that a restart cannot change.
+inline constexpr int kServerExitBadConfig = 2;
+
 struct ServerExit {
   int pid = 0;
   std::string how;          // "exited with status 3", "killed by signal 9", "could not be spawned: ..."
   int term_signal = 0;      // the signal that ended it; 0 if it exited or was never spawned
+  int exit_status = -1;     // its exit status if it exited (texstream-server: 2 = bad arguments, configuration
+                            // or scene, see kServerExitBadConfig); -1 otherwise
   bool killed_by_us = false;
   std::string kill_reason;  // why we killed it, if we did
 };

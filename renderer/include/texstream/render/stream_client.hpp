@@ -135,6 +135,9 @@ struct StreamStats {
   // Servers in a row (up to now) that died before attaching to the segment: a binary that cannot start (a
   // bad option, a missing library) rather than one that crashed while serving. 0 once one attached.
   uint64_t server_deaths_before_attach = 0;
+  // Of those, the ones in a row that exited with kServerExitBadConfig: the server refused its arguments,
+  // configuration or scene, which no restart changes. 0 once one attached or died any other way.
+  uint64_t server_refusals_before_attach = 0;
   uint64_t crash_signal_deaths = 0;                      // deaths by a crash signal the server raised itself
   uint64_t textures_quarantined = 0;                     // loaded during kQuarantineAfterCrashes such deaths
   // Recovery (issue 9): a request in flight when the server died, sent again to a later server, must be
