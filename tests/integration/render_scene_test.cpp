@@ -164,6 +164,43 @@ TEST(RenderCli, AServerThatCannotStartEndsPreloadLockstepAndStreamingRunsWithIts
   fs::remove_all(dir);
 }
 
+// Frames written to a full disk (a 64 KiB tmpfs in a mount namespace of its own; root only): the run ends
+// with an error naming the frame and the cause, and every PNG left under a frame's name is whole. Before,
+// stbi_write_png() ignored fwrite's result: empty and truncated PNGs, and the run went on (it failed only at
+// cache.json).
+TEST(RenderCli, AFullOutputDiskEndsTheRunAndLeavesNoTruncatedFrame) {
+  const fs::path dir = fresh_dir("fulldisk");
+  ASSERT_TRUE(generate_lockstep_city(dir));
+  const fs::path mnt = dir / "mnt";
+  fs::create_directories(mnt);
+  const std::string render = (kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
+                             " --set render.frames=40 --set render.write_every_frames=1 --set render.width_px=160" +
+                             " --set render.height_px=90 --set render.output_dir=" + (mnt / "out").string();
+  // Run inside the namespace by a script, which also checks the PNGs there (the mount is gone outside it):
+  // a PNG is whole if it ends with the IEND chunk's CRC (ae 42 60 82).
+  const fs::path script = dir / "fulldisk.sh";
+  std::ofstream(script) << "#!/bin/sh\n"
+                        << "mount -t tmpfs -o size=64k tmpfs '" << mnt.string() << "' || exit 77\n"
+                        << "timeout 120 " << render << "\n"
+                        << "echo render_rc=$?\n"
+                        << "n=0\n"
+                        << "for f in '" << (mnt / "out" / "frames").string() << "'/*.png; do\n"
+                        << "  [ -e \"$f\" ] || continue\n"
+                        << "  tail -c 4 \"$f\" | od -An -tx1 | tr -d ' \\n' | grep -q '^ae426082$' || echo \"TRUNCATED $f\"\n"
+                        << "  n=$((n+1))\n"
+                        << "done\n"
+                        << "echo whole $n\n";
+  fs::permissions(script, fs::perms::owner_all);
+  const int rc = run("unshare -m " + script.string(), dir / "render.log");
+  const std::string log = slurp(dir / "render.log");
+  if (rc == 77 || log.find("render_rc=") == std::string::npos) GTEST_SKIP() << "no mount namespace here:\n" << log;
+  EXPECT_NE(log.find("render_rc=1"), std::string::npos) << log;
+  EXPECT_NE(log.find("cannot write the frame (No space left on device)"), std::string::npos) << log;
+  EXPECT_EQ(log.find("TRUNCATED"), std::string::npos) << log;
+  EXPECT_NE(log.find("whole "), std::string::npos) << log;
+  fs::remove_all(dir);
+}
+
 // A RAM cache budget no machine here can hold (1 TiB, the key's maximum): the renderer refuses before it
 // spawns a server, and a server started by hand refuses too, both naming the key and the limit. Before, the
 // server pre-faulted its cache until the kernel OOM-killed it, and the renderer restarted it for ever.
