@@ -164,6 +164,14 @@ Result<std::unique_ptr<Segment>> Segment::create(const std::string& name, const 
     seg->impl_->shm.truncate(static_cast<bip::offset_t>(layout.total_bytes));
     seg->impl_->region = bip::mapped_region(seg->impl_->shm, bip::read_write);
   } catch (const bip::interprocess_exception& e) {
+    if (e.get_error_code() == bip::already_exists_error) {
+      const std::optional<uint32_t> owner = live_owner(name);
+      return make_error(ErrorCode::kIo, "cannot create shared segment '" + name + "': it exists" +
+                                            (owner ? " and belongs to a live renderer, pid " + std::to_string(*owner)
+                                                   : std::string(" (left by a renderer that died, or being created "
+                                                                 "by another one now)")) +
+                                            "; give each renderer its own protocol.segment_name");
+    }
     return make_error(ErrorCode::kIo, "cannot create shared segment '" + name + "': " + e.what());
   }
   auto* base = static_cast<std::byte*>(seg->impl_->region.get_address());
@@ -254,6 +262,39 @@ void Segment::reset_after_server_death() {
 
 bool Segment::remove(const std::string& name) { return bip::shared_memory_object::remove(name.c_str()); }
 
+namespace {
+
+enum class Liveness { kGone, kLive, kStale };
+
+// A segment name's state: kGone (no such name), kLive (its renderer is alive, or it may be being created
+// right now), kStale (its renderer is dead, or it was left half-created longer than kCreationGraceS ago).
+// `owner` gets the renderer's pid when the header says it.
+Liveness segment_liveness(const std::string& name, uint32_t* owner = nullptr) {
+  // A segment that is not `ready` may be one another process is creating right now (shm_open, truncate and
+  // the header take microseconds): it counts as stale only once it is older than kCreationGrace.
+  struct stat st {};
+  if (::stat(("/dev/shm/" + name).c_str(), &st) != 0) return Liveness::kGone;
+  const bool old_enough = ::time(nullptr) - st.st_ctime > kCreationGraceS;
+  try {
+    bip::shared_memory_object shm(bip::open_only, name.c_str(), bip::read_only);
+    bip::offset_t size = 0;
+    if (!shm.get_size(size) || size < static_cast<bip::offset_t>(kSegmentHeaderBytes + sizeof(RendererBlock))) {
+      return old_enough ? Liveness::kStale : Liveness::kLive;  // a creator died before truncate()
+    }
+    bip::mapped_region region(shm, bip::read_only, 0, kSegmentHeaderBytes + sizeof(RendererBlock));
+    const auto* rb = reinterpret_cast<const RendererBlock*>(static_cast<const std::byte*>(region.get_address()) +
+                                                            kSegmentHeaderBytes);
+    // acquire: pairs with the creator's release-store of `ready`; pid and start time are valid after it.
+    if (rb->ready.v.load(std::memory_order_acquire) != 1) return old_enough ? Liveness::kStale : Liveness::kLive;
+    if (owner) *owner = rb->pid;
+    return process_alive(static_cast<int>(rb->pid), rb->start_time) ? Liveness::kLive : Liveness::kStale;
+  } catch (const bip::interprocess_exception&) {
+    return Liveness::kLive;  // unreadable: not ours to judge
+  }
+}
+
+}  // namespace
+
 int Segment::remove_stale(const std::string& prefix) {
   int removed = 0;
   DIR* dir = ::opendir("/dev/shm");
@@ -261,35 +302,20 @@ int Segment::remove_stale(const std::string& prefix) {
   while (dirent* e = ::readdir(dir)) {
     const std::string name = e->d_name;
     if (name.rfind(prefix, 0) != 0) continue;
-    // A segment that is not `ready` may be one another process is creating right now (shm_open, truncate and
-    // the header take microseconds): it counts as stale only once it is older than kCreationGrace.
-    struct stat st {};
-    if (::stat(("/dev/shm/" + name).c_str(), &st) != 0) continue;
-    const bool old_enough = ::time(nullptr) - st.st_ctime > kCreationGraceS;
-    bool stale = false;
-    try {
-      bip::shared_memory_object shm(bip::open_only, name.c_str(), bip::read_only);
-      bip::offset_t size = 0;
-      if (!shm.get_size(size) || size < static_cast<bip::offset_t>(kSegmentHeaderBytes + sizeof(RendererBlock))) {
-        stale = old_enough;  // too small to be a segment: a creator died before truncate()
-      } else {
-        bip::mapped_region region(shm, bip::read_only, 0, kSegmentHeaderBytes + sizeof(RendererBlock));
-        const auto* rb = reinterpret_cast<const RendererBlock*>(static_cast<const std::byte*>(region.get_address()) +
-                                                                kSegmentHeaderBytes);
-        // acquire: pairs with the creator's release-store of `ready`; pid and start time are valid after it.
-        if (rb->ready.v.load(std::memory_order_acquire) != 1) {
-          stale = old_enough;
-        } else {
-          stale = !process_alive(static_cast<int>(rb->pid), rb->start_time);
-        }
-      }
-    } catch (const bip::interprocess_exception&) {
-      continue;
-    }
-    if (stale && bip::shared_memory_object::remove(name.c_str())) ++removed;
+    if (segment_liveness(name) == Liveness::kStale && bip::shared_memory_object::remove(name.c_str())) ++removed;
   }
   ::closedir(dir);
   return removed;
+}
+
+bool Segment::remove_if_stale(const std::string& name) {
+  return segment_liveness(name) == Liveness::kStale && bip::shared_memory_object::remove(name.c_str());
+}
+
+std::optional<uint32_t> Segment::live_owner(const std::string& name) {
+  uint32_t pid = 0;
+  if (segment_liveness(name, &pid) != Liveness::kLive || pid == 0) return std::nullopt;
+  return pid;
 }
 
 }  // namespace texstream

@@ -191,6 +191,11 @@ Result<std::unique_ptr<StreamClient>> StreamClient::start(const Config& config, 
   }
   const std::string name = config.protocol.segment_name.empty() ? "texstream-" + std::to_string(::getpid())
                                                                  : config.protocol.segment_name;
+  // A chosen name (for a standalone server) left behind by a renderer that was killed would block every
+  // later one with "exists"; the sweep above only covers the "texstream-" names.
+  if (!config.protocol.segment_name.empty() && Segment::remove_if_stale(name)) {
+    spdlog::info("removed the stale shared segment '{}' of a dead renderer", name);
+  }
   // config.validate() and the key ranges bound these (powers of two, 1..16384 slots, <= 64 MiB a slot).
   SegmentParams params;
   params.request_capacity = static_cast<uint32_t>(config.protocol.request_ring_capacity);

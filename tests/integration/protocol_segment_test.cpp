@@ -102,6 +102,42 @@ TEST(Segment, StaleSegmentOfAKilledOwnerIsRemoved) {
   close(ready[1]);
 }
 
+TEST(Segment, AChosenNameOfALiveRendererIsRefusedNamingItAndADeadOnesIsRemoved) {
+  // protocol.segment_name: a renderer SIGKILLed left its segment behind, and every later renderer with the same
+  // name failed with "File exists" (the start-up sweep covers only "texstream-" names).
+  const std::string name = "ts-test-chosen-" + std::to_string(getpid());
+  int ready[2];
+  ASSERT_EQ(pipe(ready), 0);
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    auto seg = Segment::create(name, {16, 16, 2, 4096});
+    char ok = seg.ok() ? 1 : 0;
+    (void)!write(ready[1], &ok, 1);
+    pause();
+    _exit(0);
+  }
+  char ok = 0;
+  ASSERT_EQ(read(ready[0], &ok, 1), 1);
+  ASSERT_EQ(ok, 1);
+  EXPECT_FALSE(Segment::remove_if_stale(name)) << "the owner lives";
+  EXPECT_EQ(Segment::live_owner(name), static_cast<uint32_t>(child));
+  auto second = Segment::create(name, {16, 16, 2, 4096});
+  ASSERT_FALSE(second.ok());
+  EXPECT_NE(second.error().message.find("belongs to a live renderer, pid " + std::to_string(child)), std::string::npos)
+      << second.error().message;
+  EXPECT_NE(second.error().message.find("protocol.segment_name"), std::string::npos) << second.error().message;
+  kill(child, SIGKILL);
+  waitpid(child, nullptr, 0);
+  EXPECT_FALSE(Segment::live_owner(name));
+  EXPECT_TRUE(Segment::remove_if_stale(name));
+  EXPECT_FALSE(Segment::remove_if_stale(name)) << "gone already";
+  auto third = Segment::create(name, {16, 16, 2, 4096});
+  EXPECT_TRUE(third.ok()) << third.error().message;
+  close(ready[0]);
+  close(ready[1]);
+}
+
 TEST(Segment, ASegmentBeingCreatedIsNotTakenForStale) {
   // Another process between shm_open/truncate and `ready`: its segment has pid 0 and is not ready. A
   // concurrent remove_stale() (every renderer runs one at start) must leave it alone.

@@ -6,6 +6,7 @@
 // stand-in process (a shell script that only sleeps) so that death, hang and restart are real.
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -236,6 +237,34 @@ std::unique_ptr<StreamClient> start_external(const Config& config) {
   auto c = StreamClient::start(config, shapes(), "/nonexistent-scene", "", {}, external());
   EXPECT_TRUE(c.ok()) << (c.ok() ? "" : c.error().message);
   return c.ok() ? std::move(*c) : nullptr;
+}
+
+// A chosen protocol.segment_name (not a "texstream-" one, which the start-up sweep covers) left behind by a
+// SIGKILLed renderer: the next renderer takes the name over. Before, it failed with "File exists" until
+// someone removed /dev/shm/<name> by hand.
+TEST(StreamClient, TakesOverAChosenSegmentNameLeftByAKilledRenderer) {
+  const std::string name = "ts-test-chosen-" + std::to_string(::getpid());
+  int ready[2];
+  ASSERT_EQ(pipe(ready), 0);
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    auto seg = Segment::create(name, {16, 16, 2, 4096});
+    char ok = seg.ok() ? 1 : 0;
+    (void)!write(ready[1], &ok, 1);
+    pause();
+    _exit(0);
+  }
+  char ok = 0;
+  ASSERT_EQ(read(ready[0], &ok, 1), 1);
+  ASSERT_EQ(ok, 1);
+  kill(child, SIGKILL);
+  waitpid(child, nullptr, 0);
+  close(ready[0]);
+  close(ready[1]);
+  auto client = start_external(small_config(name));
+  ASSERT_NE(client, nullptr);
+  EXPECT_EQ(client->segment().header().slot_count, 4u) << "the new renderer's own segment, not the dead one's";
 }
 
 // ---- the happy path, step by step ----

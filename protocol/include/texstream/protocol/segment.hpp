@@ -4,6 +4,7 @@
 // managed allocator or message_queue anywhere (DESIGN.md: each hangs when a peer dies at the wrong instant).
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 
@@ -26,6 +27,10 @@ class Segment {
   // Removes the name of a segment whose owner (pid + start time in its RendererBlock) is no longer alive.
   // Returns the number removed. Names must start with `prefix`.
   static int remove_stale(const std::string& prefix);
+  // The same for one exact name (a protocol.segment_name chosen by the user): true if it was removed.
+  static bool remove_if_stale(const std::string& name);
+  // The pid of the live renderer that owns the segment `name`, if there is one (for messages).
+  static std::optional<uint32_t> live_owner(const std::string& name);
   static bool remove(const std::string& name);
 
   ~Segment();
