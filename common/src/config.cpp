@@ -32,6 +32,7 @@ void visit_keys(Config& c, V&& v) {
   v("protocol", "staging_slot_bytes", c.protocol.staging_slot_bytes, "bytes", "Bytes per staging slot; must hold the largest mip", Range{4096, 64 << 20});
   v("protocol", "heartbeat_timeout_ms", c.protocol.heartbeat_timeout_ms, "ms", "A peer whose progress heartbeat stalls this long is treated as hung", Range{10, 600000});
 
+  v("server", "spawn", c.server.spawn, "bool", "Start texstream-server as a child; false: a standalone one (texstream-server --segment NAME) serves protocol.segment_name, and is not restarted by the renderer", kAny);
   v("server", "executable", c.server.executable, "path", "texstream-server binary; empty: next to texstream-render", kAny);
   v("server", "worker_threads", c.server.worker_threads, "threads", "Read/decode workers (default fits a 2-core machine)", Range{1, 64});
   v("server", "ram_cache_bytes", c.server.ram_cache_bytes, "bytes", "Byte budget of the server's RAM cache of mips, pre-faulted at start. With the staging pool and 64 MiB it must fit physical memory and any memory cgroup limit (else an error at start); more than is free now, less a reserve, is lowered with a warning", Range{0, 1ll << 40});
@@ -279,6 +280,9 @@ Status Config::validate() const {
   }
   if (stream.max_requests_in_flight > protocol.request_ring_capacity) {
     return bad("stream.max_requests_in_flight", "must not exceed protocol.request_ring_capacity");
+  }
+  if (!server.spawn && protocol.segment_name.empty()) {
+    return bad("server.spawn", "false needs protocol.segment_name: the name the standalone texstream-server serves");
   }
   if (protocol.completion_ring_capacity < protocol.request_ring_capacity) {
     return bad("protocol.completion_ring_capacity", "must be at least protocol.request_ring_capacity (every request is answered)");

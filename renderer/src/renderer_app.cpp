@@ -346,7 +346,7 @@ Status Renderer::set_up() {
   }
 
   StreamClientOptions so;
-  so.spawn_server = !run_.in_process_server;
+  so.spawn_server = !run_.in_process_server && cfg_.server.spawn;
   auto client = StreamClient::start(cfg_, scene_.shapes(), scene_.dir, run_.config_file, run_.overrides, so);
   if (!client) return client.error();
   client_ = std::move(*client);

@@ -442,6 +442,43 @@ void StreamClient::fail_quarantined_requests(MipSink& sink) {
   }
 }
 
+void StreamClient::watch_external_server(MipSink& sink) {
+  // A standalone server (server.spawn = false) is no child of ours: its death is told by its identity in the
+  // ServerBlock, pid + start time, looked at every kExternalServerCheck. Then its requests are lost and the
+  // block and rings are reset, as after a spawned server's death, so that the next standalone server (its
+  // supervisor restarts it, or a person does) can claim the segment: a server claims it only while the pid
+  // word is 0 (Server::run). The in-process server is this process: never dead here.
+  const SteadyTime t = now();
+  if (t < next_external_check_) return;
+  next_external_check_ = t + kExternalServerCheck;
+  const ServerBlock& sb = segment_->server_block();
+  const uint32_t pid = sb.pid.v.load(std::memory_order_acquire);
+  // start_time 0: a server between its claim of the pid word and publishing its start time.
+  const uint64_t start_time = sb.start_time.v.load(std::memory_order_acquire);
+  if (pid == 0) {
+    // Nobody serves the segment yet: say so once after a while (a preload would otherwise wait silently).
+    if (external_unserved_since_ == SteadyTime{}) external_unserved_since_ = t;
+    if (!external_unserved_told_ && t - external_unserved_since_ >= kExternalUnservedWarning) {
+      spdlog::warn("no texstream-server has attached to segment '{}' for {} s (server.spawn = false): start one "
+                   "with texstream-server --segment {} --scene DIR",
+                   segment_->name(), std::chrono::duration_cast<std::chrono::seconds>(kExternalUnservedWarning).count(),
+                   segment_->name());
+      external_unserved_told_ = true;
+    }
+  } else {
+    external_unserved_since_ = SteadyTime{};
+    external_unserved_told_ = false;
+  }
+  if (pid == 0 || start_time == 0 || pid == static_cast<uint32_t>(::getpid())) return;
+  if (process_alive(static_cast<int>(pid), start_time)) return;
+  ++stats_.server_deaths;
+  last_server_exit_ = "standalone texstream-server pid " + std::to_string(pid) + " is gone";
+  spdlog::warn("{}: its requests are sent again once another server attaches", last_server_exit_);
+  on_server_gone(sink, last_server_exit_);
+  segment_->reset_after_server_death();
+  attach_rings();
+}
+
 void StreamClient::supervise(MipSink& sink) {
   const bool ring_broken = requests_.error() != RingError::kNone || completions_.error() != RingError::kNone ||
                            !server_read_position().has_value();
@@ -451,11 +488,27 @@ void StreamClient::supervise(MipSink& sink) {
       protocol_error("a ring position of the external server is impossible; stopping until reset");
       broken_ = true;
       on_server_gone(sink, "ring corrupt");
+      return;
     }
+    watch_external_server(sink);
     return;
   }
   const SteadyTime t = now();
   if (auto exit = process_->reap(t)) {
+    const ServerBlock& sb = segment_->server_block();
+    const uint32_t holder = sb.pid.v.load(std::memory_order_acquire);
+    const uint64_t holder_start = sb.start_time.v.load(std::memory_order_acquire);
+    if (holder != 0 && holder != static_cast<uint32_t>(exit->pid) && holder_start != 0 &&
+        process_alive(static_cast<int>(holder), holder_start)) {
+      // Our child found the segment held by another server (a standalone texstream-server on this
+      // protocol.segment_name) and left. A reset would pull the rings from under that server: it serves this
+      // renderer from now on, as with server.spawn = false, and no child is started again.
+      spdlog::warn("segment '{}' is served by a standalone texstream-server (pid {}): using it, as with "
+                   "server.spawn = false; child pid {} {}",
+                   segment_->name(), holder, exit->pid, exit->how);
+      process_.reset();
+      return;
+    }
     ++stats_.server_deaths;
     // Before on_server_gone (a quarantined texture's lost requests fail for good) and before the reset
     // (which zeroes the words).

@@ -6,6 +6,7 @@
 #include "process_test_support.hpp"
 #include "texstream/common/memory_info.hpp"
 #include "texstream/render/frame_log.hpp"
+#include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -198,6 +199,56 @@ TEST(RenderCli, AFullOutputDiskEndsTheRunAndLeavesNoTruncatedFrame) {
   EXPECT_NE(log.find("cannot write the frame (No space left on device)"), std::string::npos) << log;
   EXPECT_EQ(log.find("TRUNCATED"), std::string::npos) << log;
   EXPECT_NE(log.find("whole "), std::string::npos) << log;
+  fs::remove_all(dir);
+}
+
+// A standalone texstream-server (--segment NAME, started first: it waits for the renderer) serves renderers
+// configured with protocol.segment_name = NAME:
+// - with server.spawn = false, the renderer starts no server of its own;
+// - with the default (spawn), the renderer's child finds the segment held and leaves; the renderer uses the
+//   standalone one (before, both attached to the one segment: slots released twice, protocol errors).
+// Each run (render.preload_all: it waits for every mip) must stream with no protocol error.
+TEST(RenderCli, AStandaloneServerServesRenderersOnItsSegmentName) {
+  const fs::path dir = fresh_dir("standalone");
+  ASSERT_TRUE(generate_lockstep_city(dir));
+  const std::string name = "ts-test-standalone-" + std::to_string(getpid());
+  const pid_t server = fork();
+  ASSERT_GE(server, 0);
+  if (server == 0) {
+    const std::string exe = (kBin / "texstream-server").string(), scene = (dir / "scene").string();
+    const std::string log = (dir / "server.log").string();
+    freopen(log.c_str(), "w", stderr);
+    execl(exe.c_str(), exe.c_str(), "--segment", name.c_str(), "--scene", scene.c_str(), "--set",
+          "server.idle_wait_ms=5", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  for (const std::string spawn : {"false", "true"}) {
+    const fs::path out = dir / ("out-" + spawn);
+    const int rc = run("timeout 120 " + (kBin / "texstream-render").string() + " --set scene.dir=" +
+                           (dir / "scene").string() + " --set render.frames=5 --set render.width_px=160" +
+                           " --set render.height_px=90 --set render.output_dir=" + out.string() +
+                           " --set render.preload_all=true --set protocol.segment_name=" + name +
+                           " --set server.spawn=" + spawn,
+                       dir / ("render-" + spawn + ".log"));
+    const std::string log = slurp(dir / ("render-" + spawn + ".log"));
+    EXPECT_EQ(rc, 0) << "server.spawn=" << spawn << "\n" << log;
+    const nlohmann::json summary = nlohmann::json::parse(slurp(out / "summary.json"), nullptr, false);
+    ASSERT_FALSE(summary.is_discarded()) << log;
+    EXPECT_GT(summary["mips_streamed"].get<int>(), 0) << log;
+    EXPECT_EQ(summary["protocol_errors"].get<int>(), 0) << log;
+    if (spawn == "false") {
+      EXPECT_EQ(log.find("texstream-server started"), std::string::npos) << "a child was spawned:\n" << log;
+    } else {
+      // One of the two took the segment; the other stood aside, whichever came first.
+      const bool child_left = log.find("is served by a standalone texstream-server") != std::string::npos;
+      const bool standalone_waited = slurp(dir / "server.log").find("waiting until it is free") != std::string::npos;
+      EXPECT_TRUE(child_left || standalone_waited) << log << "\n" << slurp(dir / "server.log");
+    }
+  }
+  kill(server, SIGTERM);
+  int status = 0;
+  waitpid(server, &status, 0);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << slurp(dir / "server.log");
   fs::remove_all(dir);
 }
 

@@ -202,9 +202,27 @@ TEST_F(ServerProcessTest, BadArgumentsExitWithCode2) {
   EXPECT_EQ(wait_exit(bad_range, 10s), 2);
 }
 
-TEST_F(ServerProcessTest, MissingSegmentExitsWithCode3) {
-  const pid_t pid = spawn_server(server_args());
+TEST_F(ServerProcessTest, MissingSegmentExitsWithCode3WhenSpawned) {
+  const pid_t pid = spawn_server(server_args(true));
   EXPECT_EQ(wait_exit(pid, 10s), 3);
+}
+
+TEST_F(ServerProcessTest, AStandaloneServerStartedBeforeItsRendererWaitsForIt) {
+  // Before, it exited with status 3 (no segment yet): a standalone server had to be started after the renderer.
+  const pid_t pid = spawn_server(server_args(false));
+  std::this_thread::sleep_for(300ms);
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, WNOHANG), 0) << "the standalone server exited before any renderer came";
+  const pid_t owner = fork_owner(false, nullptr);
+  ASSERT_GT(owner, 0) << "owner child could not create the segment";
+  auto seg = Segment::open(name_);
+  ASSERT_TRUE(seg.ok()) << seg.error().message;
+  ASSERT_TRUE(wait_attached(**seg, 1)) << "the waiting server never attached";
+  stream_one_mip(**seg);
+  kill(pid, SIGTERM);
+  EXPECT_EQ(wait_exit(pid, 10s), 0);
+  kill(owner, SIGKILL);
+  waitpid(owner, nullptr, 0);
 }
 
 TEST_F(ServerProcessTest, HeaderMismatchExitsWithCode3NamingTheField) {
@@ -290,6 +308,44 @@ TEST_F(ServerProcessTest, StandaloneServerWaitsForTheNextRendererOnTheSameName) 
   EXPECT_EQ(wait_exit(pid, 10s), 0);
   kill(second, SIGKILL);
   waitpid(second, nullptr, 0);
+}
+
+TEST_F(ServerProcessTest, ASecondServerOnASegmentTouchesNothing) {
+  // The rings have one consumer and one producer: a second server (a standalone one and the renderer's own
+  // child on one protocol.segment_name) must not attach alongside the first. Before, both did, and the
+  // renderer saw slots released twice and protocol errors.
+  auto seg = Segment::create(name_, {});
+  ASSERT_TRUE(seg.ok()) << seg.error().message;
+  const pid_t first = spawn_server(server_args(false));
+  ASSERT_TRUE(wait_attached(**seg, 1));
+  stream_one_mip(**seg);
+  // A spawned one leaves at once, naming the holder.
+  const fs::path log = dir_ / "second.txt";
+  const pid_t second = spawn_server(server_args(true), log);
+  EXPECT_EQ(wait_exit(second, 10s), 3);
+  std::ifstream f(log);
+  std::ostringstream text;
+  text << f.rdbuf();
+  EXPECT_NE(text.str().find("already served by texstream-server pid " + std::to_string(first)), std::string::npos)
+      << text.str();
+  // A standalone one waits (it does not exit, and does not take the segment).
+  const pid_t third = spawn_server(server_args(false));
+  std::this_thread::sleep_for(300ms);
+  int status = 0;
+  EXPECT_EQ(waitpid(third, &status, WNOHANG), 0) << "a standalone server must wait for the segment to be free";
+  EXPECT_EQ((*seg)->server_block().pid.v.load(), static_cast<uint32_t>(first));
+  stream_one_mip(**seg);
+  stream_one_mip(**seg);
+  // The first goes; once the renderer has reset the block (as it does when it sees a server's death), the
+  // waiting one takes over and serves.
+  kill(first, SIGKILL);
+  waitpid(first, nullptr, 0);
+  (*seg)->reset_after_server_death();
+  ASSERT_TRUE(wait_attached(**seg, 1)) << "the waiting standalone server never took the free segment";
+  EXPECT_EQ((*seg)->server_block().pid.v.load(), static_cast<uint32_t>(third));
+  stream_one_mip(**seg);
+  kill(third, SIGTERM);
+  EXPECT_EQ(wait_exit(third, 10s), 0);
 }
 
 TEST_F(ServerProcessTest, Sigusr1PrintsStatisticsAndKeepsServing) {

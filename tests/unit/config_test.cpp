@@ -52,6 +52,9 @@ TEST(Config, RelationsBetweenKeysAreValidated) {
   EXPECT_NE(error_of("[cache]\nformat = \"dxt5\"\n").find("'cache.format'"), std::string::npos);
   EXPECT_NE(error_of("[render]\nnear_m = 100.0\nfar_m = 10.0\n").find("'render.near_m'"), std::string::npos);
   EXPECT_NE(error_of("[protocol]\nstaging_slot_bytes = 4096\n").find("'protocol.staging_slot_bytes'"), std::string::npos);
+  // A standalone server serves a name: server.spawn = false needs protocol.segment_name.
+  EXPECT_NE(error_of("[server]\nspawn = false\n").find("'server.spawn'"), std::string::npos);
+  EXPECT_TRUE(parse_config("[server]\nspawn = false\n[protocol]\nsegment_name = \"ts-city\"\n", "t", {}).ok());
 }
 
 TEST(Config, MalformedTomlNamesFileAndLine) {

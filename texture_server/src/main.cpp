@@ -3,12 +3,14 @@
 //   texstream-server --segment NAME --scene DIR [--config FILE] [--set part.key=value]... [--spawned]
 //
 // Spawned (--spawned): serves the renderer that started it and exits with it. Standalone (no --spawned):
-// when the renderer dies, waits for the next one — a renderer configured with the same
+// waits for a renderer to create the segment if there is none yet, and when the renderer dies, waits for the
+// next one — a renderer configured with the same
 // protocol.segment_name recreates the segment under that name with a new epoch — and serves it.
 // SIGUSR1 logs the statistics (server_stats.hpp); they are also logged at exit.
 //
 // Exit codes: 0 stopped (SIGTERM/SIGINT) or the renderer exited; 2 bad arguments, configuration or scene;
-// 3 the segment cannot be opened or its header does not match this build (the message names the field);
+// 3 the segment cannot be opened or its header does not match this build (the message names the field; a
+// standalone server whose segment does not exist yet waits for a renderer to create it instead);
 // 4 the renderer broke the ring protocol; 5 the storage origin did not answer at start (a restart may
 // succeed: the renderer retries it like a crash, while 2 ends its run after three in a row).
 #include <signal.h>
@@ -95,6 +97,20 @@ std::unique_ptr<texstream::Segment> wait_for_next_client(const std::string& name
   return nullptr;
 }
 
+// A standalone server that found its segment held by another server: waits until the pid word is 0 again
+// (nullopt: claim it now), the renderer is gone (kRendererDead) or we are told to stop (kStopped).
+std::optional<texstream::server::RunOutcome> wait_until_free(const texstream::Segment& segment) {
+  const ClientId renderer = client_of(segment);
+  while (!g_stop.load(std::memory_order_relaxed)) {
+    if (!texstream::process_alive(static_cast<int>(renderer.pid), renderer.start_time)) {
+      return texstream::server::RunOutcome::kRendererDead;
+    }
+    if (segment.server_block().pid.v.load(std::memory_order_acquire) == 0) return std::nullopt;
+    std::this_thread::sleep_for(kNextClientPoll);  // a signal cuts it short; the loop then sees g_stop
+  }
+  return texstream::server::RunOutcome::kStopped;
+}
+
 void setup_logging(const std::string& level) {
   auto logger = spdlog::stderr_color_mt("server");
   logger->set_pattern("[%H:%M:%S.%e] [server] [%l] %v");
@@ -149,6 +165,12 @@ int main(int argc, char** argv) {
   }
 
   texstream::Result<std::unique_ptr<texstream::Segment>> segment = texstream::Segment::open(segment_name);
+  if (!segment.ok() && !spawned && segment.error().code == texstream::ErrorCode::kNotFound) {
+    // Standalone and started before its renderer: wait for one to create the segment, as after a renderer
+    // exits (before, it exited with status 3 and had to be started after the renderer).
+    segment = texstream::Result<std::unique_ptr<texstream::Segment>>(wait_for_next_client(segment_name, ClientId{}));
+    if (!*segment) return kExitOk;  // stopped while waiting
+  }
   if (!segment.ok()) {
     spdlog::error("{}", segment.error().message);
     return kExitSegment;
@@ -179,7 +201,23 @@ int main(int argc, char** argv) {
                  "rate limit {} MB/s)",
                  segment_name, current->header().epoch, config->scene.dir, config->server.worker_threads,
                  server_config.ram_cache_bytes, config->server.cache_policy, config->server.rate_limit_mb_s);
-    const texstream::server::RunOutcome outcome = (*server)->run(g_stop, &g_print_stats);
+    texstream::server::RunOutcome outcome = (*server)->run(g_stop, &g_print_stats);
+    if (outcome == texstream::server::RunOutcome::kSegmentBusy) {
+      // Another server holds the segment (run() touched nothing). Spawned, this one is not needed. Standalone,
+      // it waits for the segment to be free: the holder gone and the renderer's reset of its block done (pid
+      // word 0); then a fresh Server claims it (this one's rings saw positions the reset has since zeroed).
+      const uint32_t holder = (*server)->busy_holder();
+      server.value().reset();
+      if (spawned) {
+        spdlog::error("segment '{}' is already served by texstream-server pid {}", segment_name, holder);
+        return kExitSegment;
+      }
+      spdlog::warn("segment '{}' is served by texstream-server pid {}; waiting until it is free", segment_name,
+                   holder);
+      const std::optional<texstream::server::RunOutcome> ended = wait_until_free(*current);
+      if (!ended) continue;
+      outcome = *ended;
+    }
     if (outcome == texstream::server::RunOutcome::kPeerCorrupt) return kExitProtocol;
     if (outcome == texstream::server::RunOutcome::kStopped || spawned) return kExitOk;
     // Standalone and the renderer died: drop its state (server, mapping) and serve the next one.

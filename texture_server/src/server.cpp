@@ -93,6 +93,7 @@ const char* to_string(RunOutcome outcome) {
     case RunOutcome::kStopped: return "stopped";
     case RunOutcome::kRendererDead: return "renderer dead";
     case RunOutcome::kPeerCorrupt: return "renderer broke the ring protocol";
+    case RunOutcome::kSegmentBusy: return "segment held by another server";
   }
   return "?";
 }
@@ -208,8 +209,17 @@ RunOutcome Server::run(const std::atomic<bool>& stop, std::atomic<bool>* print_s
   ServerBlock& block = segment_.server_block();
   RendererBlock& renderer = segment_.renderer_block();
   const int self = static_cast<int>(::getpid());
-  // relaxed: these words are published to the renderer by the release-store of `attached` below.
-  block.pid.v.store(static_cast<uint32_t>(self), std::memory_order_relaxed);
+  // One server per segment: its rings have one consumer and one producer each. The pid word is the claim:
+  // 0 after creation and after the renderer's reset of a dead server's block; a server leaves it set when it
+  // detaches. A second server (a standalone one and the renderer's own child on one name) finds it taken and
+  // touches nothing; so does a server whose predecessor died before the renderer reset the block.
+  uint32_t holder = 0;
+  if (!block.pid.v.compare_exchange_strong(holder, static_cast<uint32_t>(self), std::memory_order_acq_rel) &&
+      holder != static_cast<uint32_t>(self)) {
+    busy_holder_ = holder;
+    return RunOutcome::kSegmentBusy;
+  }
+  // relaxed: published to the renderer by the release-store of `attached` below.
   block.start_time.v.store(process_start_time(self).value_or(0), std::memory_order_relaxed);
   block.attached.v.store(1, std::memory_order_release);  // pairs with the renderer's acquire-load
 

@@ -27,6 +27,7 @@ struct ProtocolConfig {
 };
 
 struct ServerConfig {
+  bool spawn = true;                     // false: no child; a standalone texstream-server serves segment_name
   std::string executable;               // empty: texstream-server next to texstream-render
   int64_t worker_threads = 2;           // read + decode workers (2-core default)
   int64_t ram_cache_bytes = 256ll << 20;

@@ -235,6 +235,7 @@ class StreamClient {
     SteadyTime sent_at{};
   };
   void expire_requests(MipSink& sink, SteadyTime t);
+  void watch_external_server(MipSink& sink);
   // A request lost with a dead server, until it is answered by a later one (or no longer wanted).
   struct Lost {
     bool resent = false;
@@ -299,6 +300,12 @@ class StreamClient {
   uint64_t sink_ns_ = 0;        // time inside the sink during the current client call
   int ipc_depth_ = 0;           // nested client calls (poll → restart paths) count once
   SteadyTime next_expiry_scan_{};
+  // server.spawn = false: when watch_external_server() looks at the standalone server's identity next.
+  static constexpr std::chrono::milliseconds kExternalServerCheck{100};
+  SteadyTime next_external_check_{};
+  static constexpr std::chrono::seconds kExternalUnservedWarning{3};
+  SteadyTime external_unserved_since_{};  // since when no server has held the segment ({}: one does)
+  bool external_unserved_told_ = false;
   std::unordered_map<uint32_t, uint32_t> crash_charges_;  // texture id → crashes while it was being loaded
   std::unordered_set<uint32_t> quarantined_;              // texture ids
   std::vector<uint64_t> quarantine_refused_;              // keys refused by try_request, failed at next poll

@@ -44,6 +44,7 @@ enum class RunOutcome {
   kStopped,       // the stop flag was set
   kRendererDead,  // the renderer that owns the segment exited (or was never alive)
   kPeerCorrupt,   // a ring position published by the renderer is impossible: the protocol is broken
+  kSegmentBusy,   // another server holds the segment (its pid is in the ServerBlock): nothing was touched
 };
 const char* to_string(RunOutcome outcome);
 
@@ -71,6 +72,8 @@ class Server {
   uint64_t remote_fetches() const { return remote_fetches_.load(std::memory_order_relaxed); }
   uint64_t unfilled() const { return unfilled_.load(std::memory_order_relaxed); }
   const ServerStats& stats() const { return stats_; }
+  // The pid that held the segment when run() returned kSegmentBusy.
+  uint32_t busy_holder() const { return busy_holder_; }
   // format_stats() of the current counters.
   std::string stats_report() const;
 
@@ -127,6 +130,7 @@ class Server {
   uint32_t remote_in_flight_ = 0;        // jobs of the remote-fetch workers (≤ server.remote_fetches_in_flight)
   std::atomic<uint64_t> remote_fetches_{0};
   std::atomic<uint64_t> unfilled_{0};
+  uint32_t busy_holder_ = 0;
   std::deque<CompletionRecord> overflow_;       // completions waiting for room in the ring
   uint32_t unpublished_completions_ = 0;        // pushed into the ring, not yet published (this pass's)
   bool publish_each_completion_ = false;        // fault injection: publish per record (kAfterRingPush)
