@@ -2,9 +2,7 @@
 // segments of killed owners removed, identity that survives pid reuse, a futex doorbell across processes,
 // and rings whose peer is SIGKILLed mid-stream.
 #include <gtest/gtest.h>
-#include <sched.h>
 #include <signal.h>
-#include <sys/mount.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -15,6 +13,7 @@
 
 #include <boost/interprocess/shared_memory_object.hpp>
 
+#include "../support/forked_child.hpp"
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
 
@@ -23,6 +22,17 @@ namespace {
 
 std::string unique_name(const char* what) {
   return "texstream-test-" + std::string(what) + "-" + std::to_string(getpid());
+}
+
+// A child that creates the segment `name` and sleeps until killed: a renderer that can be SIGKILLed, leaving
+// its segment behind. Its Segment is leaked on purpose: its destructor would remove the name.
+pid_t fork_segment_owner(const std::string& name) {
+  return test::fork_sleeper([&] {
+    auto seg = Segment::create(name, {16, 16, 2, 4096});
+    if (!seg.ok()) return false;
+    (void)seg.value().release();
+    return true;
+  });
 }
 
 TEST(Segment, CreateOpenShareRingsAndSlots) {
@@ -77,20 +87,8 @@ TEST(Segment, OpenOfAMissingSegmentFailsClearly) {
 TEST(Segment, StaleSegmentOfAKilledOwnerIsRemoved) {
   const std::string prefix = "texstream-test-stale-" + std::to_string(getpid()) + "-";
   const std::string name = prefix + "a";
-  int ready[2];
-  ASSERT_EQ(pipe(ready), 0);
-  const pid_t child = fork();
-  ASSERT_GE(child, 0);
-  if (child == 0) {
-    auto seg = Segment::create(name, {16, 16, 2, 4096});
-    char ok = seg.ok() ? 1 : 0;
-    (void)!write(ready[1], &ok, 1);
-    pause();  // killed by the parent; the segment name stays behind
-    _exit(0);
-  }
-  char ok = 0;
-  ASSERT_EQ(read(ready[0], &ok, 1), 1);
-  ASSERT_EQ(ok, 1);
+  const pid_t child = fork_segment_owner(name);
+  ASSERT_GT(child, 0);
   // While the owner lives, its segment is not stale.
   EXPECT_EQ(Segment::remove_stale(prefix), 0);
   EXPECT_TRUE(Segment::open(name).ok());
@@ -98,28 +96,14 @@ TEST(Segment, StaleSegmentOfAKilledOwnerIsRemoved) {
   waitpid(child, nullptr, 0);
   EXPECT_EQ(Segment::remove_stale(prefix), 1);
   EXPECT_FALSE(Segment::open(name).ok());
-  close(ready[0]);
-  close(ready[1]);
 }
 
 TEST(Segment, AChosenNameOfALiveRendererIsRefusedNamingItAndADeadOnesIsRemoved) {
   // protocol.segment_name: a renderer SIGKILLed left its segment behind, and every later renderer with the same
   // name failed with "File exists" (the start-up sweep covers only "texstream-" names).
   const std::string name = "ts-test-chosen-" + std::to_string(getpid());
-  int ready[2];
-  ASSERT_EQ(pipe(ready), 0);
-  const pid_t child = fork();
-  ASSERT_GE(child, 0);
-  if (child == 0) {
-    auto seg = Segment::create(name, {16, 16, 2, 4096});
-    char ok = seg.ok() ? 1 : 0;
-    (void)!write(ready[1], &ok, 1);
-    pause();
-    _exit(0);
-  }
-  char ok = 0;
-  ASSERT_EQ(read(ready[0], &ok, 1), 1);
-  ASSERT_EQ(ok, 1);
+  const pid_t child = fork_segment_owner(name);
+  ASSERT_GT(child, 0);
   EXPECT_FALSE(Segment::remove_if_stale(name)) << "the owner lives";
   EXPECT_EQ(Segment::live_owner(name), static_cast<uint32_t>(child));
   auto second = Segment::create(name, {16, 16, 2, 4096});
@@ -134,8 +118,6 @@ TEST(Segment, AChosenNameOfALiveRendererIsRefusedNamingItAndADeadOnesIsRemoved) 
   EXPECT_FALSE(Segment::remove_if_stale(name)) << "gone already";
   auto third = Segment::create(name, {16, 16, 2, 4096});
   EXPECT_TRUE(third.ok()) << third.error().message;
-  close(ready[0]);
-  close(ready[1]);
 }
 
 TEST(Segment, ASegmentBeingCreatedIsNotTakenForStale) {
@@ -156,47 +138,28 @@ TEST(Segment, ASegmentLargerThanDevShmIsRefusedAtCreationNamingTheKeys) {
   // otherwise). A segment that does not fit must fail create() with an error naming /dev/shm and the config
   // keys, and leave no object behind: before, truncate() succeeded (tmpfs files are sparse) and the first
   // write past the free space raised SIGBUS in whichever process made it, usually the server copying a mip.
-  int pipe_fds[2];
-  ASSERT_EQ(pipe(pipe_fds), 0);
-  const pid_t child = fork();
-  ASSERT_GE(child, 0);
-  if (child == 0) {
-    close(pipe_fds[0]);
-    const auto say = [&](const std::string& text, int code) {
-      (void)!write(pipe_fds[1], text.data(), text.size());
-      _exit(code);
-    };
-    // Private propagation first, or the tmpfs would be mounted over the host's /dev/shm too.
-    if (unshare(CLONE_NEWNS) != 0 || mount(nullptr, "/", nullptr, MS_REC | MS_PRIVATE, nullptr) != 0 ||
-        mount("tmpfs", "/dev/shm", "tmpfs", 0, "size=1m") != 0) {
-      say(std::string("no mount namespace here: ") + std::strerror(errno), 77);
+  const test::ChildResult r = test::run_in_child([](const auto& finish) {
+    if (!test::mount_private_tmpfs("/dev/shm", "1m")) {
+      finish(std::string("no mount namespace here: ") + std::strerror(errno), test::kChildCannotRun);
     }
     const std::string name = unique_name("toolarge");
     auto small = Segment::create(name + "-small", {64, 64, 4, 1 << 16});  // ~0.3 MiB: fits
-    if (!small.ok()) say("a segment that fits was refused: " + small.error().message, 1);
+    if (!small.ok()) finish("a segment that fits was refused: " + small.error().message, 1);
     small.value().reset();
     auto big = Segment::create(name, {64, 64, 4, 1 << 20});  // ~4 MiB
-    if (big.ok()) say("a 4 MiB segment was created on a 1 MiB /dev/shm", 1);
+    if (big.ok()) finish("a 4 MiB segment was created on a 1 MiB /dev/shm", 1);
     const std::string& m = big.error().message;
     if (m.find("/dev/shm") == std::string::npos || m.find("protocol.staging_slot_count") == std::string::npos ||
         m.find(name) == std::string::npos) {
-      say("the error does not name the segment, /dev/shm and the keys: " + m, 1);
+      finish("the error does not name the segment, /dev/shm and the keys: " + m, 1);
     }
-    if (Segment::open(name).ok()) say("the refused segment was left behind", 1);
-    say(m, 0);
-  }
-  close(pipe_fds[1]);
-  std::string text;
-  char buf[512];
-  ssize_t n;
-  while ((n = read(pipe_fds[0], buf, sizeof buf)) > 0) text.append(buf, static_cast<size_t>(n));
-  close(pipe_fds[0]);
-  int status = 0;
-  ASSERT_EQ(waitpid(child, &status, 0), child);
-  ASSERT_TRUE(WIFEXITED(status)) << "the child died by signal " << WTERMSIG(status) << " (SIGBUS is " << SIGBUS << ")";
-  if (WEXITSTATUS(status) == 77) GTEST_SKIP() << text;
-  EXPECT_EQ(WEXITSTATUS(status), 0) << text;
-  std::printf("  create() said: %s\n", text.c_str());
+    if (Segment::open(name).ok()) finish("the refused segment was left behind", 1);
+    finish(m, 0);
+  });
+  ASSERT_EQ(r.signal, 0) << "the child died by signal " << r.signal << " (SIGBUS is " << SIGBUS << ")";
+  if (r.code == test::kChildCannotRun) GTEST_SKIP() << r.text;
+  EXPECT_EQ(r.code, 0) << r.text;
+  std::printf("  create() said: %s\n", r.text.c_str());
 }
 
 TEST(Liveness, IdentityIsPidPlusStartTime) {

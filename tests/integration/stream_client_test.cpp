@@ -22,6 +22,7 @@
 #include <thread>
 #include <vector>
 
+#include "../support/forked_child.hpp"
 #include "texstream/protocol/checksum.hpp"
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
@@ -244,24 +245,15 @@ std::unique_ptr<StreamClient> start_external(const Config& config) {
 // someone removed /dev/shm/<name> by hand.
 TEST(StreamClient, TakesOverAChosenSegmentNameLeftByAKilledRenderer) {
   const std::string name = "ts-test-chosen-" + std::to_string(::getpid());
-  int ready[2];
-  ASSERT_EQ(pipe(ready), 0);
-  const pid_t child = fork();
-  ASSERT_GE(child, 0);
-  if (child == 0) {
+  const pid_t child = test::fork_sleeper([&] {
     auto seg = Segment::create(name, {16, 16, 2, 4096});
-    char ok = seg.ok() ? 1 : 0;
-    (void)!write(ready[1], &ok, 1);
-    pause();
-    _exit(0);
-  }
-  char ok = 0;
-  ASSERT_EQ(read(ready[0], &ok, 1), 1);
-  ASSERT_EQ(ok, 1);
+    if (!seg.ok()) return false;
+    (void)seg.value().release();  // its destructor would remove the name
+    return true;
+  });
+  ASSERT_GT(child, 0);
   kill(child, SIGKILL);
   waitpid(child, nullptr, 0);
-  close(ready[0]);
-  close(ready[1]);
   auto client = start_external(small_config(name));
   ASSERT_NE(client, nullptr);
   EXPECT_EQ(client->segment().header().slot_count, 4u) << "the new renderer's own segment, not the dead one's";

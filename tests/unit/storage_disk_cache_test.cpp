@@ -4,9 +4,6 @@
 // 1 MiB tmpfs in a mount namespace of the test's own: root only) keeps taking new entries. Files only: no
 // network, shm or clock.
 #include <gtest/gtest.h>
-#include <sched.h>
-#include <sys/mount.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <cstring>
@@ -15,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "../support/forked_child.hpp"
 #include "test_temp_dir.hpp"
 #include "texstream/server/disk_cache.hpp"
 
@@ -266,19 +264,9 @@ TEST_F(DiskCacheTest, AFileSystemSmallerThanTheBudgetKeepsTakingNewEntries) {
   // warning each: 21570 in a 7 s run) and was never cached. Now the budget is lowered at open to what the disk
   // holds, and again when another writer fills the disk, so the newest entries are always there.
   fs::create_directories(dir_);
-  int pipe_fds[2];
-  ASSERT_EQ(pipe(pipe_fds), 0);
-  const pid_t child = fork();
-  ASSERT_GE(child, 0);
-  if (child == 0) {
-    close(pipe_fds[0]);
-    const auto finish = [&](const std::string& text, int code) {
-      (void)!write(pipe_fds[1], text.data(), text.size());
-      _exit(code);
-    };
-    if (unshare(CLONE_NEWNS) != 0 || mount(nullptr, "/", nullptr, MS_REC | MS_PRIVATE, nullptr) != 0 ||
-        mount("tmpfs", dir_.c_str(), "tmpfs", 0, "size=1m") != 0) {
-      finish(std::string("no mount namespace here: ") + std::strerror(errno), 77);
+  const test::ChildResult r = test::run_in_child([&](const auto& finish) {
+    if (!test::mount_private_tmpfs(dir_.string(), "1m")) {
+      finish(std::string("no mount namespace here: ") + std::strerror(errno), test::kChildCannotRun);
     }
     const fs::path folder = dir_ / "dc";
     const size_t n = 64 << 10;
@@ -312,18 +300,10 @@ TEST_F(DiskCacheTest, AFileSystemSmallerThanTheBudgetKeepsTakingNewEntries) {
     if (!reopened.ok()) finish("reopen: " + reopened.error().message, 1);
     if (!holds(**reopened, 43)) finish("the newest entry did not survive a restart", 1);
     finish("", 0);
-  }
-  close(pipe_fds[1]);
-  std::string text;
-  char buf[512];
-  ssize_t got;
-  while ((got = read(pipe_fds[0], buf, sizeof buf)) > 0) text.append(buf, static_cast<size_t>(got));
-  close(pipe_fds[0]);
-  int status = 0;
-  ASSERT_EQ(waitpid(child, &status, 0), child);
-  ASSERT_TRUE(WIFEXITED(status)) << "the child died by signal " << WTERMSIG(status);
-  if (WEXITSTATUS(status) == 77) GTEST_SKIP() << text;
-  EXPECT_EQ(WEXITSTATUS(status), 0) << text;
+  });
+  ASSERT_EQ(r.signal, 0) << "the child died by signal " << r.signal;
+  if (r.code == test::kChildCannotRun) GTEST_SKIP() << r.text;
+  EXPECT_EQ(r.code, 0) << r.text;
 }
 
 }  // namespace
