@@ -66,6 +66,8 @@ SegmentHeader make_header(const SegmentParams& p, uint64_t epoch) {
   h.completion_ring_offset = l.completion_ring_offset;
   h.slots_offset = l.slots_offset;
   h.epoch = epoch;
+  h.texture_count = p.texture_count;
+  h.texture_table_fingerprint = p.texture_table_fingerprint;
   return h;
 }
 

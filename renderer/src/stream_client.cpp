@@ -202,6 +202,12 @@ Result<std::unique_ptr<StreamClient>> StreamClient::start(const Config& config, 
   params.completion_capacity = static_cast<uint32_t>(config.protocol.completion_ring_capacity);
   params.slot_count = static_cast<uint32_t>(config.protocol.staging_slot_count);
   params.slot_bytes = static_cast<uint64_t>(config.protocol.staging_slot_bytes);
+  params.texture_count = c->shapes_.size();
+  params.texture_table_fingerprint = kTextureTableSeed;
+  for (const TextureShape& t : c->shapes_) {
+    params.texture_table_fingerprint = texture_table_step(params.texture_table_fingerprint, t.width, t.height,
+                                                          t.mip_count, static_cast<uint32_t>(t.format));
+  }
   auto segment = Segment::create(name, params);
   if (!segment) return segment.error();
   c->segment_ = std::move(*segment);

@@ -249,6 +249,38 @@ TEST_F(ServerProcessTest, MissingSceneExitsWithCode2) {
   EXPECT_EQ(wait_exit(pid, 10s), 2);
 }
 
+TEST_F(ServerProcessTest, AServerReadingAnotherSceneRefusesTheSegmentNamingBoth) {
+  // The renderer states its texture table in the header. A server whose scene differs used to serve anyway:
+  // every answer about textures the renderer does not have was refused one by one as a protocol error (994
+  // in a 400-frame run). Now it exits 2 before attaching, naming both tables.
+  SegmentParams other;
+  other.texture_count = 999;
+  other.texture_table_fingerprint = 0x1234;
+  auto seg = Segment::create(name_, other);
+  ASSERT_TRUE(seg.ok()) << seg.error().message;
+  const fs::path log = dir_ / "stderr.txt";
+  const pid_t pid = spawn_server(server_args(), log);
+  EXPECT_EQ(wait_exit(pid, 10s), 2);
+  const std::string text = read_text(log);
+  EXPECT_NE(text.find("texture table of 999 textures"), std::string::npos) << text;
+  EXPECT_NE(text.find("has 1 (fingerprint"), std::string::npos) << text;
+  EXPECT_NE(text.find("read different scenes"), std::string::npos) << text;
+  EXPECT_EQ((*seg)->server_block().pid.v.load(), 0u) << "it claimed the segment";
+  seg.value().reset();
+  // The same table (this test's one texture) is served.
+  SegmentParams same;
+  same.texture_count = 1;
+  same.texture_table_fingerprint =
+      texture_table_step(kTextureTableSeed, 32, 32, full_mip_count(32, 32), uint32_t(TexelFormat::kRgba8));
+  auto seg2 = Segment::create(name_, same);
+  ASSERT_TRUE(seg2.ok()) << seg2.error().message;
+  const pid_t pid2 = spawn_server(server_args());
+  ASSERT_TRUE(wait_attached(**seg2, 1)) << "a server of the same scene never attached";
+  stream_one_mip(**seg2);
+  kill(pid2, SIGTERM);
+  EXPECT_EQ(wait_exit(pid2, 10s), 0);
+}
+
 TEST_F(ServerProcessTest, StreamsAMipAndExitsCleanlyOnSigterm) {
   auto seg = Segment::create(name_, {});
   ASSERT_TRUE(seg.ok()) << seg.error().message;

@@ -26,7 +26,9 @@ TEST(ProtocolLayout, RecordSizesAndOffsets) {
   EXPECT_EQ(kLoadingWords, 8u);
   EXPECT_EQ(sizeof(RingControl), 128u);
   EXPECT_EQ(offsetof(RingControl, read_pos), 64u);
-  EXPECT_EQ(kLayoutVersion, 2u);
+  EXPECT_EQ(offsetof(SegmentHeader, texture_count), 160u);  // version 3: the renderer's texture table
+  EXPECT_EQ(offsetof(SegmentHeader, texture_table_fingerprint), 168u);
+  EXPECT_EQ(kLayoutVersion, 3u);
 }
 
 TEST(ProtocolLayout, ComputedLayoutIsAlignedAndDisjoint) {

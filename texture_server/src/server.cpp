@@ -11,6 +11,7 @@
 #include <cmath>
 #include <thread>
 
+#include "texstream/protocol/checksum.hpp"
 #include "texstream/server/rate_limited_storage.hpp"
 
 namespace texstream::server {
@@ -121,6 +122,22 @@ Result<std::unique_ptr<Server>> Server::create(Segment& segment, const std::file
       return make_error(ErrorCode::kCorrupt, "texture table of '" + scene_dir.string() + "': texture " +
                                                  std::to_string(i) + " has unknown format " +
                                                  std::to_string((*textures)[i].format));
+    }
+  }
+  // The renderer states its texture table in the header: a server reading another scene would answer every
+  // request for textures the renderer does not have (refused one by one as protocol errors). Refused here.
+  if (const SegmentHeader& h = segment.header(); h.texture_table_fingerprint != 0) {
+    uint64_t fingerprint = kTextureTableSeed;
+    for (const scene::TextureRecord& t : *textures) {
+      fingerprint = texture_table_step(fingerprint, t.width, t.height, t.mip_count, t.format);
+    }
+    if (h.texture_count != textures->size() || h.texture_table_fingerprint != fingerprint) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        fmt::format("segment '{}' was made by a renderer reading a texture table of {} textures "
+                                    "(fingerprint {:016x}), but this server's scene '{}' has {} (fingerprint "
+                                    "{:016x}): the two read different scenes (scene.dir, --scene, storage.origin)",
+                                    segment.name(), h.texture_count, h.texture_table_fingerprint,
+                                    scene_dir.string(), textures->size(), fingerprint));
     }
   }
   if (!(config.rate_limit_mb_s >= 0)) {

@@ -19,7 +19,7 @@
 namespace texstream {
 
 inline constexpr uint64_t kSegmentMagic = 0x314d525453584554ull;  // "TEXSTRM1" read little-endian
-inline constexpr uint32_t kLayoutVersion = 2;  // 2: ServerBlock.loading
+inline constexpr uint32_t kLayoutVersion = 3;  // 2: ServerBlock.loading; 3: the header's texture table
 inline constexpr uint64_t kSegmentHeaderBytes = 4096;
 inline constexpr uint64_t kSlotAlignment = 4096;
 inline constexpr uint32_t kCompilerIdBytes = 64;
@@ -43,7 +43,11 @@ struct SegmentHeader {
   uint64_t completion_ring_offset;
   uint64_t slots_offset;
   uint64_t epoch;                   // random per creation and per reset after a server death
-  uint64_t reserved2[8];
+  // The renderer's texture table (texture_table_step over every texture; 0: not stated, nothing checked): a
+  // server whose scene differs refuses the segment.
+  uint64_t texture_count;
+  uint64_t texture_table_fingerprint;
+  uint64_t reserved2[6];
 };
 static_assert(std::is_trivially_copyable_v<SegmentHeader> && std::is_standard_layout_v<SegmentHeader>);
 static_assert(sizeof(SegmentHeader) == 224);
@@ -51,6 +55,8 @@ static_assert(offsetof(SegmentHeader, compiler) == 32);
 static_assert(offsetof(SegmentHeader, segment_bytes) == 96);
 static_assert(offsetof(SegmentHeader, slot_bytes) == 120);
 static_assert(offsetof(SegmentHeader, epoch) == 152);
+static_assert(offsetof(SegmentHeader, texture_count) == 160);
+static_assert(offsetof(SegmentHeader, texture_table_fingerprint) == 168);
 
 // Written by the renderer only.
 struct alignas(64) RendererBlock {
@@ -104,6 +110,8 @@ struct SegmentParams {
   uint32_t completion_capacity = 1024;
   uint32_t slot_count = 64;
   uint64_t slot_bytes = 1u << 20;
+  uint64_t texture_count = 0;              // the renderer's texture table (SegmentHeader); 0, 0: not stated
+  uint64_t texture_table_fingerprint = 0;
 };
 
 struct SegmentLayout {
