@@ -1,7 +1,6 @@
 #include "texstream/server/fault_point.hpp"
 #include "texstream/server/server.hpp"
 
-#include <sys/mman.h>
 #include <unistd.h>
 
 #include <spdlog/spdlog.h>
@@ -75,11 +74,6 @@ constexpr uint64_t kLivenessCheckNs = 1'000'000;
 // default stream.max_requests_in_flight: one whole cycle of requests.
 constexpr size_t kRemotePendingLimit = 256;
 
-// The staging slots' pages are faulted in while the dispatcher is idle, this many bytes per idle pass (about
-// half a millisecond of page allocation, the most a request arriving meanwhile waits). A fresh segment's
-// pages are otherwise faulted by the first payload copied into them: texstream-bench server measured the
-// first misses after start at half the speed of later ones, ~1 µs of fault per 4 KiB page copied.
-constexpr uint64_t kSlotWarmStep = 2ull << 20;
 
 uint64_t steady_now_ns() {
   return static_cast<uint64_t>(
@@ -283,8 +277,6 @@ RunOutcome Server::run(const std::atomic<bool>& stop, std::atomic<bool>* print_s
     if (print_stats && print_stats->exchange(false, std::memory_order_relaxed)) {
       spdlog::info("statistics (SIGUSR1):\n{}", stats_report());
     }
-    // Idle: fault in a step of the staging slots before sleeping (see kSlotWarmStep).
-    if (!busy && !slots_warm_.load(std::memory_order_relaxed)) busy = warm_slots_step();
     was_idle = !busy;
     if (!busy) idle_wait();
   }
@@ -600,23 +592,6 @@ bool Server::flush_completions() {
     any = true;
   }
   return any;
-}
-
-bool Server::warm_slots_step() {
-  const uint64_t total = uint64_t{segment_.slot_count()} * segment_.slot_bytes();
-  if (slots_warmed_bytes_ >= total) return false;
-  // The slots lie back to back (segment_layout.hpp); madvise needs page-aligned bounds. Rounding out to
-  // pages may take in a neighbouring page of the segment: populating faults pages in and writes nothing.
-  const uint64_t page = static_cast<uint64_t>(::sysconf(_SC_PAGESIZE));
-  const uint64_t base = reinterpret_cast<uintptr_t>(segment_.slot(0).data());
-  uint64_t next = std::min(total, slots_warmed_bytes_ + kSlotWarmStep);
-  const uint64_t start = (base + slots_warmed_bytes_) / page * page;
-  const uint64_t end = (base + next + page - 1) / page * page;
-  // MADV_POPULATE_WRITE (Linux 5.14); on an older kernel it fails and the slots are faulted on first use.
-  if (::madvise(reinterpret_cast<void*>(start), end - start, MADV_POPULATE_WRITE) != 0) next = total;
-  slots_warmed_bytes_ = next;
-  slots_warm_.store(slots_warmed_bytes_ >= total, std::memory_order_relaxed);  // relaxed: a gauge
-  return true;
 }
 
 void Server::idle_wait() {

@@ -66,8 +66,6 @@ class Server {
   RunOutcome run(const std::atomic<bool>& stop, std::atomic<bool>* print_stats = nullptr);
 
   MipCacheStats cache_stats() const { return cache_.stats(); }
-  // True once every staging slot's pages have been faulted in (done while idle, see kSlotWarmStep).
-  bool staging_warm() const { return slots_warm_.load(std::memory_order_relaxed); }
   // Remote fetches started and loads answered kUnfilled so far (read after run() returned, or as a statistic).
   uint64_t remote_fetches() const { return remote_fetches_.load(std::memory_order_relaxed); }
   uint64_t unfilled() const { return unfilled_.load(std::memory_order_relaxed); }
@@ -107,8 +105,6 @@ class Server {
   void publish_completions();
   bool flush_completions();
   void idle_wait();
-  // Faults in the next kSlotWarmStep bytes of the staging slots; false when there was nothing left to do.
-  bool warm_slots_step();
   void update_gauges();
   void record_latency(LatencyHistogram& histogram, uint64_t received_ns);
 
@@ -140,8 +136,6 @@ class Server {
   uint64_t pass_now_ns_ = 0;                    // steady clock at the start of the loop's current pass
   ShmAtomic<uint32_t>* inline_loading_ = nullptr;  // the dispatcher's crash-attribution word (null: no inline loads)
   std::vector<bool> inline_ok_;                 // per texture: may be loaded inline (not remote, not slow)
-  uint64_t slots_warmed_bytes_ = 0;             // staging slot bytes faulted in so far (warm_slots_step)
-  std::atomic<bool> slots_warm_{false};
   uint64_t clock_generation_ = 0;               // last generation forwarded to the cache policy (Eq. 4 clock)
   std::unique_ptr<WorkerPool> workers_;         // last members: their threads die before what they use
   std::unique_ptr<WorkerPool> remote_workers_;
