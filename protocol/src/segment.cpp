@@ -137,7 +137,8 @@ Status validate_header(const SegmentHeader& h, uint64_t mapped_bytes) {
 // made it, mostly the server copying a mip into a slot (a crash loop, each restart dying the same way). Here
 // the kernel refuses with EFAULT instead, and the creator reports it naming the size and the keys. In the
 // attacher the pages exist already: this fills its page tables in one call, not one trap per 4 KiB of a slot
-// inside the server's copies (the server used to do the same for the slots in 2 MiB steps while idle). Kernels before 5.14 (EINVAL) fault on first touch, as before.
+// inside the server's copies (the server used to do the same for the slots in 2 MiB steps while idle).
+// Kernels before 5.14 (EINVAL) fault on first touch, as before.
 Status populate(const std::string& name, void* base, uint64_t bytes) {
   if (::madvise(base, bytes, MADV_POPULATE_WRITE) == 0 || errno == EINVAL) return ok_status();
   const std::string why = errno == EFAULT ? "/dev/shm has less free space than that"
