@@ -169,6 +169,8 @@ class Renderer {
   // report success. kMaxDeathsBeforeAttach during the run; 1 at its end (a short run ends before a third
   // spawn). Crashes keep the colormap-and-retry rule (docs/faults.md).
   Status server_not_refusing(uint64_t limit) const;
+  // server.spawn = false: a standalone server refused the segment (another scene): the run ends, naming it.
+  Status standalone_server_not_refusing() const;
   // Frame 0's parts go into the summary after set_up()'s stages (where a start's first frame goes):
   // the time since the previous part, under `name`.
   void first_frame_stage(const char* name);
@@ -435,6 +437,7 @@ Status Renderer::record_and_submit(const FrameRecording* rec, Uploads uploads, b
 Status Renderer::upload_now() { return record_and_submit(nullptr, Uploads::kMips, false, false); }
 
 Status Renderer::server_can_start() const {
+  TS_TRY(standalone_server_not_refusing());
   const uint64_t deaths = client_->stats().server_deaths_before_attach;
   if (deaths < kMaxDeathsBeforeAttach) return ok_status();
   return make_error(ErrorCode::kPeerDead,
@@ -443,7 +446,15 @@ Status Renderer::server_can_start() const {
                         "); its own messages are above. Check server.executable and the [server] keys");
 }
 
+Status Renderer::standalone_server_not_refusing() const {
+  if (client_->stats().standalone_refused_by == 0) return ok_status();
+  return make_error(ErrorCode::kPeerDead, client_->last_server_exit() +
+                                              ". Start texstream-server with this renderer's scene (--scene, "
+                                              "scene.dir), or run this renderer on the server's scene");
+}
+
 Status Renderer::server_not_refusing(uint64_t limit) const {
+  TS_TRY(standalone_server_not_refusing());
   const uint64_t refusals = client_->stats().server_refusals_before_attach;
   if (refusals < limit) return ok_status();
   return make_error(ErrorCode::kPeerDead,

@@ -461,6 +461,14 @@ void StreamClient::watch_external_server(MipSink& sink) {
   const uint32_t pid = sb.pid.v.load(std::memory_order_acquire);
   // start_time 0: a server between its claim of the pid word and publishing its start time.
   const uint64_t start_time = sb.start_time.v.load(std::memory_order_acquire);
+  if (const uint32_t refused = sb.refused_by.v.load(std::memory_order_acquire);
+      pid == 0 && refused != 0 && stats_.standalone_refused_by == 0) {
+    stats_.standalone_refused_by = refused;
+    last_server_exit_ = "standalone texstream-server pid " + std::to_string(refused) + " refused segment '" +
+                        segment_->name() +
+                        "': it reads another scene than this renderer (its texture table differs; its log names "
+                        "both tables)";
+  }
   if (pid == 0) {
     // Nobody serves the segment yet: say so once after a while (a preload would otherwise wait silently).
     if (external_unserved_since_ == SteadyTime{}) external_unserved_since_ = t;

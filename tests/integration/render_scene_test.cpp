@@ -254,6 +254,54 @@ TEST(RenderCli, AStandaloneServerServesRenderersOnItsSegmentName) {
   fs::remove_all(dir);
 }
 
+// A standalone texstream-server started on another scene than the renderer's (server.spawn = false): it
+// refuses the segment (the texture tables differ), and the renderer's run ends at once with an error naming
+// that server, while the server waits for the next renderer. Before, the server exited and the renderer's
+// preload (render.preload_all) waited for ever for a server, with one warning after 3 s.
+TEST(RenderCli, AStandaloneServerOfAnotherSceneEndsTheRunNamingIt) {
+  const fs::path dir = fresh_dir("otherscene");
+  ASSERT_TRUE(generate_lockstep_city(dir));
+  ASSERT_EQ(run((kBin / "texstream-gen").string() + " --out " + (dir / "other").string() +
+                    " --textures 20 --seed 3 --threads 2",
+                dir / "gen-other.log"),
+            0)
+      << slurp(dir / "gen-other.log");
+  const std::string name = "ts-test-otherscene-" + std::to_string(getpid());
+  const pid_t server = fork();
+  ASSERT_GE(server, 0);
+  if (server == 0) {
+    const std::string exe = (kBin / "texstream-server").string(), scene = (dir / "other").string();
+    const std::string log = (dir / "server.log").string();
+    freopen(log.c_str(), "w", stderr);
+    execl(exe.c_str(), exe.c_str(), "--segment", name.c_str(), "--scene", scene.c_str(), "--set",
+          "server.idle_wait_ms=5", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  const int rc = run("timeout 120 " + (kBin / "texstream-render").string() + " --set scene.dir=" +
+                         (dir / "scene").string() + " --set render.frames=5 --set render.width_px=160" +
+                         " --set render.height_px=90 --set render.output_dir=" + (dir / "out").string() +
+                         " --set render.preload_all=true --set protocol.segment_name=" + name +
+                         " --set server.spawn=false",
+                     dir / "render.log");
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const std::string log = slurp(dir / "render.log");
+  EXPECT_EQ(rc, 1) << log;
+  EXPECT_LT(seconds, 60.0) << log;
+  EXPECT_NE(log.find("standalone texstream-server pid " + std::to_string(server) + " refused segment '" + name +
+                     "': it reads another scene"),
+            std::string::npos)
+      << log;
+  const std::string server_log = slurp(dir / "server.log");
+  EXPECT_NE(server_log.find("refused, waiting for the next renderer"), std::string::npos) << server_log;
+  int status = 0;
+  EXPECT_EQ(waitpid(server, &status, WNOHANG), 0) << "the standalone server exited:\n" << server_log;
+  kill(server, SIGTERM);
+  waitpid(server, &status, 0);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << slurp(dir / "server.log");
+  fs::remove_all(dir);
+}
+
 // A RAM cache budget no machine here can hold (1 TiB, the key's maximum): the renderer refuses before it
 // spawns a server, and a server started by hand refuses too, both naming the key and the limit. Before, the
 // server pre-faulted its cache until the kernel OOM-killed it, and the renderer restarted it for ever.

@@ -252,33 +252,51 @@ TEST_F(ServerProcessTest, MissingSceneExitsWithCode2) {
 TEST_F(ServerProcessTest, AServerReadingAnotherSceneRefusesTheSegmentNamingBoth) {
   // The renderer states its texture table in the header. A server whose scene differs used to serve anyway:
   // every answer about textures the renderer does not have was refused one by one as a protocol error (994
-  // in a 400-frame run). Now it exits 2 before attaching, naming both tables.
+  // in a 400-frame run). Now it refuses before attaching, naming both tables: a spawned server exits 2, a
+  // standalone one marks the segment refused (ServerBlock::refused_by, for the renderer to name it) and
+  // waits for the next renderer, which it serves.
   SegmentParams other;
   other.texture_count = 999;
   other.texture_table_fingerprint = 0x1234;
   auto seg = Segment::create(name_, other);
   ASSERT_TRUE(seg.ok()) << seg.error().message;
-  const fs::path log = dir_ / "stderr.txt";
-  const pid_t pid = spawn_server(server_args(), log);
-  EXPECT_EQ(wait_exit(pid, 10s), 2);
-  const std::string text = read_text(log);
+  const fs::path spawned_log = dir_ / "spawned.txt";
+  const pid_t spawned = spawn_server(server_args(/*spawned=*/true), spawned_log);
+  EXPECT_EQ(wait_exit(spawned, 10s), 2);
+  std::string text = read_text(spawned_log);
   EXPECT_NE(text.find("texture table of 999 textures"), std::string::npos) << text;
   EXPECT_NE(text.find("has 1 (fingerprint"), std::string::npos) << text;
   EXPECT_NE(text.find("read different scenes"), std::string::npos) << text;
   EXPECT_EQ((*seg)->server_block().pid.v.load(), 0u) << "it claimed the segment";
-  seg.value().reset();
-  // The same table (this test's one texture) is served.
+  EXPECT_EQ((*seg)->server_block().refused_by.v.load(), 0u) << "a spawned server's refusal is its exit status";
+
+  const fs::path log = dir_ / "standalone.txt";
+  const pid_t pid = spawn_server(server_args(), log);
+  const auto deadline = std::chrono::steady_clock::now() + 10s;
+  while ((*seg)->server_block().refused_by.v.load() == 0 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(2ms);
+  }
+  EXPECT_EQ((*seg)->server_block().refused_by.v.load(), static_cast<uint32_t>(pid));
+  EXPECT_EQ((*seg)->server_block().pid.v.load(), 0u) << "it claimed the segment";
+  std::this_thread::sleep_for(300ms);
+  int status = 0;
+  EXPECT_EQ(waitpid(pid, &status, WNOHANG), 0) << "a standalone server must wait for the next renderer";
+  text = read_text(log);
+  EXPECT_NE(text.find("read different scenes"), std::string::npos) << text;
+  EXPECT_NE(text.find("refused, waiting for the next renderer"), std::string::npos) << text;
+  seg.value().reset();  // the creator's mapping goes, and with it the name
+  // The next renderer on the name reads the same table (this test's one texture): the same server serves it.
   SegmentParams same;
   same.texture_count = 1;
   same.texture_table_fingerprint =
       texture_table_step(kTextureTableSeed, 32, 32, full_mip_count(32, 32), uint32_t(TexelFormat::kRgba8));
   auto seg2 = Segment::create(name_, same);
   ASSERT_TRUE(seg2.ok()) << seg2.error().message;
-  const pid_t pid2 = spawn_server(server_args());
-  ASSERT_TRUE(wait_attached(**seg2, 1)) << "a server of the same scene never attached";
+  ASSERT_TRUE(wait_attached(**seg2, 1)) << "the waiting server never attached to the next renderer's segment:\n" << read_text(log);
+  EXPECT_EQ((*seg2)->server_block().pid.v.load(), static_cast<uint32_t>(pid));
   stream_one_mip(**seg2);
-  kill(pid2, SIGTERM);
-  EXPECT_EQ(wait_exit(pid2, 10s), 0);
+  kill(pid, SIGTERM);
+  EXPECT_EQ(wait_exit(pid, 10s), 0);
 }
 
 TEST_F(ServerProcessTest, StreamsAMipAndExitsCleanlyOnSigterm) {

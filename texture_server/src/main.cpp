@@ -193,6 +193,18 @@ int main(int argc, char** argv) {
         static_cast<uint64_t>(server_config.ram_cache_bytes), texstream::read_memory_info(), &lowered));
     if (!lowered.empty()) spdlog::warn("{}", lowered);
     auto server = texstream::server::Server::create(*current, (*stack)->scene_dir, server_config, (*stack)->storage());
+    if (!server.ok() && server.error().code == texstream::ErrorCode::kProtocol && !spawned) {
+      // Standalone, and this renderer reads another scene: it is refused (told through the segment, so that
+      // it ends its run naming this server), and the server waits for the next renderer rather than exit: a
+      // wrong renderer must not take down a server that others use.
+      spdlog::error("{}; refused, waiting for the next renderer", server.error().message);
+      current->server_block().refused_by.v.store(static_cast<uint32_t>(::getpid()), std::memory_order_release);
+      const ClientId refused = client_of(*current);
+      current.reset();
+      current = wait_for_next_client(segment_name, refused);
+      if (!current) return kExitOk;
+      continue;
+    }
     if (!server.ok()) {
       spdlog::error("{}", server.error().message);
       return kExitBadArguments;

@@ -126,7 +126,9 @@ Result<std::unique_ptr<Server>> Server::create(Segment& segment, const std::file
       fingerprint = texture_table_step(fingerprint, t.width, t.height, t.mip_count, t.format);
     }
     if (h.texture_count != textures->size() || h.texture_table_fingerprint != fingerprint) {
-      return make_error(ErrorCode::kInvalidArgument,
+      // kProtocol: this renderer's segment is not one this server can serve (main.cpp tells it from a bad
+      // configuration: a standalone server waits for the next renderer).
+      return make_error(ErrorCode::kProtocol,
                         fmt::format("segment '{}' was made by a renderer reading a texture table of {} textures "
                                     "(fingerprint {:016x}), but this server's scene '{}' has {} (fingerprint "
                                     "{:016x}): the two read different scenes (scene.dir, --scene, storage.origin)",

@@ -85,7 +85,10 @@ struct alignas(64) ServerBlock {
   ShmAtomic<uint64_t> start_time;
   ShmAtomic<uint64_t> heartbeat;   // bumped by the server loop each iteration: progress, not time
   ShmAtomic<uint32_t> sleeping;    // 1 while waiting on the doorbell futex (the renderer then wakes it)
-  uint32_t reserved0;
+  // The pid of a standalone server that refused this segment (its scene's texture table differs from the
+  // renderer's, SegmentHeader::texture_table_fingerprint) and waits for the next renderer instead. Written
+  // by that server, which does not claim the segment (pid stays 0); the renderer ends its run naming it.
+  ShmAtomic<uint32_t> refused_by;
   // Statistics (monotonic counters; relaxed stores, read for reports only).
   ShmAtomic<uint64_t> completions;        // completions published
   ShmAtomic<uint64_t> requests_received;  // kLoad records taken off the request ring

@@ -138,6 +138,9 @@ struct StreamStats {
   // Of those, the ones in a row that exited with kServerExitBadConfig: the server refused its arguments,
   // configuration or scene, which no restart changes. 0 once one attached or died any other way.
   uint64_t server_refusals_before_attach = 0;
+  // server.spawn = false: the pid of a standalone server that refused the segment because it reads another
+  // scene (ServerBlock::refused_by); 0 if none. No restart of ours changes that: the run ends (renderer_app).
+  uint32_t standalone_refused_by = 0;
   uint64_t crash_signal_deaths = 0;                      // deaths by a crash signal the server raised itself
   uint64_t textures_quarantined = 0;                     // loaded during kQuarantineAfterCrashes such deaths
   // Recovery (issue 9): a request in flight when the server died, sent again to a later server, must be

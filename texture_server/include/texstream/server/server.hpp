@@ -51,7 +51,8 @@ const char* to_string(RunOutcome outcome);
 class Server {
  public:
   // Reads the scene's texture table (errors name the file) and attaches to `segment`. The segment and the
-  // storage must outlive the server.
+  // storage must outlive the server. ErrorCode::kProtocol: the segment's renderer reads another scene (its
+  // texture table differs); any other error is this server's configuration or scene.
   static Result<std::unique_ptr<Server>> create(Segment& segment, const std::filesystem::path& scene_dir,
                                                 const ServerConfig& config, Storage& storage);
   ~Server();
