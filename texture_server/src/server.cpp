@@ -43,7 +43,12 @@ constexpr uint32_t kJobsPerWorker = 2;
 // 0.515 in 8). 1 MiB from the page cache is 60-150 us: hits queued behind it wait that long, against a
 // renderer that takes completions once per 16-33 ms frame. (Tried: tail reads on a free worker, the texture's
 // other misses parked until it finished: misses at 0.26 of read() against 0.28 inline, 4 runs each: the
-// hand-off costs what the overlap gains on 2 cores.) A remote mip is never read here (the attempt is
+// hand-off costs what the overlap gains on 2 cores. Tried again with a prefetch thread: a texture's first
+// request handed at once to a thread that reads its chain into the cache, up to 4 textures ahead, the
+// dispatcher only copying hits: misses at 0.36 and 0.36 of read() against 0.53 and 0.51 inline, alternating
+// runs. The dispatcher then waited 43 % of the time for reads that shared the cores with the renderer's
+// polling: a third busy thread on 2 cores, and the renderer's share is what a real renderer renders with.)
+// A remote mip is never read here (the attempt is
 // local-only: it comes back kUnfilled at once and goes to the remote path), and a texture whose inline load
 // was slow or that is not a DDS served raw is not loaded inline again (inline_ok_): a cold disk or a decoded
 // format costs the dispatcher at most one load per texture.
