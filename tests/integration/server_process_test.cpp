@@ -225,6 +225,18 @@ TEST_F(ServerProcessTest, AStandaloneServerStartedBeforeItsRendererWaitsForIt) {
   waitpid(owner, nullptr, 0);
 }
 
+TEST_F(ServerProcessTest, AStandaloneServerWithAWrongSceneExitsAtOnceNamingTheFile) {
+  // Before, a standalone server started before its renderer waited silently with any --scene (a typo, an
+  // unreadable texture table), and failed only when a renderer came, which then found no server.
+  const fs::path log = dir_ / "stderr.txt";
+  const fs::path missing = dir_ / "no-such-scene";
+  const pid_t pid = spawn_server({"--segment", name_, "--scene", missing.string()}, log);
+  EXPECT_EQ(wait_exit(pid, 10s), 2);
+  const std::string text = read_text(log);
+  EXPECT_NE(text.find((missing / "textures.bin").string()), std::string::npos) << text;
+  EXPECT_EQ(text.find("waiting for the next renderer"), std::string::npos) << text;
+}
+
 TEST_F(ServerProcessTest, HeaderMismatchExitsWithCode3NamingTheField) {
   auto seg = Segment::create(name_, {});
   ASSERT_TRUE(seg.ok()) << seg.error().message;

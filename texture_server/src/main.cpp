@@ -164,6 +164,23 @@ int main(int argc, char** argv) {
     return kExitBadArguments;
   }
 
+  // The storage tiers ([storage]: origin, slow-storage emulation, disk cache) live as long as the process:
+  // the disk cache's lock and index survive from one renderer to the next.
+  auto stack = texstream::server::make_storage_stack(config->storage, config->scene.dir);
+  if (!stack.ok()) {
+    spdlog::error("{}", stack.error().message);
+    return stack.error().code == texstream::ErrorCode::kPeerDead ? kExitStorageUnavailable : kExitBadArguments;
+  }
+  spdlog::info("storage: {}", (*stack)->describe());
+  // The scene is read now, before any waiting: a standalone server given a wrong --scene (or an unreadable
+  // texture table) says so at once instead of waiting for a renderer it could never serve.
+  auto scene = texstream::server::Server::read_scene((*stack)->scene_dir);
+  if (!scene.ok()) {
+    spdlog::error("{}", scene.error().message);
+    return kExitBadArguments;
+  }
+  // The first renderer's server takes this table; later ones read it again (the scene may have changed).
+  std::optional<std::vector<texstream::scene::TextureRecord>> first_scene = std::move(scene).value();
   texstream::Result<std::unique_ptr<texstream::Segment>> segment = texstream::Segment::open(segment_name);
   if (!segment.ok() && !spawned && segment.error().code == texstream::ErrorCode::kNotFound) {
     // Standalone and started before its renderer: wait for one to create the segment, as after a renderer
@@ -175,14 +192,6 @@ int main(int argc, char** argv) {
     spdlog::error("{}", segment.error().message);
     return kExitSegment;
   }
-  // The storage tiers ([storage]: origin, slow-storage emulation, disk cache) live as long as the process:
-  // the disk cache's lock and index survive from one renderer to the next.
-  auto stack = texstream::server::make_storage_stack(config->storage, config->scene.dir);
-  if (!stack.ok()) {
-    spdlog::error("{}", stack.error().message);
-    return stack.error().code == texstream::ErrorCode::kPeerDead ? kExitStorageUnavailable : kExitBadArguments;
-  }
-  spdlog::info("storage: {}", (*stack)->describe());
   std::unique_ptr<texstream::Segment> current = std::move(segment).value();
   for (;;) {
     // The cache pre-faults its whole budget (cache_arena.hpp): one that fits the limit but not what is free
@@ -192,7 +201,9 @@ int main(int argc, char** argv) {
     server_config.ram_cache_bytes = static_cast<int64_t>(texstream::server_cache_budget(
         static_cast<uint64_t>(server_config.ram_cache_bytes), texstream::read_memory_info(), &lowered));
     if (!lowered.empty()) spdlog::warn("{}", lowered);
-    auto server = texstream::server::Server::create(*current, (*stack)->scene_dir, server_config, (*stack)->storage());
+    auto server = texstream::server::Server::create(*current, (*stack)->scene_dir, server_config, (*stack)->storage(),
+                                                    std::move(first_scene));
+    first_scene.reset();
     if (!server.ok() && server.error().code == texstream::ErrorCode::kProtocol && !spawned) {
       // Standalone, and this renderer reads another scene: it is refused (told through the segment, so that
       // it ends its run naming this server), and the server waits for the next renderer rather than exit: a

@@ -98,8 +98,24 @@ const char* to_string(RunOutcome outcome) {
   return "?";
 }
 
+Result<std::vector<scene::TextureRecord>> Server::read_scene(const std::filesystem::path& scene_dir) {
+  Result<std::vector<scene::TextureRecord>> textures = scene::read_texture_table(scene_dir);
+  if (!textures.ok()) return textures.error();
+  // read_texture_table validates extents and mip counts; the format is re-checked here because everything
+  // downstream casts it.
+  for (size_t i = 0; i < textures->size(); ++i) {
+    if (!texel_format_from_raw((*textures)[i].format)) {
+      return make_error(ErrorCode::kCorrupt, "texture table of '" + scene_dir.string() + "': texture " +
+                                                 std::to_string(i) + " has unknown format " +
+                                                 std::to_string((*textures)[i].format));
+    }
+  }
+  return textures;
+}
+
 Result<std::unique_ptr<Server>> Server::create(Segment& segment, const std::filesystem::path& scene_dir,
-                                               const ServerConfig& config, Storage& storage) {
+                                               const ServerConfig& config, Storage& storage,
+                                               std::optional<std::vector<scene::TextureRecord>> scene) {
   if (config.worker_threads < 1 || config.worker_threads > 64) {
     return make_error(ErrorCode::kInvalidArgument, "server.worker_threads must be in [1, 64], not " +
                                                        std::to_string(config.worker_threads));
@@ -112,17 +128,9 @@ Result<std::unique_ptr<Server>> Server::create(Segment& segment, const std::file
     return make_error(ErrorCode::kInvalidArgument, "server.remote_fetches_in_flight must be in [1, 16], not " +
                                                        std::to_string(config.remote_fetches_in_flight));
   }
-  Result<std::vector<scene::TextureRecord>> textures = scene::read_texture_table(scene_dir);
+  Result<std::vector<scene::TextureRecord>> textures =
+      scene ? Result<std::vector<scene::TextureRecord>>(std::move(*scene)) : read_scene(scene_dir);
   if (!textures.ok()) return textures.error();
-  // read_texture_table validates extents and mip counts; the format is re-checked here because everything
-  // downstream casts it.
-  for (size_t i = 0; i < textures->size(); ++i) {
-    if (!texel_format_from_raw((*textures)[i].format)) {
-      return make_error(ErrorCode::kCorrupt, "texture table of '" + scene_dir.string() + "': texture " +
-                                                 std::to_string(i) + " has unknown format " +
-                                                 std::to_string((*textures)[i].format));
-    }
-  }
   // The renderer states its texture table in the header: a server reading another scene would answer every
   // request for textures the renderer does not have (refused one by one as protocol errors). Refused here.
   if (const SegmentHeader& h = segment.header(); h.texture_table_fingerprint != 0) {

@@ -23,6 +23,7 @@
 #include <deque>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "texstream/common/config.hpp"
@@ -50,11 +51,17 @@ const char* to_string(RunOutcome outcome);
 
 class Server {
  public:
+  // The scene's texture table, validated (errors name the file). create() reads it again for each renderer;
+  // texstream-server reads it once at start too, so that a wrong scene is refused before it waits.
+  static Result<std::vector<scene::TextureRecord>> read_scene(const std::filesystem::path& scene_dir);
   // Reads the scene's texture table (errors name the file) and attaches to `segment`. The segment and the
   // storage must outlive the server. ErrorCode::kProtocol: the segment's renderer reads another scene (its
   // texture table differs); any other error is this server's configuration or scene.
+  // `scene`: the table read_scene() returned for scene_dir, taken instead of reading it again (a city's table
+  // is ~90 MB); empty: read now.
   static Result<std::unique_ptr<Server>> create(Segment& segment, const std::filesystem::path& scene_dir,
-                                                const ServerConfig& config, Storage& storage);
+                                                const ServerConfig& config, Storage& storage,
+                                                std::optional<std::vector<scene::TextureRecord>> scene = {});
   ~Server();
   Server(const Server&) = delete;
   Server& operator=(const Server&) = delete;
