@@ -29,6 +29,7 @@ const char* to_string(ErrorCode code) {
     case ErrorCode::kProtocol: return "protocol violation";
     case ErrorCode::kPeerDead: return "peer dead";
     case ErrorCode::kTimeout: return "timeout";
+    case ErrorCode::kUnavailable: return "unavailable";
     case ErrorCode::kVulkan: return "vulkan error";
     case ErrorCode::kResourceExhausted: return "resource exhausted";
   }

@@ -89,26 +89,9 @@ class NginxOrigin {
       auto origin = std::unique_ptr<NginxOrigin>(new NginxOrigin());
       origin->port_ = port;
       origin->log_ = work / "error.log";
-      // Everything the child needs is built before fork(): after it, only async-signal-safe calls.
-      const std::string prefix = std::filesystem::absolute(work).string() + "/";
-      const std::string out = (work / "nginx.stderr").string();
-      origin->pid_ = ::fork();
-      if (origin->pid_ == 0) {
-        const int fd = ::open(out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-        if (fd >= 0) ::dup2(fd, 2);
-        ::execl(kNginxBinary, kNginxBinary, "-p", prefix.c_str(), "-c", conf_path.c_str(), static_cast<char*>(nullptr));
-        ::_exit(127);
-      }
-      const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
-      while (std::chrono::steady_clock::now() < deadline) {
-        if (loopback_accepts(port)) return origin;
-        int status = 0;
-        if (::waitpid(origin->pid_, &status, WNOHANG) == origin->pid_) {
-          origin->pid_ = 0;  // exited (port taken?): try again with another port
-          break;
-        }
-        std::this_thread::sleep_for(std::chrono::milliseconds(10));
-      }
+      origin->work_ = work;
+      origin->conf_path_ = conf_path;
+      if (origin->launch()) return origin;
       std::ifstream err(work / "nginx.stderr");
       std::stringstream e;
       e << err.rdbuf();
@@ -137,8 +120,15 @@ class NginxOrigin {
     pid_ = 0;
   }
 
+  // Starts it again on the same port after stop() (an origin that was down and comes back). False if it did
+  // not come up within 5 s.
+  bool restart() {
+    stop();
+    return launch();
+  }
+
   uint16_t port() const { return port_; }
-  // "http://127.0.0.1:<port>/<location>" (location: unlimited, mb10, t1, isdn, fail500, missing).
+  // "http://127.0.0.1:<port>/<location>" (location: unlimited, mb10, t1, isdn, fail500, fail503, missing).
   std::string url(const std::string& location) const {
     return "http://127.0.0.1:" + std::to_string(port_) + "/" + location;
   }
@@ -146,12 +136,39 @@ class NginxOrigin {
 
  private:
   NginxOrigin() = default;
+  // Runs nginx on port_ with conf_path_ and waits until it accepts (5 s); false if it exited or never did.
+  bool launch() {
+    // Everything the child needs is built before fork(): after it, only async-signal-safe calls.
+    const std::string prefix = std::filesystem::absolute(work_).string() + "/";
+    const std::string out = (work_ / "nginx.stderr").string();
+    const std::string conf = conf_path_.string();
+    pid_ = ::fork();
+    if (pid_ == 0) {
+      const int fd = ::open(out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+      if (fd >= 0) ::dup2(fd, 2);
+      ::execl(kNginxBinary, kNginxBinary, "-p", prefix.c_str(), "-c", conf.c_str(), static_cast<char*>(nullptr));
+      ::_exit(127);
+    }
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+    while (std::chrono::steady_clock::now() < deadline) {
+      if (loopback_accepts(port_)) return true;
+      int status = 0;
+      if (::waitpid(pid_, &status, WNOHANG) == pid_) {
+        pid_ = 0;  // exited (port taken?)
+        return false;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return false;
+  }
   static void replace(std::string& s, const std::string& from, const std::string& to) {
     for (size_t at = s.find(from); at != std::string::npos; at = s.find(from, at + to.size())) s.replace(at, from.size(), to);
   }
   pid_t pid_ = 0;
   uint16_t port_ = 0;
   std::filesystem::path log_;
+  std::filesystem::path work_;
+  std::filesystem::path conf_path_;
 };
 
 }  // namespace texstream::test

@@ -313,9 +313,56 @@ TEST_F(StorageOriginTest, TheServerProcessReadsThroughNginxAndASecondOneOnItsCac
   EXPECT_NE(slurp(log).find("disk cache"), std::string::npos);
 }
 
-TEST_F(StorageOriginTest, OriginDownIsAnIoErrorWithinTheConnectTimeout) {
+// An origin that does not answer (nothing listens: connection refused) is kTimedOut, which the renderer asks
+// again for without counting it against the texture. It was kIoError: 4 of them and the renderer marked the
+// texture broken for the run, so an origin down for 2.5 s (an nginx restart) left textures unstreamed for good.
+TEST_F(StorageOriginTest, OriginDownIsTimedOutWithinTheConnectTimeout) {
   const std::string url = "http://127.0.0.1:" + std::to_string(free_loopback_port());
-  expect_failure(http_config(url), CompletionStatus::kIoError, 3000ms, url);
+  expect_failure(http_config(url), CompletionStatus::kTimedOut, 3000ms, url);
+}
+
+TEST_F(StorageOriginTest, ServiceUnavailableIsTimedOut) {
+  expect_failure(http_config(nginx_->url("fail503")), CompletionStatus::kTimedOut, 2000ms, "HTTP 503");
+}
+
+// The same server, its origin down and then back (nginx stopped and started again on its port): while down,
+// every ask is answered kTimedOut, as many times as asked; once back, the same mips are served, byte-equal to
+// the local files, and the down time's warnings are rate-limited.
+TEST_F(StorageOriginTest, AnOriginThatComesBackIsReadAgain) {
+  std::string error;
+  auto origin = NginxOrigin::start(scene_, fs::path(TEXSTREAM_SOURCE_DIR) / "config/nginx/texstream-origin.conf.in",
+                                   root_ / "nginx_comeback", error);
+  ASSERT_NE(origin, nullptr) << error;
+  const std::vector<WantedMip> wanted{{0, 0, 1.0f}, {1, 1, 1.0f}, {2, 0, 1.0f}};
+  const DriveResult reference = local_reference(wanted);
+  ASSERT_EQ(reference.ok, wanted.size());
+  StorageConfig c = http_config(origin->url("unlimited"));
+  c.retries = 0;
+  auto stack = server::make_storage_stack(c, scene_);
+  ASSERT_TRUE(stack.ok()) << stack.error().message;
+  auto h = ServerHarness::start((*stack)->scene_dir, ServerConfig{}, (*stack)->storage(), error);
+  ASSERT_NE(h, nullptr) << error;
+  origin->stop();
+  for (int round = 0; round < 6; ++round) {
+    const DriveResult down = drive(*h, wanted, 5s);
+    ASSERT_TRUE(down.complete) << "round " << round;
+    for (size_t i = 0; i < wanted.size(); ++i) {
+      EXPECT_EQ(down.status[i], static_cast<uint32_t>(CompletionStatus::kTimedOut))
+          << "round " << round << ", mip " << i << ": " << to_string(static_cast<CompletionStatus>(down.status[i]));
+    }
+  }
+  const size_t warnings = [&] {
+    size_t n = 0;
+    const std::string text = log_text();
+    for (size_t at = text.find("timed out ("); at != std::string::npos; at = text.find("timed out (", at + 1)) ++n;
+    return n;
+  }();
+  EXPECT_LE(warnings, 2u) << "18 failed loads within seconds should log one warning per 5 s:\n" << log_text();
+  ASSERT_TRUE(origin->restart()) << "nginx did not come back on port " << origin->port();
+  const DriveResult back = drive(*h, wanted, 10s);
+  ASSERT_TRUE(back.complete);
+  EXPECT_EQ(back.ok, wanted.size());
+  EXPECT_EQ(back.checksum, reference.checksum);
 }
 
 TEST_F(StorageOriginTest, NotFoundIsNotFound) {

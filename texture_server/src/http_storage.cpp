@@ -212,12 +212,21 @@ Attempt attempt(const std::string& url, std::span<std::byte> out, std::string* w
                 true);
   }
   if (rc != CURLE_OK && !(rc == CURLE_WRITE_ERROR && t.overflow)) {
-    // No status line at all (connection refused, reset, nothing received): the origin is down or broken.
-    if (status == 0 || rc != CURLE_WRITE_ERROR) {
+    // No status line at all (connection refused, reset, nothing received): the origin is down, or cannot be
+    // reached. kUnavailable: not this object's fault (the renderer asks again in a later cycle, uncounted).
+    if (status == 0) {
+      return fail(ErrorCode::kUnavailable, what + ": " + (errbuf[0] ? std::string(errbuf) : curl_easy_strerror(rc)),
+                  true);
+    }
+    if (rc != CURLE_WRITE_ERROR) {
       return fail(ErrorCode::kIo, what + ": " + (errbuf[0] ? std::string(errbuf) : curl_easy_strerror(rc)), true);
     }
   }
   if (status == 404 || status == 410) return fail(ErrorCode::kNotFound, what + ": HTTP " + std::to_string(status), false);
+  // A gateway or proxy with nothing behind it, or an origin that says it is overloaded or restarting.
+  if (status == 502 || status == 503 || status == 504) {
+    return fail(ErrorCode::kUnavailable, what + ": HTTP " + std::to_string(status), true);
+  }
   if (status >= 500) return fail(ErrorCode::kIo, what + ": HTTP " + std::to_string(status), true);
   if (whole) {
     if (status != 200) return fail(ErrorCode::kIo, what + ": HTTP " + std::to_string(status) + " (expected 200)", false);

@@ -74,7 +74,8 @@ Result<std::unique_ptr<StorageStack>> make_storage_stack(const StorageConfig& c,
       // kPeerDead: the origin did not answer (texstream-server exits with its "storage unavailable" status,
       // which the renderer retries like a crash); an answer that is wrong keeps its own code.
       if (!table.ok()) {
-        const ErrorCode code = table.error().code == ErrorCode::kIo || table.error().code == ErrorCode::kTimeout
+        const ErrorCode code = table.error().code == ErrorCode::kIo || table.error().code == ErrorCode::kTimeout ||
+                                       table.error().code == ErrorCode::kUnavailable
                                    ? ErrorCode::kPeerDead
                                    : table.error().code;
         return make_error(code, "storage.origin: " + table.error().message);

@@ -18,6 +18,7 @@ enum class ErrorCode {
   kProtocol,          // a peer broke the shared-memory protocol
   kPeerDead,          // the other process is gone
   kTimeout,
+  kUnavailable,       // a storage origin that does not answer now (refused, reset, 502/503/504): try later
   kVulkan,
   kResourceExhausted, // a bounded pool or budget is full
 };

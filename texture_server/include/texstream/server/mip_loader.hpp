@@ -9,9 +9,11 @@
 //   into RGBA8 (oiio_mip_decoder.hpp). A bc1 texture is never encoded here: such a file is kCorrupt.
 // The file's extent of the asked mip must equal the texture table's, else kCorrupt. Errors are logged with
 // the path. Thread-safe (workers call load() concurrently; the dispatcher calls serve_cached()).
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <mutex>
 #include <span>
 
 #include "texstream/common/scene_format.hpp"
@@ -141,6 +143,14 @@ class MipLoader {
   CompletionStatus fail_status(const LoadRequest& request, CompletionStatus status, const std::filesystem::path& path,
                                const std::string& why);
   void count_read(uint64_t bytes);
+  // fail_status()'s rate limit on kTimedOut warnings (loads on several threads).
+  static constexpr std::chrono::seconds kTimedOutLogPeriod{5};
+  struct TimedOutLog {
+    std::mutex mutex;
+    std::chrono::steady_clock::time_point last{};
+    uint64_t suppressed = 0;
+  };
+  TimedOutLog timed_out_log_;
 
   std::filesystem::path scene_dir_;
   Storage& storage_;
