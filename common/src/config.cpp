@@ -25,7 +25,7 @@ template <class V>
 void visit_keys(Config& c, V&& v) {
   v("scene", "dir", c.scene.dir, "path", "Scene folder written by texstream-gen (relative paths are from the working directory)", kAny);
 
-  v("protocol", "segment_name", c.protocol.segment_name, "name", "POSIX shared-memory name; empty: texstream-<renderer pid>", kAny);
+  v("protocol", "segment_name", c.protocol.segment_name, "name", "POSIX shared-memory name (a file in /dev/shm: no '/', at most 255 bytes); empty: texstream-<renderer pid>", kAny);
   v("protocol", "request_ring_capacity", c.protocol.request_ring_capacity, "records", "Request ring size (power of two)", Range{4, 65536});
   v("protocol", "completion_ring_capacity", c.protocol.completion_ring_capacity, "records", "Completion ring size (power of two)", Range{4, 65536});
   v("protocol", "staging_slot_count", c.protocol.staging_slot_count, "slots", "Staging slots: bound the mips in flight between the processes", Range{1, 16384});
@@ -281,6 +281,11 @@ Status Config::validate() const {
   if (stream.max_requests_in_flight > protocol.request_ring_capacity) {
     return bad("stream.max_requests_in_flight", "must not exceed protocol.request_ring_capacity");
   }
+  if (!protocol.segment_name.empty()) {
+    if (std::optional<std::string> problem = segment_name_problem(protocol.segment_name)) {
+      return bad("protocol.segment_name", *problem);
+    }
+  }
   if (!server.spawn && protocol.segment_name.empty()) {
     return bad("server.spawn", "false needs protocol.segment_name: the name the standalone texstream-server serves");
   }
@@ -288,6 +293,17 @@ Status Config::validate() const {
     return bad("protocol.completion_ring_capacity", "must be at least protocol.request_ring_capacity (every request is answered)");
   }
   return ok_status();
+}
+
+std::optional<std::string> segment_name_problem(std::string_view name) {
+  if (name.empty()) return "must not be empty";
+  if (name.size() > 255) {
+    return "is " + std::to_string(name.size()) + " bytes long; a shared-memory name has at most 255 (NAME_MAX)";
+  }
+  if (name.find('/') != std::string_view::npos) return "'" + std::string(name) + "' contains '/'; a shared-memory name cannot";
+  if (name.find('\0') != std::string_view::npos) return "contains a NUL byte";
+  if (name == "." || name == "..") return "cannot be '" + std::string(name) + "'";
+  return std::nullopt;
 }
 
 Result<Config> parse_config(const std::string& toml_text, const std::string& what, const std::vector<std::string>& overrides) {

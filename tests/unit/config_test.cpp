@@ -57,6 +57,21 @@ TEST(Config, RelationsBetweenKeysAreValidated) {
   EXPECT_TRUE(parse_config("[server]\nspawn = false\n[protocol]\nsegment_name = \"ts-city\"\n", "t", {}).ok());
 }
 
+// A segment name that no shared-memory object can have is refused naming the key. Before, the renderer failed
+// with "cannot create shared segment 'a/b': Invalid argument", and a standalone server on it waited for ever.
+TEST(Config, ASegmentNameNoSharedMemoryObjectCanHaveIsRefused) {
+  const std::string slash = error_of("[protocol]\nsegment_name = \"city/a\"\n");
+  EXPECT_NE(slash.find("'protocol.segment_name'"), std::string::npos) << slash;
+  EXPECT_NE(slash.find("contains '/'"), std::string::npos) << slash;
+  const std::string long_name = error_of("[protocol]\nsegment_name = \"" + std::string(256, 'x') + "\"\n");
+  EXPECT_NE(long_name.find("256 bytes long"), std::string::npos) << long_name;
+  EXPECT_NE(error_of("[protocol]\nsegment_name = \"..\"\n").find("'protocol.segment_name'"), std::string::npos);
+  EXPECT_TRUE(parse_config("[protocol]\nsegment_name = \"" + std::string(255, 'x') + "\"\n", "t", {}).ok());
+  EXPECT_FALSE(segment_name_problem("ts-city.1_a").has_value());
+  EXPECT_TRUE(segment_name_problem("").has_value());
+  EXPECT_TRUE(segment_name_problem(std::string_view("a\0b", 3)).has_value());
+}
+
 TEST(Config, MalformedTomlNamesFileAndLine) {
   const std::string e = error_of("[render]\nwidth_px = = 3\n");
   EXPECT_NE(e.find("test.toml:2"), std::string::npos) << e;

@@ -141,6 +141,10 @@ int main(int argc, char** argv) {
     return kExitBadArguments;
   }
 
+  if (std::optional<std::string> problem = texstream::segment_name_problem(segment_name)) {
+    fprintf(stderr, "[server] --segment: %s\n", problem->c_str());
+    return kExitBadArguments;
+  }
   if (spawned) {
     // Die with the parent even if it is SIGKILLed. If the parent died before this call, the signal will
     // never come: then our parent is already someone else.

@@ -6,7 +6,9 @@
 // Unknown keys and out-of-range values are start-up errors that name the key — never silently clamped.
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "texstream/common/result.hpp"
@@ -137,6 +139,12 @@ Result<Config> parse_config(const std::string& toml_text, const std::string& wha
 // The same config as TOML text that parse_config reads back equal (handed to the spawned server).
 // With comments: each key is preceded by its documentation and unit (how config/default.toml is made).
 std::string to_toml(const Config& config, bool with_comments = false);
+
+// Why `name` cannot name a POSIX shared-memory segment (a file in /dev/shm: no '/', not "." or "..", at most
+// NAME_MAX = 255 bytes, not empty), or nullopt if it can. protocol.segment_name and texstream-server
+// --segment are checked with it, so that a bad name is refused naming the key (before, the renderer failed
+// with "Invalid argument" and a standalone server waited for ever for a segment that could never exist).
+std::optional<std::string> segment_name_problem(std::string_view name);
 // Markdown table of every key: name, type, unit, default, range, meaning.
 std::string config_reference_markdown();
 
