@@ -1,5 +1,7 @@
 // The Server in this process over a real shared segment; the test plays the renderer: it pushes requests,
 // polls completions, checks the payload bytes against the files it wrote, and releases slots.
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <gtest/gtest.h>
@@ -410,6 +412,31 @@ TEST_F(ServerStreamingTest, BadFilesGiveErrorCompletionsAndOthersAreStillServed)
   // The failed loads gave their slots back: all but the two kOk ones are free for more work.
   for (uint32_t mip = 0; mip < 7; ++mip) load(kRgbaA, mip, 2);
   for (const auto& c : next_n(7)) expect_payload(c);
+}
+
+// A FIFO or a directory where a texture file should be. A FIFO used to block the dispatcher's open() until a
+// writer came: the renderer killed the hung server, started another, which hung on the same file, for ever.
+// Now both are answered with an error at once, and the server goes on serving.
+TEST_F(ServerStreamingTest, AFifoOrADirectoryInPlaceOfATextureFileIsAnErrorNotAHang) {
+  const fs::path fifo = scene::texture_path(dir_, TextureId(kMissing));
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0) << std::strerror(errno);
+  const fs::path folder = scene::texture_path(dir_, TextureId(kFaulty));
+  fs::remove(folder);
+  fs::create_directory(folder);
+  start_server();
+  load(kMissing, 0);
+  load(kFaulty, 0);
+  load(kRgbaA, 1);
+  std::map<uint32_t, CompletionRecord> by_texture;
+  for (const auto& c : next_n(3)) by_texture[c.texture_id] = c;
+  // On a failure above the dispatcher may still sit in open(): a writer lets it go, so the test ends.
+  if (const int w = ::open(fifo.c_str(), O_WRONLY | O_NONBLOCK); w >= 0) ::close(w);
+  ASSERT_EQ(by_texture.size(), 3u);
+  for (const uint32_t t : {uint32_t(kMissing), uint32_t(kFaulty)}) {
+    EXPECT_NE(by_texture[t].status, uint32_t(CompletionStatus::kOk)) << "texture " << t;
+    EXPECT_EQ(by_texture[t].slot, kNoSlot) << "texture " << t;
+  }
+  expect_payload(by_texture[kRgbaA]);
 }
 
 TEST_F(ServerStreamingTest, StorageErrorIsAnIoErrorCompletion) {

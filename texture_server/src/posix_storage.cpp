@@ -126,16 +126,20 @@ Result<std::unique_ptr<StorageFile>> PosixStorage::open_text(const std::string& 
   const int dir = slash != std::string::npos && slash > 0 && slash + 1 < full.size()
                       ? directory_fd(std::string_view(full).substr(0, slash))
                       : -1;
+  // O_NONBLOCK: a FIFO in place of a texture file would block open() until a writer came, and with it the
+  // dispatcher (it opens local files itself): the renderer then killed the hung server and started another,
+  // which hung on the same file, for ever (a preload never ended). Non-blocking, it opens at once and reads
+  // nothing (a truncated file: kCorrupt). On regular files the flag changes nothing.
+  constexpr int kFlags = O_RDONLY | O_CLOEXEC | O_NONBLOCK;
   int fd;
   do {
-    fd = dir >= 0 ? ::openat(dir, full.c_str() + slash + 1, O_RDONLY | O_CLOEXEC)
-                  : ::open(full.c_str(), O_RDONLY | O_CLOEXEC);
+    fd = dir >= 0 ? ::openat(dir, full.c_str() + slash + 1, kFlags) : ::open(full.c_str(), kFlags);
   } while (fd < 0 && errno == EINTR);
   if (fd < 0 && dir >= 0 && errno == ENOENT) {
     // The kept descriptor names the directory as it was when first kept: if it has been replaced since (a
     // scene folder swapped in place), the path may exist in the new one. Only a miss pays this second open.
     do {
-      fd = ::open(full.c_str(), O_RDONLY | O_CLOEXEC);
+      fd = ::open(full.c_str(), kFlags);
     } while (fd < 0 && errno == EINTR);
   }
   if (fd < 0) {
