@@ -48,6 +48,12 @@ bool process_alive(int pid, uint64_t start_time) {
   return start == start_time && state != 'Z' && state != 'X';
 }
 
+bool process_stopped(int pid) {
+  char state = 0;
+  uint64_t start = 0;
+  return pid > 0 && read_stat(pid, &state, &start) && (state == 'T' || state == 't');
+}
+
 PidWatch::PidWatch(int pid) { fd_ = static_cast<int>(syscall(SYS_pidfd_open, pid, 0)); }
 
 PidWatch::~PidWatch() {

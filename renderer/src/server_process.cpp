@@ -13,6 +13,8 @@
 #include <system_error>
 #include <utility>
 
+#include "texstream/protocol/liveness.hpp"
+
 extern char** environ;
 
 namespace texstream {
@@ -250,6 +252,7 @@ bool ServerProcess::spawn_if_due(SteadyTime now) {
   attached_ = false;
   killing_ = false;
   kill_reason_.clear();
+  kill_hung_ = false;
   child_ = true;
   spdlog::debug("texstream-server spawn #{} posted to the spawner thread", spawns_);
   return true;
@@ -301,6 +304,7 @@ std::optional<ServerExit> ServerProcess::reap(SteadyTime now) {
   }
   e->killed_by_us = killing_;
   e->kill_reason = kill_reason_;
+  e->hung = killing_ && kill_hung_;
   // SIGKILL that we did not send came from outside (OOM killer, an operator, texstream-chaos): the server did
   // nothing wrong. Anything else it ended by itself (exit, SIGSEGV, SIGABRT, ...), could not be spawned, or
   // we killed it: a crash.
@@ -308,6 +312,7 @@ std::optional<ServerExit> ServerProcess::reap(SteadyTime now) {
   child_ = false;
   killing_ = false;
   kill_reason_.clear();
+  kill_hung_ = false;
   attached_ = false;
   record_death(now, !outside_kill);
   return e;
@@ -358,9 +363,13 @@ bool ServerProcess::watch_heartbeat(uint64_t heartbeat, bool attached, bool work
   }
   const auto limit = attached ? timeout : std::max(timeout, policy_.startup_grace);
   if (now - last_progress_ <= limit) return false;
+  // Hung by its own doing, or stopped from outside (SIGSTOP: texstream-chaos, a debugger): only the first is
+  // charged to the textures it was loading (StreamClient::charge_hang).
+  const bool stopped = process_stopped(pid());
   kill("heartbeat stalled for " +
        std::to_string(std::chrono::duration_cast<std::chrono::milliseconds>(now - last_progress_).count()) +
-       " ms with requests outstanding" + (attached ? "" : " (never attached)"));
+       " ms with requests outstanding" + (attached ? "" : " (never attached)") + (stopped ? " (stopped)" : ""));
+  kill_hung_ = attached && killing_ && !stopped;
   return true;
 }
 

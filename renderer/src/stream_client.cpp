@@ -413,6 +413,12 @@ void StreamClient::charge_crash(int signal) {
                      signal == SIGILL;
   if (!crash) return;
   ++stats_.crash_signal_deaths;
+  charge_loading("died by signal " + std::to_string(signal));
+}
+
+void StreamClient::charge_hang() { charge_loading("hung (its heartbeat stalled) and was killed"); }
+
+void StreamClient::charge_loading(const std::string& how) {
   const ServerBlock& sb = std::as_const(*segment_).server_block();
   std::unordered_set<uint32_t> charged;  // two workers on one texture: one crash, one charge
   for (uint32_t i = 0; i < kLoadingWords; ++i) {
@@ -424,16 +430,15 @@ void StreamClient::charge_crash(int signal) {
     if (!charged.insert(texture).second || quarantined_.count(texture) != 0) continue;
     const uint32_t n = ++crash_charges_[texture];
     if (n < kQuarantineAfterCrashes) {
-      spdlog::warn("texstream-server died by signal {} while loading texture {} (crash {} of {} before it is "
-                   "quarantined)",
-                   signal, texture, n, kQuarantineAfterCrashes);
+      spdlog::warn("texstream-server {} while loading texture {} (crash {} of {} before it is quarantined)", how,
+                   texture, n, kQuarantineAfterCrashes);
       continue;
     }
     quarantined_.insert(texture);
     ++stats_.textures_quarantined;
-    spdlog::warn("texture {} quarantined: texstream-server crashed {} times while loading it (last: signal {}); "
+    spdlog::warn("texture {} quarantined: texstream-server crashed or hung {} times while loading it (last: {}); "
                  "it is not requested again and stays on its colormap",
-                 texture, n, signal);
+                 texture, n, how);
   }
 }
 
@@ -527,6 +532,7 @@ void StreamClient::supervise(MipSink& sink) {
     // Before on_server_gone (a quarantined texture's lost requests fail for good) and before the reset
     // (which zeroes the words).
     if (!exit->killed_by_us) charge_crash(exit->term_signal);
+    if (exit->hung) charge_hang();
     // The server writes its pid when it attaches and leaves it there when it detaches; the reset clears it.
     const bool attached = exit->pid > 0 && segment_->server_block().pid.v.load(std::memory_order_relaxed) ==
                                                static_cast<uint32_t>(exit->pid);

@@ -56,6 +56,10 @@ int main(int argc, char** argv) {
   const std::optional<long> crash_texture = env_number("TEXSTREAM_FAKE_CRASH_TEXTURE");
   const int crash_signal = static_cast<int>(env_number("TEXSTREAM_FAKE_CRASH_SIGNAL").value_or(SIGSEGV));
   const std::optional<long> bystander = env_number("TEXSTREAM_FAKE_BYSTANDER");
+  // Loading this texture hangs the server (no heartbeat, nothing answered) until it is killed.
+  const std::optional<long> hang_texture = env_number("TEXSTREAM_FAKE_HANG_TEXTURE");
+  // Loading this texture stops the server (SIGSTOP on itself, as texstream-chaos or a debugger would).
+  const std::optional<long> stop_texture = env_number("TEXSTREAM_FAKE_STOP_TEXTURE");
   const char* mark = std::getenv("TEXSTREAM_FAKE_MARK");
 
   auto opened = Segment::open(segment_name);
@@ -78,6 +82,17 @@ int main(int argc, char** argv) {
     block.heartbeat.v.fetch_add(1, std::memory_order_relaxed);
     while (std::optional<RequestRecord> r = requests.try_pop()) {
       if (r->kind != static_cast<uint32_t>(RequestKind::kLoad)) continue;
+      if (stop_texture && r->texture_id == static_cast<uint32_t>(*stop_texture)) {
+        block.loading[0].v.store(r->texture_id + 1, std::memory_order_relaxed);
+        ::raise(SIGSTOP);
+      }
+      if (hang_texture && r->texture_id == static_cast<uint32_t>(*hang_texture)) {
+        block.loading[0].v.store(r->texture_id + 1, std::memory_order_relaxed);
+        while (::getppid() == parent && std::chrono::steady_clock::now() < give_up) {
+          std::this_thread::sleep_for(std::chrono::milliseconds(10));
+        }
+        return 0;
+      }
       if (crash_texture && r->texture_id == static_cast<uint32_t>(*crash_texture)) {
         block.loading[0].v.store(r->texture_id + 1, std::memory_order_relaxed);
         if (bystander && mark != nullptr && !std::filesystem::exists(mark)) {

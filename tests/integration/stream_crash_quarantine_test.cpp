@@ -191,6 +191,48 @@ TEST(StreamCrashQuarantine, DeathsBySigkillNeverQuarantine) {
   EXPECT_GE(sink.cancelled, 3);
 }
 
+// A server that hangs while loading a texture (a file whose reads block, a stuck mount) is killed by the
+// heartbeat watchdog, and that kill charges the texture like a crash: after two, it is quarantined and the
+// others are served. Before, only crash signals charged: the watchdog killed the server, the next one hung on
+// the same texture, for ever (seen with a FIFO in place of a texture file, docs/faults.md).
+TEST(StreamCrashQuarantine, ATextureLoadingDuringTwoHangsIsQuarantined) {
+  ASSERT_EQ(::access(kFakeServer.c_str(), X_OK), 0) << kFakeServer;
+  Fixture f("hang");
+  f.config.protocol.heartbeat_timeout_ms = 300;
+  ScopedEnv hang("TEXSTREAM_FAKE_HANG_TEXTURE", "2");
+  auto client = f.start();
+  ASSERT_TRUE(client);
+  RecordingSink sink;
+  const bool answered = drive(*client, sink, 4, 60s, [&] { return sink.final_status.size() == 4; });
+  const StreamStats st = client->stats();
+  ASSERT_TRUE(answered) << "not every texture got a final answer: " << sink.final_status.size() << " of 4; "
+                        << st.server_deaths << " server deaths, state " << to_string(st.server_state);
+  EXPECT_EQ(sink.status(2, 0), CompletionStatus::kCorrupt);
+  for (uint32_t t : {0u, 1u, 3u}) EXPECT_EQ(sink.status(t, 0), CompletionStatus::kNotFound) << t;
+  EXPECT_TRUE(client->quarantined(TextureId(2)));
+  EXPECT_EQ(st.crash_signal_deaths, 0u) << "a hang is no crash signal";
+  EXPECT_EQ(st.server_deaths, 2u);
+  EXPECT_EQ(st.textures_quarantined, 1u);
+}
+
+// A server stopped from outside (SIGSTOP: texstream-chaos, a debugger) while loading a texture is killed by
+// the watchdog too, but that is not the texture's doing: it is never charged.
+TEST(StreamCrashQuarantine, AStoppedServerIsNotChargedToTheTextureItWasLoading) {
+  ASSERT_EQ(::access(kFakeServer.c_str(), X_OK), 0) << kFakeServer;
+  Fixture f("stop");
+  f.config.protocol.heartbeat_timeout_ms = 300;
+  ScopedEnv stop("TEXSTREAM_FAKE_STOP_TEXTURE", "2");
+  auto client = f.start();
+  ASSERT_TRUE(client);
+  RecordingSink sink;
+  const bool died = drive(*client, sink, 4, 60s, [&] { return client->stats().server_deaths >= 3; });
+  const StreamStats st = client->stats();
+  ASSERT_TRUE(died) << st.server_deaths << " deaths";
+  EXPECT_FALSE(client->quarantined(TextureId(2)));
+  EXPECT_EQ(st.textures_quarantined, 0u);
+  EXPECT_FALSE(sink.answered(2, 0)) << "texture 2 must still be asked for";
+}
+
 // $TEXSTREAM_SERVER, else this build's texstream-server (a build dependency of this test).
 fs::path real_server() {
   if (const char* env = std::getenv("TEXSTREAM_SERVER"); env && *env) return env;

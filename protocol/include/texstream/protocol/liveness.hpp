@@ -13,6 +13,8 @@ namespace texstream {
 std::optional<uint64_t> process_start_time(int pid);
 // True if a process with this pid exists and started at `start_time` (and is not a zombie).
 bool process_alive(int pid, uint64_t start_time);
+// True if the process is stopped by a signal (SIGSTOP, SIGTSTP) or a tracer: state T or t in /proc/<pid>/stat.
+bool process_stopped(int pid);
 
 // Owns a pidfd. `dead()` polls it without blocking: true once the process has exited.
 class PidWatch {

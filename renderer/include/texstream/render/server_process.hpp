@@ -85,6 +85,7 @@ struct ServerExit {
                             // or scene, see kServerExitBadConfig); -1 otherwise
   bool killed_by_us = false;
   std::string kill_reason;  // why we killed it, if we did
+  bool hung = false;        // we killed it because its heartbeat stalled while it was serving (attached)
 };
 
 class ServerProcess {
@@ -150,6 +151,7 @@ class ServerProcess {
   bool child_ = false;
   bool killing_ = false;
   std::string kill_reason_;
+  bool kill_hung_ = false;  // kill_reason_ is an attached server's heartbeat stall
   SteadyTime spawned_at_{};
   SteadyTime next_spawn_at_{};
   std::deque<SteadyTime> recent_deaths_;  // within crash_window

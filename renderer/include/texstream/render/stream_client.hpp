@@ -260,6 +260,11 @@ class StreamClient {
   // A server died by signal `signal`: if it is a crash signal, charges the textures its workers were loading
   // (ServerBlock::loading; before the segment is reset) and quarantines those charged often enough.
   void charge_crash(int signal);
+  // The same for a server we killed because it hung while serving (its heartbeat stalled): a texture whose
+  // load blocks the server (a file that blocks every read, a stuck mount) is charged like one that crashes it.
+  void charge_hang();
+  // Charges the textures in ServerBlock::loading with one death described by `how` ("died by signal 11").
+  void charge_loading(const std::string& how);
   // Fails (kCorrupt) the requests of quarantined textures refused since the last poll.
   void fail_quarantined_requests(MipSink& sink);
   void protocol_error(const std::string& what);
