@@ -499,10 +499,12 @@ Status Renderer::load_fully(std::vector<StreamCandidate> wanted, bool no_evictio
       });
       if (incomplete == 0) return ok_status();
       if (Clock::now() - idle_since > kLockstepTimeout) {
+        const std::string unattached = client_->unattached_reason();
         return make_error(ErrorCode::kTimeout,
                           std::to_string(incomplete) + " textures still incomplete and the server takes no requests (" +
                               to_string(client_->stats().server_state) + ") after " +
-                              std::to_string(kLockstepTimeout.count()) + " s");
+                              std::to_string(kLockstepTimeout.count()) + " s" +
+                              (unattached.empty() ? "" : ": " + unattached));
       }
       client_->poll(*cache_, 0);  // supervision: reap, restart
       TS_TRY(server_can_start());

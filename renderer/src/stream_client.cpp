@@ -736,8 +736,16 @@ void StreamClient::expire_requests(MipSink& sink, SteadyTime t) {
     sink.failed(TextureId(static_cast<uint32_t>(k >> 32)), MipLevel(static_cast<uint32_t>(k)),
                 CompletionStatus::kTimedOut);
   }
-  protocol_error(std::to_string(expired.size()) + " request(s) unanswered for " +
-                 std::to_string(options_.request_timeout.count()) + " ms: failed as timed out");
+  const std::string what = std::to_string(expired.size()) + " request(s) unanswered for " +
+                           std::to_string(options_.request_timeout.count()) + " ms: failed as timed out";
+  // With no server attached nobody broke the protocol: nobody was there to answer (server.spawn = false and no
+  // standalone server yet, or a spawned one that has not attached). Before, each expiry counted as a protocol
+  // error of a server that did not exist.
+  if (segment_->server_block().attached.v.load(std::memory_order_acquire) == 0) {
+    spdlog::warn("{} (no texstream-server is attached to segment '{}')", what, segment_->name());
+    return;
+  }
+  protocol_error(what);
 }
 
 void StreamClient::note_answered(uint64_t k) {
@@ -755,6 +763,15 @@ uint64_t StreamClient::overdue_lost(SteadyTime t) const {
   return static_cast<uint64_t>(std::count_if(lost_.begin(), lost_.end(), [&](const auto& e) {
     return e.second.resent && t - e.second.resent_at > kRecoveryDeadline;
   }));
+}
+
+std::string StreamClient::unattached_reason() const {
+  if (std::as_const(*segment_).server_block().attached.v.load(std::memory_order_acquire) == 1) return {};
+  std::string why = "no texstream-server is attached to segment '" + segment_->name() + "'";
+  if (!process_) {
+    why += " (server.spawn = false): start one with texstream-server --segment " + segment_->name() + " --scene DIR";
+  }
+  return why;
 }
 
 bool StreamClient::in_flight(TextureId texture, MipLevel mip) const { return in_flight_.count(key(texture, mip)) != 0; }

@@ -261,6 +261,46 @@ TEST(StreamClient, TakesOverAChosenSegmentNameLeftByAKilledRenderer) {
 
 // ---- the happy path, step by step ----
 
+// Requests that expire unanswered are a protocol error only if a server was attached to answer them. With
+// none (server.spawn = false and no standalone server yet) they fail as timed out, and no protocol error is
+// counted: before, a renderer waiting for its standalone server reported "texstream-server broke the
+// protocol" once per expiry, of a server that did not exist.
+TEST(StreamClient, RequestsUnansweredWithNoServerAttachedAreNoProtocolError) {
+  const Config config = small_config(unique_name("noserver"));
+  StreamClientOptions o = external();
+  o.request_timeout = std::chrono::milliseconds(50);
+  auto started = StreamClient::start(config, shapes(), "/nonexistent-scene", "", {}, o);
+  ASSERT_TRUE(started.ok()) << started.error().message;
+  StreamClient& client = **started;
+  RecordingSink sink;
+  client.begin_cycle();
+  ASSERT_TRUE(client.request(TextureId(0), MipLevel(4), 1.0f));
+  const auto end = std::chrono::steady_clock::now() + 5s;
+  while (client.stats().requests_timed_out == 0 && std::chrono::steady_clock::now() < end) {
+    client.poll(sink, 16);
+    std::this_thread::sleep_for(5ms);
+  }
+  EXPECT_EQ(client.stats().requests_timed_out, 1u);
+  EXPECT_EQ(client.stats().protocol_errors, 0u);
+  ASSERT_FALSE(sink.events.empty());
+  EXPECT_EQ(sink.events.back().kind, Event::kFailed);
+  EXPECT_NE(client.unattached_reason().find("texstream-server --segment " + config.protocol.segment_name),
+            std::string::npos)
+      << client.unattached_reason();
+
+  // A server that is attached and does not answer: that is a protocol error.
+  FakeServer server(config.protocol.segment_name);
+  EXPECT_EQ(client.unattached_reason(), "");
+  ASSERT_TRUE(client.request(TextureId(2), MipLevel(6), 1.0f));
+  const auto end2 = std::chrono::steady_clock::now() + 5s;
+  while (client.stats().requests_timed_out == 1 && std::chrono::steady_clock::now() < end2) {
+    client.poll(sink, 16);
+    std::this_thread::sleep_for(5ms);
+  }
+  EXPECT_EQ(client.stats().requests_timed_out, 2u);
+  EXPECT_EQ(client.stats().protocol_errors, 1u);
+}
+
 TEST(StreamClient, StreamsMipsAndHandsEverySlotBack) {
   const Config config = small_config(unique_name("happy"));
   auto client = start_external(config);

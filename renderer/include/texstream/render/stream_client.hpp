@@ -219,6 +219,8 @@ class StreamClient {
   // written elsewhere).
   std::string stats_text() const;
   bool in_flight(TextureId texture, MipLevel mip) const;
+  // Empty if a server is attached to the segment now; else why not, for an error that has to say it.
+  std::string unattached_reason() const;
   bool quarantined(TextureId texture) const { return quarantined_.count(texture.value) != 0; }
   const Segment& segment() const { return *segment_; }
   Segment& segment() { return *segment_; }
