@@ -42,6 +42,20 @@ class RenderScene : public ::testing::TestWithParam<std::string> {};
   return ::testing::AssertionFailure() << "texstream-gen failed:\n" << slurp(dir / "gen.log");
 }
 
+// texstream-server --segment NAME --scene SCENE as a standalone server, its stderr into `log`. Returns its pid
+// (-1 if fork failed).
+pid_t start_standalone_server(const std::string& name, const fs::path& scene, const fs::path& log) {
+  const std::string exe = (kBin / "texstream-server").string(), scene_text = scene.string(), log_text = log.string();
+  const pid_t pid = fork();
+  if (pid == 0) {
+    freopen(log_text.c_str(), "w", stderr);
+    execl(exe.c_str(), exe.c_str(), "--segment", name.c_str(), "--scene", scene_text.c_str(), "--set",
+          "server.idle_wait_ms=5", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  return pid;
+}
+
 // One texstream-render run over the lock-step city at 320x180 into `out`, controller off; `sets` adds options.
 // Its summary.json (discarded, so that the caller's checks fail, if the run failed).
 nlohmann::json render_lockstep_city(const fs::path& dir, const fs::path& out, const std::string& sets) {
@@ -212,16 +226,8 @@ TEST(RenderCli, AStandaloneServerServesRenderersOnItsSegmentName) {
   const fs::path dir = fresh_dir("standalone");
   ASSERT_TRUE(generate_lockstep_city(dir));
   const std::string name = "ts-test-standalone-" + std::to_string(getpid());
-  const pid_t server = fork();
-  ASSERT_GE(server, 0);
-  if (server == 0) {
-    const std::string exe = (kBin / "texstream-server").string(), scene = (dir / "scene").string();
-    const std::string log = (dir / "server.log").string();
-    freopen(log.c_str(), "w", stderr);
-    execl(exe.c_str(), exe.c_str(), "--segment", name.c_str(), "--scene", scene.c_str(), "--set",
-          "server.idle_wait_ms=5", static_cast<char*>(nullptr));
-    _exit(127);
-  }
+  const pid_t server = start_standalone_server(name, dir / "scene", dir / "server.log");
+  ASSERT_GT(server, 0);
   for (const std::string spawn : {"false", "true"}) {
     const fs::path out = dir / ("out-" + spawn);
     const int rc = run("timeout 120 " + (kBin / "texstream-render").string() + " --set scene.dir=" +
@@ -267,16 +273,8 @@ TEST(RenderCli, AStandaloneServerOfAnotherSceneEndsTheRunNamingIt) {
             0)
       << slurp(dir / "gen-other.log");
   const std::string name = "ts-test-otherscene-" + std::to_string(getpid());
-  const pid_t server = fork();
-  ASSERT_GE(server, 0);
-  if (server == 0) {
-    const std::string exe = (kBin / "texstream-server").string(), scene = (dir / "other").string();
-    const std::string log = (dir / "server.log").string();
-    freopen(log.c_str(), "w", stderr);
-    execl(exe.c_str(), exe.c_str(), "--segment", name.c_str(), "--scene", scene.c_str(), "--set",
-          "server.idle_wait_ms=5", static_cast<char*>(nullptr));
-    _exit(127);
-  }
+  const pid_t server = start_standalone_server(name, dir / "other", dir / "server.log");
+  ASSERT_GT(server, 0);
   const auto t0 = std::chrono::steady_clock::now();
   const int rc = run("timeout 120 " + (kBin / "texstream-render").string() + " --set scene.dir=" +
                          (dir / "scene").string() + " --set render.frames=5 --set render.width_px=160" +

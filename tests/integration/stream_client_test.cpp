@@ -273,13 +273,17 @@ TEST(StreamClient, RequestsUnansweredWithNoServerAttachedAreNoProtocolError) {
   ASSERT_TRUE(started.ok()) << started.error().message;
   StreamClient& client = **started;
   RecordingSink sink;
+  // Polls until `n` requests have timed out (or 5 s).
+  const auto poll_until_timed_out = [&](uint64_t n) {
+    const auto end = std::chrono::steady_clock::now() + 5s;
+    while (client.stats().requests_timed_out < n && std::chrono::steady_clock::now() < end) {
+      client.poll(sink, 16);
+      std::this_thread::sleep_for(5ms);
+    }
+  };
   client.begin_cycle();
   ASSERT_TRUE(client.request(TextureId(0), MipLevel(4), 1.0f));
-  const auto end = std::chrono::steady_clock::now() + 5s;
-  while (client.stats().requests_timed_out == 0 && std::chrono::steady_clock::now() < end) {
-    client.poll(sink, 16);
-    std::this_thread::sleep_for(5ms);
-  }
+  poll_until_timed_out(1);
   EXPECT_EQ(client.stats().requests_timed_out, 1u);
   EXPECT_EQ(client.stats().protocol_errors, 0u);
   ASSERT_FALSE(sink.events.empty());
@@ -292,11 +296,7 @@ TEST(StreamClient, RequestsUnansweredWithNoServerAttachedAreNoProtocolError) {
   FakeServer server(config.protocol.segment_name);
   EXPECT_EQ(client.unattached_reason(), "");
   ASSERT_TRUE(client.request(TextureId(2), MipLevel(6), 1.0f));
-  const auto end2 = std::chrono::steady_clock::now() + 5s;
-  while (client.stats().requests_timed_out == 1 && std::chrono::steady_clock::now() < end2) {
-    client.poll(sink, 16);
-    std::this_thread::sleep_for(5ms);
-  }
+  poll_until_timed_out(2);
   EXPECT_EQ(client.stats().requests_timed_out, 2u);
   EXPECT_EQ(client.stats().protocol_errors, 1u);
 }

@@ -106,6 +106,18 @@ bool drive(StreamClient& client, RecordingSink& sink, uint32_t textures, std::ch
   return false;
 }
 
+// Drives mip 0 of textures 0..3 until each has a final answer: texture 2 (the fake server's bad one) must be
+// quarantined (kCorrupt), the others answered by the server (kNotFound: the fake has no files).
+void expect_texture_2_quarantined(StreamClient& client, RecordingSink& sink) {
+  const bool answered = drive(client, sink, 4, 60s, [&] { return sink.final_status.size() == 4; });
+  const StreamStats st = client.stats();
+  ASSERT_TRUE(answered) << "not every texture got a final answer: " << sink.final_status.size() << " of 4; "
+                        << st.server_deaths << " server deaths, state " << to_string(st.server_state);
+  EXPECT_EQ(sink.status(2, 0), CompletionStatus::kCorrupt);
+  for (uint32_t t : {0u, 1u, 3u}) EXPECT_EQ(sink.status(t, 0), CompletionStatus::kNotFound) << t;
+  EXPECT_TRUE(client.quarantined(TextureId(2)));
+}
+
 TEST(StreamCrashQuarantine, ATextureLoadingDuringTwoCrashesIsQuarantinedAndTheOthersAreServed) {
   ASSERT_EQ(::access(kFakeServer.c_str(), X_OK), 0) << kFakeServer;
   Fixture f("segv");
@@ -115,14 +127,8 @@ TEST(StreamCrashQuarantine, ATextureLoadingDuringTwoCrashesIsQuarantinedAndTheOt
   auto client = f.start();
   ASSERT_TRUE(client);
   RecordingSink sink;
-
-  const bool answered = drive(*client, sink, 4, 60s, [&] { return sink.final_status.size() == 4; });
+  ASSERT_NO_FATAL_FAILURE(expect_texture_2_quarantined(*client, sink));
   const StreamStats st = client->stats();
-  ASSERT_TRUE(answered) << "not every texture got a final answer: " << sink.final_status.size() << " of 4; "
-                        << st.server_deaths << " server deaths, state " << to_string(st.server_state);
-  EXPECT_EQ(sink.status(2, 0), CompletionStatus::kCorrupt);
-  for (uint32_t t : {0u, 1u, 3u}) EXPECT_EQ(sink.status(t, 0), CompletionStatus::kNotFound) << t;
-  EXPECT_TRUE(client->quarantined(TextureId(2)));
   EXPECT_FALSE(client->quarantined(TextureId(1))) << "charged for one crash only";
   EXPECT_EQ(st.crash_signal_deaths, 2u);
   EXPECT_EQ(st.server_deaths, 2u);
@@ -203,13 +209,8 @@ TEST(StreamCrashQuarantine, ATextureLoadingDuringTwoHangsIsQuarantined) {
   auto client = f.start();
   ASSERT_TRUE(client);
   RecordingSink sink;
-  const bool answered = drive(*client, sink, 4, 60s, [&] { return sink.final_status.size() == 4; });
+  ASSERT_NO_FATAL_FAILURE(expect_texture_2_quarantined(*client, sink));
   const StreamStats st = client->stats();
-  ASSERT_TRUE(answered) << "not every texture got a final answer: " << sink.final_status.size() << " of 4; "
-                        << st.server_deaths << " server deaths, state " << to_string(st.server_state);
-  EXPECT_EQ(sink.status(2, 0), CompletionStatus::kCorrupt);
-  for (uint32_t t : {0u, 1u, 3u}) EXPECT_EQ(sink.status(t, 0), CompletionStatus::kNotFound) << t;
-  EXPECT_TRUE(client->quarantined(TextureId(2)));
   EXPECT_EQ(st.crash_signal_deaths, 0u) << "a hang is no crash signal";
   EXPECT_EQ(st.server_deaths, 2u);
   EXPECT_EQ(st.textures_quarantined, 1u);
