@@ -741,8 +741,8 @@ void StreamClient::expire_requests(MipSink& sink, SteadyTime t) {
   // With no server attached nobody broke the protocol: nobody was there to answer (server.spawn = false and no
   // standalone server yet, or a spawned one that has not attached). Before, each expiry counted as a protocol
   // error of a server that did not exist.
-  if (segment_->server_block().attached.v.load(std::memory_order_acquire) == 0) {
-    spdlog::warn("{} (no texstream-server is attached to segment '{}')", what, segment_->name());
+  if (const std::string unattached = unattached_reason(); !unattached.empty()) {
+    spdlog::warn("{} ({})", what, unattached);
     return;
   }
   protocol_error(what);

@@ -85,7 +85,8 @@ MipLoader::MipLoader(std::filesystem::path scene_dir, Storage& storage, MipCache
 CompletionStatus MipLoader::fail_status(const LoadRequest& request, CompletionStatus status,
                                         const std::filesystem::path& path, const std::string& why) {
   // A storage that does not answer fails every request the renderer asks again each cycle: one warning per
-  // kTimedOutLogPeriod, then how many more there were (an origin down for a minute was ~1600 lines).
+  // kTimedOutLogPeriod, with how many were left out since the last one (an nginx origin down for 2.5 s under
+  // a paced renderer gave 54 lines).
   bool log = true;
   uint64_t quiet = 0;
   if (status == CompletionStatus::kTimedOut) {
@@ -100,8 +101,9 @@ CompletionStatus MipLoader::fail_status(const LoadRequest& request, CompletionSt
     }
   }
   if (log && quiet > 0) {
-    spdlog::warn("{} more load(s) timed out or found the storage unavailable in the last {} s (not logged)", quiet,
-                 std::chrono::duration_cast<std::chrono::seconds>(kTimedOutLogPeriod).count());
+    spdlog::warn("{} more load(s) timed out or found the storage unavailable since the last such warning (at most "
+                 "one per {} s is logged)",
+                 quiet, std::chrono::duration_cast<std::chrono::seconds>(kTimedOutLogPeriod).count());
   }
   if (log) {
     spdlog::warn("texture {} mip {}: {} ({}): {}", request.texture.value, request.mip.value, to_string(status),
