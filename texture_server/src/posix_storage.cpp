@@ -128,8 +128,8 @@ Result<std::unique_ptr<StorageFile>> PosixStorage::open_text(const std::string& 
                       : -1;
   // O_NONBLOCK: a FIFO in place of a texture file would block open() until a writer came, and with it the
   // dispatcher (it opens local files itself): the renderer then killed the hung server and started another,
-  // which hung on the same file, for ever (a preload never ended). Non-blocking, it opens at once and reads
-  // nothing (a truncated file: kCorrupt). On regular files the flag changes nothing.
+  // which hung on the same file, for ever (a preload never ended). Non-blocking, it opens at once and its
+  // pread fails (ESPIPE: kIoError). On regular files the flag changes nothing.
   constexpr int kFlags = O_RDONLY | O_CLOEXEC | O_NONBLOCK;
   int fd;
   do {

@@ -48,10 +48,9 @@ constexpr uint32_t kJobsPerWorker = 2;
 // dispatcher only copying hits: misses at 0.36 and 0.36 of read() against 0.53 and 0.51 inline, alternating
 // runs. The dispatcher then waited 43 % of the time for reads that shared the cores with the renderer's
 // polling: a third busy thread on 2 cores, and the renderer's share is what a real renderer renders with.)
-// A remote mip is never read here (the attempt is
-// local-only: it comes back kUnfilled at once and goes to the remote path), and a texture whose inline load
-// was slow or that is not a DDS served raw is not loaded inline again (inline_ok_): a cold disk or a decoded
-// format costs the dispatcher at most one load per texture.
+// A remote mip is never read here (the attempt is local-only: it comes back kUnfilled at once and goes to the
+// remote path), and a texture whose inline load was slow or that is not a DDS served raw is not loaded inline
+// again (inline_ok_): a cold disk or a decoded format costs the dispatcher at most one load per texture.
 constexpr uint64_t kInlineMissBytes = 1 << 20;
 // An inline load that took longer than this (a disk read, a decode) marks its texture as not for inline loads.
 constexpr uint64_t kInlineSlowNs = 250'000;
