@@ -439,6 +439,20 @@ TEST_F(ServerStreamingTest, AFifoOrADirectoryInPlaceOfATextureFileIsAnErrorNotAH
   expect_payload(by_texture[kRgbaA]);
 }
 
+// Local misses are loaded by the dispatcher itself (inline) whatever the number of threads: with 8 workers and
+// 4 remote fetchers every crash-attribution word used to be taken before the dispatcher's, so no miss was
+// loaded inline and every one went through a worker hand-off.
+TEST_F(ServerStreamingTest, ManyWorkersStillLoadLocalMissesInline) {
+  ServerConfig config;
+  config.worker_threads = 8;
+  config.remote_fetches_in_flight = 4;
+  start_server(config);
+  for (uint32_t mip = 0; mip < 7; ++mip) load(kRgbaA, mip);
+  for (const auto& c : next_n(7)) expect_payload(c);
+  EXPECT_EQ(server_->stats().in_flight.max.load(), 0u) << "a miss went to a worker";
+  EXPECT_GT(server_->stats().loads_ok.load(), 0u);
+}
+
 TEST_F(ServerStreamingTest, StorageErrorIsAnIoErrorCompletion) {
   FaultyStorage faulty(scene::texture_path(dir_, TextureId(kFaulty)));
   start_server({}, &faulty);
