@@ -447,7 +447,7 @@ Status Renderer::server_can_start() const {
 }
 
 Status Renderer::standalone_server_not_refusing() const {
-  if (client_->stats().standalone_refused_by == 0) return ok_status();
+  if (client_->standalone_refused_by() == 0) return ok_status();
   return make_error(ErrorCode::kPeerDead, client_->last_server_exit() +
                                               ". Start texstream-server with this renderer's scene (--scene, "
                                               "scene.dir), or run this renderer on the server's scene");
@@ -455,7 +455,7 @@ Status Renderer::standalone_server_not_refusing() const {
 
 Status Renderer::server_not_refusing(uint64_t limit) const {
   TS_TRY(standalone_server_not_refusing());
-  const uint64_t refusals = client_->stats().server_refusals_before_attach;
+  const uint64_t refusals = client_->server_refusals_before_attach();
   if (refusals < limit) return ok_status();
   return make_error(ErrorCode::kPeerDead,
                     "texstream-server refused to start, " + std::to_string(refusals) +

@@ -219,6 +219,10 @@ class StreamClient {
   // written elsewhere).
   std::string stats_text() const;
   bool in_flight(TextureId texture, MipLevel mip) const;
+  // stats()'s standalone_refused_by and server_refusals_before_attach without building the whole StreamStats
+  // (the renderer asks every frame; stats() counts held slots and scans the lost requests).
+  uint32_t standalone_refused_by() const { return stats_.standalone_refused_by; }
+  uint64_t server_refusals_before_attach() const { return stats_.server_refusals_before_attach; }
   // Empty if a server is attached to the segment now; else why not, for an error that has to say it.
   std::string unattached_reason() const;
   bool quarantined(TextureId texture) const { return quarantined_.count(texture.value) != 0; }
