@@ -94,17 +94,15 @@ CompletionStatus MipLoader::fail_status(const LoadRequest& request, CompletionSt
     const auto now = std::chrono::steady_clock::now();
     if (now - timed_out_log_.last < kTimedOutLogPeriod) {
       ++timed_out_log_.suppressed;
+      timed_out_log_.any_suppressed.store(true, std::memory_order_relaxed);  // relaxed: the lock orders the count
       log = false;
     } else {
       timed_out_log_.last = now;
       quiet = std::exchange(timed_out_log_.suppressed, 0);
+      timed_out_log_.any_suppressed.store(false, std::memory_order_relaxed);
     }
   }
-  if (log && quiet > 0) {
-    spdlog::warn("{} more load(s) timed out or found the storage unavailable since the last such warning (at most "
-                 "one per {} s is logged)",
-                 quiet, std::chrono::duration_cast<std::chrono::seconds>(kTimedOutLogPeriod).count());
-  }
+  if (log && quiet > 0) log_left_out(quiet);
   if (log) {
     spdlog::warn("texture {} mip {}: {} ({}): {}", request.texture.value, request.mip.value, to_string(status),
                  path.string(), why);
@@ -115,6 +113,26 @@ CompletionStatus MipLoader::fail_status(const LoadRequest& request, CompletionSt
     default: stats_.add(stats_.io_errors, 1); break;
   }
   return status;
+}
+
+void MipLoader::log_left_out(uint64_t count) {
+  spdlog::warn("{} more load(s) timed out or found the storage unavailable after the last such warning (at most one "
+               "per {} s is logged)",
+               count, std::chrono::duration_cast<std::chrono::seconds>(kTimedOutLogPeriod).count());
+}
+
+void MipLoader::log_left_out_timeouts(bool now_or_never) {
+  if (!timed_out_log_.any_suppressed.load(std::memory_order_relaxed)) return;  // relaxed: rechecked under the lock
+  uint64_t quiet = 0;
+  {
+    std::lock_guard lock(timed_out_log_.mutex);
+    const auto now = std::chrono::steady_clock::now();
+    if (timed_out_log_.suppressed == 0 || (!now_or_never && now - timed_out_log_.last < kTimedOutLogPeriod)) return;
+    timed_out_log_.last = now;  // this line counts as the period's warning
+    quiet = std::exchange(timed_out_log_.suppressed, 0);
+    timed_out_log_.any_suppressed.store(false, std::memory_order_relaxed);
+  }
+  log_left_out(quiet);
 }
 
 CompletionRecord MipLoader::fail(const LoadRequest& request, CompletionStatus status,

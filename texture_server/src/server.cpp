@@ -271,6 +271,7 @@ RunOutcome Server::run(const std::atomic<bool>& stop, std::atomic<bool>* print_s
     pass_now_ns_ = steady_now_ns();
     if (was_idle || pass_now_ns_ - last_liveness_check >= kLivenessCheckNs) {
       last_liveness_check = pass_now_ns_;
+      loader_.log_left_out_timeouts();
       if (watch.dead()) {
         spdlog::info("the renderer (pid {}) exited", renderer_pid);
         outcome = RunOutcome::kRendererDead;
@@ -299,6 +300,7 @@ RunOutcome Server::run(const std::atomic<bool>& stop, std::atomic<bool>* print_s
     if (!busy) idle_wait();
   }
   block.attached.v.store(0, std::memory_order_release);  // pairs with the renderer's acquire-load
+  loader_.log_left_out_timeouts(/*now_or_never=*/true);
   spdlog::info("{}: {} completions\n{}", to_string(outcome), block.completions.v.load(std::memory_order_relaxed),
                stats_report());
   return outcome;

@@ -9,6 +9,7 @@
 //   into RGBA8 (oiio_mip_decoder.hpp). A bc1 texture is never encoded here: such a file is kCorrupt.
 // The file's extent of the asked mip must equal the texture table's, else kCorrupt. Errors are logged with
 // the path. Thread-safe (workers call load() concurrently; the dispatcher calls serve_cached()).
+#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <filesystem>
@@ -71,6 +72,14 @@ class MipLoader {
   // Inserts the held read's mips into the cache (one lock) and forgets them. Cheap when nothing is held.
   void release_held();
   bool holding() const { return !held_.empty(); }
+
+  // fail_status()'s rate limit on kTimedOut warnings (loads on several threads): at most one per period.
+  static constexpr std::chrono::seconds kTimedOutLogPeriod{5};
+  // Logs how many kTimedOut warnings the rate limit left out (see fail_status) once kTimedOutLogPeriod has
+  // passed since the last such warning, or at once with `now_or_never`: without it, an outage's last count was
+  // printed only at the next timeout, so never if the storage came back. Cheap when nothing was left out (one
+  // relaxed load); the dispatcher calls it about once a millisecond and at exit.
+  void log_left_out_timeouts(bool now_or_never = false);
 
   // The largest mip read as part of a coarse tail: 16 KiB = a 64x64 RGBA8 or 128x128 BC1 mip. A whole tail
   // of such mips is at most 4/3 of it (~22 KiB), which is what a texture wanted only at a coarser level
@@ -143,12 +152,12 @@ class MipLoader {
   CompletionStatus fail_status(const LoadRequest& request, CompletionStatus status, const std::filesystem::path& path,
                                const std::string& why);
   void count_read(uint64_t bytes);
-  // fail_status()'s rate limit on kTimedOut warnings (loads on several threads).
-  static constexpr std::chrono::seconds kTimedOutLogPeriod{5};
+  void log_left_out(uint64_t count);
   struct TimedOutLog {
     std::mutex mutex;
     std::chrono::steady_clock::time_point last{};
     uint64_t suppressed = 0;
+    std::atomic<bool> any_suppressed{false};  // suppressed > 0, read without the lock
   };
   TimedOutLog timed_out_log_;
 
