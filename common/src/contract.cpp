@@ -32,6 +32,7 @@ const char* to_string(ErrorCode code) {
     case ErrorCode::kUnavailable: return "unavailable";
     case ErrorCode::kVulkan: return "vulkan error";
     case ErrorCode::kResourceExhausted: return "resource exhausted";
+    case ErrorCode::kNotAFile: return "not a file";
   }
   return "unknown";
 }

@@ -40,6 +40,7 @@ CompletionStatus status_of(ErrorCode code) {
   switch (code) {
     case ErrorCode::kNotFound: return CompletionStatus::kNotFound;
     case ErrorCode::kCorrupt:
+    case ErrorCode::kNotAFile:
     case ErrorCode::kUnsupported: return CompletionStatus::kCorrupt;
     case ErrorCode::kTimeout:
     case ErrorCode::kUnavailable: return CompletionStatus::kTimedOut;
@@ -52,12 +53,14 @@ CompletionStatus status_of(ErrorCode code) {
 // the renderer asks again for without counting it against the texture (texture_states.cpp): before, an
 // origin down for 2.5 s left 4 textures broken for the rest of the run after 4 refused connections each.
 // Anything else — other 5xx, a wrong Content-Range, truncated bodies — kIoError, which the renderer retries a
-// bounded number of times. Never kCorrupt: the file itself was not shown to be bad.
+// bounded number of times. kCorrupt only for a path that names no regular file (a FIFO or a directory in its
+// place, kNotAFile): asking again cannot help, and it was 4 failed asks per texture as kIoError.
 CompletionStatus read_status(ErrorCode code) {
   switch (code) {
     case ErrorCode::kNotFound: return CompletionStatus::kNotFound;
     case ErrorCode::kTimeout:
     case ErrorCode::kUnavailable: return CompletionStatus::kTimedOut;
+    case ErrorCode::kNotAFile: return CompletionStatus::kCorrupt;
     default: return CompletionStatus::kIoError;
   }
 }

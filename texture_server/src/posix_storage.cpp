@@ -32,9 +32,7 @@ class PosixFile final : public StorageFile {
       const ssize_t n = ::pread(fd_, out.data() + done, out.size() - done, static_cast<off_t>(offset + done));
       if (n < 0) {
         if (errno == EINTR) continue;
-        return make_error(ErrorCode::kIo, "cannot read " + std::to_string(out.size()) + " bytes at offset " +
-                                              std::to_string(offset) + " of '" + path_ +
-                                              "': " + std::strerror(errno));
+        return read_error(errno, out.size(), offset);
       }
       if (n == 0) break;  // end of file
       done += static_cast<uint64_t>(n);
@@ -59,9 +57,7 @@ class PosixFile final : public StorageFile {
                                  static_cast<off_t>(offset + done));
       if (n < 0) {
         if (errno == EINTR) continue;
-        return make_error(ErrorCode::kIo, "cannot read " + std::to_string(total) + " bytes at offset " +
-                                              std::to_string(offset) + " of '" + path_ +
-                                              "': " + std::strerror(errno));
+        return read_error(errno, total, offset);
       }
       if (n == 0) break;  // end of file
       done += static_cast<uint64_t>(n);
@@ -85,6 +81,25 @@ class PosixFile final : public StorageFile {
   }
 
  private:
+  // A failed read. A texture path that names no regular file (a FIFO, a directory, a socket put in its
+  // place: its pread fails with ESPIPE or EISDIR) is kNotAFile, answered kCorrupt, which the renderer does
+  // not ask again for; it was kIo, asked 4 times per texture. Only this error path pays the fstat.
+  Error read_error(int err, uint64_t bytes, uint64_t offset) const {
+    struct stat st {};
+    if (::fstat(fd_, &st) == 0 && !S_ISREG(st.st_mode)) {
+      const char* kind = S_ISFIFO(st.st_mode)  ? "a FIFO"
+                         : S_ISDIR(st.st_mode) ? "a directory"
+                         : S_ISSOCK(st.st_mode) ? "a socket"
+                         : S_ISCHR(st.st_mode)  ? "a character device"
+                         : S_ISBLK(st.st_mode)  ? "a block device"
+                                                : "not a file";
+      return Error{ErrorCode::kNotAFile, "'" + path_ + "' is " + kind + ", not a regular file (" +
+                                            std::strerror(err) + ")"};
+    }
+    return Error{ErrorCode::kIo, "cannot read " + std::to_string(bytes) + " bytes at offset " +
+                                     std::to_string(offset) + " of '" + path_ + "': " + std::strerror(err)};
+  }
+
   int fd_;
   std::string path_;
 };
@@ -129,7 +144,7 @@ Result<std::unique_ptr<StorageFile>> PosixStorage::open_text(const std::string& 
   // O_NONBLOCK: a FIFO in place of a texture file would block open() until a writer came, and with it the
   // dispatcher (it opens local files itself): the renderer then killed the hung server and started another,
   // which hung on the same file, for ever (a preload never ended). Non-blocking, it opens at once and its
-  // pread fails (ESPIPE: kIoError). On regular files the flag changes nothing.
+  // pread fails (ESPIPE: kNotAFile, see read_error). On regular files the flag changes nothing.
   constexpr int kFlags = O_RDONLY | O_CLOEXEC | O_NONBLOCK;
   int fd;
   do {

@@ -21,6 +21,7 @@ enum class ErrorCode {
   kUnavailable,       // a storage origin that does not answer now (refused, reset, 502/503/504): try later
   kVulkan,
   kResourceExhausted, // a bounded pool or budget is full
+  kNotAFile,          // a path that names a FIFO, directory, socket or device where a regular file belongs
 };
 
 const char* to_string(ErrorCode code);
