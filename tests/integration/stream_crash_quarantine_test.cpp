@@ -118,6 +118,17 @@ void expect_texture_2_quarantined(StreamClient& client, RecordingSink& sink) {
   EXPECT_TRUE(client.quarantined(TextureId(2)));
 }
 
+// Drives mip 0 of textures 0..3 until the server (which dies whenever texture 2 is loaded) has died 3 times:
+// texture 2 must never be quarantined and must still be asked for.
+void expect_three_deaths_without_quarantine(StreamClient& client, RecordingSink& sink) {
+  const bool died = drive(client, sink, 4, 60s, [&] { return client.stats().server_deaths >= 3; });
+  const StreamStats st = client.stats();
+  ASSERT_TRUE(died) << st.server_deaths << " deaths";
+  EXPECT_FALSE(client.quarantined(TextureId(2)));
+  EXPECT_EQ(st.textures_quarantined, 0u);
+  EXPECT_FALSE(sink.answered(2, 0)) << "texture 2 must still be asked for";
+}
+
 TEST(StreamCrashQuarantine, ATextureLoadingDuringTwoCrashesIsQuarantinedAndTheOthersAreServed) {
   ASSERT_EQ(::access(kFakeServer.c_str(), X_OK), 0) << kFakeServer;
   Fixture f("segv");
@@ -186,14 +197,9 @@ TEST(StreamCrashQuarantine, DeathsBySigkillNeverQuarantine) {
   auto client = f.start();
   ASSERT_TRUE(client);
   RecordingSink sink;
-  // Texture 2 kills the server every time it is asked for: wait for 3 such deaths.
-  const bool died = drive(*client, sink, 4, 60s, [&] { return client->stats().server_deaths >= 3; });
-  const StreamStats st = client->stats();
-  ASSERT_TRUE(died) << st.server_deaths << " deaths";
-  EXPECT_FALSE(client->quarantined(TextureId(2)));
-  EXPECT_EQ(st.crash_signal_deaths, 0u);
-  EXPECT_EQ(st.textures_quarantined, 0u);
-  EXPECT_FALSE(sink.answered(2, 0)) << "texture 2 must still be asked for";
+  // Texture 2 kills the server every time it is asked for.
+  ASSERT_NO_FATAL_FAILURE(expect_three_deaths_without_quarantine(*client, sink));
+  EXPECT_EQ(client->stats().crash_signal_deaths, 0u);
   EXPECT_GE(sink.cancelled, 3);
 }
 
@@ -226,12 +232,7 @@ TEST(StreamCrashQuarantine, AStoppedServerIsNotChargedToTheTextureItWasLoading) 
   auto client = f.start();
   ASSERT_TRUE(client);
   RecordingSink sink;
-  const bool died = drive(*client, sink, 4, 60s, [&] { return client->stats().server_deaths >= 3; });
-  const StreamStats st = client->stats();
-  ASSERT_TRUE(died) << st.server_deaths << " deaths";
-  EXPECT_FALSE(client->quarantined(TextureId(2)));
-  EXPECT_EQ(st.textures_quarantined, 0u);
-  EXPECT_FALSE(sink.answered(2, 0)) << "texture 2 must still be asked for";
+  ASSERT_NO_FATAL_FAILURE(expect_three_deaths_without_quarantine(*client, sink));
 }
 
 // $TEXSTREAM_SERVER, else this build's texstream-server (a build dependency of this test).
