@@ -2,6 +2,7 @@
 // join the one read, that each lands in the cache with its own checksum and marked prefetched, that read
 // amplification counts a prefetched mip only once it is served, and that a truncated range caches nothing.
 // Also PosixStorage's preadv-based read_scatter_at on a real file, and MipCache's prefetched accounting.
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -141,12 +142,25 @@ TEST_F(TailRead, TheCoarsestMipBringsEverySmallMipInOneRead) {
   const uint64_t chain = mip_chain_offset(TexelFormat::kRgba8, 64, 64, 7);
   EXPECT_EQ(stats_.bytes_read.load(), scene::kDdsHeaderBytes + chain);  // the legacy header, read along
   EXPECT_EQ(stats_.bytes_loaded.load(), m6.size());
+  // The report tells the read-ahead not asked for yet apart: without it, only the header is read in vain.
+  EXPECT_EQ(cache_.stats().prefetched_bytes, chain - m6.size());
+  EXPECT_EQ(cache_.stats().prefetch_hit_bytes, 0u);
+  const std::string report = format_stats(stats_, cache_.stats());
+  EXPECT_NE(report.find(fmt::format("6 mips ({} bytes) not asked for yet", chain - m6.size())), std::string::npos)
+      << report;
+  EXPECT_NE(report.find(fmt::format("({:.4f} without the read-ahead not asked for yet)",
+                                    static_cast<double>(scene::kDdsHeaderBytes + m6.size()) /
+                                        static_cast<double>(m6.size()))),
+            std::string::npos)
+      << report;
   for (uint32_t l = 6; l-- > 0;) expect_hit(l);
   // Each prefetched mip counted as delivered once, at its first hit; a second hit counts nothing.
   EXPECT_EQ(stats_.bytes_loaded.load(), chain);
   expect_hit(0);
   EXPECT_EQ(stats_.bytes_loaded.load(), chain);
   EXPECT_EQ(cache_.stats().prefetch_hits, 6u);
+  EXPECT_EQ(cache_.stats().prefetch_hit_bytes, chain - m6.size());
+  EXPECT_NE(format_stats(stats_, cache_.stats()).find("0 mips (0 bytes) not asked for yet"), std::string::npos);
   EXPECT_EQ(storage_.counters.scatter_reads + storage_.counters.reads, 1);  // nothing read again
 }
 
@@ -189,6 +203,8 @@ TEST_F(TailRead, AHeldReadServesItsLevelsWithoutTheCacheThenInsertsThemTogether)
   EXPECT_EQ(stats_.bytes_loaded.load(), mip_chain_offset(TexelFormat::kRgba8, 64, 64, 7));
   st = cache_.stats();
   EXPECT_EQ(st.prefetch_hits, 6u);
+  EXPECT_EQ(st.prefetched_bytes, mip_chain_offset(TexelFormat::kRgba8, 64, 64, 7) - m6.size());
+  EXPECT_EQ(st.prefetch_hit_bytes, st.prefetched_bytes);  // the held read's served levels count as used
   EXPECT_EQ(st.hits, 7u);
   EXPECT_EQ(storage_.counters.scatter_reads + storage_.counters.reads, 1);  // one read for everything
 }

@@ -68,6 +68,7 @@ std::optional<CachedCopy> MipCache::copy_into(MipKey key, std::span<std::byte> d
   const bool first_use = e->prefetched;
   e->prefetched = false;
   stats_.prefetch_hits += first_use ? 1 : 0;
+  stats_.prefetch_hit_bytes += first_use ? e->size : 0;
   return CachedCopy{e->size, e->checksum, first_use};
 }
 
@@ -174,6 +175,8 @@ size_t MipCache::insert_loaded(std::span<LoadedMip> mips) {
       ++stats_.hits;
       ++stats_.prefetch_hits;
       ++stats_.prefetched;  // it was read ahead (stats_.prefetched counts entries read ahead of a request)
+      stats_.prefetch_hit_bytes += m.mip->bytes.size();
+      stats_.prefetched_bytes += m.mip->bytes.size();
     }
     admitted += insert_locked(m.key, std::move(m.mip), m.use == LoadedUse::kReadAhead, evicted) ? 1 : 0;
   }
@@ -224,6 +227,7 @@ bool MipCache::insert_locked(MipKey key, std::shared_ptr<const CachedMip> mip, b
   slot.mip = std::move(mip);
   slot.prefetched = prefetched;
   stats_.prefetched += prefetched ? 1 : 0;
+  stats_.prefetched_bytes += prefetched ? size : 0;
   entries_.insert(std::move(slot));
   stats_.bytes += size;
   ++stats_.insertions;

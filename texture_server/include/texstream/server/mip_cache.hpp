@@ -81,6 +81,8 @@ struct MipCacheStats {
   uint64_t rejections = 0;  // insert() refused: larger than the budget, or the rest was pinned
   uint64_t prefetched = 0;      // entries inserted ahead of any request (a coarse-tail read)
   uint64_t prefetch_hits = 0;   // of the hits: first uses of such entries (the rest of the hits were asked before)
+  uint64_t prefetched_bytes = 0;     // their payload bytes
+  uint64_t prefetch_hit_bytes = 0;   // the payload bytes of those first uses
   uint64_t bytes = 0;       // payload bytes held now
   uint64_t entries = 0;
   uint64_t budget_bytes = 0;
