@@ -103,6 +103,30 @@ TEST(MipCacheTest, RefusesWhenOnlyPinnedEntriesCouldMakeRoom) {
   EXPECT_EQ(s.evictions, 0u);
 }
 
+// Pins are counted (eviction skips the per-entry check while none is out): a pin and its copies keep the entry,
+// letting the last one go makes it evictable again, and a pin may outlive the cache.
+TEST(MipCacheTest, APinLetGoMakesItsEntryEvictableAgainAndAPinMayOutliveTheCache) {
+  std::shared_ptr<const CachedMip> outliving;
+  {
+    MipCache cache = make_cache(200);
+    ASSERT_TRUE(cache.insert(key(1), mip_of(100, 1)));
+    ASSERT_TRUE(cache.insert(key(2), mip_of(100, 2)));
+    {
+      const auto pin = cache.lookup(key(1));
+      const auto copy = pin;  // NOLINT(performance-unnecessary-copy-initialization): a second holder
+      EXPECT_FALSE(cache.insert(key(3), mip_of(150, 3)));  // 2 goes; 1 is pinned, so 150 bytes never fit
+      EXPECT_TRUE(cache.contains(key(1)));
+    }
+    ASSERT_TRUE(cache.insert(key(3), mip_of(150, 3)));  // no pin out: 1 goes
+    EXPECT_FALSE(cache.contains(key(1)));
+    outliving = cache.lookup(key(3));
+  }
+  ASSERT_NE(outliving, nullptr);
+  EXPECT_EQ(outliving->bytes.size(), 150u);
+  EXPECT_EQ(outliving->bytes.front(), std::byte{3});
+  outliving.reset();  // counts the pin off on a counter the cache no longer owns alone (ASan: no use after free)
+}
+
 TEST(MipCacheTest, RejectsMipsLargerThanTheBudgetAndZeroBudgetCachesNothing) {
   MipCache cache = make_cache(100);
   EXPECT_FALSE(cache.admissible(101));

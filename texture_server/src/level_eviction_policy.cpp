@@ -84,7 +84,7 @@ std::optional<MipKey> LevelEvictionPolicy::pick_victim(const std::function<bool(
       }
     }
     if (!best) return std::nullopt;
-    if (evictable(best->key)) return best->key;
+    if (!evictable || evictable(best->key)) return best->key;
     ++at[best_level];
   }
 }

@@ -45,7 +45,7 @@ void LruEvictionPolicy::on_erase(MipKey key) {
 
 std::optional<MipKey> LruEvictionPolicy::pick_victim(const std::function<bool(MipKey)>& evictable) {
   for (auto it = order_.rbegin(); it != order_.rend(); ++it) {
-    if (evictable(it->key)) return it->key;
+    if (!evictable || evictable(it->key)) return it->key;
   }
   return std::nullopt;
 }

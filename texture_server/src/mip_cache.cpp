@@ -36,7 +36,12 @@ std::shared_ptr<const CachedMip> MipCache::lookup(MipKey key) {
   }
   ++stats_.hits;
   policy_->touch(e->node);
-  return e->mip;  // the copy is the pin: made under the lock (see the header's contract)
+  // The pin: a reference to the entry (made under the lock, see the header's contract), inside a shared_ptr
+  // whose deleter counts the pin off before that reference goes.
+  pins_->fetch_add(1, std::memory_order_relaxed);  // relaxed: read under this lock, which orders it
+  return std::shared_ptr<const CachedMip>(e->mip.get(), [entry = e->mip, pins = pins_](const CachedMip*) {
+    pins->fetch_sub(1, std::memory_order_release);  // pairs with evict_one()'s acquire: the holder is done
+  });
 }
 
 std::optional<CachedCopy> MipCache::copy_into(MipKey key, std::span<std::byte> dst,
@@ -80,11 +85,14 @@ bool MipCache::contains(MipKey key) const {
 bool MipCache::evict_one(std::vector<std::shared_ptr<const CachedMip>>& evicted) {
   // Only entries nobody outside holds may go: use_count() == 1 is the cache's own reference. Counts only fall
   // concurrently (new references are made under this lock), so a stale read can only keep an entry.
+  // With no lookup() pin out, nothing outside holds an entry: no candidate needs asking (the server's case).
   const auto evictable = [this](MipKey k) {
     const MipCacheSlot* e = entries_.find(k);
     return e != nullptr && e->mip.use_count() == 1;
   };
-  const std::optional<MipKey> victim = policy_->pick_victim(evictable);
+  const bool pinned_some = pins_->load(std::memory_order_acquire) != 0;
+  const std::optional<MipKey> victim =
+      pinned_some ? policy_->pick_victim(evictable) : policy_->pick_victim(std::function<bool(MipKey)>{});
   if (!victim) return false;
   MipCacheSlot* e = entries_.find(*victim);
   TS_ASSERT(e != nullptr, "the eviction policy picked a key the cache does not hold");
@@ -214,7 +222,7 @@ bool MipCache::insert_locked(MipKey key, std::shared_ptr<const CachedMip> mip, b
   };
   if (!admissible(size)) return give_up();
   while (stats_.bytes + size > budget_) {
-    // Everything left is pinned (at most one entry per worker plus the dispatcher): refuse, stay in budget.
+    // Everything left is pinned (held through lookup()): refuse, stay in budget.
     if (!evict_one(evicted)) return give_up();
   }
   if (is_overflow(mip->bytes)) overflow_bytes_ += size;

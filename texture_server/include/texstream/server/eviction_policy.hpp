@@ -39,6 +39,7 @@ class EvictionPolicy {
   virtual void touch(PolicyNode* node) = 0;
   virtual void erase(PolicyNode* node) = 0;
   // The key to evict first among those for which `evictable` is true (pinned entries are not), or nullopt.
+  // An empty `evictable`: every key is (the cache has no pin out), and none is asked about.
   virtual std::optional<MipKey> pick_victim(const std::function<bool(MipKey)>& evictable) = 0;
   // The clock advanced to `now` (the server's streaming-cycle generation: the "frames" of Eq. 4). Policies
   // that order by recency alone ignore it.
