@@ -25,19 +25,20 @@ std::string format_stats(const ServerStats& s, const MipCacheStats& c) {
                      "{} entries, {} of {} bytes\n",
                      c.hits, c.misses, hit_rate, c.insertions, c.evictions, c.rejections, c.entries, c.bytes,
                      c.budget_bytes);
-  // Mips read ahead count as loaded at their first use only: those not asked for (yet) are what the read
-  // amplification has on top of the exact reads, and a short run (a 90-frame demo) has many of them.
+  // Mips read ahead count as loaded at their first use only: those not used (yet, or before their eviction)
+  // are what the read amplification has on top of the exact reads. A short run (the 90-frame demo) and a
+  // small cache have many of them.
   const uint64_t unused_mips = c.prefetched - std::min(c.prefetched, c.prefetch_hits);
   const uint64_t unused_bytes = c.prefetched_bytes - std::min(c.prefetched_bytes, c.prefetch_hit_bytes);
   out += fmt::format("coarse tails: {} mips read ahead ({} bytes), {} of the hits were their first use; {} mips "
-                     "({} bytes) not asked for yet\n",
+                     "({} bytes) not used (yet, or before their eviction)\n",
                      c.prefetched, c.prefetched_bytes, c.prefetch_hits, unused_mips, unused_bytes);
   const uint64_t loaded = get(s.bytes_loaded);
   const uint64_t read = get(s.bytes_read);
   const double asked_amplification =
       loaded == 0 ? 0.0 : static_cast<double>(read - std::min(read, unused_bytes)) / static_cast<double>(loaded);
   out += fmt::format("storage: {} bytes read, {} bytes of mips loaded, read amplification {:.4f} ({:.4f} without the "
-                     "read-ahead not asked for yet); {} bytes served from the cache; rate-limit waits {} us\n",
+                     "read-ahead not used); {} bytes served from the cache; rate-limit waits {} us\n",
                      read, loaded, read_amplification(s), asked_amplification, get(s.bytes_served_cached),
                      get(s.rate_limit_wait_us));
   out += fmt::format("completions: {} hits ok, {} loads ok, {} not found, {} corrupt, {} I/O errors, {} cancelled\n",
