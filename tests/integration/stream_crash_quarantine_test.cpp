@@ -203,20 +203,29 @@ TEST(StreamCrashQuarantine, DeathsBySigkillNeverQuarantine) {
   EXPECT_GE(sink.cancelled, 3);
 }
 
+// The fake server, set to stall whenever texture 2 is loaded (`mode`: its hang or its stop variable), under
+// a 300 ms heartbeat timeout so that the watchdog kills it soon.
+struct StallingServer {
+  Fixture f;
+  ScopedEnv stall;
+  std::unique_ptr<StreamClient> client;
+  StallingServer(const std::string& tag, const char* mode) : f(tag), stall(mode, "2") {
+    f.config.protocol.heartbeat_timeout_ms = 300;
+    client = f.start();
+  }
+};
+
 // A server that hangs while loading a texture (a file whose reads block, a stuck mount) is killed by the
 // heartbeat watchdog, and that kill charges the texture like a crash: after two, it is quarantined and the
 // others are served. Before, only crash signals charged: the watchdog killed the server, the next one hung on
 // the same texture, for ever (seen with a FIFO in place of a texture file, docs/faults.md).
 TEST(StreamCrashQuarantine, ATextureLoadingDuringTwoHangsIsQuarantined) {
   ASSERT_EQ(::access(kFakeServer.c_str(), X_OK), 0) << kFakeServer;
-  Fixture f("hang");
-  f.config.protocol.heartbeat_timeout_ms = 300;
-  ScopedEnv hang("TEXSTREAM_FAKE_HANG_TEXTURE", "2");
-  auto client = f.start();
-  ASSERT_TRUE(client);
+  StallingServer s("hang", "TEXSTREAM_FAKE_HANG_TEXTURE");
+  ASSERT_TRUE(s.client);
   RecordingSink sink;
-  ASSERT_NO_FATAL_FAILURE(expect_texture_2_quarantined(*client, sink));
-  const StreamStats st = client->stats();
+  ASSERT_NO_FATAL_FAILURE(expect_texture_2_quarantined(*s.client, sink));
+  const StreamStats st = s.client->stats();
   EXPECT_EQ(st.crash_signal_deaths, 0u) << "a hang is no crash signal";
   EXPECT_EQ(st.server_deaths, 2u);
   EXPECT_EQ(st.textures_quarantined, 1u);
@@ -226,13 +235,10 @@ TEST(StreamCrashQuarantine, ATextureLoadingDuringTwoHangsIsQuarantined) {
 // the watchdog too, but that is not the texture's doing: it is never charged.
 TEST(StreamCrashQuarantine, AStoppedServerIsNotChargedToTheTextureItWasLoading) {
   ASSERT_EQ(::access(kFakeServer.c_str(), X_OK), 0) << kFakeServer;
-  Fixture f("stop");
-  f.config.protocol.heartbeat_timeout_ms = 300;
-  ScopedEnv stop("TEXSTREAM_FAKE_STOP_TEXTURE", "2");
-  auto client = f.start();
-  ASSERT_TRUE(client);
+  StallingServer s("stop", "TEXSTREAM_FAKE_STOP_TEXTURE");
+  ASSERT_TRUE(s.client);
   RecordingSink sink;
-  ASSERT_NO_FATAL_FAILURE(expect_three_deaths_without_quarantine(*client, sink));
+  ASSERT_NO_FATAL_FAILURE(expect_three_deaths_without_quarantine(*s.client, sink));
 }
 
 // $TEXSTREAM_SERVER, else this build's texstream-server (a build dependency of this test).
