@@ -96,13 +96,11 @@ CompletionStatus MipLoader::fail_status(const LoadRequest& request, CompletionSt
     std::lock_guard lock(timed_out_log_.mutex);
     const auto now = std::chrono::steady_clock::now();
     if (now - timed_out_log_.last < kTimedOutLogPeriod) {
-      ++timed_out_log_.suppressed;
-      timed_out_log_.any_suppressed.store(true, std::memory_order_relaxed);  // relaxed: the lock orders the count
+      timed_out_log_.suppressed.fetch_add(1, std::memory_order_relaxed);  // relaxed: the lock orders it
       log = false;
     } else {
       timed_out_log_.last = now;
-      quiet = std::exchange(timed_out_log_.suppressed, 0);
-      timed_out_log_.any_suppressed.store(false, std::memory_order_relaxed);
+      quiet = timed_out_log_.suppressed.exchange(0, std::memory_order_relaxed);
     }
   }
   if (log && quiet > 0) log_left_out(quiet);
@@ -125,15 +123,15 @@ void MipLoader::log_left_out(uint64_t count) {
 }
 
 void MipLoader::log_left_out_timeouts(bool now_or_never) {
-  if (!timed_out_log_.any_suppressed.load(std::memory_order_relaxed)) return;  // relaxed: rechecked under the lock
+  if (timed_out_log_.suppressed.load(std::memory_order_relaxed) == 0) return;  // relaxed: rechecked under the lock
   uint64_t quiet = 0;
   {
     std::lock_guard lock(timed_out_log_.mutex);
     const auto now = std::chrono::steady_clock::now();
-    if (timed_out_log_.suppressed == 0 || (!now_or_never && now - timed_out_log_.last < kTimedOutLogPeriod)) return;
+    if (!now_or_never && now - timed_out_log_.last < kTimedOutLogPeriod) return;
+    quiet = timed_out_log_.suppressed.exchange(0, std::memory_order_relaxed);
+    if (quiet == 0) return;
     timed_out_log_.last = now;  // this line counts as the period's warning
-    quiet = std::exchange(timed_out_log_.suppressed, 0);
-    timed_out_log_.any_suppressed.store(false, std::memory_order_relaxed);
   }
   log_left_out(quiet);
 }

@@ -156,8 +156,8 @@ class MipLoader {
   struct TimedOutLog {
     std::mutex mutex;
     std::chrono::steady_clock::time_point last{};
-    uint64_t suppressed = 0;
-    std::atomic<bool> any_suppressed{false};  // suppressed > 0, read without the lock
+    // Changed under the lock; log_left_out_timeouts() reads it without, to skip the lock when it is 0.
+    std::atomic<uint64_t> suppressed{0};
   };
   TimedOutLog timed_out_log_;
 
