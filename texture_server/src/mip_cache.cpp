@@ -77,6 +77,12 @@ std::optional<CachedCopy> MipCache::copy_into(MipKey key, std::span<std::byte> d
   return CachedCopy{e->size, e->checksum, first_use};
 }
 
+void MipCache::prefetch_index(std::span<const MipKey> keys) const {
+  if (keys.empty()) return;
+  std::lock_guard lock(mutex_);  // the table may grow under a worker's insert: its slots are read under the lock
+  for (const MipKey k : keys) entries_.prefetch(k);
+}
+
 bool MipCache::contains(MipKey key) const {
   std::lock_guard lock(mutex_);
   return entries_.find(key) != nullptr;

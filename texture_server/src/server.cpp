@@ -185,6 +185,7 @@ Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const S
   cancelled_scratch_.reserve(256);
   results_scratch_.reserve(64);
   hits_unrecorded_.reserve(256);
+  drained_keys_.reserve(256);
   if (fault_injection_enabled()) completions_.set_mid_push_hook([] { fault_point(FaultPoint::kMidRingPush); });
   publish_each_completion_ = fault_injection_enabled();
   ShmAtomic<uint32_t>* doorbell = &segment_.renderer_block().doorbell;
@@ -337,6 +338,8 @@ bool Server::drain_requests() {
   }
   requests_.publish();  // one release-store of the read position for the whole batch
   if (!any) return false;
+  cache_.prefetch_index(drained_keys_);
+  drained_keys_.clear();
   if (scheduler_.newest_generation().value > clock_generation_) {
     clock_generation_ = scheduler_.newest_generation().value;
     cache_.advance_clock(clock_generation_);  // one streaming cycle = one "frame" of seed 002 Eq. 4
@@ -386,6 +389,7 @@ void Server::handle_load(const RequestRecord& r) {
     complete(make_completion(request, CompletionStatus::kIoError));
     return;
   }
+  drained_keys_.push_back(request.key());
   if (const std::optional<LoadRequest> cancelled = scheduler_.add(request)) {
     block.requests_cancelled.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
     stats_.add(stats_.cancelled, 1);

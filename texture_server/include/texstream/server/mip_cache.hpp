@@ -131,6 +131,10 @@ class MipCache {
   // over the arena; a small gain, see copy_into()). Counts nothing for it.
   std::optional<CachedCopy> copy_into(MipKey key, std::span<std::byte> dst,
                                       std::optional<MipKey> prefetch_next = std::nullopt);
+  // Starts loading the index slots of `keys` into the CPU cache (a hint: counts nothing, changes nothing). The
+  // dispatcher calls it once per drained batch of requests, so that the index lookups of the batch's hits
+  // overlap instead of each waiting for DRAM in copy_into().
+  void prefetch_index(std::span<const MipKey> keys) const;
   // A payload of exactly `bytes` for a miss to read into and then insert(): from the warm arena when there is
   // one and `bytes` ≥ CacheArena::kMinBlock (evicting unpinned entries in policy order until a block is
   // free), else from the heap. nullptr when the mip is not admissible, or when the arena has no block even

@@ -140,6 +140,7 @@ class Server {
   bool publish_each_completion_ = false;        // fault injection: publish per record (kAfterRingPush)
   std::vector<LoadRequest> cancelled_scratch_;  // reused each iteration: no allocation when warm
   std::vector<LoadResult> results_scratch_;
+  std::vector<MipKey> drained_keys_;            // the loads of the pass's drained batch (MipCache::prefetch_index)
   std::vector<uint64_t> hits_unrecorded_;       // receive times of hits served, latency not yet recorded
   uint64_t pass_now_ns_ = 0;                    // steady clock at the start of the loop's current pass
   ShmAtomic<uint32_t>* inline_loading_ = nullptr;  // the dispatcher's crash-attribution word (null: no inline loads)
