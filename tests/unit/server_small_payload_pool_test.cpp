@@ -146,5 +146,63 @@ TEST(SmallPayloadPoolTest, TheCacheTakesSmallPayloadsFromThePoolAndGetsThemBackO
   EXPECT_EQ(again->bytes.data(), small_block);
 }
 
+TEST(SmallPayloadPoolTest, TheArenasPrefaultWarmsThePoolAfterTheArenaAndPayloadsTakenMeanwhileKeepTheirBytes) {
+  // 64 MiB budget: a pool of 8 MiB, beyond the kWarmBytes the pool faults in itself and below kPrefaultBytes.
+  constexpr uint64_t kBudget = 64ull << 20;
+  static_assert(kBudget / 8 <= SmallPayloadPool::kPrefaultBytes);
+  {
+    MipCache cold(kBudget, std::make_unique<LruEvictionPolicy>(), MipCacheOptions{true, ArenaPrefault::kNone});
+    EXPECT_EQ(cold.stats().small_pool_capacity, kBudget / 8);
+    EXPECT_EQ(cold.stats().small_pool_warm_bytes, SmallPayloadPool::kWarmBytes);  // nobody warms the rest
+  }
+  {
+    MipCache now(kBudget, std::make_unique<LruEvictionPolicy>(), MipCacheOptions{true, ArenaPrefault::kNow});
+    EXPECT_EQ(now.stats().small_pool_warm_bytes, kBudget / 8);
+  }
+  MipCache cache(kBudget, std::make_unique<LruEvictionPolicy>(), MipCacheOptions{true, ArenaPrefault::kBackground});
+  // Payloads taken (and written) while the pre-fault thread runs: past kWarmBytes some land in slabs that the
+  // thread has claimed or is faulting in.
+  std::vector<std::shared_ptr<CachedMip>> mips;
+  for (uint32_t i = 0; i < 3000; ++i) {
+    auto m = cache.make_payload(2048);
+    ASSERT_NE(m, nullptr);
+    ASSERT_TRUE(m->bytes.in_pool());
+    std::memset(m->bytes.data(), static_cast<int>(i & 0xff), 2048);
+    mips.push_back(std::move(m));
+  }
+  cache.wait_arena_warm();
+  const MipCacheStats s = cache.stats();
+  EXPECT_EQ(s.arena_warm_bytes, s.arena_bytes);
+  EXPECT_EQ(s.small_pool_warm_bytes, s.small_pool_capacity);
+  EXPECT_EQ(s.small_pool_prefault_bytes, s.small_pool_capacity);
+  EXPECT_GE(s.small_pool_bytes, 3000u * 2048);
+  for (uint32_t i = 0; i < mips.size(); ++i) {
+    const std::byte* b = mips[i]->bytes.data();
+    ASSERT_EQ(b[0], static_cast<std::byte>(i & 0xff)) << i;
+    ASSERT_EQ(b[2047], static_cast<std::byte>(i & 0xff)) << i;
+  }
+}
+
+TEST(SmallPayloadPoolTest, WarmStepsStopAtThePrefaultBoundAndAllocationPastItStillWorks) {
+  SmallPayloadPool pool(64ull << 20);  // a 512 MiB cache's pool
+  ASSERT_EQ(pool.prefault_bytes(), SmallPayloadPool::kPrefaultBytes);
+  EXPECT_EQ(pool.bytes_warm(), SmallPayloadPool::kWarmBytes);
+  int steps = 0;
+  while (pool.warm_step()) ++steps;
+  EXPECT_EQ(pool.bytes_warm(), SmallPayloadPool::kPrefaultBytes);  // not the whole 64 MiB
+  EXPECT_FALSE(pool.warm_step());
+  EXPECT_EQ(steps + 1, static_cast<int>((SmallPayloadPool::kPrefaultBytes - SmallPayloadPool::kWarmBytes) >> 20));
+  // Slabs past the warm part are faulted in by allocate() itself, as before.
+  std::vector<std::byte*> blocks;
+  for (uint64_t b = 0; b < SmallPayloadPool::kPrefaultBytes + 4 * kSlab; b += 2048) {
+    std::byte* p = pool.allocate(2048);
+    ASSERT_NE(p, nullptr);
+    p[0] = std::byte{1};
+    blocks.push_back(p);
+  }
+  EXPECT_GT(pool.bytes_warm(), SmallPayloadPool::kPrefaultBytes);
+  for (std::byte* p : blocks) pool.free(p, 2048);
+}
+
 }  // namespace
 }  // namespace texstream::server

@@ -25,7 +25,8 @@ uint64_t CacheArena::block_bytes(uint64_t bytes) {
   return std::bit_ceil(std::max<uint64_t>(bytes, kMinBlock));
 }
 
-CacheArena::CacheArena(uint64_t capacity, ArenaPrefault prefault) : free_(kMaxOrders) {
+CacheArena::CacheArena(uint64_t capacity, ArenaPrefault prefault, std::function<bool()> then_warm)
+    : free_(kMaxOrders), then_warm_(std::move(then_warm)) {
   capacity_ = capacity / kMinBlock * kMinBlock;
   if (capacity_ == 0) return;
   void* p = ::mmap(nullptr, capacity_, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE, -1, 0);
@@ -51,6 +52,8 @@ CacheArena::CacheArena(uint64_t capacity, ArenaPrefault prefault) : free_(kMaxOr
   }
   if (prefault == ArenaPrefault::kNow) {
     prefault_range(0, capacity_);
+    while (then_warm_ && then_warm_()) {
+    }
   } else if (prefault == ArenaPrefault::kBackground) {
     warmer_ = std::thread([this] { warm_in_background(); });
   }
@@ -83,6 +86,8 @@ void CacheArena::warm_in_background() {
   ::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), 10);
   for (uint64_t from = 0; from < capacity_ && !stop_.load(std::memory_order_relaxed); from += kWarmStep) {
     prefault_range(from, std::min(capacity_, from + kWarmStep));
+  }
+  while (then_warm_ && !stop_.load(std::memory_order_relaxed) && then_warm_()) {
   }
 }
 

@@ -17,11 +17,13 @@ MipCache::MipCache(uint64_t budget_bytes, std::unique_ptr<EvictionPolicy> policy
   stats_.budget_bytes = budget_;
   // The arena is the budget itself, so arena payloads can never hold more memory than the budget allows.
   if (options.arena && budget_ >= CacheArena::kMinBlock) {
-    arena_ = std::make_shared<CacheArena>(budget_, options.prefault);
+    // The pool's pages are faulted in after the arena's, by the arena's pre-fault (SmallPayloadPool::warm_step).
+    auto pool = std::make_shared<SmallPayloadPool>(budget_ / kSmallPoolDivisor);
+    arena_ = std::make_shared<CacheArena>(budget_, options.prefault, [pool] { return pool->warm_step(); });
     if (arena_->capacity() == 0) {
       arena_.reset();  // no address space: heap payloads, as without the option
     } else {
-      small_pool_ = std::make_shared<SmallPayloadPool>(budget_ / kSmallPoolDivisor);
+      small_pool_ = std::move(pool);
       block_allocator_.emplace(small_pool_);
     }
   }
@@ -273,6 +275,9 @@ MipCacheStats MipCache::stats() const {
     s.arena_warm_bytes = arena_->bytes_warm();
     s.arena_in_use_bytes = arena_->bytes_in_use();
     s.small_pool_bytes = small_pool_->slab_bytes();
+    s.small_pool_capacity = small_pool_->capacity();
+    s.small_pool_prefault_bytes = small_pool_->prefault_bytes();
+    s.small_pool_warm_bytes = small_pool_->bytes_warm();
   }
   return s;
 }

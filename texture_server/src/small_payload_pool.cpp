@@ -96,6 +96,24 @@ void SmallPayloadPool::free(std::byte* p, uint64_t bytes) {
   in_use_ -= kMinClass << c;
 }
 
+bool SmallPayloadPool::warm_step() {
+  uint64_t from = 0, to = 0;
+  {
+    std::lock_guard lock(mutex_);
+    if (warm_ >= prefault_bytes()) return false;
+    from = warm_;
+    to = std::min(prefault_bytes(), from + kWarmStepBytes);
+    warm_ = to;  // claimed: allocate() no longer faults these slabs in itself
+  }
+  populate(base_ + from, to - from);
+  return to < prefault_bytes();
+}
+
+uint64_t SmallPayloadPool::bytes_warm() const {
+  std::lock_guard lock(mutex_);
+  return warm_;
+}
+
 uint64_t SmallPayloadPool::slab_bytes() const {
   std::lock_guard lock(mutex_);
   return slabs_used_;

@@ -551,13 +551,14 @@ OiioResult replay_oiio(const Scene& s, const std::vector<Cycle>& trace, uint64_t
   return out;
 }
 
-// Waits (at most 10 s) until the server's cache arena, if it has one, is pre-faulted (at idle priority after
-// start; the staging slots are faulted in when the segment is created and opened); returns the seconds.
+// Waits (at most 10 s) until the server's cache arena and its small-payload pool, if it has them, are
+// pre-faulted (at idle priority after start; the staging slots are faulted in when the segment is created and
+// opened); returns the seconds.
 double wait_for_warm_arena(const server::Server& server) {
   const Stopwatch sw;
   for (;;) {
     const server::MipCacheStats cs = server.cache_stats();
-    const bool warm = cs.arena_warm_bytes >= cs.arena_bytes;
+    const bool warm = cs.arena_warm_bytes >= cs.arena_bytes && cs.small_pool_warm_bytes >= cs.small_pool_prefault_bytes;
     if (warm || sw.seconds() > 10.0) return sw.seconds();
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
@@ -990,10 +991,12 @@ int run_server_bench(const std::vector<std::string>& args) {
     {
     const server::MipCacheStats cs = h->server().cache_stats();
     if (cs.arena_bytes > 0) {
-      std::printf("\n[misses] the server's cache arena: %.1f MB, %.1f MB pre-faulted after %.2f s of waiting before "
-                  "the misses (%llu arena evictions, %llu fallbacks)",
+      std::printf("\n[misses] the server's cache arena: %.1f MB, %.1f MB pre-faulted, and its small-payload pool: %.1f "
+                  "MB, %.1f MB of it pre-faulted, after %.2f s of waiting before the misses (%llu arena evictions, %llu "
+                  "fallbacks)",
                   static_cast<double>(cs.arena_bytes) / 1e6, static_cast<double>(cs.arena_warm_bytes) / 1e6,
-                  arena_wait_s, static_cast<unsigned long long>(cs.arena_evictions),
+                  static_cast<double>(cs.small_pool_capacity) / 1e6,
+                  static_cast<double>(cs.small_pool_warm_bytes) / 1e6, arena_wait_s, static_cast<unsigned long long>(cs.arena_evictions),
                   static_cast<unsigned long long>(cs.arena_fallbacks));
     } else {
       std::printf("\n[misses] the server's cache has no arena (payloads from malloc)");

@@ -20,6 +20,7 @@
 #include <bit>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <mutex>
 #include <set>
 #include <thread>
@@ -40,7 +41,11 @@ class CacheArena {
 
   // `capacity` is rounded down to kMinBlock. A capacity below kMinBlock gives an empty arena (every
   // allocate() fails). The mapping is reserved without swap accounting (MAP_NORESERVE) and never grows.
-  CacheArena(uint64_t capacity, ArenaPrefault prefault);
+  //
+  // `then_warm`, if given, is more memory to fault in after the arena's own pages, on the same thread (or in the
+  // constructor with kNow): it is called until it returns false (each call one bounded step) or the arena goes.
+  // MipCache passes its small-payload pool's (small_payload_pool.hpp).
+  CacheArena(uint64_t capacity, ArenaPrefault prefault, std::function<bool()> then_warm = {});
   ~CacheArena();
   CacheArena(const CacheArena&) = delete;
   CacheArena& operator=(const CacheArena&) = delete;
@@ -84,6 +89,7 @@ class CacheArena {
   uint64_t in_use_ = 0;
   std::atomic<uint64_t> warm_{0};
   std::atomic<bool> stop_{false};
+  std::function<bool()> then_warm_;
   std::thread warmer_;
 };
 

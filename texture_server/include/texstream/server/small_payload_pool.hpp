@@ -6,8 +6,9 @@
 // cost after the reads themselves: texstream-bench server's misses (perf, the dispatcher during the miss
 // stream) spent ~20 % of their time growing the thread's malloc heap — an mprotect per 4 KiB of growth and a
 // first-touch page fault per page, ~4 µs each on this machine (cache_arena.hpp). From the pool a small
-// payload is a free-list pop: the first kWarmBytes are faulted in when the pool is made, every later slab
-// with one madvise (MADV_POPULATE_WRITE) for its 16 pages.
+// payload is a free-list pop: the first kWarmBytes are faulted in when the pool is made, the rest by the cache
+// arena's pre-fault thread once the arena is warm (warm_step()), and a slab taken before that with one
+// madvise (MADV_POPULATE_WRITE) for its 16 pages.
 // Not from the cache's arena: slabs there took blocks the large mips needed, and the buddy allocator then
 // evicted more (texstream-bench server's trace, "level with the buddy arena" at 30 MB: hit rate 0.572 with
 // small payloads on the heap, 0.537 with them in arena slabs).
@@ -21,6 +22,7 @@
 // Bounded: at most `max_bytes` of slabs (the cache passes a share of its budget: like the heap payloads they
 // replace, they are memory beside the arena); past that allocate() returns nullptr and the caller uses the
 // heap as before. Thread-safe (payloads are freed from any thread that drops the last reference).
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -52,6 +54,21 @@ class SmallPayloadPool {
   SmallPayloadPool(const SmallPayloadPool&) = delete;
   SmallPayloadPool& operator=(const SmallPayloadPool&) = delete;
 
+  // Faulted in by warm_step() at most: with the cache's budget and the staging pool it must fit the 64 MiB the
+  // server may use beside them (docs/config.md, server.ram_cache_bytes); the coarse mips of ~12000 textures.
+  static constexpr uint64_t kPrefaultBytes = 16 << 20;
+
+  // Faults in the next kWarmStepBytes of the pool not faulted in yet (one madvise, outside the pool's lock: a
+  // slab handed out meanwhile is only written, as it would be anyway), up to prefault_bytes(). False once
+  // that much is warm.
+  // The cache arena's pre-fault thread calls it after the arena (CacheArena's then_warm): in a fresh server
+  // the slabs taken while the cache first fills were faulted in by the dispatcher, one madvise per 64 KiB
+  // slab (texstream-bench server --quick --phases misses, perf: clear_page and the fault path were ~5 % of
+  // the dispatcher; 4 alternating runs with the pool warm: 2.70 us per mip against 2.82).
+  bool warm_step();
+  uint64_t bytes_warm() const;
+  uint64_t prefault_bytes() const { return std::min(capacity_, kPrefaultBytes); }
+
   // True if `bytes` is a size this pool serves: 0 < bytes < CacheArena::kMinBlock.
   static bool serves(uint64_t bytes) { return bytes > 0 && bytes < CacheArena::kMinBlock; }
   // Memory for `bytes` (serves(bytes) must hold), or nullptr when every slab is taken and the class has no
@@ -71,6 +88,7 @@ class SmallPayloadPool {
   // is ~100 bytes: two lines), in lines of kLineBytes.
   static constexpr uint64_t kPrefetchBytes = 128;
   static constexpr uint64_t kLineBytes = 64;
+  static constexpr uint64_t kWarmStepBytes = 1 << 20;  // one warm_step(): ~4 ms on this machine
   static constexpr uint32_t kClasses = 9;   // 16 B .. 4 KiB
   static uint32_t class_of(uint64_t bytes);
   struct FreeNode {
