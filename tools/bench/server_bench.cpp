@@ -6,7 +6,7 @@
 //   1. memcpy of exactly the hit set's mips, vs cache hits into staging slots        → hit_vs_memcpy
 //      (alternating passes of each, so that both see the same machine load)
 //   2. plain sequential read() of whole texture files (page cache warm), vs misses   → miss_vs_read, read_amp
-//      (9 rounds, 15 without --quick: a fresh server's misses between two read() passes; the median round)
+//      (21 rounds, 15 without --quick: a fresh server's misses between two read() passes; the median round)
 //   3. request→completion latency p50/p99 (hits, misses) with a window of kLatencyWindow requests
 //   4. a realistic access trace (the scene's camera path, a renderer with a bounded GPU cache, Algorithm 1:
 //      one mip per texture per cycle, coarsest first) replayed through our server and through OpenImageIO's
@@ -894,9 +894,10 @@ int run_server_bench(const std::vector<std::string>& args) {
     // either side alone swung by up to 2x between back-to-back runs (read() 3.9-8.0 GB/s, misses 2.5-3.8 GB/s
     // over 6 runs, each side moving on its own), so a single pass of each decided the ratio by chance. Rounds
     // of one run still spread by 0.1-0.3 and fall in two clusters at times (15 rounds of one run: eleven at
-    // 0.36-0.49, four at 0.53-0.68), so a median of 5 moved with how many rounds a run caught of each: 9 rounds
-    // (15 in full mode), ~0.25 s each.
-    const int rounds = opt->miss_rounds > 0 ? static_cast<int>(opt->miss_rounds) : opt->quick ? 9 : 15;
+    // 0.36-0.49, four at 0.53-0.68), so a median of 5 moved with how many rounds a run caught of each: 21 rounds
+    // in quick mode (~0.1 s each; with 9 the median of back-to-back runs of one build spread 0.49-0.59), 15 in
+    // full mode (~0.25 s each).
+    const int rounds = opt->miss_rounds > 0 ? static_cast<int>(opt->miss_rounds) : opt->quick ? 21 : 15;
     std::unique_ptr<Harness> h;
     double arena_wait_s = 0, read_s = 0;
     uint64_t read_total = 0;
