@@ -10,6 +10,7 @@
 //
 // No locks, no waiting: every call returns at once. Safe against a peer killed at any instant: a record is
 // visible only after the release-store of the position that follows its full copy.
+#include <algorithm>
 #include <cstdint>
 #include <cstring>
 #include <optional>
@@ -184,7 +185,11 @@ class SpscRingConsumer {
       }
       seen_write_ = write;
       if (write == read_pos_) return std::nullopt;
+      // The new records were written by the producer's core: ask for the first few at once, so that their
+      // transfers overlap instead of each copy below waiting for its own (a hint: no effect on the contents).
+      for (uint64_t p = read_pos_ + 1; p < std::min(write, read_pos_ + kPrefetchAhead); ++p) prefetch(p);
     }
+    if (read_pos_ + kPrefetchAhead < seen_write_) prefetch(read_pos_ + kPrefetchAhead);
     Record out;
     std::memcpy(&out, &records_[read_pos_ & (capacity_ - 1)], sizeof(Record));
     ++read_pos_;
@@ -212,6 +217,10 @@ class SpscRingConsumer {
   uint64_t position() const { return read_pos_; }
 
  private:
+  // try_pop_deferred() keeps the records up to this many places ahead on their way into the CPU cache.
+  static constexpr uint64_t kPrefetchAhead = 8;
+  void prefetch(uint64_t pos) const { __builtin_prefetch(&records_[pos & (capacity_ - 1)], 0, 3); }
+
   RingControl* control_ = nullptr;
   Record* records_ = nullptr;
   uint32_t capacity_ = 0;
