@@ -174,7 +174,7 @@ TEST(SmallPayloadPoolTest, TheArenasPrefaultWarmsThePoolAfterTheArenaAndPayloads
   const MipCacheStats s = cache.stats();
   EXPECT_EQ(s.arena_warm_bytes, s.arena_bytes);
   EXPECT_EQ(s.small_pool_warm_bytes, s.small_pool_capacity);
-  EXPECT_EQ(s.small_pool_prefault_bytes, s.small_pool_capacity);
+  EXPECT_EQ(s.small_pool_prefault, s.small_pool_capacity);
   EXPECT_GE(s.small_pool_bytes, 3000u * 2048);
   for (uint32_t i = 0; i < mips.size(); ++i) {
     const std::byte* b = mips[i]->bytes.data();

@@ -276,7 +276,7 @@ MipCacheStats MipCache::stats() const {
     s.arena_in_use_bytes = arena_->bytes_in_use();
     s.small_pool_bytes = small_pool_->slab_bytes();
     s.small_pool_capacity = small_pool_->capacity();
-    s.small_pool_prefault_bytes = small_pool_->prefault_bytes();
+    s.small_pool_prefault = small_pool_->prefault_bytes();
     s.small_pool_warm_bytes = small_pool_->bytes_warm();
   }
   return s;

@@ -558,7 +558,7 @@ double wait_for_warm_arena(const server::Server& server) {
   const Stopwatch sw;
   for (;;) {
     const server::MipCacheStats cs = server.cache_stats();
-    const bool warm = cs.arena_warm_bytes >= cs.arena_bytes && cs.small_pool_warm_bytes >= cs.small_pool_prefault_bytes;
+    const bool warm = cs.arena_warm_bytes >= cs.arena_bytes && cs.small_pool_warm_bytes >= cs.small_pool_prefault;
     if (warm || sw.seconds() > 10.0) return sw.seconds();
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }

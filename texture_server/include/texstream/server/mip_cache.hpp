@@ -96,7 +96,7 @@ struct MipCacheStats {
   uint64_t arena_overflows = 0;       // payloads put on the heap because no arena block was free
   uint64_t small_pool_bytes = 0;      // slabs of the small payload pool in use (payloads < 4 KiB)
   uint64_t small_pool_capacity = 0;   // the pool's reserved bytes (0: no pool)
-  uint64_t small_pool_prefault_bytes = 0;  // of which the arena's pre-fault faults in (SmallPayloadPool)
+  uint64_t small_pool_prefault = 0;   // of which the arena's pre-fault faults in (SmallPayloadPool)
   uint64_t small_pool_warm_bytes = 0; // of which faulted in so far
 };
 
