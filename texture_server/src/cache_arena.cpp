@@ -52,8 +52,7 @@ CacheArena::CacheArena(uint64_t capacity, ArenaPrefault prefault, std::function<
   }
   if (prefault == ArenaPrefault::kNow) {
     prefault_range(0, capacity_);
-    while (then_warm_ && then_warm_()) {
-    }
+    warm_then();
   } else if (prefault == ArenaPrefault::kBackground) {
     warmer_ = std::thread([this] { warm_in_background(); });
   }
@@ -87,6 +86,10 @@ void CacheArena::warm_in_background() {
   for (uint64_t from = 0; from < capacity_ && !stop_.load(std::memory_order_relaxed); from += kWarmStep) {
     prefault_range(from, std::min(capacity_, from + kWarmStep));
   }
+  warm_then();
+}
+
+void CacheArena::warm_then() {
   while (then_warm_ && !stop_.load(std::memory_order_relaxed) && then_warm_()) {
   }
 }

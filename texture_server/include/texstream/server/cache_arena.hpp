@@ -77,6 +77,7 @@ class CacheArena {
   void remove_free(uint64_t index, uint32_t order);
   void prefault_range(uint64_t from, uint64_t to);
   void warm_in_background();
+  void warm_then();  // then_warm_'s steps, until it is done or the arena goes
 
   std::byte* base_ = nullptr;
   uint64_t capacity_ = 0;
