@@ -1,5 +1,5 @@
 // Mip level under anisotropic filtering (Hollemeersch et al., as used by seed 000 §3.2). The C++ twin is
-// renderer/include/texstream/render/mip_math.hpp; tests/unit/render_mip_math_test.cpp pins its values.
+// renderer/include/texstream/render/frame/mip_math.hpp; tests/unit/render_mip_math_test.cpp pins its values.
 // dx, dy: texture-coordinate derivatives along screen x and y, in texels of mip 0.
 struct AnisoLod {
   float lod;   // log2(p_max / N)

@@ -1,4 +1,4 @@
-// Structs and binding numbers read by both C++ (renderer/include/texstream/render/gpu_structs.hpp, which
+// Structs and binding numbers read by both C++ (renderer/include/texstream/render/scene/gpu_structs.hpp, which
 // static_asserts every size and offset) and GLSL (every shader in this folder). Written once, here (the nvpro
 // host_device.h pattern). Only scalar, vec4/uvec4 and mat4 members, so std140 and std430 agree with the plain
 // C++ layout; buffers are std430 unless they are the uniform block.

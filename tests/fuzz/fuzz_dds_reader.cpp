@@ -10,12 +10,12 @@
 #include <span>
 
 #include "texstream/common/scene_format.hpp"
-#include "texstream/server/dds_layout.hpp"
-#include "texstream/server/eviction_policy.hpp"
-#include "texstream/server/mip_cache.hpp"
-#include "texstream/server/mip_loader.hpp"
-#include "texstream/server/server_stats.hpp"
-#include "texstream/server/storage.hpp"
+#include "texstream/server/load/dds_layout.hpp"
+#include "texstream/server/cache/eviction_policy.hpp"
+#include "texstream/server/cache/mip_cache.hpp"
+#include "texstream/server/load/mip_loader.hpp"
+#include "texstream/server/load/server_stats.hpp"
+#include "texstream/server/storage/storage.hpp"
 
 namespace {
 

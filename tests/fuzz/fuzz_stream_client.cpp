@@ -11,7 +11,7 @@
 
 #include "texstream/protocol/checksum.hpp"
 #include "texstream/protocol/segment.hpp"
-#include "texstream/render/stream_client.hpp"
+#include "texstream/stream/stream_client.hpp"
 
 using namespace texstream;
 

@@ -23,7 +23,7 @@
 #include "chaos_test_support.hpp"
 #include "child_process.hpp"
 #include "corrupt_corpus.hpp"
-#include "texstream/render/stream_client.hpp"
+#include "texstream/stream/stream_client.hpp"
 
 namespace texstream {
 namespace {

@@ -16,7 +16,7 @@
 
 #include "chaos_test_support.hpp"
 #include "texstream/protocol/spsc_ring.hpp"
-#include "texstream/server/fault_point.hpp"
+#include "texstream/server/support/fault_point.hpp"
 
 namespace texstream::server {
 namespace {

@@ -17,7 +17,7 @@
 #include "chaos_test_support.hpp"
 #include "texstream/protocol/checksum.hpp"
 #include "texstream/protocol/segment.hpp"
-#include "texstream/render/stream_client.hpp"
+#include "texstream/stream/stream_client.hpp"
 
 namespace texstream {
 namespace {

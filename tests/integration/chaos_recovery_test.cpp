@@ -15,7 +15,7 @@
 
 #include "chaos_test_support.hpp"
 #include "texstream/protocol/liveness.hpp"
-#include "texstream/render/stream_client.hpp"
+#include "texstream/stream/stream_client.hpp"
 
 namespace texstream {
 namespace {

@@ -13,7 +13,7 @@
 
 #include "texstream/common/scene_format.hpp"
 #include "texstream/protocol/completion_check.hpp"
-#include "texstream/protocol/texel_format.hpp"
+#include "texstream/common/texel_format.hpp"
 
 namespace texstream::chaos_test {
 

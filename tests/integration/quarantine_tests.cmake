@@ -1,9 +1,3 @@
-# Issue 9, server-process level quarantine: a StreamClient charging crash-signal deaths of its server to the
-# textures in ServerBlock::loading, against a stand-in server (quarantine_fake_server) that records a texture
-# there and dies by a signal. (The decode-helper level is in server_decode_tests.cmake.)
-if(NOT TARGET texstream_stream)
-  include(${PROJECT_SOURCE_DIR}/renderer/stream.cmake)
-endif()
 
 add_executable(quarantine_fake_server ${CMAKE_CURRENT_LIST_DIR}/quarantine_fake_server.cpp)
 target_link_libraries(quarantine_fake_server PRIVATE texstream::protocol texstream::common texstream::warnings)

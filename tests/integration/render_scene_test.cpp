@@ -5,7 +5,7 @@
 
 #include "process_test_support.hpp"
 #include "texstream/common/memory_info.hpp"
-#include "texstream/render/frame_log.hpp"
+#include "texstream/render/measure/frame_log.hpp"
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>

@@ -23,7 +23,7 @@
 #include <sstream>
 
 #include "texstream/common/config.hpp"
-#include "texstream/render/view_renderer.hpp"
+#include "texstream/render/frame/view_renderer.hpp"
 
 namespace fs = std::filesystem;
 using namespace texstream;

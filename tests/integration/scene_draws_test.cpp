@@ -9,11 +9,11 @@
 #include <memory>
 #include <vector>
 
-#include "texstream/render/broad_phase.hpp"
-#include "texstream/render/scene_data.hpp"
-#include "texstream/render/scene_gpu.hpp"
-#include "texstream/render/scene_passes.hpp"
-#include "texstream/render/vulkan_context.hpp"
+#include "texstream/render/scene/broad_phase.hpp"
+#include "texstream/render/scene/scene_data.hpp"
+#include "texstream/render/scene/scene_gpu.hpp"
+#include "texstream/render/frame/scene_passes.hpp"
+#include "texstream/render/vulkan/vulkan_context.hpp"
 
 using namespace texstream;
 using namespace texstream::render;

@@ -20,7 +20,7 @@
 #include "process_test_support.hpp"
 #include "texstream/common/camera_path.hpp"
 #include "texstream/common/config.hpp"
-#include "texstream/render/view_renderer.hpp"
+#include "texstream/render/frame/view_renderer.hpp"
 
 namespace fs = std::filesystem;
 using namespace texstream;

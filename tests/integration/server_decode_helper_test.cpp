@@ -17,9 +17,9 @@
 #include <string>
 #include <vector>
 
-#include "texstream/protocol/texel_format.hpp"
-#include "texstream/server/decode_helper_pool.hpp"
-#include "texstream/server/posix_storage.hpp"
+#include "texstream/common/texel_format.hpp"
+#include "texstream/server/decode/decode_helper_pool.hpp"
+#include "texstream/server/storage/posix_storage.hpp"
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;

@@ -33,11 +33,11 @@
 #include "scoped_env.hpp"
 #include "server_harness.hpp"
 #include "texstream/common/scene_format.hpp"
-#include "texstream/protocol/texel_format.hpp"
-#include "texstream/server/decode_helper_pool.hpp"
-#include "texstream/server/posix_storage.hpp"
-#include "texstream/server/texture_file_index.hpp"
-#include "texstream/server/worker_pool.hpp"
+#include "texstream/common/texel_format.hpp"
+#include "texstream/server/decode/decode_helper_pool.hpp"
+#include "texstream/server/storage/posix_storage.hpp"
+#include "texstream/server/load/texture_file_index.hpp"
+#include "texstream/server/dispatch/worker_pool.hpp"
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;

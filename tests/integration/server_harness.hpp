@@ -19,8 +19,8 @@
 
 #include "texstream/common/config.hpp"
 #include "texstream/protocol/segment.hpp"
-#include "texstream/server/server.hpp"
-#include "texstream/server/storage.hpp"
+#include "texstream/server/dispatch/server.hpp"
+#include "texstream/server/storage/storage.hpp"
 
 namespace texstream::test {
 

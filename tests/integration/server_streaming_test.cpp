@@ -22,9 +22,9 @@
 #include "texstream/protocol/checksum.hpp"
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
-#include "texstream/server/posix_storage.hpp"
-#include "texstream/server/dds_layout.hpp"
-#include "texstream/server/server.hpp"
+#include "texstream/server/storage/posix_storage.hpp"
+#include "texstream/server/load/dds_layout.hpp"
+#include "texstream/server/dispatch/server.hpp"
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;

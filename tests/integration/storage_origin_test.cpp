@@ -21,9 +21,9 @@
 #include "process_test_support.hpp"
 #include "server_harness.hpp"
 #include "texstream/common/scene_format.hpp"
-#include "texstream/server/mip_loader.hpp"
-#include "texstream/server/posix_storage.hpp"
-#include "texstream/server/storage_stack.hpp"
+#include "texstream/server/load/mip_loader.hpp"
+#include "texstream/server/storage/posix_storage.hpp"
+#include "texstream/server/storage/storage_stack.hpp"
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;

@@ -26,7 +26,7 @@
 #include "texstream/protocol/checksum.hpp"
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
-#include "texstream/render/stream_client.hpp"
+#include "texstream/stream/stream_client.hpp"
 
 namespace texstream {
 namespace {

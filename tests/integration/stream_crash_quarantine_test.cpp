@@ -23,7 +23,7 @@
 
 #include "scoped_env.hpp"
 #include "texstream/common/scene_format.hpp"
-#include "texstream/render/stream_client.hpp"
+#include "texstream/stream/stream_client.hpp"
 
 namespace texstream {
 namespace {

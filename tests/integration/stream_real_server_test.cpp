@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "texstream/common/scene_format.hpp"
-#include "texstream/render/stream_client.hpp"
+#include "texstream/stream/stream_client.hpp"
 
 namespace texstream {
 namespace {

@@ -14,7 +14,7 @@
 #include <thread>
 
 #include "texstream/protocol/liveness.hpp"
-#include "texstream/render/server_process.hpp"
+#include "texstream/stream/server_process.hpp"
 
 namespace texstream {
 namespace {

@@ -1,8 +1,3 @@
-# Streaming client against a fake server thread on a real shared segment, the server supervisor against
-# stand-in processes, and one end-to-end run with the real texstream-server (the server is built first).
-if(NOT TARGET texstream_stream)
-  include(${PROJECT_SOURCE_DIR}/renderer/stream.cmake)
-endif()
 
 texstream_add_integration_test(stream_integration_tests
   ${CMAKE_CURRENT_LIST_DIR}/stream_client_test.cpp

@@ -6,7 +6,7 @@
 #include <limits>
 
 #include "path_analysis.hpp"
-#include "texstream/render/frame_log.hpp"
+#include "texstream/render/measure/frame_log.hpp"
 
 namespace texstream::bench {
 namespace {

@@ -7,7 +7,7 @@
 #include <random>
 #include <vector>
 
-#include "texstream/render/image_metrics.hpp"
+#include "texstream/render/measure/image_metrics.hpp"
 
 namespace texstream::render {
 namespace {

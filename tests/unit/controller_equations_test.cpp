@@ -6,7 +6,7 @@
 #include <limits>
 #include <vector>
 
-#include "texstream/render/adaptive_controller.hpp"
+#include "texstream/stream/adaptive_controller.hpp"
 
 namespace texstream {
 namespace {

@@ -20,7 +20,7 @@
 #include <string>
 #include <vector>
 
-#include "texstream/render/adaptive_controller.hpp"
+#include "texstream/stream/adaptive_controller.hpp"
 
 namespace texstream::controller_stress {
 

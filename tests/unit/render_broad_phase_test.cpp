@@ -4,8 +4,8 @@
 #include <algorithm>
 #include <cmath>
 
-#include "texstream/render/broad_phase.hpp"
-#include "texstream/render/camera.hpp"
+#include "texstream/render/scene/broad_phase.hpp"
+#include "texstream/render/scene/camera.hpp"
 
 using namespace texstream;
 using namespace texstream::render;

@@ -2,7 +2,7 @@
 // layers in ring order, the oldest layer recycled with its textures evicted.
 #include <gtest/gtest.h>
 
-#include "texstream/render/cache_allocator.hpp"
+#include "texstream/render/cache/cache_allocator.hpp"
 
 using texstream::TextureId;
 using texstream::render::CacheAllocator;

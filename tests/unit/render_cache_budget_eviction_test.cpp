@@ -4,7 +4,7 @@
 
 #include <algorithm>
 
-#include "texstream/render/cache_allocator.hpp"
+#include "texstream/render/cache/cache_allocator.hpp"
 
 using texstream::TextureId;
 using texstream::render::CacheAllocator;

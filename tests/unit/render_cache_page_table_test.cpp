@@ -4,7 +4,7 @@
 
 #include <algorithm>
 
-#include "texstream/render/sparse_page_table.hpp"
+#include "texstream/render/cache/sparse_page_table.hpp"
 
 using texstream::render::PageBindOp;
 using texstream::render::PageGeometry;

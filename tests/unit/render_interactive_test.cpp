@@ -7,12 +7,12 @@
 #include <filesystem>
 #include <set>
 
-#include "texstream/render/camera_recorder.hpp"
-#include "texstream/render/fly_camera.hpp"
-#include "texstream/render/gpu_structs.hpp"
-#include "texstream/render/interactive_session.hpp"
-#include "texstream/render/mip_math.hpp"
-#include "texstream/render/view_renderer.hpp"
+#include "texstream/render/window/camera_recorder.hpp"
+#include "texstream/render/window/fly_camera.hpp"
+#include "texstream/render/scene/gpu_structs.hpp"
+#include "texstream/render/window/interactive_session.hpp"
+#include "texstream/render/frame/mip_math.hpp"
+#include "texstream/render/frame/view_renderer.hpp"
 
 using namespace texstream;
 using namespace texstream::render;

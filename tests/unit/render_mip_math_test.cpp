@@ -4,7 +4,7 @@
 
 #include <cmath>
 
-#include "texstream/render/mip_math.hpp"
+#include "texstream/render/frame/mip_math.hpp"
 
 using namespace texstream::render;
 

@@ -6,7 +6,7 @@
 #include <filesystem>
 #include <fstream>
 
-#include "texstream/render/shader_compiler.hpp"
+#include "texstream/render/vulkan/shader_compiler.hpp"
 
 namespace fs = std::filesystem;
 using texstream::render::ShaderCompiler;

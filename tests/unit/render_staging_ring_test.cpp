@@ -2,7 +2,7 @@
 // allocation order.
 #include <gtest/gtest.h>
 
-#include "texstream/render/staging_ring.hpp"
+#include "texstream/render/cache/staging_ring.hpp"
 
 using texstream::render::StagingRing;
 

@@ -5,7 +5,7 @@
 
 #include <cstddef>
 
-#include "texstream/render/gpu_structs.hpp"
+#include "texstream/render/scene/gpu_structs.hpp"
 
 using namespace texstream::gpu;
 

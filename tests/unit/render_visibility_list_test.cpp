@@ -5,7 +5,7 @@
 #include <map>
 #include <random>
 
-#include "texstream/render/visibility_list.hpp"
+#include "texstream/render/frame/visibility_list.hpp"
 
 using namespace texstream;
 using namespace texstream::render;

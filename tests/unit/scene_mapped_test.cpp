@@ -15,9 +15,9 @@
 #include "test_temp_dir.hpp"
 #include "texstream/common/mesh_index.hpp"
 #include "texstream/common/scene_format.hpp"
-#include "texstream/render/broad_phase.hpp"
-#include "texstream/render/camera.hpp"
-#include "texstream/render/scene_data.hpp"
+#include "texstream/render/scene/broad_phase.hpp"
+#include "texstream/render/scene/camera.hpp"
+#include "texstream/render/scene/scene_data.hpp"
 
 namespace fs = std::filesystem;
 using namespace texstream;

@@ -6,7 +6,7 @@
 #include <random>
 #include <vector>
 
-#include "texstream/server/cache_arena.hpp"
+#include "texstream/server/cache/cache_arena.hpp"
 
 namespace texstream::server {
 namespace {

@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "texstream/protocol/checksum.hpp"
-#include "texstream/server/fast_checksum.hpp"
+#include "texstream/server/support/fast_checksum.hpp"
 
 namespace texstream::server {
 namespace {

@@ -4,7 +4,7 @@
 #include <random>
 #include <vector>
 
-#include "texstream/server/flat_mip_map.hpp"
+#include "texstream/server/cache/flat_mip_map.hpp"
 
 namespace texstream::server {
 namespace {

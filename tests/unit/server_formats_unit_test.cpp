@@ -8,10 +8,10 @@
 #include <vector>
 
 #include "texstream/common/scene_format.hpp"
-#include "texstream/server/dds_layout.hpp"
-#include "texstream/server/latency_histogram.hpp"
-#include "texstream/server/texel_conversion.hpp"
-#include "texstream/server/texture_file_index.hpp"
+#include "texstream/server/load/dds_layout.hpp"
+#include "texstream/server/support/latency_histogram.hpp"
+#include "texstream/server/decode/texel_conversion.hpp"
+#include "texstream/server/load/texture_file_index.hpp"
 
 namespace texstream::server {
 namespace {

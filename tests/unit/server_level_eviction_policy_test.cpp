@@ -8,8 +8,8 @@
 #include <set>
 #include <vector>
 
-#include "texstream/server/level_eviction_policy.hpp"
-#include "texstream/server/mip_cache.hpp"
+#include "texstream/server/cache/level_eviction_policy.hpp"
+#include "texstream/server/cache/mip_cache.hpp"
 
 namespace texstream::server {
 namespace {

@@ -6,9 +6,9 @@
 #include <unordered_map>
 #include <vector>
 
-#include "texstream/server/lru_eviction_policy.hpp"
-#include "texstream/server/mip_cache.hpp"
-#include "texstream/server/mip_cache_table.hpp"
+#include "texstream/server/cache/lru_eviction_policy.hpp"
+#include "texstream/server/cache/mip_cache.hpp"
+#include "texstream/server/cache/mip_cache_table.hpp"
 
 namespace texstream::server {
 namespace {

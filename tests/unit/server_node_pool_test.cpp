@@ -6,9 +6,9 @@
 #include <set>
 #include <vector>
 
-#include "texstream/server/level_eviction_policy.hpp"
-#include "texstream/server/lru_eviction_policy.hpp"
-#include "texstream/server/node_pool.hpp"
+#include "texstream/server/cache/level_eviction_policy.hpp"
+#include "texstream/server/cache/lru_eviction_policy.hpp"
+#include "texstream/server/cache/node_pool.hpp"
 
 namespace texstream::server {
 namespace {

@@ -1,7 +1,7 @@
 // OpenFileCache: files checked out and handed back, bounded with LRU closing, duplicates closed.
 #include <gtest/gtest.h>
 
-#include "texstream/server/open_file_cache.hpp"
+#include "texstream/server/storage/open_file_cache.hpp"
 
 namespace texstream::server {
 namespace {

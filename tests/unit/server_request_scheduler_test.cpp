@@ -2,7 +2,7 @@
 
 #include <vector>
 
-#include "texstream/server/request_scheduler.hpp"
+#include "texstream/server/dispatch/request_scheduler.hpp"
 
 namespace texstream::server {
 namespace {

@@ -1,6 +1,6 @@
 #include <gtest/gtest.h>
 
-#include "texstream/server/slot_pool.hpp"
+#include "texstream/server/dispatch/slot_pool.hpp"
 
 namespace texstream::server {
 namespace {

@@ -7,9 +7,9 @@
 #include <set>
 #include <vector>
 
-#include "texstream/server/lru_eviction_policy.hpp"
-#include "texstream/server/mip_cache.hpp"
-#include "texstream/server/small_payload_pool.hpp"
+#include "texstream/server/cache/lru_eviction_policy.hpp"
+#include "texstream/server/cache/mip_cache.hpp"
+#include "texstream/server/cache/small_payload_pool.hpp"
 
 namespace texstream::server {
 namespace {

@@ -18,12 +18,12 @@
 #include "texstream/common/scene_format.hpp"
 #include "texstream/protocol/checksum.hpp"
 #include "texstream/protocol/segment_layout.hpp"
-#include "texstream/server/dds_layout.hpp"
-#include "texstream/server/lru_eviction_policy.hpp"
-#include "texstream/server/mip_cache.hpp"
-#include "texstream/server/mip_loader.hpp"
-#include "texstream/server/posix_storage.hpp"
-#include "texstream/server/server_stats.hpp"
+#include "texstream/server/load/dds_layout.hpp"
+#include "texstream/server/cache/lru_eviction_policy.hpp"
+#include "texstream/server/cache/mip_cache.hpp"
+#include "texstream/server/load/mip_loader.hpp"
+#include "texstream/server/storage/posix_storage.hpp"
+#include "texstream/server/load/server_stats.hpp"
 
 namespace texstream::server {
 namespace {

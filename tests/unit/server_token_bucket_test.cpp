@@ -1,7 +1,7 @@
 // server.rate_limit_mb_s's token bucket, on a fake clock.
 #include <gtest/gtest.h>
 
-#include "texstream/server/token_bucket.hpp"
+#include "texstream/server/storage/token_bucket.hpp"
 
 namespace texstream::server {
 namespace {

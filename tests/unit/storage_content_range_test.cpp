@@ -1,7 +1,7 @@
 // Content-Range parsing and the check of a 206 answer against the asked range (http origin, issue 4).
 #include <gtest/gtest.h>
 
-#include "texstream/server/content_range.hpp"
+#include "texstream/server/storage/content_range.hpp"
 
 namespace texstream::server {
 namespace {

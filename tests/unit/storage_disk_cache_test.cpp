@@ -14,7 +14,7 @@
 
 #include "../support/forked_child.hpp"
 #include "test_temp_dir.hpp"
-#include "texstream/server/disk_cache.hpp"
+#include "texstream/server/storage/disk_cache.hpp"
 
 namespace fs = std::filesystem;
 

@@ -2,7 +2,7 @@
 // draws have the configured rates, and out-of-range parameters are refused naming the key.
 #include <gtest/gtest.h>
 
-#include "texstream/server/slow_storage.hpp"
+#include "texstream/server/storage/slow_storage.hpp"
 
 namespace texstream::server {
 namespace {

@@ -10,7 +10,7 @@
 #include <limits>
 #include <vector>
 
-#include "texstream/render/texture_states.hpp"
+#include "texstream/stream/texture_states.hpp"
 
 namespace texstream {
 namespace {

@@ -31,8 +31,8 @@
 #include "texstream/common/memory_info.hpp"
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
-#include "texstream/server/server.hpp"
-#include "texstream/server/storage_stack.hpp"
+#include "texstream/server/dispatch/server.hpp"
+#include "texstream/server/storage/storage_stack.hpp"
 
 namespace {
 

@@ -41,8 +41,8 @@
 #include "bench_util.hpp"
 #include "texstream/common/camera_path.hpp"
 #include "texstream/common/scene_format.hpp"
-#include "texstream/render/sparse_memory.hpp"
-#include "texstream/render/vulkan_context.hpp"
+#include "texstream/render/cache/sparse_memory.hpp"
+#include "texstream/render/vulkan/vulkan_context.hpp"
 
 namespace fs = std::filesystem;
 

@@ -31,7 +31,7 @@
 #include "bench_registry.hpp"
 #include "bench_util.hpp"
 #include "controller_stress_sequences.hpp"
-#include "texstream/render/adaptive_controller.hpp"
+#include "texstream/stream/adaptive_controller.hpp"
 
 namespace texstream::bench {
 namespace {

@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "texstream/common/camera_path.hpp"
-#include "texstream/render/frame_log.hpp"
+#include "texstream/render/measure/frame_log.hpp"
 
 namespace texstream::bench {
 

@@ -40,8 +40,8 @@
 #include "path_runner.hpp"
 #include "texstream/common/camera_path.hpp"
 #include "texstream/common/config.hpp"
-#include "texstream/render/frame_log.hpp"
-#include "texstream/render/scene_data.hpp"
+#include "texstream/render/measure/frame_log.hpp"
+#include "texstream/render/scene/scene_data.hpp"
 
 namespace fs = std::filesystem;
 

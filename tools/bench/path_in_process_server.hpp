@@ -9,9 +9,9 @@
 
 #include "texstream/common/config.hpp"
 #include "texstream/protocol/segment.hpp"
-#include "texstream/render/in_process_server.hpp"
-#include "texstream/server/posix_storage.hpp"
-#include "texstream/server/server.hpp"
+#include "texstream/render/app/in_process_server.hpp"
+#include "texstream/server/storage/posix_storage.hpp"
+#include "texstream/server/dispatch/server.hpp"
 
 namespace texstream::bench {
 

@@ -8,8 +8,8 @@
 #include <vector>
 
 #include "texstream/common/camera_path.hpp"
-#include "texstream/render/frame_log.hpp"
-#include "texstream/render/scene_data.hpp"
+#include "texstream/render/measure/frame_log.hpp"
+#include "texstream/render/scene/scene_data.hpp"
 
 namespace texstream::bench {
 

@@ -50,12 +50,12 @@
 #include "texstream/common/scene_format.hpp"
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
-#include "texstream/server/level_eviction_policy.hpp"
-#include "texstream/server/lru_eviction_policy.hpp"
-#include "texstream/server/mip_cache.hpp"
-#include "texstream/server/mip_loader.hpp"
-#include "texstream/server/posix_storage.hpp"
-#include "texstream/server/server.hpp"
+#include "texstream/server/cache/level_eviction_policy.hpp"
+#include "texstream/server/cache/lru_eviction_policy.hpp"
+#include "texstream/server/cache/mip_cache.hpp"
+#include "texstream/server/load/mip_loader.hpp"
+#include "texstream/server/storage/posix_storage.hpp"
+#include "texstream/server/dispatch/server.hpp"
 
 namespace fs = std::filesystem;
 

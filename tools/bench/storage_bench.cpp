@@ -48,8 +48,8 @@
 #include "server_harness.hpp"
 #include "storage_fig12.hpp"
 #include "texstream/common/scene_format.hpp"
-#include "texstream/server/disk_cache.hpp"
-#include "texstream/server/storage_stack.hpp"
+#include "texstream/server/storage/disk_cache.hpp"
+#include "texstream/server/storage/storage_stack.hpp"
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;

@@ -11,7 +11,7 @@
 #include "path_analysis.hpp"
 #include "path_runner.hpp"
 #include "texstream/common/camera_path.hpp"
-#include "texstream/render/scene_data.hpp"
+#include "texstream/render/scene/scene_data.hpp"
 
 namespace fs = std::filesystem;
 

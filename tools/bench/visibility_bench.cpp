@@ -40,10 +40,10 @@
 #include "bench_util.hpp"
 #include "texstream/common/camera_path.hpp"
 #include "texstream/common/config.hpp"
-#include "texstream/render/frame_log.hpp"
-#include "texstream/render/scene_data.hpp"
-#include "texstream/render/view_renderer.hpp"
-#include "texstream/render/visibility_list.hpp"
+#include "texstream/render/measure/frame_log.hpp"
+#include "texstream/render/scene/scene_data.hpp"
+#include "texstream/render/frame/view_renderer.hpp"
+#include "texstream/render/frame/visibility_list.hpp"
 
 namespace fs = std::filesystem;
 

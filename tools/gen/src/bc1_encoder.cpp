@@ -4,7 +4,7 @@
 #include <cstring>
 
 #include "texstream/common/contract.hpp"
-#include "texstream/protocol/texel_format.hpp"
+#include "texstream/common/texel_format.hpp"
 
 // The one translation unit that holds stb_dxt's implementation.
 #define STB_DXT_IMPLEMENTATION

@@ -6,7 +6,7 @@
 
 #include "colour.hpp"
 #include "texstream/common/contract.hpp"
-#include "texstream/protocol/texel_format.hpp"
+#include "texstream/common/texel_format.hpp"
 
 namespace texstream::gen {
 

@@ -8,7 +8,7 @@
 #include <functional>
 
 #include "texstream/common/result.hpp"
-#include "texstream/protocol/texel_format.hpp"
+#include "texstream/common/texel_format.hpp"
 
 namespace texstream::gen {
 

@@ -19,8 +19,8 @@
 #include <vector>
 
 #include "texstream/common/result.hpp"
-#include "texstream/protocol/ids.hpp"
-#include "texstream/protocol/texel_format.hpp"
+#include "texstream/common/ids.hpp"
+#include "texstream/common/texel_format.hpp"
 
 namespace texstream::scene {
 
@@ -46,7 +46,7 @@ struct MeshRecord {
   float bounds_max[3];
   // A mesh owns its vertex and index ranges, or shares all four fields with another mesh (instancing: the
   // same geometry at another origin). Any other overlap is refused by the renderer when it first draws the
-  // mesh (it stores indices absolute and a mesh id per vertex, renderer/src/scene_gpu.cpp).
+  // mesh (it stores indices absolute and a mesh id per vertex, renderer/src/scene/scene_gpu.cpp).
   uint32_t first_vertex;
   uint32_t vertex_count;
   uint32_t first_index;   // indices are relative to first_vertex

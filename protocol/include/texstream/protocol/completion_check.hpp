@@ -5,9 +5,9 @@
 #include <cstdint>
 
 #include "texstream/common/result.hpp"
-#include "texstream/protocol/ids.hpp"
+#include "texstream/common/ids.hpp"
 #include "texstream/protocol/records.hpp"
-#include "texstream/protocol/texel_format.hpp"
+#include "texstream/common/texel_format.hpp"
 
 namespace texstream {
 

@@ -1,0 +1,104 @@
+#pragma once
+// The Vulkan side of the sparse cache image (seed 000 §3.6): the partially-resident 2D array image, the
+// device memory behind its pages, and the binds.
+//
+// * The image has VK_IMAGE_CREATE_SPARSE_BINDING_BIT | SPARSE_RESIDENCY_BIT; its page size and the page shape
+//   (imageGranularity) of the cache format are queried from the device, never assumed. The whole image must
+//   fit the device's sparse address space (lavapipe: 2 GiB).
+// * Memory: `memory_bytes` (cache.memory_bytes) is the most this object ever allocates. A mip tail, if the
+//   device has one (lavapipe has none), is bound for good at start-up and paid first; the rest is cut into
+//   one-page slots carved from a few large VkDeviceMemory blocks (kBlockBytes each), allocated the first time
+//   a slot in them is bound and kept until destruction: never one allocation per page.
+// * submit() turns one batch of SparsePageTable ops into exactly one vkQueueBindSparse that signals the next
+//   value of a timeline semaphore; the frame's submission waits on that value before its copies (a sparse
+//   bind is not ordered with command buffers of the same queue otherwise).
+// Frame-thread only.
+#include <vulkan/vulkan.h>
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "texstream/common/result.hpp"
+#include "texstream/render/cache/sparse_page_table.hpp"
+#include "texstream/render/vulkan/vk_handle.hpp"
+
+namespace texstream::render {
+
+class VulkanContext;
+
+struct SparseImageInfo {
+  VkFormat format = VK_FORMAT_R8G8B8A8_SRGB;
+  uint32_t extent = 512;      // layer side at mip 0 (cache.layer_extent_px)
+  uint32_t mip_levels = 10;
+  uint32_t layers = 64;       // cache.layers
+  uint64_t memory_bytes = 0;  // cache.memory_bytes: the GPU memory budget of the pages (and mip tail)
+};
+
+struct SparseBindStats {
+  uint64_t calls = 0;            // vkQueueBindSparse calls
+  uint64_t ops = 0;              // page binds + unbinds submitted
+  double seconds = 0;            // building the bind arrays + the calls (and the waits for them)
+  double call_seconds = 0;       // of which the calls and waits alone
+  uint64_t max_ops_per_call = 0;
+  std::vector<uint32_t> ops_per_call;  // one entry per call (the bind-cost benchmark replays these sizes)
+};
+
+class SparseMemory {
+ public:
+  // Bytes of one memory block: 16 MiB = 256 pages of 64 KiB, so a 1 GiB budget is 64 allocations at most
+  // (well under maxMemoryAllocationCount, which is 4096 on many devices).
+  static constexpr uint64_t kBlockBytes = 16ull << 20;
+
+  static Result<std::unique_ptr<SparseMemory>> create(const VulkanContext& ctx, const SparseImageInfo& info);
+  ~SparseMemory();
+  SparseMemory(const SparseMemory&) = delete;
+  SparseMemory& operator=(const SparseMemory&) = delete;
+
+  VkImage image() const { return image_.get(); }
+  VkImageView view() const { return view_.get(); }
+  const PageGeometry& geometry() const { return geometry_; }
+  uint64_t page_bytes() const { return page_bytes_; }
+  uint32_t slot_count() const { return slot_count_; }
+  uint64_t tail_bytes() const { return tail_bytes_; }
+  uint64_t allocated_bytes() const { return allocated_bytes_; }  // device memory allocated so far (<= budget)
+  uint64_t image_bytes() const { return image_bytes_; }          // the image's virtual size
+  const SparseImageInfo& info() const { return info_; }
+  uint32_t pages_per_block() const { return pages_per_block_; }
+
+  // One vkQueueBindSparse for the whole batch (nothing when it is empty). On success the semaphore reaches
+  // signal_value() once the binds have executed.
+  Status submit(std::span<const PageBindOp> ops);
+  VkSemaphore semaphore() const { return semaphore_.get(); }
+  uint64_t signal_value() const { return signal_value_; }
+  const SparseBindStats& stats() const { return stats_; }
+
+ private:
+  SparseMemory() = default;
+  Result<VkDeviceMemory> block_of(uint32_t slot);
+  Status bind_tail(const std::vector<VkSparseImageMemoryRequirements>& reqs);
+
+  VkDevice device_ = VK_NULL_HANDLE;
+  VkQueue queue_ = VK_NULL_HANDLE;
+  SparseImageInfo info_;
+  PageGeometry geometry_;
+  uint64_t page_bytes_ = 0;
+  uint32_t slot_count_ = 0;
+  uint32_t pages_per_block_ = 0;
+  uint32_t memory_type_ = 0;
+  uint64_t tail_bytes_ = 0;
+  uint64_t allocated_bytes_ = 0;
+  uint64_t image_bytes_ = 0;
+  uint64_t signal_value_ = 0;
+  std::vector<UniqueMemory> blocks_;  // index = slot / pages_per_block_; null until first used
+  UniqueMemory tail_memory_;
+  UniqueSemaphore semaphore_;
+  // Destroyed before the memory (members are destroyed in reverse order): view, then image.
+  UniqueImage image_;
+  UniqueImageView view_;
+  std::vector<VkSparseImageMemoryBind> scratch_;
+  SparseBindStats stats_;
+};
+
+}  // namespace texstream::render

@@ -1,0 +1,291 @@
+#include "texstream/render/cache/sparse_memory.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <string>
+
+#include "texstream/render/vulkan/vk_check.hpp"
+#include "texstream/render/vulkan/vulkan_context.hpp"
+
+namespace texstream::render {
+
+namespace {
+
+constexpr VkImageUsageFlags kUsage = VK_IMAGE_USAGE_SAMPLED_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT;
+
+bool queue_family_can_bind(const VulkanContext& ctx) {
+  uint32_t n = 0;
+  vkGetPhysicalDeviceQueueFamilyProperties(ctx.physical_device(), &n, nullptr);
+  std::vector<VkQueueFamilyProperties> families(n);
+  vkGetPhysicalDeviceQueueFamilyProperties(ctx.physical_device(), &n, families.data());
+  return ctx.queue_family() < n && (families[ctx.queue_family()].queueFlags & VK_QUEUE_SPARSE_BINDING_BIT);
+}
+
+std::string mib(uint64_t bytes) { return std::to_string(bytes >> 20) + " MiB"; }
+
+}  // namespace
+
+SparseMemory::~SparseMemory() = default;
+
+Result<std::unique_ptr<SparseMemory>> SparseMemory::create(const VulkanContext& ctx, const SparseImageInfo& info) {
+  VkPhysicalDeviceFeatures features{};
+  vkGetPhysicalDeviceFeatures(ctx.physical_device(), &features);
+  if (!features.sparseBinding || !features.sparseResidencyImage2D) {
+    return make_error(ErrorCode::kUnsupported, "device '" + ctx.device_name() +
+                                                   "' lacks sparseBinding / sparseResidencyImage2D (the texture cache "
+                                                   "is a sparse partially-resident image)");
+  }
+  if (!queue_family_can_bind(ctx)) {
+    return make_error(ErrorCode::kUnsupported, "the renderer's queue family has no VK_QUEUE_SPARSE_BINDING_BIT");
+  }
+  // The cache format must be sparse-residency capable, with its own page shape.
+  uint32_t nprops = 0;
+  vkGetPhysicalDeviceSparseImageFormatProperties(ctx.physical_device(), info.format, VK_IMAGE_TYPE_2D,
+                                                 VK_SAMPLE_COUNT_1_BIT, kUsage, VK_IMAGE_TILING_OPTIMAL, &nprops,
+                                                 nullptr);
+  if (nprops == 0) {
+    return make_error(ErrorCode::kUnsupported,
+                      "cache.format: VkFormat " + std::to_string(info.format) + " has no sparse residency support");
+  }
+
+  std::unique_ptr<SparseMemory> m(new SparseMemory());
+  m->device_ = ctx.device();
+  m->queue_ = ctx.queue();
+  m->info_ = info;
+
+  VkImageCreateInfo ici{};
+  ici.sType = VK_STRUCTURE_TYPE_IMAGE_CREATE_INFO;
+  ici.flags = VK_IMAGE_CREATE_SPARSE_BINDING_BIT | VK_IMAGE_CREATE_SPARSE_RESIDENCY_BIT;
+  ici.imageType = VK_IMAGE_TYPE_2D;
+  ici.format = info.format;
+  ici.extent = {info.extent, info.extent, 1};
+  ici.mipLevels = info.mip_levels;
+  ici.arrayLayers = info.layers;
+  ici.samples = VK_SAMPLE_COUNT_1_BIT;
+  ici.tiling = VK_IMAGE_TILING_OPTIMAL;
+  ici.usage = kUsage;
+  ici.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
+  ici.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+  VkImage image = VK_NULL_HANDLE;
+  TS_VK_TRY(vkCreateImage(m->device_, &ici, nullptr, &image));
+  m->image_ = UniqueImage(m->device_, image);
+
+  VkMemoryRequirements req{};
+  vkGetImageMemoryRequirements(m->device_, image, &req);
+  m->page_bytes_ = req.alignment;  // the sparse block size (64 KiB on lavapipe and most GPUs)
+  m->image_bytes_ = req.size;
+  const VkDeviceSize space = ctx.properties().limits.sparseAddressSpaceSize;
+  if (req.size > space) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "cache.layers = " + std::to_string(info.layers) + " x cache.layer_extent_px = " +
+                          std::to_string(info.extent) + " needs " + mib(req.size) +
+                          " of sparse address space; the device has " + mib(space));
+  }
+  uint32_t nreq = 0;
+  vkGetImageSparseMemoryRequirements(m->device_, image, &nreq, nullptr);
+  std::vector<VkSparseImageMemoryRequirements> reqs(nreq);
+  vkGetImageSparseMemoryRequirements(m->device_, image, &nreq, reqs.data());
+  const VkSparseImageMemoryRequirements* colour = nullptr;
+  for (const auto& r : reqs)
+    if (r.formatProperties.aspectMask & VK_IMAGE_ASPECT_COLOR_BIT) colour = &r;
+  if (!colour) return make_error(ErrorCode::kUnsupported, "sparse cache image has no colour-aspect requirements");
+  // imageGranularity is "in texels or compressed texel blocks" (spec): lavapipe gives BC1 128x64, which is
+  // blocks (128 x 64 blocks x 8 bytes = one 64 KiB page), NVIDIA gives 512x256 texels. Decide by the page
+  // size, and keep texels (VkSparseImageMemoryBind offsets and extents are texels).
+  VkExtent3D g = colour->formatProperties.imageGranularity;
+  const bool bc1 = info.format == VK_FORMAT_BC1_RGBA_SRGB_BLOCK || info.format == VK_FORMAT_BC1_RGBA_UNORM_BLOCK;
+  const uint64_t block_bytes = bc1 ? 8 : 4, block_side = bc1 ? 4 : 1;
+  if (block_side > 1 && uint64_t{g.width} * g.height * block_bytes == m->page_bytes_) {
+    g.width *= block_side;
+    g.height *= block_side;
+  }
+  if (uint64_t{g.width} * g.height * block_bytes / (block_side * block_side) != m->page_bytes_) {
+    return make_error(ErrorCode::kUnsupported, "sparse page of " + std::to_string(m->page_bytes_) + " bytes does not match its " +
+                                                   std::to_string(g.width) + "x" + std::to_string(g.height) + " granularity");
+  }
+  m->geometry_ = PageGeometry{info.extent, info.mip_levels, info.layers, g.width, g.height,
+                              std::min(colour->imageMipTailFirstLod, info.mip_levels)};
+
+  auto type = ctx.find_memory_type(req.memoryTypeBits, 0, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+  if (!type) return type.error();
+  m->memory_type_ = *type;
+
+  // The mip tail (and metadata, if any) is paid first; pages get the rest, whole pages only.
+  for (const auto& r : reqs) {
+    if (r.imageMipTailFirstLod >= info.mip_levels && !(r.formatProperties.aspectMask & VK_IMAGE_ASPECT_METADATA_BIT))
+      continue;
+    const bool single = (r.formatProperties.flags & VK_SPARSE_IMAGE_FORMAT_SINGLE_MIPTAIL_BIT) ||
+                        (r.formatProperties.aspectMask & VK_IMAGE_ASPECT_METADATA_BIT);
+    m->tail_bytes_ += single ? r.imageMipTailSize : r.imageMipTailSize * info.layers;
+  }
+  const uint64_t one_region = [&] {
+    uint64_t pages = 0;
+    for (uint32_t l = 0; l < info.mip_levels; ++l) pages += SparsePageTable::pages_of_region(m->geometry_, 0, 0, info.extent, l);
+    return pages * m->page_bytes_;
+  }();
+  if (info.memory_bytes < m->tail_bytes_ + one_region) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "cache.memory_bytes = " + std::to_string(info.memory_bytes) + " cannot hold one " +
+                          std::to_string(info.extent) + "² texture with all its levels (" +
+                          std::to_string(m->tail_bytes_ + one_region) + " bytes with " +
+                          std::to_string(m->page_bytes_) + "-byte pages" +
+                          (m->tail_bytes_ ? " and the mip tail" : "") + "); raise it or lower cache.layer_extent_px");
+  }
+  const uint64_t pages = (info.memory_bytes - m->tail_bytes_) / m->page_bytes_;
+  m->slot_count_ = static_cast<uint32_t>(std::min<uint64_t>(pages, UINT32_MAX));
+  m->pages_per_block_ = static_cast<uint32_t>(std::max<uint64_t>(kBlockBytes / m->page_bytes_, 1));
+  m->blocks_.resize((m->slot_count_ + m->pages_per_block_ - 1) / m->pages_per_block_);
+
+  VkSemaphoreTypeCreateInfo sti{};
+  sti.sType = VK_STRUCTURE_TYPE_SEMAPHORE_TYPE_CREATE_INFO;
+  sti.semaphoreType = VK_SEMAPHORE_TYPE_TIMELINE;
+  VkSemaphoreCreateInfo sci{};
+  sci.sType = VK_STRUCTURE_TYPE_SEMAPHORE_CREATE_INFO;
+  sci.pNext = &sti;
+  VkSemaphore sem = VK_NULL_HANDLE;
+  TS_VK_TRY(vkCreateSemaphore(m->device_, &sci, nullptr, &sem));
+  m->semaphore_ = UniqueSemaphore(m->device_, sem);
+
+  if (m->tail_bytes_ > 0) TS_TRY(m->bind_tail(reqs));
+
+  VkImageViewCreateInfo vci{};
+  vci.sType = VK_STRUCTURE_TYPE_IMAGE_VIEW_CREATE_INFO;
+  vci.image = image;
+  vci.viewType = VK_IMAGE_VIEW_TYPE_2D_ARRAY;
+  vci.format = info.format;
+  vci.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, info.mip_levels, 0, info.layers};
+  VkImageView view = VK_NULL_HANDLE;
+  TS_VK_TRY(vkCreateImageView(m->device_, &vci, nullptr, &view));
+  m->view_ = UniqueImageView(m->device_, view);
+  return m;
+}
+
+Status SparseMemory::bind_tail(const std::vector<VkSparseImageMemoryRequirements>& reqs) {
+  VkMemoryAllocateInfo ai{};
+  ai.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;
+  ai.allocationSize = tail_bytes_;
+  ai.memoryTypeIndex = memory_type_;
+  VkDeviceMemory mem = VK_NULL_HANDLE;
+  TS_VK_TRY(vkAllocateMemory(device_, &ai, nullptr, &mem));
+  tail_memory_ = UniqueMemory(device_, mem);
+  allocated_bytes_ += tail_bytes_;
+  std::vector<VkSparseMemoryBind> binds;
+  VkDeviceSize offset = 0;
+  for (const auto& r : reqs) {
+    const bool metadata = r.formatProperties.aspectMask & VK_IMAGE_ASPECT_METADATA_BIT;
+    if (r.imageMipTailFirstLod >= info_.mip_levels && !metadata) continue;
+    const bool single = (r.formatProperties.flags & VK_SPARSE_IMAGE_FORMAT_SINGLE_MIPTAIL_BIT) || metadata;
+    const uint32_t count = single ? 1 : info_.layers;
+    for (uint32_t layer = 0; layer < count; ++layer) {
+      VkSparseMemoryBind b{};
+      b.resourceOffset = r.imageMipTailOffset + layer * r.imageMipTailStride;
+      b.size = r.imageMipTailSize;
+      b.memory = mem;
+      b.memoryOffset = offset;
+      b.flags = metadata ? VK_SPARSE_MEMORY_BIND_METADATA_BIT : 0;
+      offset += r.imageMipTailSize;
+      binds.push_back(b);
+    }
+  }
+  VkSparseImageOpaqueMemoryBindInfo opaque{image_.get(), static_cast<uint32_t>(binds.size()), binds.data()};
+  VkBindSparseInfo bi{};
+  bi.sType = VK_STRUCTURE_TYPE_BIND_SPARSE_INFO;
+  bi.imageOpaqueBindCount = 1;
+  bi.pImageOpaqueBinds = &opaque;
+  VkTimelineSemaphoreSubmitInfo ts{};
+  ts.sType = VK_STRUCTURE_TYPE_TIMELINE_SEMAPHORE_SUBMIT_INFO;
+  const uint64_t value = ++signal_value_;
+  ts.signalSemaphoreValueCount = 1;
+  ts.pSignalSemaphoreValues = &value;
+  VkSemaphore sem = semaphore_.get();
+  bi.pNext = &ts;
+  bi.signalSemaphoreCount = 1;
+  bi.pSignalSemaphores = &sem;
+  TS_VK_TRY(vkQueueBindSparse(queue_, 1, &bi, VK_NULL_HANDLE));
+  // Once at start-up: the cache's first layout transition must not race the tail binding.
+  TS_VK_TRY(vkQueueWaitIdle(queue_));
+  return ok_status();
+}
+
+Result<VkDeviceMemory> SparseMemory::block_of(uint32_t slot) {
+  const uint32_t b = slot / pages_per_block_;
+  TS_ASSERT(b < blocks_.size(), "slot %u outside the %u slots", slot, slot_count_);
+  if (!blocks_[b]) {
+    // The last block holds only the slots left, so the blocks never add up to more than the budget.
+    const uint64_t slots = std::min<uint64_t>(pages_per_block_, slot_count_ - b * pages_per_block_);
+    VkMemoryAllocateInfo ai{};
+    ai.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;
+    ai.allocationSize = slots * page_bytes_;
+    ai.memoryTypeIndex = memory_type_;
+    VkDeviceMemory mem = VK_NULL_HANDLE;
+    TS_VK_TRY(vkAllocateMemory(device_, &ai, nullptr, &mem));
+    blocks_[b] = UniqueMemory(device_, mem);
+    allocated_bytes_ += ai.allocationSize;
+    TS_ASSERT(allocated_bytes_ <= info_.memory_bytes, "sparse cache memory %llu above the budget %llu",
+              (unsigned long long)allocated_bytes_, (unsigned long long)info_.memory_bytes);
+  }
+  return blocks_[b].get();
+}
+
+Status SparseMemory::submit(std::span<const PageBindOp> ops) {
+  if (ops.empty()) return ok_status();
+  // Memory blocks first: a block is allocated once per run, not per bind, so it is not part of the bind cost.
+  for (const PageBindOp& op : ops) {
+    if (!op.bind) continue;
+    auto mem = block_of(op.slot);
+    if (!mem) return mem.error();
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  scratch_.clear();
+  scratch_.reserve(ops.size());
+  const uint32_t gw = geometry_.granularity_w, gh = geometry_.granularity_h;
+  for (const PageBindOp& op : ops) {
+    const uint32_t level = std::max(info_.extent >> op.page.mip, 1u);
+    VkSparseImageMemoryBind b{};
+    b.subresource = {VK_IMAGE_ASPECT_COLOR_BIT, op.page.mip, op.page.layer};
+    b.offset = {static_cast<int32_t>(op.page.x * gw), static_cast<int32_t>(op.page.y * gh), 0};
+    // Whole pages, except at the level's right and bottom edge (which is how levels below one page are bound).
+    b.extent = {std::min(gw, level - op.page.x * gw), std::min(gh, level - op.page.y * gh), 1};
+    if (op.bind) {
+      b.memory = blocks_[op.slot / pages_per_block_].get();
+      b.memoryOffset = static_cast<VkDeviceSize>(op.slot % pages_per_block_) * page_bytes_;
+    }
+    scratch_.push_back(b);
+  }
+  VkSparseImageMemoryBindInfo image_binds{image_.get(), static_cast<uint32_t>(scratch_.size()), scratch_.data()};
+  VkBindSparseInfo bi{};
+  bi.sType = VK_STRUCTURE_TYPE_BIND_SPARSE_INFO;
+  bi.imageBindCount = 1;
+  bi.pImageBinds = &image_binds;
+  const uint64_t value = signal_value_ + 1;
+  VkTimelineSemaphoreSubmitInfo ts{};
+  ts.sType = VK_STRUCTURE_TYPE_TIMELINE_SEMAPHORE_SUBMIT_INFO;
+  ts.signalSemaphoreValueCount = 1;
+  ts.pSignalSemaphoreValues = &value;
+  VkSemaphore sem = semaphore_.get();
+  bi.pNext = &ts;
+  bi.signalSemaphoreCount = 1;
+  bi.pSignalSemaphores = &sem;
+  const auto t_call = std::chrono::steady_clock::now();
+  TS_VK_TRY(vkQueueBindSparse(queue_, 1, &bi, VK_NULL_HANDLE));
+  signal_value_ = value;
+  // Wait for the binds here: the frame's submission would wait for them anyway (its copies need the pages),
+  // and lavapipe returns from vkQueueBindSparse before binding, so only this makes the measured bind cost the
+  // real one. No GPU work is pending on this queue at this point (one frame in flight, already complete).
+  VkSemaphoreWaitInfo wi{};
+  wi.sType = VK_STRUCTURE_TYPE_SEMAPHORE_WAIT_INFO;
+  wi.semaphoreCount = 1;
+  wi.pSemaphores = &sem;
+  wi.pValues = &value;
+  TS_VK_TRY(vkWaitSemaphores(device_, &wi, UINT64_MAX));
+  const auto t_end = std::chrono::steady_clock::now();
+  stats_.seconds += std::chrono::duration<double>(t_end - t0).count();
+  stats_.call_seconds += std::chrono::duration<double>(t_end - t_call).count();
+  ++stats_.calls;
+  stats_.ops += ops.size();
+  stats_.max_ops_per_call = std::max<uint64_t>(stats_.max_ops_per_call, ops.size());
+  stats_.ops_per_call.push_back(static_cast<uint32_t>(ops.size()));
+  return ok_status();
+}
+
+}  // namespace texstream::render

@@ -1,0 +1,484 @@
+#include "texstream/render/cache/texture_cache.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <bit>
+#include <chrono>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "texstream/render/scene/gpu_structs.hpp"
+#include "texstream/render/vulkan/one_shot.hpp"
+#include "texstream/render/scene/scene_data.hpp"
+#include "texstream/render/vulkan/vk_check.hpp"
+#include "texstream/render/vulkan/vulkan_context.hpp"
+
+namespace texstream::render {
+
+namespace {
+
+// vkCmdCopyBufferToImage wants bufferOffset a multiple of the texel block size (4 for RGBA8, 8 for BC1) and of
+// 4; 16 covers both and keeps rows of a CPU memcpy aligned.
+constexpr uint64_t kStagingAlignment = 16;
+// BC1 stores 4x4 blocks: a copy whose extent is not whole blocks must end at the mip's edge, so a region side
+// below one block at some level cannot be written without touching a neighbour.
+constexpr uint32_t kBc1Block = 4;
+
+uint32_t block_size(TexelFormat f) { return f == TexelFormat::kBc1 ? kBc1Block : 1; }
+
+}  // namespace
+
+VkFormat cache_vk_format(TexelFormat format) {
+  return format == TexelFormat::kBc1 ? VK_FORMAT_BC1_RGBA_SRGB_BLOCK : VK_FORMAT_R8G8B8A8_SRGB;
+}
+
+TextureCache::TextureCache(const TextureCacheOptions& options, const SceneData& scene, TextureStates& states)
+    : options_(options),
+      scene_(scene),
+      states_(states),
+      ring_(options.staging_bytes),
+      allocator_(options.layer_extent, options.layers),
+      residency_(scene.texture_records().size()),
+      unplaceable_logged_(scene.texture_records().size(), false),
+      entry_written_(scene.texture_records().size(), false) {}
+
+Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& ctx, const TextureCacheOptions& options,
+                                                           const SceneData& scene, TextureStates& states) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (options.layer_extent == 0 || (options.layer_extent & (options.layer_extent - 1)) != 0) {
+    return make_error(ErrorCode::kInvalidArgument, "cache.layer_extent_px = " + std::to_string(options.layer_extent) +
+                                                       " is not a power of two");
+  }
+  if (options.layers > ctx.properties().limits.maxImageArrayLayers) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "cache.layers = " + std::to_string(options.layers) + " exceeds the device's maxImageArrayLayers " +
+                          std::to_string(ctx.properties().limits.maxImageArrayLayers));
+  }
+  std::unique_ptr<TextureCache> c(new TextureCache(options, scene, states));
+  c->mip_levels_ = floor_log2(options.layer_extent) + 1;
+  SparseImageInfo info;
+  info.format = cache_vk_format(options.format);
+  info.extent = options.layer_extent;
+  info.mip_levels = c->mip_levels_;
+  info.layers = options.layers;
+  info.memory_bytes = options.memory_bytes;
+  auto sparse = SparseMemory::create(ctx, info);
+  if (!sparse) return sparse.error();
+  c->sparse_ = std::move(*sparse);
+  c->pages_ = std::make_unique<SparsePageTable>(c->sparse_->geometry(), c->sparse_->slot_count());
+  spdlog::info("texture cache: sparse {} layers of {}px, {} KiB pages of {}x{} texels, {} page slots ({} MiB budget{})",
+               options.layers, options.layer_extent, c->sparse_->page_bytes() >> 10,
+               c->sparse_->geometry().granularity_w, c->sparse_->geometry().granularity_h, c->sparse_->slot_count(),
+               options.memory_bytes >> 20,
+               c->sparse_->tail_bytes() ? fmt::format(", {} KiB mip tail", c->sparse_->tail_bytes() >> 10) : "");
+
+  auto staging = GpuBuffer::create(ctx, options.staging_bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, MemoryUse::kHostVisible);
+  if (!staging) return staging.error();
+  c->staging_ = std::move(*staging);
+
+  // Entries are written by prepare_textures when first used: the shader reads only the entries of the
+  // textures of the meshes it draws.
+  const size_t n = std::max<size_t>(scene.texture_records().size(), 1);
+  auto table = GpuBuffer::create(ctx, n * sizeof(gpu::TextureGpu), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT,
+                                 MemoryUse::kHostVisible);
+  if (!table) return table.error();
+  c->table_ = std::move(*table);
+
+  // Every level of every layer starts in the layout the shader reads; copies move it to TRANSFER_DST and back.
+  VkImage img = c->sparse_->image();
+  const uint32_t levels = c->mip_levels_, layers = options.layers;
+  TS_TRY(run_one_shot(ctx, [&](VkCommandBuffer cmd) {
+    VkImageMemoryBarrier b{};
+    b.sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER;
+    b.srcAccessMask = 0;
+    b.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
+    b.oldLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+    b.newLayout = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
+    b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+    b.image = img;
+    b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, levels, 0, layers};
+    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, 0, 0, nullptr,
+                         0, nullptr, 1, &b);
+  }));
+  c->stats_.create_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return c;
+}
+
+Status TextureCache::prepare_textures(std::span<const uint32_t> textures) {
+  for (uint32_t t : textures) TS_TRY(prepare_texture(t));
+  return ok_status();
+}
+
+Status TextureCache::prepare_texture(uint32_t texture) {
+  const auto records = scene_.texture_records();
+  TS_ASSERT(texture < records.size(), "texture %u of %zu", texture, records.size());
+  if (entry_written_[texture]) return ok_status();
+  const scene::TextureRecord& r = records[texture];
+  // The renderer never decodes: texel blocks go from the file to the image unchanged.
+  if (r.format != static_cast<uint32_t>(options_.format)) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "cache.format = " + std::string(to_string(options_.format)) + " but texture " +
+                          std::to_string(texture) + " of " + (scene_.dir / "textures.bin").string() + " is " +
+                          std::string(to_string(texel_format_from_raw(r.format).value_or(TexelFormat::kRgba8))));
+  }
+  gpu::TextureGpu& t = table_.as<gpu::TextureGpu>()[texture];
+  t = gpu::TextureGpu{};
+  t.placement = {0, gpu::kNotResident, 0, r.mip_count};
+  t.region = {0, 0, r.width, r.height};
+  t.colour = {scene_.colours()[texture], 0, 0, 0};
+  entry_written_[texture] = true;
+  return ok_status();
+}
+
+std::span<std::byte> TextureCache::reserve(TextureId, MipLevel, uint64_t bytes) {
+  auto a = ring_.allocate(bytes, kStagingAlignment);
+  if (!a) {
+    ++stats_.staging_full;
+    return {};  // the client holds the completion and offers it again next frame
+  }
+  reserved_.emplace(a->offset, *a);
+  return staging_.bytes().subspan(a->offset, bytes);
+}
+
+void TextureCache::release_staging(const StagingRing::Allocation& a) { ring_.release(a.id); }
+
+void TextureCache::reject(TextureId texture, MipLevel mip, std::span<std::byte> reserved) {
+  if (!reserved.empty()) {
+    const auto offset = static_cast<uint64_t>(reserved.data() - staging_.bytes().data());
+    auto it = reserved_.find(offset);
+    TS_ASSERT(it != reserved_.end(), "reject of a span this sink did not reserve");
+    release_staging(it->second);
+    reserved_.erase(it);
+  }
+  states_.on_rejected(texture, mip);
+}
+
+void TextureCache::failed(TextureId texture, MipLevel mip, CompletionStatus status) {
+  states_.on_failed(texture, mip, status);
+}
+
+void TextureCache::evict(TextureId texture) {
+  Residency& r = residency_[texture.value];
+  if (r.mask != 0) --resident_count_;
+  r.mask = 0;
+  ++r.epoch;
+  r.evicted_before = true;
+  ++stats_.evictions;
+  table_.as<gpu::TextureGpu>()[texture.value].placement.y = gpu::kNotResident;
+  // Its pages: the submissions up to last_serial_ may still sample them, so they are unbound after those.
+  for (uint32_t mip = 0; r.bound != 0; ++mip) {
+    if (!(r.bound & (1u << mip))) continue;
+    r.bound &= ~(1u << mip);
+    pages_->release(r.region.layer, r.region.origin_x, r.region.origin_y, r.region.extent, mip, last_serial_);
+  }
+  // Copies not yet recorded would write into a region that now belongs to another texture: drop them.
+  auto drop = [&](const Copy& c) {
+    if (c.texture != texture) return false;
+    release_staging(c.staging);
+    ++stats_.mips_dropped;
+    return true;
+  };
+  std::erase_if(queued_, drop);
+  std::erase_if(ready_, drop);
+  states_.invalidate(texture);
+}
+
+void TextureCache::evict_all(const std::vector<TextureId>& textures) {
+  for (TextureId e : textures) evict(e);
+}
+
+void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> data) {
+  const auto offset = static_cast<uint64_t>(data.data() - staging_.bytes().data());
+  auto it = reserved_.find(offset);
+  TS_ASSERT(it != reserved_.end(), "commit of a span this sink did not reserve");
+  const StagingRing::Allocation alloc = it->second;
+  reserved_.erase(it);
+
+  // StreamClient checked the payload against the texture table; these are our own invariants.
+  TS_ASSERT(texture.value < scene_.texture_records().size(), "commit of unknown texture %u", texture.value);
+  if (auto prepared = prepare_texture(texture.value); !prepared) {
+    // Streamed before any mesh of it was drawn (render.preload_all) and of another format: never shown.
+    if (!unplaceable_logged_[texture.value]) {
+      spdlog::warn("texture cache: {}", prepared.error().message);
+      unplaceable_logged_[texture.value] = true;
+    }
+    release_staging(alloc);
+    states_.on_failed(texture, mip, CompletionStatus::kNotFound);
+    return;
+  }
+  const scene::TextureRecord& rec = scene_.texture_records()[texture.value];
+  TS_ASSERT(mip.value < rec.mip_count && data.size() == mip_bytes(options_.format, rec.width, rec.height, mip.value),
+            "commit of texture %u mip %u with %zu bytes", texture.value, mip.value, data.size());
+
+  auto region = allocator_.find(texture);
+  if (!region) {
+    std::vector<TextureId> evicted;
+    // BC1 regions are at least one block wide so that the 4x4 level (one block) has a region of its own.
+    const uint32_t w = std::max(rec.width, block_size(options_.format));
+    auto placed = allocator_.allocate(texture, w, rec.height, evicted);
+    evict_all(evicted);
+    if (!placed) {
+      if (!unplaceable_logged_[texture.value]) {
+        spdlog::warn("texture cache: {}", placed.error().message);
+        unplaceable_logged_[texture.value] = true;
+      }
+      release_staging(alloc);
+      // Not the file's fault, but it can never be shown: kNotFound marks it broken, so it is not asked again.
+      states_.on_failed(texture, mip, CompletionStatus::kNotFound);
+      return;
+    }
+    region = *placed;
+    ++stats_.texture_loads;
+    if (residency_[texture.value].evicted_before) ++stats_.texture_reloads;
+    auto& t = table_.as<gpu::TextureGpu>()[texture.value];
+    t.placement.x = region->layer;
+    t.region.x = region->origin_x;
+    t.region.y = region->origin_y;
+  }
+  if ((region->extent >> mip.value) < block_size(options_.format)) {
+    // A BC1 level smaller than a block in a shared layer: writing it would overwrite a neighbour's texels.
+    release_staging(alloc);
+    states_.on_rejected(texture, mip);
+    return;
+  }
+  queued_.push_back(Copy{texture, mip.value, alloc, residency_[texture.value].epoch, 0});
+}
+
+bool TextureCache::bind_pages_for(const Copy& c) {
+  Residency& r = residency_[c.texture.value];
+  if (r.epoch != c.epoch) return false;
+  if (r.bound & (1u << c.mip)) return true;
+  while (true) {
+    const auto region = allocator_.find(c.texture);
+    if (!region || r.epoch != c.epoch) return false;  // evicted while making room
+    if (pages_->acquire(region->layer, region->origin_x, region->origin_y, region->extent, c.mip)) {
+      TS_ASSERT(r.bound == 0 || (r.region.layer == region->layer && r.region.index == region->index),
+                "texture %u bound in two regions", c.texture.value);
+      r.region = *region;
+      r.bound |= 1u << c.mip;
+      return true;
+    }
+    // Seed §3.6: when the cache is full, the oldest layer goes. Its pages retire at last_serial_, which has
+    // completed by now in the renderer's one-frame-in-flight loop, so reclaim() frees their slots at once.
+    std::vector<TextureId> evicted;
+    if (!allocator_.evict_oldest(evicted)) return false;
+    ++stats_.budget_evicted_layers;
+    evict_all(evicted);
+    pages_->reclaim(completed_serial_);
+  }
+}
+
+Status TextureCache::prepare_uploads(uint64_t serial) {
+  TS_ASSERT(serial > last_serial_, "submission serials must increase (%llu after %llu)", (unsigned long long)serial,
+            (unsigned long long)last_serial_);
+  prepared_serial_ = serial;
+  bind_wait_ = BindWait{};
+  pages_->reclaim(completed_serial_);
+  // Copies in commit order. An eviction on the way drops copies of evicted textures from ready_ (evict());
+  // those still in `work` are recognised by their epoch.
+  std::vector<Copy> work = std::move(queued_);
+  queued_.clear();
+  for (const Copy& c : work) {
+    if (bind_pages_for(c)) {
+      ready_.push_back(c);
+    } else {
+      release_staging(c.staging);
+      ++stats_.mips_dropped;
+    }
+  }
+  const std::vector<PageBindOp> batch = pages_->take_batch();
+  // Copies come at most one per ready mip: counting them now keeps the trace frame whole.
+  trace_open_ = trace_entries_ + batch.size() + ready_.size() <= kTraceEntries && (!batch.empty() || !ready_.empty());
+  if (trace_open_) {
+    trace_.push_back(UploadTraceFrame{batch, {}});
+    trace_entries_ += batch.size() + ready_.size();
+  }
+  if (!batch.empty()) {
+    TS_TRY(sparse_->submit(batch));
+    bind_wait_ = BindWait{sparse_->semaphore(), sparse_->signal_value()};
+  }
+  return ok_status();
+}
+
+uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
+  if (prepared_serial_ != serial) {
+    if (auto st = prepare_uploads(serial); !st.ok()) {
+      spdlog::error("texture cache: {}", st.error().message);
+      for (const Copy& c : ready_) {
+        release_staging(c.staging);
+        states_.on_rejected(c.texture, MipLevel(c.mip));
+      }
+      ready_.clear();
+    }
+  }
+  last_serial_ = serial;
+  if (ready_.empty()) return 0;
+  VkImageMemoryBarrier b{};
+  b.sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER;
+  b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+  b.image = sparse_->image();
+  b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, mip_levels_, 0, options_.layers};
+  // Earlier frames' fragment shaders read the image; the copies must wait for them (write-after-read).
+  b.srcAccessMask = VK_ACCESS_SHADER_READ_BIT;
+  b.dstAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+  b.oldLayout = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
+  b.newLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 0, nullptr, 0,
+                       nullptr, 1, &b);
+
+  std::vector<VkBufferImageCopy> regions;
+  regions.reserve(ready_.size());
+  const uint32_t block = block_size(options_.format);
+  for (Copy& c : ready_) {
+    const scene::TextureRecord& rec = scene_.texture_records()[c.texture.value];
+    const auto region = allocator_.find(c.texture);
+    TS_ASSERT(region.has_value(), "queued copy of texture %u without a region", c.texture.value);
+    const Extent2D e = mip_extent(rec.width, rec.height, c.mip);
+    VkBufferImageCopy r{};
+    r.bufferOffset = c.staging.offset;
+    r.bufferRowLength = 0;  // tightly packed, as the DDS stores it
+    r.bufferImageHeight = 0;
+    r.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, c.mip, region->layer, 1};
+    r.imageOffset = {static_cast<int32_t>(region->origin_x >> c.mip), static_cast<int32_t>(region->origin_y >> c.mip), 0};
+    // BC1: whole blocks (the payload holds them: mip_bytes rounds up), inside the region by the check in commit.
+    r.imageExtent = {(e.width + block - 1) / block * block, (e.height + block - 1) / block * block, 1};
+    regions.push_back(r);
+    if (trace_open_) {
+      trace_.back().copies.push_back({region->layer, c.mip, static_cast<uint32_t>(r.imageOffset.x),
+                                      static_cast<uint32_t>(r.imageOffset.y), r.imageExtent.width,
+                                      r.imageExtent.height});
+    }
+    c.serial = serial;
+    in_flight_.push_back(c);
+  }
+  vkCmdCopyBufferToImage(cmd, staging_.handle(), sparse_->image(), VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
+                         static_cast<uint32_t>(regions.size()), regions.data());
+
+  b.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+  b.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
+  b.oldLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
+  b.newLayout = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, 0, 0, nullptr, 0,
+                       nullptr, 1, &b);
+  const auto n = static_cast<uint32_t>(ready_.size());
+  ready_.clear();
+  trace_open_ = false;
+  return n;
+}
+
+void TextureCache::publish(TextureId texture) {
+  const uint32_t mask = residency_[texture.value].mask;
+  auto& t = table_.as<gpu::TextureGpu>()[texture.value];
+  if (mask == 0) {
+    t.placement.y = gpu::kNotResident;
+    return;
+  }
+  // The shader samples a contiguous range [finest, coarsest]: the run of resident levels that ends at the
+  // coarsest one (Algorithm 1 refines one level at a time, so normally every resident level is in it).
+  const uint32_t coarsest = 31u - static_cast<uint32_t>(std::countl_zero(mask));
+  uint32_t finest = coarsest;
+  while (finest > 0 && (mask & (1u << (finest - 1)))) --finest;
+  t.placement.y = finest;
+  t.placement.z = coarsest;
+}
+
+void TextureCache::on_submission_complete(uint64_t serial) {
+  completed_serial_ = std::max(completed_serial_, serial);
+  // The budget check of every frame (issue 6: bound pages x page size <= cache.memory_bytes).
+  ++stats_.frames;
+  const uint64_t bound = bound_bytes();
+  stats_.max_bound_bytes = std::max(stats_.max_bound_bytes, bound);
+  if (bound > options_.memory_bytes) ++stats_.budget_exceeded_frames;
+  while (!in_flight_.empty() && in_flight_.front().serial <= serial) {
+    const Copy c = in_flight_.front();
+    in_flight_.pop_front();
+    release_staging(c.staging);
+    Residency& r = residency_[c.texture.value];
+    if (r.epoch != c.epoch) {  // evicted while the copy was on its way: it wrote into a region no one samples
+      ++stats_.mips_dropped;
+      continue;
+    }
+    if (r.mask == 0) ++resident_count_;
+    r.mask |= 1u << c.mip;
+    publish(c.texture);
+    ++stats_.mips_uploaded;
+    stats_.bytes_uploaded += c.staging.size;
+    states_.on_committed(c.texture, MipLevel(c.mip));
+  }
+}
+
+uint64_t TextureCache::resident_textures() const {
+  // Counted as masks change, not by a pass over every texture: the frame loop asks every frame, and a scene
+  // can have millions of textures.
+  return resident_count_;
+}
+
+}  // namespace texstream::render
+
+namespace texstream::render {
+
+Status TextureCache::write_stats_json(const std::filesystem::path& file) const {
+  const SparseBindStats& b = sparse_->stats();
+  const PageTableStats& p = pages_->stats();
+  const PageGeometry& g = sparse_->geometry();
+  nlohmann::json j;
+  j["memory_budget_bytes"] = options_.memory_bytes;
+  j["page_bytes"] = sparse_->page_bytes();
+  j["page_texels"] = {g.granularity_w, g.granularity_h};
+  j["mip_tail_first_level"] = g.tail_first_level;
+  j["mip_tail_bytes"] = sparse_->tail_bytes();
+  j["page_slots"] = sparse_->slot_count();
+  j["allocated_bytes"] = sparse_->allocated_bytes();
+  j["image_virtual_bytes"] = sparse_->image_bytes();
+  j["create_seconds"] = stats_.create_seconds;
+  j["frames"] = stats_.frames;
+  j["budget_exceeded_frames"] = stats_.budget_exceeded_frames;
+  j["max_bound_bytes"] = stats_.max_bound_bytes;
+  j["bound_bytes"] = bound_bytes();
+  j["mips_uploaded"] = stats_.mips_uploaded;
+  j["mips_dropped"] = stats_.mips_dropped;
+  j["evictions"] = stats_.evictions;
+  j["budget_evicted_layers"] = stats_.budget_evicted_layers;
+  j["layers_recycled"] = allocator_.layers_recycled();
+  j["texture_loads"] = stats_.texture_loads;
+  j["texture_reloads"] = stats_.texture_reloads;
+  j["thrash_rate"] = stats_.texture_loads ? static_cast<double>(stats_.texture_reloads) /
+                                                static_cast<double>(stats_.texture_loads)
+                                          : 0.0;
+  j["bind_calls"] = b.calls;
+  j["bind_ops"] = b.ops;
+  j["bind_seconds"] = b.seconds;
+  j["bind_max_ops_per_call"] = b.max_ops_per_call;
+  j["bind_ops_per_call"] = b.ops_per_call;
+  j["bind_call_seconds"] = b.call_seconds;
+  // The image the binds went to and the first frames' bind ops ([layer, mip, x, y, slot], slot -1 = unbind) and
+  // copy regions, for the bind-cost benchmark's replay.
+  const SparseImageInfo& si = sparse_->info();
+  j["sparse_image"] = {{"vk_format", static_cast<int64_t>(si.format)}, {"extent", si.extent},
+                       {"mip_levels", si.mip_levels},           {"layers", si.layers},
+                       {"memory_bytes", si.memory_bytes},       {"pages_per_block", sparse_->pages_per_block()}};
+  nlohmann::json trace = nlohmann::json::array();
+  for (const UploadTraceFrame& f : trace_) {
+    nlohmann::json binds = nlohmann::json::array(), copies = nlohmann::json::array();
+    for (const PageBindOp& op : f.binds)
+      binds.push_back({op.page.layer, op.page.mip, op.page.x, op.page.y, op.bind ? static_cast<int64_t>(op.slot) : -1});
+    for (const auto& c : f.copies) {
+      nlohmann::json row = nlohmann::json::array();
+      for (uint32_t v : c) row.push_back(static_cast<int64_t>(v));  // signed: GCC 12 misreads the unsigned path
+      copies.push_back(std::move(row));
+    }
+    trace.push_back({{"binds", std::move(binds)}, {"copies", std::move(copies)}});
+  }
+  j["upload_trace"] = std::move(trace);
+  j["pages_bound"] = p.pages_bound;
+  j["pages_unbound"] = p.pages_unbound;
+  j["pages_shared"] = p.pages_shared;
+  j["pages_revived"] = p.pages_revived;
+  std::ofstream out(file);
+  out << j.dump(1) << "\n";
+  if (!out) return make_error(ErrorCode::kIo, "cannot write " + file.string());
+  return ok_status();
+}
+
+}  // namespace texstream::render

@@ -1,0 +1,81 @@
+#include "texstream/render/measure/run_summary.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <numeric>
+
+namespace texstream::render {
+
+LatencyStats LatencyStats::from(std::vector<double> samples_ms) {
+  LatencyStats s;
+  if (samples_ms.empty()) return s;
+  std::sort(samples_ms.begin(), samples_ms.end());
+  const size_t n = samples_ms.size();
+  s.median_ms = n % 2 ? samples_ms[n / 2] : 0.5 * (samples_ms[n / 2 - 1] + samples_ms[n / 2]);
+  s.avg_ms = std::accumulate(samples_ms.begin(), samples_ms.end(), 0.0) / static_cast<double>(n);
+  s.max_ms = samples_ms.back();
+  return s;
+}
+
+std::string RunSummary::to_json() const {
+  nlohmann::json j;
+  j["device"] = device;
+  j["output_dir"] = output_dir.string();
+  j["frames"] = frames;
+  j["frame_latency_ms"] = {{"median", frame_latency.median_ms}, {"avg", frame_latency.avg_ms},
+                           {"max", frame_latency.max_ms}};
+  j["mips_streamed"] = mips_streamed;
+  j["mb_streamed"] = mb_streamed;
+  j["server_ram_cache_hit_rate"] = server_ram_hit_rate;
+  j["protocol_errors"] = protocol_errors;
+  j["server_restarts"] = server_restarts;
+  j["validation_errors"] = validation_errors;
+  j["validation_warnings"] = validation_warnings;
+  j["textures_resident"] = textures_resident;
+  j["texture_count"] = texture_count;
+  j["streaming_cycles"] = streaming_cycles;
+  j["evictions"] = evictions;
+  j["controller"] = {{"mode", controller_mode},
+                     {"avg_load_size_mb", avg_load_size_mb},
+                     {"avg_mip_bias", avg_mip_bias},
+                     {"avg_weighted_latency_ms", avg_weighted_latency_ms},
+                     {"load_time_limited_frames", load_time_limited_frames},
+                     {"rejected_frames", controller_rejected_frames}};
+  nlohmann::json startup = nlohmann::json::object();
+  for (const auto& [stage, seconds] : startup_seconds) startup[stage] = seconds;
+  j["startup_seconds"] = startup;
+  return j.dump(2);
+}
+
+std::string RunSummary::to_text() const {
+  return fmt::format(
+      "texstream-render summary\n"
+      "  device              {}\n"
+      "  frames              {}\n"
+      "  frame latency       median {:.2f} ms, avg {:.2f} ms, max {:.2f} ms\n"
+      "  streamed            {} mips, {:.2f} MB in {} cycles\n"
+      "  server RAM hit rate {:.1f} %\n"
+      "  protocol errors     {}\n"
+      "  server restarts     {}\n"
+      "  validation          {} errors, {} warnings\n"
+      "  textures resident   {} of {} ({} evictions)\n"
+      "  controller          {}: avg s {:.3f} MB, avg b {:.2f}, avg t_w {:.2f} ms, {} load-time-limited frames\n"
+      "  output              {}\n",
+      device, frames, frame_latency.median_ms, frame_latency.avg_ms, frame_latency.max_ms, mips_streamed, mb_streamed,
+      streaming_cycles, 100.0 * server_ram_hit_rate, protocol_errors, server_restarts, validation_errors,
+      validation_warnings, textures_resident, texture_count, evictions, controller_mode, avg_load_size_mb,
+      avg_mip_bias, avg_weighted_latency_ms, load_time_limited_frames, output_dir.string());
+}
+
+Status RunSummary::write_json(const std::filesystem::path& file) const {
+  std::ofstream out(file);
+  out << to_json() << "\n";
+  out.close();
+  if (!out) return make_error(ErrorCode::kIo, file.string() + ": write failed");
+  return ok_status();
+}
+
+}  // namespace texstream::render

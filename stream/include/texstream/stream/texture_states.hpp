@@ -1,0 +1,150 @@
+#pragma once
+// Per-texture streaming states of seed 000 (Algorithm 1, LoadTextures; §3.5): Initial → Active → Final, one
+// mip per texture per streaming cycle, coarsest first, refined only while the bias-modified sampled level
+// asks for more than is displayed, and the cycle stops once the load size s is exceeded.
+//
+// Pure and deterministic: no clock, no I/O, no Vulkan. The caller feeds it one cycle's sorted visibility
+// list and hands each chosen mip to a `send` function (in the renderer: StreamClient::try_request); events
+// from the streaming side (a mip uploaded, a load failed, a cache layer evicted) come back through
+// on_committed / on_failed / on_rejected / invalidate. Single-threaded: one owner calls everything.
+//
+// How the paper's synchronous loop maps onto an asynchronous server:
+//   * The paper's `texture.mipLevel` (the displayed level) is `resident`: the finest level the renderer
+//     has uploaded, updated only by on_committed().
+//   * A request in flight is `pending`. A texture with a pending request is skipped ("only one request per
+//     texture in flight"), which is what makes the paper's "mipLevel ← texture.mipLevel - 1" step sound.
+//   * The state changes that Algorithm 1 makes when it decides to load happen when the request is sent;
+//     a failed load rolls them back (Initial request failed → Initial; base-mip request failed → Active).
+//   * The load-size test `if loadedBatchSize > s then break` runs before each load, exactly as in
+//     Algorithm 1, so the mip that first pushes the batch over s is still loaded; unlike the listing, the
+//     test comes before the state change, so the texture that hits the limit keeps its state.
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <span>
+#include <vector>
+
+#include "texstream/protocol/completion_check.hpp"
+#include "texstream/common/ids.hpp"
+#include "texstream/protocol/records.hpp"
+
+namespace texstream {
+
+enum class TexturePhase : uint8_t {
+  kInitial,  // nothing loaded or asked for: the next cycle that sees it requests its initial mip
+  kActive,   // a mip is resident or pending and finer ones may follow
+  kFinal,    // the base mip (level 0) was requested or is resident: nothing left to stream
+};
+
+const char* to_string(TexturePhase phase);
+
+// One entry of a cycle's compacted visibility list (seed 000 §3.3: mip level, weight, mesh id → texture).
+struct StreamCandidate {
+  TextureId texture;
+  float desired_mip;  // the paper's mipLevelSampled: the level the GPU metadata asks for (may be fractional)
+  float weight;       // Eq. 1 mesh weight; the list is sorted by it, descending, and it becomes the priority
+};
+
+struct MipRequest {
+  TextureId texture;
+  MipLevel mip;
+  float priority;
+  uint64_t bytes;  // the mip's payload size, counted against the load size s
+};
+
+// What `send` answers for one request.
+enum class SendResult : uint8_t {
+  kSent,  // on its way: the state machine records it as pending
+  kSkip,  // not now for this texture only (e.g. that mip is still in flight from before an eviction)
+  kStop,  // no room at all (ring full, in-flight limit): end this cycle
+};
+
+struct TextureStateView {
+  TexturePhase phase;
+  std::optional<uint32_t> resident;  // finest uploaded level, if any
+  std::optional<uint32_t> pending;   // level in flight, if any
+  bool broken;
+  uint32_t failures;                 // consecutive counted failures (see kMaxCountedFailures)
+};
+
+struct TextureStateCounts {
+  uint64_t initial = 0;
+  uint64_t active = 0;
+  uint64_t final = 0;
+  uint64_t broken = 0;
+  uint64_t pending = 0;
+};
+
+struct CycleResult {
+  std::vector<MipRequest> sent;
+  uint64_t bytes = 0;           // sum of sent[i].bytes
+  bool stopped_by_load_size = false;
+  bool stopped_by_sender = false;
+  bool stopped_by_count = false;  // max_requests reached
+  uint64_t unknown_textures = 0;  // candidates whose id is not in the texture table (ignored)
+};
+
+// The first mip Algorithm 1 loads ("We use the 4x4 mipmap", mipLevelMax): the coarsest level whose larger
+// side is still at least 4 texels, i.e. floor(log2(max(w, h))) - 2, so its larger side is 4..7 texels (4
+// exactly for power-of-two sizes; a BC1 4x4 level is one block). A texture whose larger side is below 4 has
+// no such level: its initial mip is its base level 0. Clamped to the texture's last stored level.
+uint32_t initial_mip_level(const TextureShape& shape);
+
+class TextureStates {
+ public:
+  // Failures that are not the texture's fault (unfilled, cancelled, timed out: the server was busy, the
+  // request was superseded or the server restarted) are retried forever. Failures that may be the file's
+  // (i/o error, a payload the renderer rejected) are retried too, but this many in a row mark the texture
+  // broken for the session, so a bad file cannot cost a request every cycle forever.
+  static constexpr uint32_t kMaxCountedFailures = 4;
+
+  // `shapes` is the scene's texture table, indexed by texture id. A shape with no mips is broken from start.
+  explicit TextureStates(std::vector<TextureShape> shapes);
+
+  using Sender = std::function<SendResult(const MipRequest&)>;
+
+  // One streaming cycle of Algorithm 1 (LoadTextures) over `candidates` in the given order (the caller
+  // sorts by descending weight), with load size `load_bytes` (s) and mip bias `bias` (b >= 0). Every mip
+  // chosen is passed to `send`, in order, and what it accepts is returned. `max_requests` (config
+  // stream.max_mips_per_cycle) caps the mips sent in one cycle on top of s.
+  CycleResult run_cycle(std::span<const StreamCandidate> candidates, uint64_t load_bytes, float bias,
+                        const Sender& send, size_t max_requests = SIZE_MAX);
+
+  // The renderer has uploaded `mip` of `texture` and may sample it. Returns false (and changes nothing)
+  // when that mip is not the pending one: a late answer to a request from before an invalidate().
+  bool on_committed(TextureId texture, MipLevel mip);
+  // The load of `mip` failed with `status` (kCancelled also for requests lost with a dead server). Rolls
+  // the pending state back; kNotFound and kCorrupt mark the texture broken. Returns false when not pending.
+  bool on_failed(TextureId texture, MipLevel mip, CompletionStatus status);
+  // The payload of `mip` arrived but was rejected (checksum or size mismatch). Rolls back and counts.
+  bool on_rejected(TextureId texture, MipLevel mip);
+  // The cache evicted the texture (seed 000 §3.6: its layer was reused): back to Initial, nothing resident,
+  // nothing pending (a late answer to the old request is then refused by on_committed). Broken stays broken.
+  void invalidate(TextureId texture);
+
+  size_t size() const { return states_.size(); }
+  bool contains(TextureId texture) const { return texture.value < states_.size(); }
+  TextureStateView view(TextureId texture) const;  // contract: contains(texture)
+  TextureStateCounts counts() const;
+
+ private:
+  struct State {
+    TexturePhase phase = TexturePhase::kInitial;
+    uint32_t resident = kNone;
+    uint32_t pending = kNone;
+    bool broken = false;
+    uint8_t failures = 0;
+  };
+  static constexpr uint32_t kNone = 0xffffffffu;
+
+  // The level Algorithm 1 would load for this texture now, or nullopt.
+  std::optional<uint32_t> next_mip(const State& s, const TextureShape& shape, float desired, float bias) const;
+  // Undo the transition made when `s.pending` was sent.
+  static void roll_back(State& s);
+
+  std::vector<TextureShape> shapes_;
+  std::vector<State> states_;
+};
+
+}  // namespace texstream

@@ -1,0 +1,843 @@
+#include "texstream/stream/stream_client.hpp"
+
+#include <signal.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <spdlog/spdlog.h>
+#include <utility>
+
+#include "texstream/common/contract.hpp"
+#include "texstream/common/memory_info.hpp"
+#include "texstream/protocol/checksum.hpp"
+#include "texstream/protocol/liveness.hpp"
+#include "texstream/common/texel_format.hpp"
+
+namespace texstream {
+
+namespace {
+
+// Protocol errors are logged in full at first, then sampled: a hostile server must not flood the log.
+constexpr uint64_t kProtocolErrorsLoggedInFull = 20;
+constexpr uint64_t kProtocolErrorLogEvery = 1000;
+
+std::string mip_name(uint32_t texture, uint32_t mip) {
+  return "texture " + std::to_string(texture) + " mip " + std::to_string(mip);
+}
+
+uint64_t elapsed_ns(std::chrono::steady_clock::time_point since) {
+  return static_cast<uint64_t>(
+      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - since).count());
+}
+
+}  // namespace
+
+void IpcTimeHistogram::add(uint64_t ns) {
+  const uint64_t b = ns / kBucketNs;
+  if (b < kBuckets) {
+    ++buckets_[b];
+  } else {
+    ++overflow_;
+  }
+  ++samples_;
+  total_ns_ += ns;
+  max_ns_ = std::max(max_ns_, ns);
+}
+
+double IpcTimeHistogram::quantile_us(double q) const {
+  if (samples_ == 0) return 0.0;
+  const auto rank = static_cast<uint64_t>(std::ceil(std::clamp(q, 0.0, 1.0) * static_cast<double>(samples_)));
+  uint64_t seen = 0;
+  const double max_us = static_cast<double>(max_ns_) / 1e3;
+  for (size_t i = 0; i < kBuckets; ++i) {
+    seen += buckets_[i];
+    if (seen >= std::max<uint64_t>(rank, 1)) {
+      return std::min(static_cast<double>((i + 1) * kBucketNs) / 1e3, max_us);
+    }
+  }
+  return max_us;
+}
+
+uint64_t IpcTimeHistogram::above(uint64_t ns) const {
+  uint64_t n = overflow_;
+  for (size_t i = ns / kBucketNs + 1; i < kBuckets; ++i) n += buckets_[i];
+  return n;
+}
+
+// Forwards to the renderer's sink; the time spent there is the renderer's, not IPC.
+class StreamClient::TimedSink final : public MipSink {
+ public:
+  TimedSink(StreamClient& owner, MipSink& inner) : owner_(owner), inner_(inner) {}
+  std::span<std::byte> reserve(TextureId texture, MipLevel mip, uint64_t bytes) override {
+    const auto t0 = std::chrono::steady_clock::now();
+    auto r = inner_.reserve(texture, mip, bytes);
+    owner_.sink_ns_ += elapsed_ns(t0);
+    return r;
+  }
+  void commit(TextureId texture, MipLevel mip, std::span<std::byte> data) override {
+    const auto t0 = std::chrono::steady_clock::now();
+    inner_.commit(texture, mip, data);
+    owner_.sink_ns_ += elapsed_ns(t0);
+  }
+  void reject(TextureId texture, MipLevel mip, std::span<std::byte> reserved) override {
+    const auto t0 = std::chrono::steady_clock::now();
+    inner_.reject(texture, mip, reserved);
+    owner_.sink_ns_ += elapsed_ns(t0);
+  }
+  void failed(TextureId texture, MipLevel mip, CompletionStatus status) override {
+    const auto t0 = std::chrono::steady_clock::now();
+    inner_.failed(texture, mip, status);
+    owner_.sink_ns_ += elapsed_ns(t0);
+  }
+
+ private:
+  StreamClient& owner_;
+  MipSink& inner_;
+};
+
+// One client call's time, less the sink's, added to the open frame's IPC time. Nested calls count once.
+class StreamClient::IpcScope {
+ public:
+  explicit IpcScope(StreamClient& c) : c_(c) {
+    if (c_.ipc_depth_++ == 0) {
+      c_.sink_ns_ = 0;
+      start_ = std::chrono::steady_clock::now();
+    }
+  }
+  ~IpcScope() {
+    if (--c_.ipc_depth_ == 0) {
+      const uint64_t total = elapsed_ns(start_);
+      c_.frame_ipc_ns_ += total > c_.sink_ns_ ? total - c_.sink_ns_ : 0;
+    }
+  }
+  IpcScope(const IpcScope&) = delete;
+  IpcScope& operator=(const IpcScope&) = delete;
+
+ private:
+  StreamClient& c_;
+  std::chrono::steady_clock::time_point start_{};
+};
+
+const char* to_string(RequestOutcome outcome) {
+  switch (outcome) {
+    case RequestOutcome::kSent: return "sent";
+    case RequestOutcome::kAlreadyInFlight: return "already in flight";
+    case RequestOutcome::kInFlightLimit: return "in-flight limit reached";
+    case RequestOutcome::kRingFull: return "request ring full";
+    case RequestOutcome::kNoServer: return "no server";
+    case RequestOutcome::kUnknownTexture: return "unknown texture";
+    case RequestOutcome::kBadMip: return "mip level out of range";
+    case RequestOutcome::kQuarantined: return "texture quarantined (it crashed the server twice)";
+  }
+  return "?";
+}
+
+SendResult to_send_result(RequestOutcome outcome) {
+  switch (outcome) {
+    case RequestOutcome::kSent:
+    // Answered at once: its kCorrupt comes with the next poll. kSent, so the texture states hold the mip
+    // pending and take that failure (kSkip would leave the texture wanted, and asked for, forever).
+    case RequestOutcome::kQuarantined: return SendResult::kSent;
+    case RequestOutcome::kAlreadyInFlight:
+    case RequestOutcome::kUnknownTexture:
+    case RequestOutcome::kBadMip: return SendResult::kSkip;
+    case RequestOutcome::kInFlightLimit:
+    case RequestOutcome::kRingFull:
+    case RequestOutcome::kNoServer: return SendResult::kStop;
+  }
+  return SendResult::kStop;
+}
+
+const char* to_string(StreamServerState state) {
+  switch (state) {
+    case StreamServerState::kExternal: return "external";
+    case StreamServerState::kRunning: return "running";
+    case StreamServerState::kBackingOff: return "backing off";
+    case StreamServerState::kColormapOnly: return "colormap only";
+    case StreamServerState::kBroken: return "broken";
+  }
+  return "?";
+}
+
+Result<std::unique_ptr<StreamClient>> StreamClient::start(const Config& config, std::vector<TextureShape> shapes,
+                                                           const std::filesystem::path& scene_dir,
+                                                           const std::filesystem::path& config_file,
+                                                           const std::vector<std::string>& overrides,
+                                                           StreamClientOptions options) {
+  TS_TRY(config.validate());
+  std::unique_ptr<StreamClient> c(new StreamClient());
+  c->config_ = config;
+  c->options_ = std::move(options);
+  c->shapes_ = std::move(shapes);
+
+  std::filesystem::path executable;
+  if (c->options_.spawn_server) {
+    auto exe = resolve_server_executable(config);
+    if (!exe) return exe.error();
+    executable = *exe;
+    // The server would refuse it at start (exit 2), and be spawned again and again: said once, here.
+    TS_TRY(check_server_memory(config, read_memory_info()));
+  }
+
+  // Segments of renderers that died without cleaning up (pid + start time no longer alive).
+  if (const int removed = Segment::remove_stale("texstream-"); removed > 0) {
+    spdlog::info("removed {} stale shared segment(s) of dead renderers", removed);
+  }
+  const std::string name = config.protocol.segment_name.empty() ? "texstream-" + std::to_string(::getpid())
+                                                                 : config.protocol.segment_name;
+  // A chosen name (for a standalone server) left behind by a renderer that was killed would block every
+  // later one with "exists"; the sweep above only covers the "texstream-" names.
+  if (!config.protocol.segment_name.empty() && Segment::remove_if_stale(name)) {
+    spdlog::info("removed the stale shared segment '{}' of a dead renderer", name);
+  }
+  // config.validate() and the key ranges bound these (powers of two, 1..16384 slots, <= 64 MiB a slot).
+  SegmentParams params;
+  params.request_capacity = static_cast<uint32_t>(config.protocol.request_ring_capacity);
+  params.completion_capacity = static_cast<uint32_t>(config.protocol.completion_ring_capacity);
+  params.slot_count = static_cast<uint32_t>(config.protocol.staging_slot_count);
+  params.slot_bytes = static_cast<uint64_t>(config.protocol.staging_slot_bytes);
+  params.texture_count = c->shapes_.size();
+  params.texture_table_fingerprint = kTextureTableSeed;
+  for (const TextureShape& t : c->shapes_) {
+    params.texture_table_fingerprint = texture_table_step(params.texture_table_fingerprint, t.width, t.height,
+                                                          t.mip_count, static_cast<uint32_t>(t.format));
+  }
+  auto segment = Segment::create(name, params);
+  if (!segment) return segment.error();
+  c->segment_ = std::move(*segment);
+  c->slot_held_.assign(c->segment_->slot_count(), 0);
+  c->release_pos_.assign(c->segment_->slot_count(), kNoPosition);
+  // Loads never take the last records of the request ring: those are for slot releases, so a ring filled
+  // with loads cannot keep the server from getting its slots back.
+  c->release_reserve_ = std::min<uint32_t>(c->segment_->slot_count(), c->segment_->header().request_capacity / 4);
+  c->attach_rings();
+
+  if (c->options_.spawn_server) {
+    ServerCommand cmd{executable, name, scene_dir, config_file, overrides};
+    c->process_ = std::make_unique<ServerProcess>(std::move(cmd), c->options_.restart);
+    c->segment_->renderer_block().server_epoch.v.store(c->segment_->header().epoch, std::memory_order_relaxed);
+    c->process_->spawn_if_due(c->now());
+  }
+  spdlog::info("stream client: segment '{}' ({} slots x {} bytes), {} textures, server {}", name,
+               c->segment_->slot_count(), c->segment_->slot_bytes(), c->shapes_.size(),
+               c->options_.spawn_server ? executable.string() : std::string("external"));
+  return c;
+}
+
+StreamClient::~StreamClient() {
+  if (frame_open_) ipc_time_.add(frame_ipc_ns_);
+  frame_open_ = false;
+  // A diagnostic hook for texstream-chaos (tools/chaos): the renderer's summary.json does not carry these.
+  if (const char* file = std::getenv("TEXSTREAM_STREAM_STATS"); file && *file) {
+    std::ofstream out(file, std::ios::trunc);
+    out << stats_text();
+    if (!out) spdlog::warn("could not write stream statistics to '{}' ($TEXSTREAM_STREAM_STATS)", file);
+  }
+  process_.reset();  // kill and reap the server before the segment (and its name) goes away
+  segment_.reset();
+}
+
+SteadyTime StreamClient::now() const {
+  return options_.clock ? options_.clock() : std::chrono::steady_clock::now();
+}
+
+void StreamClient::attach_rings() {
+  const SegmentHeader& h = segment_->header();
+  requests_ = SpscRingProducer<RequestRecord>(segment_->request_control(), segment_->request_records(),
+                                              h.request_capacity);
+  completions_ = SpscRingConsumer<CompletionRecord>(segment_->completion_control(), segment_->completion_records(),
+                                                    h.completion_capacity);
+}
+
+void StreamClient::begin_cycle() {
+  IpcScope scope(*this);
+  generation_ = Generation(generation_.value + 1);
+  // release: a server that sees this generation also sees the requests pushed before it (ring release).
+  segment_->renderer_block().generation.v.store(generation_.value, std::memory_order_release);
+}
+
+std::optional<uint64_t> StreamClient::server_read_position() const {
+  // acquire: pairs with the server's release-store of read_pos (as in SpscRingProducer::try_push).
+  const uint64_t read = std::as_const(*segment_).request_control()->read_pos.v.load(std::memory_order_acquire);
+  const uint64_t write = requests_.position();
+  if (read > write || write - read > requests_.capacity()) return std::nullopt;
+  return read;
+}
+
+bool StreamClient::slot_in_transit(uint32_t slot) {
+  if (release_pos_[slot] == kNoPosition) return false;
+  const std::optional<uint64_t> read = server_read_position();
+  if (read && *read > release_pos_[slot]) {
+    release_pos_[slot] = kNoPosition;  // the server has read our release: the slot is its own again
+    return false;
+  }
+  return true;
+}
+
+bool StreamClient::accepting_requests() const {
+  if (broken_) return false;
+  return process_ ? process_->serving() : true;
+}
+
+RequestOutcome StreamClient::try_request(TextureId texture, MipLevel mip, float priority) {
+  IpcScope scope(*this);
+  if (texture.value >= shapes_.size()) return RequestOutcome::kUnknownTexture;
+  if (mip.value >= shapes_[texture.value].mip_count) return RequestOutcome::kBadMip;
+  if (quarantined_.count(texture.value) != 0) {
+    // Never sent: the texture states learn at the next poll that it failed for good (kCorrupt).
+    if (quarantine_refused_set_.insert(key(texture, mip)).second) quarantine_refused_.push_back(key(texture, mip));
+    return RequestOutcome::kQuarantined;
+  }
+  if (!accepting_requests()) return RequestOutcome::kNoServer;
+  if (in_flight_.count(key(texture, mip))) return RequestOutcome::kAlreadyInFlight;
+  if (in_flight_.size() >= static_cast<size_t>(config_.stream.max_requests_in_flight)) {
+    return RequestOutcome::kInFlightLimit;
+  }
+  flush_releases();  // queued releases go first: the server waits for its slots
+  if (requests_.free_space() <= release_reserve_) return RequestOutcome::kRingFull;
+  RequestRecord r{};
+  r.kind = static_cast<uint32_t>(RequestKind::kLoad);
+  r.texture_id = texture.value;
+  r.mip_level = mip.value;
+  r.slot = kNoSlot;
+  r.generation = generation_.value;
+  r.priority = priority;
+  if (!requests_.try_push(r)) return RequestOutcome::kRingFull;  // a ring error: poll() restarts the server
+  in_flight_.emplace(key(texture, mip), InFlight{generation_, now()});
+  ++stats_.requests_sent;
+  if (auto it = lost_.find(key(texture, mip)); it != lost_.end() && !it->second.resent) {
+    it->second.resent = true;
+    it->second.resent_at = now();
+    ++stats_.lost_resent;
+  }
+  ring_doorbell();
+  return RequestOutcome::kSent;
+}
+
+TextureStates::Sender StreamClient::sender() {
+  return [this](const MipRequest& r) { return to_send_result(try_request(r.texture, r.mip, r.priority)); };
+}
+
+void StreamClient::ring_doorbell() {
+  RendererBlock& rb = segment_->renderer_block();
+  // release: pairs with the server's acquire-load of the doorbell; the records pushed before are visible.
+  rb.doorbell.v.fetch_add(1, std::memory_order_release);
+  // seq_cst fence: our push and bump are ordered before the load of `sleeping` below; pairs with the
+  // server's fence between storing sleeping = 1 and re-checking the ring, so one of us sees the other.
+  std::atomic_thread_fence(std::memory_order_seq_cst);
+  if (segment_->server_block().sleeping.v.load(std::memory_order_relaxed) == 1) futex_wake_all(rb.doorbell);
+}
+
+void StreamClient::release_slot(SlotIndex slot) {
+  TS_ASSERT(slot.value < slot_held_.size() && slot_held_[slot.value], "releasing slot %u that we do not hold",
+            slot.value);
+  release_queue_.push_back(slot);
+  flush_releases();
+}
+
+void StreamClient::flush_releases() {
+  bool pushed = false;
+  while (!release_queue_.empty()) {
+    RequestRecord r{};
+    r.kind = static_cast<uint32_t>(RequestKind::kReleaseSlot);
+    r.texture_id = 0;
+    r.mip_level = 0;
+    r.slot = release_queue_.front().value;
+    r.generation = generation_.value;
+    const uint64_t position = requests_.position();
+    if (!requests_.try_push(r)) break;  // full (or a ring error, handled by poll): keep it for next time
+    slot_held_[release_queue_.front().value] = 0;  // the server owns it once it has read the record
+    release_pos_[release_queue_.front().value] = position;
+    release_queue_.pop_front();
+    ++stats_.releases_sent;
+    pushed = true;
+  }
+  if (pushed) ring_doorbell();
+}
+
+void StreamClient::protocol_error(const std::string& what) {
+  ++stats_.protocol_errors;
+  const uint64_t n = stats_.protocol_errors;
+  if (n <= kProtocolErrorsLoggedInFull || n % kProtocolErrorLogEvery == 0) {
+    spdlog::warn("texstream-server broke the protocol (error #{}): {}", n, what);
+  }
+}
+
+void StreamClient::on_server_gone(MipSink& sink, const std::string& why) {
+  // Keep the dead server's statistics: the reset zeroes its block.
+  const ServerBlock& sb = segment_->server_block();
+  past_hits_ += sb.ram_cache_hits.v.load(std::memory_order_relaxed);
+  past_misses_ += sb.ram_cache_misses.v.load(std::memory_order_relaxed);
+  past_bytes_read_ += sb.bytes_read.v.load(std::memory_order_relaxed);
+  past_cancelled_ += sb.requests_cancelled.v.load(std::memory_order_relaxed);
+
+  // Everything in flight is lost; the state machine asks again (kCancelled is retried, never counted).
+  std::vector<uint64_t> lost;
+  lost.reserve(in_flight_.size());
+  for (const auto& [k, f] : in_flight_) lost.push_back(k);
+  std::sort(lost.begin(), lost.end());  // deterministic order for the sink
+  // Recovery accounting: a request sent again and lost again is overdue if its deadline already passed
+  // (the server it went to lived long enough to answer it); otherwise it waits for the next server.
+  const SteadyTime t = now();
+  for (auto& [k, l] : lost_) {
+    if (l.resent && t - l.resent_at > kRecoveryDeadline) ++stats_.unserved_after_restart;
+    l.resent = false;
+  }
+  for (uint64_t k : lost) lost_[k] = Lost{};
+  in_flight_.clear();
+  held_.reset();
+  release_queue_.clear();
+  std::fill(slot_held_.begin(), slot_held_.end(), 0);  // the next server owns every slot
+  std::fill(release_pos_.begin(), release_pos_.end(), kNoPosition);
+  stats_.requests_lost += lost.size();
+  if (!lost.empty() || !why.empty()) {
+    spdlog::warn("texstream-server gone ({}): {} request(s) in flight lost", why, lost.size());
+  }
+  for (uint64_t k : lost) {
+    const auto texture = static_cast<uint32_t>(k >> 32);
+    // A quarantined texture's lost request is its final answer; any other is asked again (kCancelled).
+    sink.failed(TextureId(texture), MipLevel(static_cast<uint32_t>(k)),
+                quarantined_.count(texture) != 0 ? CompletionStatus::kCorrupt : CompletionStatus::kCancelled);
+  }
+}
+
+void StreamClient::charge_crash(int signal) {
+  // Signals a process raises on itself when its own code fails; SIGKILL (and SIGTERM) come from outside.
+  const bool crash = signal == SIGSEGV || signal == SIGBUS || signal == SIGABRT || signal == SIGFPE ||
+                     signal == SIGILL;
+  if (!crash) return;
+  ++stats_.crash_signal_deaths;
+  charge_loading("died by signal " + std::to_string(signal));
+}
+
+void StreamClient::charge_hang() { charge_loading("hung (its heartbeat stalled) and was killed"); }
+
+void StreamClient::charge_loading(const std::string& how) {
+  const ServerBlock& sb = std::as_const(*segment_).server_block();
+  std::unordered_set<uint32_t> charged;  // two workers on one texture: one crash, one charge
+  for (uint32_t i = 0; i < kLoadingWords; ++i) {
+    // relaxed: the writer is dead and reaped; its stores are in the page.
+    const uint32_t word = sb.loading[i].v.load(std::memory_order_relaxed);
+    // A dead server's words are as untrusted as its completions: ids outside the table are ignored.
+    if (word == 0 || word - 1 >= shapes_.size()) continue;
+    const uint32_t texture = word - 1;
+    if (!charged.insert(texture).second || quarantined_.count(texture) != 0) continue;
+    const uint32_t n = ++crash_charges_[texture];
+    if (n < kQuarantineAfterCrashes) {
+      spdlog::warn("texstream-server {} while loading texture {} (crash {} of {} before it is quarantined)", how,
+                   texture, n, kQuarantineAfterCrashes);
+      continue;
+    }
+    quarantined_.insert(texture);
+    ++stats_.textures_quarantined;
+    spdlog::warn("texture {} quarantined: texstream-server crashed or hung {} times while loading it (last: {}); "
+                 "it is not requested again and stays on its colormap",
+                 texture, n, how);
+  }
+}
+
+void StreamClient::fail_quarantined_requests(MipSink& sink) {
+  if (quarantine_refused_.empty()) return;
+  std::vector<uint64_t> refused;
+  refused.swap(quarantine_refused_);
+  quarantine_refused_set_.clear();
+  for (uint64_t k : refused) {
+    sink.failed(TextureId(static_cast<uint32_t>(k >> 32)), MipLevel(static_cast<uint32_t>(k)),
+                CompletionStatus::kCorrupt);
+  }
+}
+
+void StreamClient::watch_external_server(MipSink& sink) {
+  // A standalone server (server.spawn = false) is no child of ours: its death is told by its identity in the
+  // ServerBlock, pid + start time, looked at every kExternalServerCheck. Then its requests are lost and the
+  // block and rings are reset, as after a spawned server's death, so that the next standalone server (its
+  // supervisor restarts it, or a person does) can claim the segment: a server claims it only while the pid
+  // word is 0 (Server::run). The in-process server is this process: never dead here.
+  const SteadyTime t = now();
+  if (t < next_external_check_) return;
+  next_external_check_ = t + kExternalServerCheck;
+  const ServerBlock& sb = segment_->server_block();
+  const uint32_t pid = sb.pid.v.load(std::memory_order_acquire);
+  // start_time 0: a server between its claim of the pid word and publishing its start time.
+  const uint64_t start_time = sb.start_time.v.load(std::memory_order_acquire);
+  if (const uint32_t refused = sb.refused_by.v.load(std::memory_order_acquire);
+      pid == 0 && refused != 0 && stats_.standalone_refused_by == 0) {
+    stats_.standalone_refused_by = refused;
+    last_server_exit_ = "standalone texstream-server pid " + std::to_string(refused) + " refused segment '" +
+                        segment_->name() +
+                        "': it reads another scene than this renderer (its texture table differs; its log names "
+                        "both tables)";
+  }
+  if (pid == 0) {
+    // Nobody serves the segment yet: say so once after a while (a preload would otherwise wait silently).
+    if (external_unserved_since_ == SteadyTime{}) external_unserved_since_ = t;
+    if (!external_unserved_told_ && t - external_unserved_since_ >= kExternalUnservedWarning) {
+      spdlog::warn("no texstream-server has attached to segment '{}' for {} s (server.spawn = false): start one "
+                   "with texstream-server --segment {} --scene DIR",
+                   segment_->name(), std::chrono::duration_cast<std::chrono::seconds>(kExternalUnservedWarning).count(),
+                   segment_->name());
+      external_unserved_told_ = true;
+    }
+  } else {
+    external_unserved_since_ = SteadyTime{};
+    external_unserved_told_ = false;
+  }
+  if (pid == 0 || start_time == 0 || pid == static_cast<uint32_t>(::getpid())) return;
+  if (process_alive(static_cast<int>(pid), start_time)) return;
+  ++stats_.server_deaths;
+  last_server_exit_ = "standalone texstream-server pid " + std::to_string(pid) + " is gone";
+  spdlog::warn("{}: its requests are sent again once another server attaches", last_server_exit_);
+  on_server_gone(sink, last_server_exit_);
+  segment_->reset_after_server_death();
+  attach_rings();
+}
+
+void StreamClient::supervise(MipSink& sink) {
+  const bool ring_broken = requests_.error() != RingError::kNone || completions_.error() != RingError::kNone ||
+                           !server_read_position().has_value();
+  expire_requests(sink, now());
+  if (!process_) {
+    if (ring_broken && !broken_) {
+      protocol_error("a ring position of the external server is impossible; stopping until reset");
+      broken_ = true;
+      on_server_gone(sink, "ring corrupt");
+      return;
+    }
+    watch_external_server(sink);
+    return;
+  }
+  const SteadyTime t = now();
+  if (auto exit = process_->reap(t)) {
+    const ServerBlock& sb = segment_->server_block();
+    const uint32_t holder = sb.pid.v.load(std::memory_order_acquire);
+    const uint64_t holder_start = sb.start_time.v.load(std::memory_order_acquire);
+    if (holder != 0 && holder != static_cast<uint32_t>(exit->pid) && holder_start != 0 &&
+        process_alive(static_cast<int>(holder), holder_start)) {
+      // Our child found the segment held by another server (a standalone texstream-server on this
+      // protocol.segment_name) and left. A reset would pull the rings from under that server: it serves this
+      // renderer from now on, as with server.spawn = false, and no child is started again.
+      spdlog::warn("segment '{}' is served by a standalone texstream-server (pid {}): using it, as with "
+                   "server.spawn = false; child pid {} {}",
+                   segment_->name(), holder, exit->pid, exit->how);
+      process_.reset();
+      return;
+    }
+    ++stats_.server_deaths;
+    // Before on_server_gone (a quarantined texture's lost requests fail for good) and before the reset
+    // (which zeroes the words).
+    if (!exit->killed_by_us) charge_crash(exit->term_signal);
+    if (exit->hung) charge_hang();
+    // The server writes its pid when it attaches and leaves it there when it detaches; the reset clears it.
+    const bool attached = exit->pid > 0 && segment_->server_block().pid.v.load(std::memory_order_relaxed) ==
+                                               static_cast<uint32_t>(exit->pid);
+    stats_.server_deaths_before_attach = attached ? 0 : stats_.server_deaths_before_attach + 1;
+    const bool refused = !attached && !exit->killed_by_us && exit->exit_status == kServerExitBadConfig;
+    stats_.server_refusals_before_attach = refused ? stats_.server_refusals_before_attach + 1 : 0;
+    last_server_exit_ = "pid " + std::to_string(exit->pid) + " " + exit->how +
+                        (exit->killed_by_us ? " after we killed it: " + exit->kill_reason : "");
+    on_server_gone(sink, last_server_exit_);
+    // Only now, with the process reaped, are its words in the segment ours to reset.
+    segment_->reset_after_server_death();
+    attach_rings();
+  }
+  if (process_->serving()) {
+    if (ring_broken) {
+      protocol_error("a ring position is impossible");
+      process_->kill("it corrupted a ring position");
+    } else {
+      const ServerBlock& sb = segment_->server_block();
+      const auto timeout = std::chrono::milliseconds(static_cast<int64_t>(config_.protocol.heartbeat_timeout_ms));
+      process_->watch_heartbeat(sb.heartbeat.v.load(std::memory_order_relaxed),
+                                sb.attached.v.load(std::memory_order_relaxed) == 1, !in_flight_.empty(), timeout, t);
+    }
+  }
+  if (!process_->has_child()) {
+    segment_->renderer_block().server_epoch.v.store(segment_->header().epoch, std::memory_order_relaxed);
+    process_->spawn_if_due(t);
+  }
+}
+
+void StreamClient::poll(MipSink& renderer_sink, size_t max_mips) {
+  // A poll starts the next frame's IPC sample (requests sent after it count with it).
+  if (frame_open_) ipc_time_.add(frame_ipc_ns_);
+  frame_ipc_ns_ = 0;
+  frame_open_ = true;
+  IpcScope scope(*this);
+  TimedSink sink(*this, renderer_sink);
+  RendererBlock& rb = segment_->renderer_block();
+  // relaxed: a progress counter only; we are its sole writer.
+  rb.heartbeat.v.store(rb.heartbeat.v.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
+  supervise(sink);
+  fail_quarantined_requests(sink);
+  if (!accepting_requests()) return;
+  flush_releases();
+
+  size_t mips = 0;
+  if (held_) {
+    if (mips >= max_mips) return;
+    const CheckedCompletion c = *held_;
+    held_.reset();
+    if (!deliver(c, sink)) return;  // still no room: keep order, try again next poll
+    ++mips;
+  }
+  // Bounded by one ring's worth per poll: a server publishing as fast as we consume cannot hold us here.
+  const uint32_t max_records = segment_->header().completion_capacity;
+  for (uint32_t n = 0; n < max_records && mips < max_mips && !held_; ++n) {
+    const std::optional<CompletionRecord> record = completions_.try_pop();
+    if (!record) break;
+    handle_record(*record, sink, mips);
+  }
+  if (completions_.error() != RingError::kNone) supervise(sink);  // act on a corrupt position this frame
+}
+
+void StreamClient::handle_record(const CompletionRecord& record, MipSink& sink, size_t& mips) {
+  const uint32_t slot_count = segment_->slot_count();
+  auto checked = check_completion(record, slot_count, segment_->slot_bytes());
+  if (!checked) {
+    protocol_error(checked.error().message + " (" + mip_name(record.texture_id, record.mip_level) + ")");
+    // A server that believes it handed us a slot gets it back, once; a slot we already hold is not
+    // released again (that would give the server a slot twice).
+    if (record.status == static_cast<uint32_t>(CompletionStatus::kOk) && record.slot < slot_count &&
+        !slot_held_[record.slot] && !slot_in_transit(record.slot)) {
+      slot_held_[record.slot] = 1;
+      release_slot(SlotIndex(record.slot));
+    }
+    // A request it claims to answer is answered badly: ask again later.
+    if (auto it = in_flight_.find(key(TextureId(record.texture_id), MipLevel(record.mip_level)));
+        it != in_flight_.end()) {
+      in_flight_.erase(it);
+      note_answered(key(TextureId(record.texture_id), MipLevel(record.mip_level)));
+      ++stats_.completions_rejected;
+      sink.reject(TextureId(record.texture_id), MipLevel(record.mip_level), {});
+    }
+    return;
+  }
+  const CheckedCompletion& c = *checked;
+  const bool ok = c.status == CompletionStatus::kOk;
+  const auto in_flight = in_flight_.find(key(c.texture, c.mip));
+  const bool asked = in_flight != in_flight_.end();
+
+  auto refuse = [&](const std::string& what, bool release) {
+    protocol_error(what + " (" + mip_name(c.texture.value, c.mip.value) + ")");
+    if (ok && release) release_slot(c.slot);
+    if (asked) {
+      in_flight_.erase(in_flight);
+      note_answered(key(c.texture, c.mip));
+      ++stats_.completions_rejected;
+      sink.reject(c.texture, c.mip, {});
+    }
+  };
+
+  if (ok) {
+    if (slot_held_[c.slot.value]) {
+      refuse("slot " + std::to_string(c.slot.value) + " handed over while we still hold it", false);
+      return;
+    }
+    // If the server's read position has not passed our release record even now, it had certainly not read
+    // it when it published this completion: it handed over a slot it did not own.
+    if (slot_in_transit(c.slot.value)) {
+      refuse("slot " + std::to_string(c.slot.value) + " handed over before the server read its release", false);
+      return;
+    }
+    slot_held_[c.slot.value] = 1;  // the ring has handed it to us
+  }
+  if (c.texture.value >= shapes_.size()) {
+    refuse("texture id outside the table of " + std::to_string(shapes_.size()), true);
+    return;
+  }
+  if (!asked) {
+    refuse("an answer to a request we did not send (or already answered)", true);
+    return;
+  }
+  if (c.generation != in_flight->second.generation) {
+    refuse("generation " + std::to_string(c.generation.value) + " but the request had " +
+               std::to_string(in_flight->second.generation.value),
+           true);
+    return;
+  }
+  if (!ok) {
+    in_flight_.erase(in_flight);
+    note_answered(key(c.texture, c.mip));
+    ++stats_.completions_failed[static_cast<uint32_t>(c.status)];
+    sink.failed(c.texture, c.mip, c.status);
+    return;
+  }
+  if (auto st = check_against_texture(c, shapes_[c.texture.value]); !st.ok()) {
+    refuse(st.error().message, true);
+    return;
+  }
+  if (deliver(c, sink)) ++mips;
+}
+
+bool StreamClient::deliver(const CheckedCompletion& c, MipSink& sink) {
+  std::span<std::byte> dst = sink.reserve(c.texture, c.mip, c.byte_size);
+  if (dst.empty()) {
+    held_ = c;  // the slot stays ours and the request stays in flight until there is room
+    return false;
+  }
+  TS_ASSERT(dst.size() >= c.byte_size, "MipSink::reserve gave %zu bytes for a %llu-byte mip", dst.size(),
+            static_cast<unsigned long long>(c.byte_size));
+  // check_completion bounded slot < slot_count and byte_size <= slot_bytes: the read stays in the slot.
+  const std::span<std::byte> src = segment_->slot(c.slot.value);
+  std::memcpy(dst.data(), src.data(), c.byte_size);  // read the shared bytes once
+  in_flight_.erase(key(c.texture, c.mip));
+  note_answered(key(c.texture, c.mip));
+  const std::span<std::byte> payload = dst.first(c.byte_size);
+  // The checksum is computed on our copy: the server may change the slot after we read it.
+  if (payload_checksum(payload.data(), payload.size()) == c.checksum) {
+    ++stats_.completions_ok;
+    stats_.bytes_received += c.byte_size;
+    sink.commit(c.texture, c.mip, payload);
+  } else {
+    protocol_error("payload checksum mismatch (" + mip_name(c.texture.value, c.mip.value) + ")");
+    ++stats_.completions_rejected;
+    ++stats_.payload_checksum_failures;
+    sink.reject(c.texture, c.mip, dst);
+  }
+  release_slot(c.slot);
+  return true;
+}
+
+void StreamClient::restart_server(const std::string& why, MipSink& renderer_sink) {
+  IpcScope scope(*this);
+  TimedSink sink(*this, renderer_sink);
+  if (process_) {
+    process_->kill(why);  // the next poll reaps it, marks requests lost, resets and respawns
+    return;
+  }
+  on_server_gone(sink, why);
+  segment_->reset_after_server_death();
+  attach_rings();
+  broken_ = false;
+}
+
+void StreamClient::expire_requests(MipSink& sink, SteadyTime t) {
+  // A scan at most every 1/8 of the timeout: the map may hold thousands of requests.
+  if (in_flight_.empty() || t < next_expiry_scan_) return;
+  next_expiry_scan_ = t + options_.request_timeout / 8;
+  std::vector<uint64_t> expired;
+  for (const auto& [k, f] : in_flight_)
+    if (t - f.sent_at > options_.request_timeout) expired.push_back(k);
+  if (expired.empty()) return;
+  std::sort(expired.begin(), expired.end());  // deterministic order for the sink
+  if (held_ && std::binary_search(expired.begin(), expired.end(), key(held_->texture, held_->mip))) {
+    std::erase(expired, key(held_->texture, held_->mip));  // answered; only the sink had no room
+  }
+  for (uint64_t k : expired) {
+    in_flight_.erase(k);
+    note_answered(k);
+    ++stats_.requests_timed_out;
+    sink.failed(TextureId(static_cast<uint32_t>(k >> 32)), MipLevel(static_cast<uint32_t>(k)),
+                CompletionStatus::kTimedOut);
+  }
+  const std::string what = std::to_string(expired.size()) + " request(s) unanswered for " +
+                           std::to_string(options_.request_timeout.count()) + " ms: failed as timed out";
+  // With no server attached nobody broke the protocol: nobody was there to answer (server.spawn = false and no
+  // standalone server yet, or a spawned one that has not attached). Before, each expiry counted as a protocol
+  // error of a server that did not exist.
+  if (const std::string unattached = unattached_reason(); !unattached.empty()) {
+    spdlog::warn("{} ({})", what, unattached);
+    return;
+  }
+  protocol_error(what);
+}
+
+void StreamClient::note_answered(uint64_t k) {
+  const auto it = lost_.find(k);
+  if (it == lost_.end() || !it->second.resent) return;
+  if (now() - it->second.resent_at <= kRecoveryDeadline) {
+    ++stats_.lost_answered_in_time;
+  } else {
+    ++stats_.unserved_after_restart;
+  }
+  lost_.erase(it);
+}
+
+uint64_t StreamClient::overdue_lost(SteadyTime t) const {
+  return static_cast<uint64_t>(std::count_if(lost_.begin(), lost_.end(), [&](const auto& e) {
+    return e.second.resent && t - e.second.resent_at > kRecoveryDeadline;
+  }));
+}
+
+std::string StreamClient::unattached_reason() const {
+  if (std::as_const(*segment_).server_block().attached.v.load(std::memory_order_acquire) == 1) return {};
+  std::string why = "no texstream-server is attached to segment '" + segment_->name() + "'";
+  if (!process_) {
+    why += " (server.spawn = false): start one with texstream-server --segment " + segment_->name() + " --scene DIR";
+  }
+  return why;
+}
+
+bool StreamClient::in_flight(TextureId texture, MipLevel mip) const { return in_flight_.count(key(texture, mip)) != 0; }
+
+StreamStats StreamClient::stats() const {
+  StreamStats s = stats_;
+  s.in_flight = in_flight_.size();
+  s.slots_held = static_cast<uint64_t>(std::count(slot_held_.begin(), slot_held_.end(), uint8_t{1}));
+  s.releases_queued = release_queue_.size();
+  const ServerBlock& sb = std::as_const(*segment_).server_block();
+  s.server_ram_cache_hits = past_hits_ + sb.ram_cache_hits.v.load(std::memory_order_relaxed);
+  s.server_ram_cache_misses = past_misses_ + sb.ram_cache_misses.v.load(std::memory_order_relaxed);
+  s.server_bytes_read = past_bytes_read_ + sb.bytes_read.v.load(std::memory_order_relaxed);
+  s.server_requests_cancelled = past_cancelled_ + sb.requests_cancelled.v.load(std::memory_order_relaxed);
+  s.unserved_after_restart += overdue_lost(now());
+  if (process_) {
+    s.server_crashes = process_->crashes();
+    s.server_restarts = process_->spawns() > 0 ? process_->spawns() - 1 : 0;
+    switch (process_->state()) {
+      case ServerState::kStopped:
+      case ServerState::kBackingOff: s.server_state = StreamServerState::kBackingOff; break;
+      case ServerState::kRunning: s.server_state = StreamServerState::kRunning; break;
+      case ServerState::kColormapOnly: s.server_state = StreamServerState::kColormapOnly; break;
+    }
+  } else {
+    s.server_state = broken_ ? StreamServerState::kBroken : StreamServerState::kExternal;
+  }
+  return s;
+}
+
+std::string StreamClient::stats_text() const {
+  const StreamStats s = stats();
+  std::ostringstream o;
+  o << "requests_sent " << s.requests_sent << "\n"
+    << "releases_sent " << s.releases_sent << "\n"
+    << "completions_ok " << s.completions_ok << "\n"
+    << "completions_rejected " << s.completions_rejected << "\n"
+    << "payload_checksum_failures " << s.payload_checksum_failures << "\n";
+  uint64_t failed = 0;
+  for (uint64_t f : s.completions_failed) failed += f;
+  o << "completions_failed " << failed << "\n"
+    << "requests_lost " << s.requests_lost << "\n"
+    << "requests_timed_out " << s.requests_timed_out << "\n"
+    << "bytes_received " << s.bytes_received << "\n"
+    << "protocol_errors " << s.protocol_errors << "\n"
+    << "server_restarts " << s.server_restarts << "\n"
+    << "server_deaths " << s.server_deaths << "\n"
+    << "server_crashes " << s.server_crashes << "\n"
+    << "server_deaths_before_attach " << s.server_deaths_before_attach << "\n"
+    << "server_refusals_before_attach " << s.server_refusals_before_attach << "\n"
+    << "crash_signal_deaths " << s.crash_signal_deaths << "\n"
+    << "textures_quarantined " << s.textures_quarantined << "\n"
+    << "lost_resent " << s.lost_resent << "\n"
+    << "lost_answered_in_time " << s.lost_answered_in_time << "\n"
+    << "unserved_after_restart " << s.unserved_after_restart << "\n"
+    << "in_flight " << s.in_flight << "\n"
+    << "server_state " << to_string(s.server_state) << "\n"
+    << "ipc_frames " << ipc_time_.samples() << "\n"
+    << "ipc_total_ms " << ipc_time_.total_ms() << "\n"
+    << "ipc_p50_us " << ipc_time_.quantile_us(0.5) << "\n"
+    << "ipc_p99_us " << ipc_time_.quantile_us(0.99) << "\n"
+    << "ipc_p999_us " << ipc_time_.quantile_us(0.999) << "\n"
+    << "ipc_p9999_us " << ipc_time_.quantile_us(0.9999) << "\n"
+    << "ipc_max_us " << static_cast<double>(ipc_time_.max_ns()) / 1e3 << "\n"
+    << "ipc_frames_over_1ms " << ipc_time_.above(1'000'000) << "\n";
+  return o.str();
+}
+
+}  // namespace texstream

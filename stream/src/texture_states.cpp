@@ -1,0 +1,177 @@
+#include "texstream/stream/texture_states.hpp"
+
+#include <algorithm>
+#include <utility>
+
+#include "texstream/common/contract.hpp"
+#include "texstream/common/texel_format.hpp"
+
+namespace texstream {
+
+const char* to_string(TexturePhase phase) {
+  switch (phase) {
+    case TexturePhase::kInitial: return "initial";
+    case TexturePhase::kActive: return "active";
+    case TexturePhase::kFinal: return "final";
+  }
+  return "?";
+}
+
+uint32_t initial_mip_level(const TextureShape& shape) {
+  // Seed 000 Algorithm 1: "Set the initial mipmap level to load. We use the 4x4 mipmap."
+  constexpr uint32_t kInitialExtentLog2 = 2;  // 4 texels
+  const uint32_t top = floor_log2(std::max(shape.width, shape.height));
+  const uint32_t level = top >= kInitialExtentLog2 ? top - kInitialExtentLog2 : 0;
+  return shape.mip_count == 0 ? 0 : std::min(level, shape.mip_count - 1);
+}
+
+TextureStates::TextureStates(std::vector<TextureShape> shapes) : shapes_(std::move(shapes)), states_(shapes_.size()) {
+  for (size_t i = 0; i < shapes_.size(); ++i) {
+    if (shapes_[i].mip_count == 0) states_[i].broken = true;
+  }
+}
+
+std::optional<uint32_t> TextureStates::next_mip(const State& s, const TextureShape& shape, float desired,
+                                                float bias) const {
+  if (s.broken || s.pending != kNone) return std::nullopt;  // one request per texture in flight
+  switch (s.phase) {
+    case TexturePhase::kFinal:
+      return std::nullopt;
+    case TexturePhase::kInitial:
+      return initial_mip_level(shape);
+    case TexturePhase::kActive:
+      // Algorithm 1: `if texture.mipLevelSampled + b < texture.mipLevel` → load mipLevel - 1. Written so
+      // that a NaN from the GPU metadata refines nothing. resident is set in Active with nothing pending
+      // (roll_back returns a texture with nothing resident to Initial), and resident > 0 (0 is Final).
+      if (s.resident == kNone || s.resident == 0) return std::nullopt;
+      if (desired + bias < static_cast<float>(s.resident)) return s.resident - 1;
+      return std::nullopt;
+  }
+  return std::nullopt;
+}
+
+void TextureStates::roll_back(State& s) {
+  s.pending = kNone;
+  // Nothing displayed: the texture is as if never loaded (the Initial request failed, or the base mip of a
+  // tiny texture whose initial level is 0). Otherwise it stays Active and refines again from `resident`.
+  s.phase = s.resident == kNone ? TexturePhase::kInitial : (s.resident == 0 ? TexturePhase::kFinal : TexturePhase::kActive);
+}
+
+CycleResult TextureStates::run_cycle(std::span<const StreamCandidate> candidates, uint64_t load_bytes, float bias,
+                                     const Sender& send, size_t max_requests) {
+  CycleResult out;
+  for (const StreamCandidate& c : candidates) {
+    if (!contains(c.texture)) {
+      ++out.unknown_textures;
+      continue;
+    }
+    State& s = states_[c.texture.value];
+    const TextureShape& shape = shapes_[c.texture.value];
+    const std::optional<uint32_t> mip = next_mip(s, shape, c.desired_mip, bias);
+    if (!mip) continue;
+    // Algorithm 1: "Stop streaming textures when the adaptive load size is reached" — tested before each
+    // load, so the mip that first pushes the batch over s is still loaded.
+    if (out.bytes > load_bytes) {
+      out.stopped_by_load_size = true;
+      break;
+    }
+    if (out.sent.size() >= max_requests) {
+      out.stopped_by_count = true;
+      break;
+    }
+    const MipRequest request{c.texture, MipLevel(*mip), c.weight, mip_bytes(shape.format, shape.width, shape.height, *mip)};
+    const SendResult r = send(request);
+    if (r == SendResult::kStop) {
+      out.stopped_by_sender = true;
+      break;
+    }
+    if (r == SendResult::kSkip) continue;
+    s.pending = *mip;
+    // Initial → Active; "Set to Final state as the highest resolution mipmap will be streamed" when the
+    // level is mipLevelMin (the base level 0), also straight from Initial for a texture smaller than 4x4.
+    s.phase = *mip == 0 ? TexturePhase::kFinal : TexturePhase::kActive;
+    out.bytes += request.bytes;
+    out.sent.push_back(request);
+  }
+  return out;
+}
+
+bool TextureStates::on_committed(TextureId texture, MipLevel mip) {
+  if (!contains(texture)) return false;
+  State& s = states_[texture.value];
+  if (s.pending == kNone || s.pending != mip.value) return false;
+  s.pending = kNone;
+  s.resident = mip.value;
+  s.failures = 0;
+  s.phase = mip.value == 0 ? TexturePhase::kFinal : TexturePhase::kActive;
+  return true;
+}
+
+bool TextureStates::on_failed(TextureId texture, MipLevel mip, CompletionStatus status) {
+  if (!contains(texture)) return false;
+  State& s = states_[texture.value];
+  if (s.pending == kNone || s.pending != mip.value) return false;
+  roll_back(s);
+  switch (status) {
+    case CompletionStatus::kNotFound:
+    case CompletionStatus::kCorrupt:
+      s.broken = true;  // the file is missing or does not match its header: asking again cannot help
+      break;
+    case CompletionStatus::kIoError:
+      if (++s.failures >= kMaxCountedFailures) s.broken = true;
+      break;
+    case CompletionStatus::kOk:  // a kOk that the caller reports as failed: treat as a rejected payload
+      if (++s.failures >= kMaxCountedFailures) s.broken = true;
+      break;
+    case CompletionStatus::kUnfilled:
+    case CompletionStatus::kCancelled:
+    case CompletionStatus::kTimedOut:
+      break;  // not the texture's fault: the next cycle asks again
+  }
+  return true;
+}
+
+bool TextureStates::on_rejected(TextureId texture, MipLevel mip) {
+  if (!contains(texture)) return false;
+  State& s = states_[texture.value];
+  if (s.pending == kNone || s.pending != mip.value) return false;
+  roll_back(s);
+  if (++s.failures >= kMaxCountedFailures) s.broken = true;
+  return true;
+}
+
+void TextureStates::invalidate(TextureId texture) {
+  if (!contains(texture)) return;
+  State& s = states_[texture.value];
+  s.phase = TexturePhase::kInitial;
+  s.resident = kNone;
+  s.pending = kNone;
+}
+
+TextureStateView TextureStates::view(TextureId texture) const {
+  TS_ASSERT(contains(texture), "texture %u outside the table of %zu", texture.value, states_.size());
+  const State& s = states_[texture.value];
+  TextureStateView v{s.phase, std::nullopt, std::nullopt, s.broken, s.failures};
+  if (s.resident != kNone) v.resident = s.resident;
+  if (s.pending != kNone) v.pending = s.pending;
+  return v;
+}
+
+TextureStateCounts TextureStates::counts() const {
+  TextureStateCounts c;
+  for (const State& s : states_) {
+    if (s.broken) {
+      ++c.broken;
+      continue;
+    }
+    if (s.pending != kNone) ++c.pending;
+    switch (s.phase) {
+      case TexturePhase::kInitial: ++c.initial; break;
+      case TexturePhase::kActive: ++c.active; break;
+      case TexturePhase::kFinal: ++c.final; break;
+    }
+  }
+  return c;
+}
+
+}  // namespace texstream

@@ -1,0 +1,107 @@
+#include "texstream/server/load/dds_layout.hpp"
+
+#include <cstring>
+
+namespace texstream::server {
+
+namespace {
+
+// Field offsets in bytes from the start of the file (the "DDS " magic is bytes 0-3), from Microsoft's
+// DDS_HEADER / DDS_PIXELFORMAT / DDS_HEADER_DXT10 documentation.
+constexpr size_t kMagic = 0, kSize = 4, kFlags = 8, kHeight = 12, kWidth = 16, kDepth = 24, kMipMapCount = 28;
+constexpr size_t kPfFlags = 80, kPfFourCC = 84, kPfBitCount = 88, kPfRMask = 92, kPfGMask = 96, kPfBMask = 100,
+                 kPfAMask = 104, kCaps2 = 112;
+constexpr size_t kDx10Format = 128, kDx10Dimension = 132, kDx10ArraySize = 140;
+constexpr uint64_t kLegacyHeaderBytes = 128;
+
+constexpr uint32_t kDdsMagic = 0x20534444u;  // "DDS "
+constexpr uint32_t kDdsdMipMapCount = 0x20000u;
+constexpr uint32_t kDdsdDepth = 0x800000u;
+constexpr uint32_t kDdpfFourCC = 0x4u;
+constexpr uint32_t kDdpfRgb = 0x40u;
+constexpr uint32_t kCaps2Cubemap = 0x200u;
+constexpr uint32_t kCaps2Volume = 0x200000u;
+constexpr uint32_t kFourCCDxt1 = 0x31545844u;   // "DXT1"
+constexpr uint32_t kFourCCDx10 = 0x30315844u;   // "DX10"
+constexpr uint32_t kDxgiR8G8B8A8Unorm = 28, kDxgiR8G8B8A8UnormSrgb = 29;
+constexpr uint32_t kDxgiBc1Unorm = 71, kDxgiBc1UnormSrgb = 72;
+constexpr uint32_t kDx10Texture2D = 3;
+
+uint32_t word(std::span<const std::byte> b, size_t offset) {
+  uint32_t v;
+  std::memcpy(&v, b.data() + offset, 4);  // little-endian host: the format's byte order
+  return v;
+}
+
+Error corrupt(const std::string& what, const std::string& why) {
+  return make_error(ErrorCode::kCorrupt, what + ": DDS " + why);
+}
+
+}  // namespace
+
+uint64_t DdsLayout::mip_offset(uint32_t level) const {
+  const TexelFormat f = encoding == DdsEncoding::kBc1 ? TexelFormat::kBc1 : TexelFormat::kRgba8;
+  return data_offset + mip_chain_offset(f, width, height, level);
+}
+
+uint64_t DdsLayout::mip_size(uint32_t level) const {
+  const TexelFormat f = encoding == DdsEncoding::kBc1 ? TexelFormat::kBc1 : TexelFormat::kRgba8;
+  return mip_bytes(f, width, height, level);
+}
+
+Result<DdsLayout> parse_dds_layout(std::span<const std::byte> bytes, const std::string& what) {
+  if (bytes.size() < kLegacyHeaderBytes) {
+    return corrupt(what, "file of " + std::to_string(bytes.size()) + " bytes is shorter than a header (128)");
+  }
+  if (word(bytes, kMagic) != kDdsMagic) return corrupt(what, "magic is not 'DDS '");
+  if (word(bytes, kSize) != 124) return corrupt(what, "header size is " + std::to_string(word(bytes, kSize)));
+  DdsLayout l;
+  l.width = word(bytes, kWidth);
+  l.height = word(bytes, kHeight);
+  if (!valid_texture_extent(l.width, l.height)) {
+    return corrupt(what, "extent " + std::to_string(l.width) + "x" + std::to_string(l.height) + " is outside [1, " +
+                             std::to_string(kMaxTextureExtent) + "]");
+  }
+  const uint32_t flags = word(bytes, kFlags);
+  const uint32_t caps2 = word(bytes, kCaps2);
+  if ((caps2 & kCaps2Cubemap) != 0) return corrupt(what, "is a cube map, not one 2D texture");
+  if ((caps2 & kCaps2Volume) != 0 || ((flags & kDdsdDepth) != 0 && word(bytes, kDepth) > 1)) {
+    return corrupt(what, "is a volume texture, not one 2D texture");
+  }
+  const uint32_t mips = word(bytes, kMipMapCount);
+  l.mip_count = (flags & kDdsdMipMapCount) != 0 && mips > 0 ? mips : 1;
+  if (l.mip_count > full_mip_count(l.width, l.height)) {
+    return corrupt(what, "mip count " + std::to_string(l.mip_count) + " exceeds the full chain of " +
+                             std::to_string(full_mip_count(l.width, l.height)) + " for " + std::to_string(l.width) +
+                             "x" + std::to_string(l.height));
+  }
+  l.data_offset = kLegacyHeaderBytes;
+
+  const uint32_t pf_flags = word(bytes, kPfFlags);
+  const uint32_t fourcc = word(bytes, kPfFourCC);
+  if ((pf_flags & kDdpfFourCC) != 0 && fourcc == kFourCCDx10) {
+    if (bytes.size() < kDdsMaxHeaderBytes) {
+      return corrupt(what, "file of " + std::to_string(bytes.size()) + " bytes ends inside the DX10 header (148)");
+    }
+    if (word(bytes, kDx10Dimension) != kDx10Texture2D) return corrupt(what, "DX10 resource is not a 2D texture");
+    if (word(bytes, kDx10ArraySize) != 1) {
+      return corrupt(what, "DX10 array of " + std::to_string(word(bytes, kDx10ArraySize)) + " textures");
+    }
+    l.data_offset = kDdsMaxHeaderBytes;
+    const uint32_t dxgi = word(bytes, kDx10Format);
+    l.encoding = dxgi == kDxgiBc1Unorm || dxgi == kDxgiBc1UnormSrgb                ? DdsEncoding::kBc1
+                 : dxgi == kDxgiR8G8B8A8Unorm || dxgi == kDxgiR8G8B8A8UnormSrgb ? DdsEncoding::kRgba8
+                                                                                  : DdsEncoding::kOther;
+  } else if ((pf_flags & kDdpfFourCC) != 0) {
+    l.encoding = fourcc == kFourCCDxt1 ? DdsEncoding::kBc1 : DdsEncoding::kOther;
+  } else if ((pf_flags & kDdpfRgb) != 0 && word(bytes, kPfBitCount) == 32 && word(bytes, kPfRMask) == 0x000000ffu &&
+             word(bytes, kPfGMask) == 0x0000ff00u && word(bytes, kPfBMask) == 0x00ff0000u &&
+             word(bytes, kPfAMask) == 0xff000000u) {
+    l.encoding = DdsEncoding::kRgba8;
+  } else {
+    l.encoding = DdsEncoding::kOther;  // BGRA, RGB without alpha, luminance, ...: OpenImageIO decodes it
+  }
+  return l;
+}
+
+}  // namespace texstream::server
