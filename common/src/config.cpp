@@ -292,6 +292,12 @@ Status Config::validate() const {
   if (protocol.completion_ring_capacity < protocol.request_ring_capacity) {
     return bad("protocol.completion_ring_capacity", "must be at least protocol.request_ring_capacity (every request is answered)");
   }
+  if (render.window && render.feedback_pairs) {
+    return bad("render.feedback_pairs", "a measurement of headless runs; it cannot be used with render.window");
+  }
+  if (render.preload_all && render.blocking_loads) {
+    return bad("render.preload_all", "and render.blocking_loads: choose one (both are baselines of their own)");
+  }
   return ok_status();
 }
 

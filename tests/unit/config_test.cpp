@@ -57,6 +57,22 @@ TEST(Config, RelationsBetweenKeysAreValidated) {
   EXPECT_TRUE(parse_config("[server]\nspawn = false\n[protocol]\nsegment_name = \"ts-city\"\n", "t", {}).ok());
 }
 
+// These two were checked only when a Renderer was built (after the scene load); every program that reads a
+// config now refuses them at parse time, naming the key.
+TEST(Config, RenderModesThatExcludeEachOtherAreRefused) {
+  const std::string pairs = error_of("[render]\nwindow = true\nfeedback_pairs = true\n");
+  EXPECT_NE(pairs.find("'render.feedback_pairs'"), std::string::npos) << pairs;
+  EXPECT_NE(pairs.find("render.window"), std::string::npos) << pairs;
+  EXPECT_TRUE(parse_config("[render]\nfeedback_pairs = true\n", "t", {}).ok());
+  EXPECT_TRUE(parse_config("[render]\nwindow = true\n", "t", {}).ok());
+
+  const std::string baselines = error_of("", {"render.preload_all=true", "render.blocking_loads=true"});
+  EXPECT_NE(baselines.find("'render.preload_all'"), std::string::npos) << baselines;
+  EXPECT_NE(baselines.find("render.blocking_loads"), std::string::npos) << baselines;
+  EXPECT_TRUE(parse_config("", "t", {"render.preload_all=true"}).ok());
+  EXPECT_TRUE(parse_config("", "t", {"render.blocking_loads=true"}).ok());
+}
+
 // A segment name that no shared-memory object can have is refused naming the key. Before, the renderer failed
 // with "cannot create shared segment 'a/b': Invalid argument", and a standalone server on it waited for ever.
 TEST(Config, ASegmentNameNoSharedMemoryObjectCanHaveIsRefused) {

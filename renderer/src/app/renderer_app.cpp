@@ -255,10 +255,6 @@ Status Renderer::set_up() {
   vo.device_substring = cfg_.render.device;
   vo.validation = cfg_.render.validation;
   vo.need_bc1 = *format == TexelFormat::kBc1;
-  if (cfg_.render.window && cfg_.render.feedback_pairs) {
-    return make_error(ErrorCode::kInvalidArgument,
-                      "render.feedback_pairs: a measurement of headless runs; it cannot be used with render.window");
-  }
   if (cfg_.render.window) {
     // The window first: the Vulkan instance needs its extensions. R records the flight next to the frames.
     auto session = InteractiveSession::open(static_cast<uint32_t>(cfg_.render.width_px),
@@ -337,10 +333,6 @@ Status Renderer::set_up() {
   TS_VK_TRY(vkCreateFence(device, &fci, nullptr, &fence));
   fence_ = UniqueFence(device, fence);
 
-  if (cfg_.render.preload_all && cfg_.render.blocking_loads) {
-    return make_error(ErrorCode::kInvalidArgument,
-                      "render.preload_all and render.blocking_loads: choose one (both are baselines of their own)");
-  }
   if (!cfg_.render.reference_dir.empty()) {
     auto measure = FrameMeasurement::open(cfg_.render.reference_dir, output_dir_, po.width, po.height);
     if (!measure) return measure.error();
