@@ -20,7 +20,8 @@ struct Range {
 };
 constexpr Range kAny{-1e300, 1e300};
 
-// One declaration per key. Visitors: parse, apply override, print TOML, print docs.
+// One declaration per key. Visitors: parse, apply override, print TOML, print docs. For a key whose type is
+// a ConfigChoice enum, `doc` is a lead-in and its table's names and docs follow it (key_doc).
 template <class V>
 void visit_keys(Config& c, V&& v) {
   v("scene", "dir", c.scene.dir, "path", "Scene folder written by texstream-gen (relative paths are from the working directory)", kAny);
@@ -37,8 +38,8 @@ void visit_keys(Config& c, V&& v) {
   v("server", "worker_threads", c.server.worker_threads, "threads", "Read/decode workers (default fits a 2-core machine)", Range{1, 64});
   v("server", "ram_cache_bytes", c.server.ram_cache_bytes, "bytes", "Byte budget of the server's RAM cache of mips, pre-faulted at start. With the staging pool and 64 MiB it must fit physical memory and any memory cgroup limit (else an error at start); more than is free now, less a reserve, is lowered with a warning", Range{0, 1ll << 40});
   v("server", "idle_wait_ms", c.server.idle_wait_ms, "ms", "Longest futex wait for new requests when idle", Range{0.1, 1000});
-  v("server", "log_level", c.server.log_level, "level", "trace, debug, info, warn or error", kAny);
-  v("server", "cache_policy", c.server.cache_policy, "name", "RAM cache eviction: level (seed 002 Eq. 4 discard priority; measured higher hit rates than lru at every budget) or lru", kAny);
+  v("server", "log_level", c.server.log_level, "level", "Log level of texstream-server:", kAny);
+  v("server", "cache_policy", c.server.cache_policy, "name", "RAM cache eviction:", kAny);
   v("server", "rate_limit_mb_s", c.server.rate_limit_mb_s, "MB/s", "Cap on storage reads (0: unlimited), seed 002 §3.3", Range{0, 1e6});
   v("server", "remote_fetches_in_flight", c.server.remote_fetches_in_flight, "fetches", "Concurrent fetches from a remote or slow origin (threads; one connection each); RAM and disk-cache hits are served meanwhile. Seed 002 used 1; texstream-bench storage measured mips/s over a 20-30 ms origin rising from 1 to 8 (4: most of the gain, few threads and slots)", Range{1, 16});
 
@@ -59,7 +60,7 @@ void visit_keys(Config& c, V&& v) {
   v("render", "near_m", c.render.near_m, "m", "Near plane", Range{1e-3, 1e6});
   v("render", "far_m", c.render.far_m, "m", "Far plane", Range{1e-2, 1e8});
   v("render", "headlight_ambient", c.render.headlight_ambient, "fraction", "Headlight: camera-facing surfaces keep all their colour, edge-on ones this fraction (1 = unlit)", Range{0, 1});
-  v("render", "debug_view", c.render.debug_view, "name", "none, mip (displayed mip as grey), weight (heat map) or mesh_id", kAny);
+  v("render", "debug_view", c.render.debug_view, "name", "What the frame shows instead of the textures:", kAny);
   v("render", "feedback", c.render.feedback, "bool", "Visibility metadata pass and compaction (off only to measure their cost)", kAny);
   v("render", "feedback_pairs", c.render.feedback_pairs, "bool", "Measurement of what feedback costs: each frame is drawn twice from the same pose, once as usual and once without feedback (the order alternates; new meshes' geometry is uploaded first, timed in neither; the twin uploads no mips and changes nothing the run shows), and the twin's latency goes to frames.csv's latency_off_ms (texstream-bench visibility; not with a window)", kAny);
   v("render", "preload_all", c.render.preload_all, "bool", "Before frame 0, load every mip of every texture through the server and wait (the cache must hold the scene): reference frames and the all-resident baseline", kAny);
@@ -74,7 +75,7 @@ void visit_keys(Config& c, V&& v) {
   v("stream", "colormap_blend", c.stream.colormap_blend, "bool", "Blend sampled colour with the City Colormap by Eq. 8 (false: sample directly)", kAny);
   v("stream", "foreground_distance_m", c.stream.foreground_distance_m, "m", "Eq. 2 distance weight: w_d = (1 - min(depth / this, 1))^4 (the seed's c_w normalised to metres)", Range{1e-3, 1e7});
 
-  v("controller", "mode", c.controller.mode, "name", "adaptive (Eq. 4-7), none (s = s_max, b = 0: the seed's baseline) or fixed", kAny);
+  v("controller", "mode", c.controller.mode, "name", "Load size s and mip bias b:", kAny);
   v("controller", "alpha_ms", c.controller.alpha_ms, "ms", "α: target maximum frame latency (seed 000 Table 2)", Range{0.1, 10000});
   v("controller", "beta", c.controller.beta, "levels", "β: maximum mip bias (Table 2)", Range{0, 16});
   v("controller", "s_min_mb", c.controller.s_min_mb, "MB", "Minimum load size s_min (Table 2: one 64 KiB sparse block)", Range{0.001, 1e5});
@@ -82,14 +83,14 @@ void visit_keys(Config& c, V&& v) {
   v("controller", "load_time_ms", c.controller.load_time_ms, "ms", "Longest time one streaming cycle may spend loading (Table 2)", Range{0.1, 1e6});
   v("controller", "fixed_load_mb", c.controller.fixed_load_mb, "MB", "mode = fixed: load size s", Range{0.001, 1e5});
   v("controller", "fixed_bias", c.controller.fixed_bias, "levels", "mode = fixed: mip bias b", Range{0, 16});
-  v("cache", "format", c.cache.format, "name", "Texel format of the GPU cache: auto (the scene's), rgba8 or bc1", kAny);
+  v("cache", "format", c.cache.format, "name", "Texel format of the GPU cache:", kAny);
   v("cache", "layer_extent_px", c.cache.layer_extent_px, "px", "Side of one cache layer = the largest texture extent it holds (power of two)", Range{4, 16384});
   v("cache", "layers", c.cache.layers, "layers", "Array layers of the sparse cache image; they cost address space only (lavapipe: 2 GiB, ~1.4 MB per 512² RGBA8 layer), cache.memory_bytes bounds memory. Too few layers recycle textures long before memory is full", Range{1, 2048});
   v("cache", "memory_bytes", c.cache.memory_bytes, "bytes", "GPU memory for the cache's bound sparse pages (and mip tail); the oldest layer is evicted when full", Range{1 << 20, 1ll << 40});
   v("storage", "origin", c.storage.origin, "path/URL", "Where texture files come from: empty = scene.dir; a folder; or an http(s):// base URL (textures/... fetched with range requests)", kAny);
   v("storage", "disk_cache_dir", c.storage.disk_cache_dir, "path", "Disk cache of fetched ranges for a remote or slow origin (empty: none); one server per folder (flock)", kAny);
   v("storage", "disk_cache_bytes", c.storage.disk_cache_bytes, "bytes", "Disk space budget of the disk cache: each entry counts its file in whole blocks of the file system; lowered with a warning to what the file system can hold", Range{1 << 20, 1ll << 44});
-  v("storage", "disk_cache_policy", c.storage.disk_cache_policy, "name", "Disk cache eviction: lru or fifo (seed 002's)", kAny);
+  v("storage", "disk_cache_policy", c.storage.disk_cache_policy, "name", "Disk cache eviction:", kAny);
   v("storage", "connect_timeout_ms", c.storage.connect_timeout_ms, "ms", "http origin: connect timeout", Range{1, 600000});
   v("storage", "request_timeout_ms", c.storage.request_timeout_ms, "ms", "http origin: longest time for one range request", Range{1, 3600000});
   v("storage", "low_speed_bytes_s", c.storage.low_speed_bytes_s, "bytes/s", "http origin: a transfer slower than this for low_speed_time_s is aborted (slowloris stall); 0: off", Range{0, 1e12});
@@ -112,6 +113,10 @@ std::string type_name(const bool&) { return "bool"; }
 std::string type_name(const int64_t&) { return "integer"; }
 std::string type_name(const double&) { return "float"; }
 std::string type_name(const std::string&) { return "string"; }
+template <ConfigChoice E>
+std::string type_name(const E&) {
+  return "string";
+}
 
 std::string format_value(const bool& b) { return b ? "true" : "false"; }
 std::string format_value(const int64_t& i) { return std::to_string(i); }
@@ -139,6 +144,20 @@ std::string format_value(const std::string& s) {
     out += ch;
   }
   return out + "\"";
+}
+template <ConfigChoice E>
+std::string format_value(const E& value) {
+  return format_value(std::string(choice_name(value)));
+}
+
+// The documentation of a key: for a choice, the lead-in and then every allowed name with what it does.
+template <class T>
+std::string key_doc(const T&, const char* doc) {
+  if constexpr (ConfigChoice<T>) {
+    return *doc ? std::string(doc) + " " + choice_docs<T>() : choice_docs<T>();
+  } else {
+    return doc;
+  }
 }
 
 // toml++ as packaged by Debian throws on malformed input; turn that into a Result at the boundary.
@@ -179,6 +198,12 @@ Status assign_from_node(T& field, const toml::node& node, const std::string& wha
       return key_error(what, key, "value " + format_value(*v) + " outside [" + format_value(r.min) + ", " + format_value(r.max) + "]");
     }
     field = *v;
+  } else if constexpr (ConfigChoice<T>) {
+    auto v = node.value_exact<std::string>();
+    if (!v) return key_error(what, key, "expected a string: " + choice_names<T>());
+    std::optional<T> value = choice_from_name<T>(*v);
+    if (!value) return key_error(what, key, "must be " + choice_names<T>() + ", not '" + *v + "'");
+    field = *value;
   } else {
     auto v = node.value_exact<std::string>();
     if (!v) return key_error(what, key, "expected a string");
@@ -228,9 +253,10 @@ Status apply_override(Config& c, const std::string& text) {
   const std::string part = key.substr(0, dot), name = key.substr(dot + 1);
   bool is_string_key = false;
   visit_keys(c, [&](const char* p, const char* k, auto& field, const char*, const char*, Range) {
-    if (std::string(p) + "." + k == key) is_string_key = std::is_same_v<std::decay_t<decltype(field)>, std::string>;
+    using T = std::decay_t<decltype(field)>;
+    if (std::string(p) + "." + k == key) is_string_key = std::is_same_v<T, std::string> || ConfigChoice<T>;
   });
-  // A string key takes the text as it is (so "--set scene.dir=x" needs no quotes); other keys are parsed
+  // A string or choice key takes the text as it is (so "--set scene.dir=x" needs no quotes); others are parsed
   // as TOML values so numbers and booleans keep their type.
   const std::string rhs = is_string_key && !(value.size() >= 2 && value.front() == '"') ? format_value(value) : value;
   auto parsed = parse_toml("[" + part + "]\n" + name + " = " + rhs + "\n", "--set " + key);
@@ -249,23 +275,22 @@ Status Config::validate() const {
   if (!is_pow2(protocol.request_ring_capacity)) return bad("protocol.request_ring_capacity", "must be a power of two");
   if (!is_pow2(protocol.completion_ring_capacity)) return bad("protocol.completion_ring_capacity", "must be a power of two");
   if (!is_pow2(cache.layer_extent_px)) return bad("cache.layer_extent_px", "must be a power of two");
-  if (cache.format != "auto" && cache.format != "rgba8" && cache.format != "bc1") {
-    return bad("cache.format", "must be auto, rgba8 or bc1, not '" + cache.format + "'");
-  }
   if (render.staging_bytes < protocol.staging_slot_bytes) {
     return bad("render.staging_bytes", "must hold at least one staging slot (protocol.staging_slot_bytes)");
   }
-  static const std::set<std::string> levels{"trace", "debug", "info", "warn", "error"};
-  if (!levels.count(server.log_level)) return bad("server.log_level", "must be one of trace, debug, info, warn, error");
-  static const std::set<std::string> policies{"lru", "level"};
-  if (!policies.count(server.cache_policy)) return bad("server.cache_policy", "must be lru or level, not '" + server.cache_policy + "'");
-  if (storage.disk_cache_policy != "lru" && storage.disk_cache_policy != "fifo") {
-    return bad("storage.disk_cache_policy", "must be lru or fifo, not '" + storage.disk_cache_policy + "'");
-  }
-  static const std::set<std::string> views{"none", "mip", "weight", "mesh_id"};
-  if (!views.count(render.debug_view)) return bad("render.debug_view", "must be none, mip, weight or mesh_id");
-  static const std::set<std::string> modes{"adaptive", "none", "fixed"};
-  if (!modes.count(controller.mode)) return bad("controller.mode", "must be adaptive, none or fixed, not '" + controller.mode + "'");
+  // The parser only ever stores a listed name; a config built in code could hold any cast integer.
+  Status choices = ok_status();
+  Config copy = *this;
+  visit_keys(copy, [&](const char* part, const char* key, auto& field, const char*, const char*, Range) {
+    using T = std::decay_t<decltype(field)>;
+    if constexpr (ConfigChoice<T>) {
+      if (choices.ok() && choice_name(field) == "?") {
+        choices = bad(std::string(part) + "." + key,
+                      "holds " + std::to_string(static_cast<int>(field)) + ", which is none of " + choice_names<T>());
+      }
+    }
+  });
+  TS_TRY(choices);
   if (controller.s_min_mb > controller.s_max_mb) return bad("controller.s_min_mb", "must not exceed controller.s_max_mb");
   if (render.near_m >= render.far_m) return bad("render.near_m", "must be less than render.far_m");
   if (render.offscreen_fov_y_deg < render.fov_y_deg) {
@@ -340,7 +365,7 @@ std::string to_toml(const Config& config, bool with_comments) {
   std::vector<std::string> order;
   visit_keys(c, [&](const char* part, const char* key, auto& field, const char* unit, const char* doc, Range) {
     if (!parts.count(part)) order.push_back(part);
-    if (with_comments) parts[part] += std::string("# ") + doc + " [" + unit + "]\n";
+    if (with_comments) parts[part] += "# " + key_doc(field, doc) + " [" + unit + "]\n";
     parts[part] += std::string(key) + " = " + format_value(field) + "\n";
   });
   std::string out;
@@ -358,10 +383,12 @@ std::string config_reference_markdown() {
       if (r.min > -1e299) range = std::to_string(static_cast<int64_t>(r.min)) + " … " + std::to_string(static_cast<int64_t>(r.max));
     } else if constexpr (std::is_same_v<T, double>) {
       if (r.min > -1e299) range = format_value(r.min) + " … " + format_value(r.max);
+    } else if constexpr (ConfigChoice<T>) {
+      range = choice_names<T>();
     }
     std::string def = format_value(field);
     out += "| `" + std::string(part) + "." + key + "` | " + type_name(field) + " | " + unit + " | `" + def + "` | " + range +
-           " | " + doc + " |\n";
+           " | " + key_doc(field, doc) + " |\n";
   });
   return out;
 }

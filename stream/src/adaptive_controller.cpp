@@ -38,27 +38,14 @@ Error bad(const std::string& key, const std::string& why) {
 }  // namespace
 
 const char* to_string(ControllerMode mode) {
-  switch (mode) {
-    case ControllerMode::kAdaptive: return "adaptive";
-    case ControllerMode::kNone: return "none";
-    case ControllerMode::kFixed: return "fixed";
-  }
-  return "?";
+  return choice_name(mode).data();  // the table's names are string literals: NUL-terminated
 }
 
 // ---- parameters ----
 
 Result<ControllerParams> ControllerParams::from_config(const ControllerConfig& c) {
   ControllerParams p;
-  if (c.mode == "adaptive") {
-    p.mode = ControllerMode::kAdaptive;
-  } else if (c.mode == "none") {
-    p.mode = ControllerMode::kNone;
-  } else if (c.mode == "fixed") {
-    p.mode = ControllerMode::kFixed;
-  } else {
-    return bad("mode", "must be adaptive, none or fixed, not '" + c.mode + "'");
-  }
+  p.mode = c.mode;
   p.alpha_s = c.alpha_ms / 1e3;  // Table 2 gives α in ms; the equations run in seconds
   p.beta = c.beta;
   p.s_min_bytes = c.s_min_mb * 1e6;  // MB = 10^6 bytes (Table 2's 0.065 MB is one 64 KiB block)

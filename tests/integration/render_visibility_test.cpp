@@ -191,7 +191,7 @@ TEST(RenderVisibility, EightKWideTargetDoesNotWrapTheWeight) {
   // 8192 x 1024 with a plane filling the view: ~8.4 M fragments of W up to 17 would wrap a plain 32-bit sum
   // of 1/16 units at 15.8 M fragments of W = 17; the saturating sum must stay >= one unit per fragment.
   Config cfg = base_config(8192, 1024);
-  cfg.render.debug_view = "mesh_id";
+  cfg.render.debug_view = DebugView::kMeshId;
   const ViewResult v = render_one(cfg, plane_scene(2.0, 400.0, 0));
   ASSERT_EQ(v.entries.size(), 1u);
   uint64_t covered = 0;
@@ -209,7 +209,7 @@ TEST(RenderVisibility, EightKWideTargetDoesNotWrapTheWeight) {
 // passes EQUAL write metadata (the old rule) gives three.
 TEST(RenderVisibility, CoplanarSurfacesCountOnlyTheirOwner) {
   Config cfg = base_config();
-  cfg.render.debug_view = "mesh_id";
+  cfg.render.debug_view = DebugView::kMeshId;
   const ViewResult v = render_one(cfg, coplanar_scene(20.0, 10.0, {0.0, 0.0, 5.0}));
   const std::set<uint32_t> meta = weighted_set(v), ids = id_buffer_set(v);
   EXPECT_EQ(meta, ids);
@@ -223,7 +223,7 @@ TEST(RenderVisibility, CoplanarSurfacesCountOnlyTheirOwner) {
 // rule decides the colour and the metadata together).
 TEST(RenderVisibility, CoincidentMeshesTheShownOneIsTheCountedOne) {
   Config cfg = base_config();
-  cfg.render.debug_view = "mesh_id";
+  cfg.render.debug_view = DebugView::kMeshId;
   for (int copies : {2, 5}) {
     const ViewResult v = render_one(cfg, coplanar_scene(15.0, 8.0, std::vector<double>(copies, 0.0)));
     const std::set<uint32_t> meta = weighted_set(v), ids = id_buffer_set(v);
@@ -327,7 +327,7 @@ TEST_F(RenderVisibilityCity, LodWithinOneLevelOfTextureQueryLod) {
 TEST_F(RenderVisibilityCity, WeightedSetEqualsTheIdBufferSet) {
   ASSERT_NE(scene_, nullptr);
   Config cfg = base_config();
-  cfg.render.debug_view = "mesh_id";
+  cfg.render.debug_view = DebugView::kMeshId;
   auto vr = ViewRenderer::create(cfg, *scene_);
   ASSERT_TRUE(vr.ok()) << vr.error().message;
   int views_with_meshes = 0;

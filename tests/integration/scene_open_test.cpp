@@ -35,7 +35,7 @@ Config view_config(const std::string& debug_view) {
   c.render.width_px = 320;
   c.render.height_px = 180;
   c.render.validation = true;
-  c.render.debug_view = debug_view;
+  c.render.debug_view = choice_from_name<DebugView>(debug_view).value();
   return c;
 }
 

@@ -73,6 +73,69 @@ TEST(Config, RenderModesThatExcludeEachOtherAreRefused) {
   EXPECT_TRUE(parse_config("", "t", {"render.blocking_loads=true"}).ok());
 }
 
+// Each fixed-value key reads its names from its enum's one table: a name outside it is refused naming the key
+// and listing the names it takes (before: five hand-written lists, two of which did not give the list).
+TEST(Config, AChoiceKeyTakesOnlyItsNames) {
+  struct Case {
+    const char* key;
+    const char* bad;
+    const char* allowed;
+  };
+  for (const Case& c : {Case{"controller.mode", "sometimes", "adaptive, none or fixed"},
+                        Case{"render.debug_view", "depth", "none, mip, weight or mesh_id"},
+                        Case{"cache.format", "dxt5", "auto, rgba8 or bc1"},
+                        Case{"server.log_level", "loud", "trace, debug, info, warn or error"},
+                        Case{"server.cache_policy", "mru", "level or lru"},
+                        Case{"storage.disk_cache_policy", "level", "lru or fifo"}}) {
+    const std::string e = error_of("", {std::string(c.key) + "=" + c.bad});
+    EXPECT_NE(e.find("'" + std::string(c.key) + "'"), std::string::npos) << e;
+    EXPECT_NE(e.find(std::string("must be ") + c.allowed + ", not '" + c.bad + "'"), std::string::npos) << e;
+    const std::string wrong_type = error_of("", {std::string(c.key) + "=3"});
+    EXPECT_NE(wrong_type.find("'" + std::string(c.key) + "'"), std::string::npos) << wrong_type;
+  }
+  // The same check in a file, and the enum each name gives.
+  EXPECT_NE(error_of("[controller]\nmode = \"sometimes\"\n").find("'controller.mode'"), std::string::npos);
+  auto c = parse_config("[controller]\nmode = \"fixed\"\n[cache]\nformat = \"bc1\"\n", "t",
+                        {"render.debug_view=mesh_id", "server.log_level=\"warn\"", "server.cache_policy=lru",
+                         "storage.disk_cache_policy=fifo"});
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  EXPECT_EQ(c->controller.mode, ControllerMode::kFixed);
+  EXPECT_EQ(c->cache.format, CacheFormat::kBc1);
+  EXPECT_EQ(c->render.debug_view, DebugView::kMeshId);
+  EXPECT_EQ(c->server.log_level, LogLevel::kWarn);
+  EXPECT_EQ(c->server.cache_policy, RamCachePolicy::kLru);
+  EXPECT_EQ(c->storage.disk_cache_policy, DiskCachePolicy::kFifo);
+  // Written back by name, and read back equal (the spawned server gets this text).
+  const std::string toml = to_toml(*c);
+  EXPECT_NE(toml.find("mode = \"fixed\""), std::string::npos) << toml;
+  auto back = parse_config(toml, "roundtrip", {});
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_EQ(to_toml(*back), toml);
+}
+
+TEST(Config, AChoiceOutsideItsTableIsRefusedByValidate) {
+  Config c;
+  c.render.debug_view = static_cast<DebugView>(7);
+  const Status s = c.validate();
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.error().message.find("'render.debug_view'"), std::string::npos) << s.error().message;
+}
+
+// Each choice's table is what the documentation shows: every name with its doc, in table order.
+TEST(Config, AChoiceKeyIsDocumentedFromItsTable) {
+  EXPECT_EQ(choice_names<CacheFormat>(), "auto, rgba8 or bc1");
+  EXPECT_EQ(choice_docs<CacheFormat>(), "auto (the scene's), rgba8 or bc1");
+  const std::string doc = config_reference_markdown();
+  EXPECT_NE(doc.find("Texel format of the GPU cache: auto (the scene's), rgba8 or bc1"), std::string::npos);
+  EXPECT_NE(doc.find("| `controller.mode` | string | name | `\"adaptive\"` | adaptive, none or fixed |"),
+            std::string::npos);
+  EXPECT_EQ(cache_texel_format(CacheFormat::kAuto, TexelFormat::kBc1), TexelFormat::kBc1);
+  EXPECT_EQ(cache_texel_format(CacheFormat::kRgba8, TexelFormat::kBc1), TexelFormat::kRgba8);
+  EXPECT_EQ(choice_name(DebugView::kMeshId), "mesh_id");
+  EXPECT_EQ(choice_from_name<DebugView>("weight"), DebugView::kWeight);
+  EXPECT_FALSE(choice_from_name<DebugView>("Weight").has_value());
+}
+
 // A segment name that no shared-memory object can have is refused naming the key. Before, the renderer failed
 // with "cannot create shared segment 'a/b': Invalid argument", and a standalone server on it waited for ever.
 TEST(Config, ASegmentNameNoSharedMemoryObjectCanHaveIsRefused) {

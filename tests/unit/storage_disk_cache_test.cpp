@@ -252,9 +252,12 @@ TEST_F(DiskCacheTest, ASecondOwnerOfTheFolderIsRefusedNamingIt) {
 }
 
 TEST(DiskCachePolicyName, ParsesLruAndFifoOnly) {
-  EXPECT_EQ(*parse_disk_cache_policy("lru"), DiskCachePolicy::kLru);
-  EXPECT_EQ(*parse_disk_cache_policy("fifo"), DiskCachePolicy::kFifo);
-  auto bad = parse_disk_cache_policy("level");
+  const auto parse = [](const std::string& name) {
+    return parse_choice<DiskCachePolicy>("storage.disk_cache_policy", name);
+  };
+  EXPECT_EQ(*parse("lru"), DiskCachePolicy::kLru);
+  EXPECT_EQ(*parse("fifo"), DiskCachePolicy::kFifo);
+  auto bad = parse("level");
   ASSERT_FALSE(bad.ok());
   EXPECT_NE(bad.error().message.find("storage.disk_cache_policy"), std::string::npos);
 }

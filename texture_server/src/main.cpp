@@ -111,10 +111,10 @@ std::optional<texstream::server::RunOutcome> wait_until_free(const texstream::Se
   return texstream::server::RunOutcome::kStopped;
 }
 
-void setup_logging(const std::string& level) {
+void setup_logging(texstream::LogLevel level) {
   auto logger = spdlog::stderr_color_mt("server");
   logger->set_pattern("[%H:%M:%S.%e] [server] [%l] %v");
-  logger->set_level(spdlog::level::from_str(level));
+  logger->set_level(spdlog::level::from_str(std::string(texstream::choice_name(level))));  // names are spdlog's
   spdlog::set_default_logger(logger);
 }
 
@@ -227,7 +227,8 @@ int main(int argc, char** argv) {
     spdlog::info("serving segment '{}' (epoch {:016x}) from scene '{}' ({} workers, RAM cache {} bytes, {} policy, "
                  "rate limit {} MB/s)",
                  segment_name, current->header().epoch, config->scene.dir, config->server.worker_threads,
-                 server_config.ram_cache_bytes, config->server.cache_policy, config->server.rate_limit_mb_s);
+                 server_config.ram_cache_bytes, texstream::choice_name(config->server.cache_policy),
+                 config->server.rate_limit_mb_s);
     texstream::server::RunOutcome outcome = (*server)->run(g_stop, &g_print_stats);
     if (outcome == texstream::server::RunOutcome::kSegmentBusy) {
       // Another server holds the segment (run() touched nothing). Spawned, this one is not needed. Standalone,

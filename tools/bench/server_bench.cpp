@@ -1069,7 +1069,7 @@ int run_server_bench(const std::vector<std::string>& args) {
   std::printf("  ours (server, %s policy): hit rate %.3f, %.1f MB/s (%.2f s, %llu failures)\n"
               "  OpenImageIO ImageCache (same budget, get_pixels per request): hit rate %.3f, %.1f MB/s (%.2f s, "
               "%llu failures)\n  throughput ours / OpenImageIO = %.2f\n",
-              trace_config.cache_policy.c_str(), ours.hit_rate, ours_bw, ours.stream.seconds, static_cast<unsigned long long>(ours.stream.failures),
+              std::string(choice_name(trace_config.cache_policy)).c_str(), ours.hit_rate, ours_bw, ours.stream.seconds, static_cast<unsigned long long>(ours.stream.failures),
               oiio.hit_rate, oiio_bw, oiio.seconds, static_cast<unsigned long long>(oiio.failures), ours_bw / oiio_bw);
   std::printf("  renderer polling cost per frame (each poll that found completions, incl. slot releases): mean %.1f us, "
               "p99 %.1f us over %zu polls\n",

@@ -107,7 +107,7 @@ StorageConfig http_storage(const std::string& origin) {
 ServerConfig server_config(int64_t remote_fetches) {
   ServerConfig s;
   s.remote_fetches_in_flight = remote_fetches;
-  s.log_level = "warn";
+  s.log_level = LogLevel::kWarn;
   return s;
 }
 

@@ -284,7 +284,7 @@ int run_visibility(const std::vector<std::string>& args) {
     Config idc = cfg;
     idc.stream.tau = 0;
     idc.render.offscreen_fov_y_deg = idc.render.fov_y_deg;
-    idc.render.debug_view = "mesh_id";
+    idc.render.debug_view = DebugView::kMeshId;
     auto vr = unwrap(render::ViewRenderer::create(idc, base), "id-buffer renderer");
     for (const auto& pose : poses) {
       const auto v = unwrap(vr->render(pose), "id-buffer view");

@@ -246,15 +246,11 @@ Status Renderer::set_up() {
   stage("scene_load");
 
   // cache.format = auto takes the scene's texel format; an explicit one must match the scene's textures.
-  const auto format = cfg_.cache.format == "auto" ? std::optional<TexelFormat>(scene_.manifest.texture_format)
-                                                  : texel_format_from_string(cfg_.cache.format);
-  if (!format) {
-    return make_error(ErrorCode::kInvalidArgument, "cache.format: '" + cfg_.cache.format + "' is not auto, rgba8 or bc1");
-  }
+  const TexelFormat format = cache_texel_format(cfg_.cache.format, scene_.manifest.texture_format);
   VulkanContextOptions vo;
   vo.device_substring = cfg_.render.device;
   vo.validation = cfg_.render.validation;
-  vo.need_bc1 = *format == TexelFormat::kBc1;
+  vo.need_bc1 = format == TexelFormat::kBc1;
   if (cfg_.render.window) {
     // The window first: the Vulkan instance needs its extensions. R records the flight next to the frames.
     auto session = InteractiveSession::open(static_cast<uint32_t>(cfg_.render.width_px),
@@ -272,7 +268,7 @@ Status Renderer::set_up() {
 
   states_ = std::make_unique<TextureStates>(scene_.shapes());
   TextureCacheOptions co;
-  co.format = *format;
+  co.format = format;
   co.layer_extent = static_cast<uint32_t>(cfg_.cache.layer_extent_px);
   co.layers = static_cast<uint32_t>(cfg_.cache.layers);
   co.staging_bytes = static_cast<uint64_t>(cfg_.render.staging_bytes);
@@ -299,9 +295,7 @@ Status Renderer::set_up() {
   po.height = static_cast<uint32_t>(cfg_.render.height_px);
   po.wide_width = std::max(16u, po.width / kWidePassDivisor);
   po.wide_height = std::max(16u, po.height / kWidePassDivisor);
-  auto view = debug_view_from_string(cfg_.render.debug_view);
-  if (!view) return view.error();
-  po.debug_view = *view;
+  po.debug_view = gpu_debug_view(cfg_.render.debug_view);
   auto passes = ScenePasses::create(*ctx_, *compiler_, po, *scene_gpu_, *cache_);
   if (!passes) return passes.error();
   passes_ = std::move(*passes);

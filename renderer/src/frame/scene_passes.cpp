@@ -7,6 +7,7 @@
 #include <utility>
 #include <vector>
 
+#include "texstream/common/contract.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texstream/render/scene/scene_gpu.hpp"
 #include "texstream/render/vulkan/shader_compiler.hpp"
@@ -186,13 +187,14 @@ void memory_barrier(VkCommandBuffer cmd, VkPipelineStageFlags src_stage, VkAcces
 
 }  // namespace
 
-Result<uint32_t> debug_view_from_string(const std::string& name) {
-  if (name == "none") return gpu::kDebugViewNone;
-  if (name == "mip") return gpu::kDebugViewMip;
-  if (name == "weight") return gpu::kDebugViewWeight;
-  if (name == "mesh_id") return gpu::kDebugViewMeshId;
-  return make_error(ErrorCode::kInvalidArgument,
-                    "render.debug_view: '" + name + "' is not none, mip, weight or mesh_id");
+uint32_t gpu_debug_view(DebugView view) {
+  switch (view) {
+    case DebugView::kNone: return gpu::kDebugViewNone;
+    case DebugView::kMip: return gpu::kDebugViewMip;
+    case DebugView::kWeight: return gpu::kDebugViewWeight;
+    case DebugView::kMeshId: return gpu::kDebugViewMeshId;
+  }
+  TS_UNREACHABLE("render.debug_view %d is outside its table", static_cast<int>(view));
 }
 
 VkFormat ScenePasses::colour_format() const {

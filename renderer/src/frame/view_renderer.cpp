@@ -112,9 +112,7 @@ Result<std::unique_ptr<ViewRenderer>> ViewRenderer::create(const Config& cfg, Sc
   po.height = static_cast<uint32_t>(cfg.render.height_px);
   po.wide_width = std::max(16u, po.width / kWidePassDivisor);
   po.wide_height = std::max(16u, po.height / kWidePassDivisor);
-  auto view = debug_view_from_string(cfg.render.debug_view);
-  if (!view) return view.error();
-  po.debug_view = *view;
+  po.debug_view = gpu_debug_view(cfg.render.debug_view);
   po.lod_probe = options.lod_probe;
   po.probe_anisotropy = static_cast<float>(cfg.stream.max_anisotropy);
   po.timestamps = options.timestamps;

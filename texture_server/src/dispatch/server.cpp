@@ -151,10 +151,6 @@ Result<std::unique_ptr<Server>> Server::create(Segment& segment, const std::file
   if (!(config.rate_limit_mb_s >= 0)) {
     return make_error(ErrorCode::kInvalidArgument, "server.rate_limit_mb_s must be >= 0");
   }
-  // Checked here so that the constructor, which builds the policy over its own texture table, cannot fail.
-  if (Result<std::unique_ptr<EvictionPolicy>> p = make_eviction_policy(config.cache_policy, {}); !p.ok()) {
-    return p.error();
-  }
   return std::unique_ptr<Server>(new Server(segment, scene_dir, config, storage, std::move(textures).value()));
 }
 
@@ -176,8 +172,7 @@ Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const S
                                   [this](MipKey key) {
                                     const scene::TextureRecord& t = textures_[key.texture().value];
                                     return t.mip_count - 1 - std::min(key.mip().value, t.mip_count - 1);
-                                  })
-                 .value(),
+                                  }),
              // Misses read into a warm arena of the budget, pre-faulted at idle priority (cache_arena.hpp).
              MipCacheOptions{.arena = true, .prefault = ArenaPrefault::kBackground}),
       loader_(scene_dir, rate_limited_ ? *rate_limited_ : storage, cache_, segment.server_block(), stats_),

@@ -95,12 +95,6 @@ bool read_all(int fd, void* data, size_t n, uint64_t offset) {
 
 }  // namespace
 
-Result<DiskCachePolicy> parse_disk_cache_policy(const std::string& name) {
-  if (name == "lru") return DiskCachePolicy::kLru;
-  if (name == "fifo") return DiskCachePolicy::kFifo;
-  return make_error(ErrorCode::kInvalidArgument, "storage.disk_cache_policy must be lru or fifo, not '" + name + "'");
-}
-
 std::string DiskCache::key_of(const std::string& relative_path, uint64_t offset, uint64_t length) {
   return relative_path + "@" + std::to_string(offset) + "+" + std::to_string(length);
 }
@@ -254,7 +248,7 @@ Status DiskCache::load_index() {
   }
   spdlog::info("disk cache '{}': {} entries, {} of {} bytes ({})", dir_.string(), entries_.size(), bytes_,
                budget_.load(std::memory_order_relaxed),
-               policy_ == DiskCachePolicy::kLru ? "lru" : "fifo");
+               choice_name(policy_));
   return ok_status();
 }
 

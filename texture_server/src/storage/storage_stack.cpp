@@ -101,11 +101,9 @@ Result<std::unique_ptr<StorageStack>> make_storage_stack(const StorageConfig& c,
     origin = stack->slow.get();
   }
   if (!c.disk_cache_dir.empty()) {
-    Result<DiskCachePolicy> policy = parse_disk_cache_policy(c.disk_cache_policy);
-    if (!policy.ok()) return policy.error();
     if (c.disk_cache_bytes <= 0) return make_error(ErrorCode::kInvalidArgument, "storage.disk_cache_bytes must be > 0");
     Result<std::unique_ptr<DiskCache>> cache =
-        DiskCache::open(c.disk_cache_dir, static_cast<uint64_t>(c.disk_cache_bytes), *policy);
+        DiskCache::open(c.disk_cache_dir, static_cast<uint64_t>(c.disk_cache_bytes), c.disk_cache_policy);
     if (!cache.ok()) return cache.error();
     stack->disk_cache = std::move(cache).value();
     stack->caching = std::make_unique<CachingStorage>(*origin, *stack->disk_cache, stack->scene_dir);

@@ -4,6 +4,7 @@
 // config.cpp's `visit_keys`, with its type, default, range and documentation; the parser, the `--set`
 // override, the documentation generator (docs/config.md) and the validation all come from that one list.
 // Unknown keys and out-of-range values are start-up errors that name the key — never silently clamped.
+// A key with a fixed set of values is an enum with one name table (config_choice.hpp), declared below.
 #include <cstdint>
 #include <filesystem>
 #include <optional>
@@ -11,9 +12,81 @@
 #include <string_view>
 #include <vector>
 
+#include "texstream/common/config_choice.hpp"
 #include "texstream/common/result.hpp"
+#include "texstream/common/texel_format.hpp"
 
 namespace texstream {
+
+// ---- keys with a fixed set of values: each enum's one table of names and docs ----
+
+enum class LogLevel : uint8_t { kTrace, kDebug, kInfo, kWarn, kError };  // server.log_level
+template <>
+struct ChoiceTable<LogLevel> {
+  // spdlog's level names: texstream-server hands the name to spdlog::level::from_str.
+  static constexpr std::array<ChoiceEntry<LogLevel>, 5> kEntries{{{LogLevel::kTrace, "trace", ""},
+                                                                   {LogLevel::kDebug, "debug", ""},
+                                                                   {LogLevel::kInfo, "info", ""},
+                                                                   {LogLevel::kWarn, "warn", ""},
+                                                                   {LogLevel::kError, "error", ""}}};
+};
+
+enum class RamCachePolicy : uint8_t { kLevel, kLru };  // server.cache_policy
+template <>
+struct ChoiceTable<RamCachePolicy> {
+  static constexpr std::array<ChoiceEntry<RamCachePolicy>, 2> kEntries{
+      {{RamCachePolicy::kLevel, "level", "seed 002 Eq. 4 discard priority; measured higher hit rates than lru at every budget"},
+       {RamCachePolicy::kLru, "lru", ""}}};
+};
+
+enum class DebugView : uint8_t { kNone, kMip, kWeight, kMeshId };  // render.debug_view
+template <>
+struct ChoiceTable<DebugView> {
+  static constexpr std::array<ChoiceEntry<DebugView>, 4> kEntries{{{DebugView::kNone, "none", ""},
+                                                                    {DebugView::kMip, "mip", "displayed mip as grey"},
+                                                                    {DebugView::kWeight, "weight", "heat map"},
+                                                                    {DebugView::kMeshId, "mesh_id", ""}}};
+};
+
+// Adaptive streaming controller mode (controller.mode), seed 000 §3.4.
+enum class ControllerMode : uint8_t {
+  kAdaptive,  // Eq. 4-7
+  kNone,      // s = s_max, b = 0: the seed's "no adaptive algorithms" baseline (Tables 3-5)
+  kFixed,     // s and b fixed by configuration (benchmarks)
+};
+template <>
+struct ChoiceTable<ControllerMode> {
+  static constexpr std::array<ChoiceEntry<ControllerMode>, 3> kEntries{
+      {{ControllerMode::kAdaptive, "adaptive", "Eq. 4-7"},
+       {ControllerMode::kNone, "none", "s = s_max, b = 0: the seed's baseline"},
+       {ControllerMode::kFixed, "fixed", "s and b from fixed_load_mb and fixed_bias"}}};
+};
+
+enum class CacheFormat : uint8_t { kAuto, kRgba8, kBc1 };  // cache.format
+template <>
+struct ChoiceTable<CacheFormat> {
+  static constexpr std::array<ChoiceEntry<CacheFormat>, 3> kEntries{{{CacheFormat::kAuto, "auto", "the scene's"},
+                                                                      {CacheFormat::kRgba8, "rgba8", ""},
+                                                                      {CacheFormat::kBc1, "bc1", ""}}};
+};
+// The GPU cache's texel format: auto takes the scene's; an explicit one must match the scene's textures.
+constexpr TexelFormat cache_texel_format(CacheFormat format, TexelFormat scene_format) {
+  switch (format) {
+    case CacheFormat::kRgba8: return TexelFormat::kRgba8;
+    case CacheFormat::kBc1: return TexelFormat::kBc1;
+    case CacheFormat::kAuto: break;
+  }
+  return scene_format;
+}
+
+enum class DiskCachePolicy : uint8_t { kLru, kFifo };  // storage.disk_cache_policy
+template <>
+struct ChoiceTable<DiskCachePolicy> {
+  static constexpr std::array<ChoiceEntry<DiskCachePolicy>, 2> kEntries{
+      {{DiskCachePolicy::kLru, "lru", ""}, {DiskCachePolicy::kFifo, "fifo", "seed 002's"}}};
+};
+
+// ---- one struct per part ----
 
 struct SceneConfig {
   std::string dir = "scenes/default";  // scene folder written by texstream-gen
@@ -34,8 +107,8 @@ struct ServerConfig {
   int64_t worker_threads = 2;           // read + decode workers (2-core default)
   int64_t ram_cache_bytes = 256ll << 20;
   double idle_wait_ms = 20;             // futex wait between doorbells (also paces the heartbeat)
-  std::string log_level = "info";       // trace, debug, info, warn, error
-  std::string cache_policy = "level";   // RAM cache eviction: level (seed 002 Eq. 4 discard priority) or lru
+  LogLevel log_level = LogLevel::kInfo;
+  RamCachePolicy cache_policy = RamCachePolicy::kLevel;  // RAM cache eviction
   double rate_limit_mb_s = 0;           // storage read rate cap in MB/s (0: unlimited), seed 002 §3.3
   int64_t remote_fetches_in_flight = 4; // bound on concurrent fetches from a remote/slow origin (seed 002: 1)
 };
@@ -59,7 +132,7 @@ struct RenderConfig {
   double far_m = 20000;
   double headlight_ambient = 0.6;       // headlight: camera-facing surfaces 1, edge-on ones this fraction (1 = unlit)
   int64_t staging_bytes = 32ll << 20;   // host-visible staging ring for uploads into the cache
-  std::string debug_view = "none";      // none, mip (displayed mip as grey), weight (heat map), mesh_id
+  DebugView debug_view = DebugView::kNone;
   bool feedback = true;                 // visibility metadata pass + compaction (off: for cost measurements)
   bool feedback_pairs = false;          // measurement: each frame also drawn without feedback (latency_off_ms)
   bool preload_all = false;             // load every mip of every texture before frame 0: no streaming (reference frames)
@@ -78,7 +151,7 @@ struct StreamConfig {
 
 // Adaptive streaming controller, seed 000 §3.4 Eq. 4-7 and Table 2.
 struct ControllerConfig {
-  std::string mode = "adaptive";        // adaptive (Eq. 4-7), none (s = s_max, b = 0: the seed's baseline), fixed
+  ControllerMode mode = ControllerMode::kAdaptive;
   double alpha_ms = 16;                 // α: target maximum frame latency
   double beta = 8;                      // β: maximum mip bias
   double s_min_mb = 0.065;              // minimum load size (one 64 KiB sparse block)
@@ -89,7 +162,7 @@ struct ControllerConfig {
 };
 
 struct CacheConfig {
-  std::string format = "auto";          // auto (the scene's format), rgba8 or bc1: the texel format of the GPU cache
+  CacheFormat format = CacheFormat::kAuto;  // the texel format of the GPU cache
   int64_t layer_extent_px = 512;        // side of one cache layer; the largest texture extent it can hold
   int64_t layers = 512;                 // array layers of the sparse cache image: virtual space only; memory_bytes bounds memory
   int64_t memory_bytes = 128ll << 20;   // GPU memory the cache's bound sparse pages may use (never exceeded)
@@ -100,7 +173,7 @@ struct StorageConfig {
   std::string origin;                     // empty: scene.dir on the local file system; else a path or http(s):// URL
   std::string disk_cache_dir;             // empty: no disk cache
   int64_t disk_cache_bytes = 1ll << 30;   // byte budget of the disk cache
-  std::string disk_cache_policy = "lru";  // lru or fifo (seed 002)
+  DiskCachePolicy disk_cache_policy = DiskCachePolicy::kLru;
   int64_t connect_timeout_ms = 2000;      // http: TCP/TLS connect
   int64_t request_timeout_ms = 10000;     // http: one whole range request
   int64_t low_speed_bytes_s = 1024;       // http: slower than this for low_speed_time_s aborts (slowloris)

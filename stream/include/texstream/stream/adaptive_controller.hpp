@@ -31,11 +31,7 @@
 
 namespace texstream {
 
-enum class ControllerMode : uint8_t {
-  kAdaptive,  // Eq. 4-7
-  kNone,      // s = s_max, b = 0: the seed's "no adaptive algorithms" baseline (Tables 3-5)
-  kFixed,     // s and b fixed by configuration (benchmarks)
-};
+// ControllerMode (adaptive, none, fixed) is the controller.mode key's enum, in config.hpp with its names.
 const char* to_string(ControllerMode mode);
 
 // Parameters in the controller's units (seconds, bytes, levels). Built from [controller] by from_config.

@@ -22,6 +22,7 @@
 #include <memory>
 #include <string>
 
+#include "texstream/common/config.hpp"
 #include "texstream/common/result.hpp"
 #include "texstream/render/scene/frame_recording.hpp"
 #include "texstream/render/vulkan/gpu_buffer.hpp"
@@ -59,8 +60,8 @@ struct PassTimes {
 
 using UniqueQueryPool = DeviceHandle<VkQueryPool, vkDestroyQueryPool>;
 
-// Parses render.debug_view (none, mip, weight, mesh_id) into gpu::kDebugView*.
-Result<uint32_t> debug_view_from_string(const std::string& name);
+// render.debug_view as the shaders' gpu::kDebugView* constant.
+uint32_t gpu_debug_view(DebugView view);
 
 class ScenePasses {
  public:

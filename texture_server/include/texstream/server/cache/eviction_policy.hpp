@@ -13,6 +13,7 @@
 #include <optional>
 #include <string>
 
+#include "texstream/common/config.hpp"
 #include "texstream/common/result.hpp"
 
 #include "texstream/server/cache/mip_key.hpp"
@@ -49,8 +50,9 @@ class EvictionPolicy {
   virtual void reserve(size_t entries) { (void)entries; }
 };
 
-// server.cache_policy: "lru" or "level" (which needs each key's quadtree level, see level_eviction_policy.hpp).
-// Errors: kInvalidArgument naming the key and the value.
+// server.cache_policy: lru or level (which needs each key's quadtree level, see level_eviction_policy.hpp).
+std::unique_ptr<EvictionPolicy> make_eviction_policy(RamCachePolicy policy, std::function<uint32_t(MipKey)> level_of);
+// The same from its name (benches and tests). Errors: kInvalidArgument naming the key and the allowed values.
 Result<std::unique_ptr<EvictionPolicy>> make_eviction_policy(const std::string& name,
                                                              std::function<uint32_t(MipKey)> level_of);
 

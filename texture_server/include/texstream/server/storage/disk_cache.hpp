@@ -37,13 +37,13 @@
 #include <string>
 #include <unordered_map>
 
+#include "texstream/common/config.hpp"
 #include "texstream/common/result.hpp"
 
 namespace texstream::server {
 
-enum class DiskCachePolicy { kLru, kFifo };
-// "lru" or "fifo"; errors name storage.disk_cache_policy.
-Result<DiskCachePolicy> parse_disk_cache_policy(const std::string& name);
+// storage.disk_cache_policy (lru or fifo): the config key's enum, named with its table in config.hpp.
+using texstream::DiskCachePolicy;
 
 struct DiskCacheCounters {
   std::atomic<uint64_t> hits{0};
