@@ -38,38 +38,6 @@ uint64_t elapsed_ns(std::chrono::steady_clock::time_point since) {
 
 }  // namespace
 
-void IpcTimeHistogram::add(uint64_t ns) {
-  const uint64_t b = ns / kBucketNs;
-  if (b < kBuckets) {
-    ++buckets_[b];
-  } else {
-    ++overflow_;
-  }
-  ++samples_;
-  total_ns_ += ns;
-  max_ns_ = std::max(max_ns_, ns);
-}
-
-double IpcTimeHistogram::quantile_us(double q) const {
-  if (samples_ == 0) return 0.0;
-  const auto rank = static_cast<uint64_t>(std::ceil(std::clamp(q, 0.0, 1.0) * static_cast<double>(samples_)));
-  uint64_t seen = 0;
-  const double max_us = static_cast<double>(max_ns_) / 1e3;
-  for (size_t i = 0; i < kBuckets; ++i) {
-    seen += buckets_[i];
-    if (seen >= std::max<uint64_t>(rank, 1)) {
-      return std::min(static_cast<double>((i + 1) * kBucketNs) / 1e3, max_us);
-    }
-  }
-  return max_us;
-}
-
-uint64_t IpcTimeHistogram::above(uint64_t ns) const {
-  uint64_t n = overflow_;
-  for (size_t i = ns / kBucketNs + 1; i < kBuckets; ++i) n += buckets_[i];
-  return n;
-}
-
 // Forwards to the renderer's sink; the time spent there is the renderer's, not IPC.
 class StreamClient::TimedSink final : public MipSink {
  public:
@@ -154,17 +122,6 @@ SendResult to_send_result(RequestOutcome outcome) {
   return SendResult::kStop;
 }
 
-const char* to_string(StreamServerState state) {
-  switch (state) {
-    case StreamServerState::kExternal: return "external";
-    case StreamServerState::kRunning: return "running";
-    case StreamServerState::kBackingOff: return "backing off";
-    case StreamServerState::kColormapOnly: return "colormap only";
-    case StreamServerState::kBroken: return "broken";
-  }
-  return "?";
-}
-
 Result<std::unique_ptr<StreamClient>> StreamClient::start(const Config& config, std::vector<TextureShape> shapes,
                                                            const std::filesystem::path& scene_dir,
                                                            const std::filesystem::path& config_file,
@@ -217,13 +174,17 @@ Result<std::unique_ptr<StreamClient>> StreamClient::start(const Config& config, 
   // with loads cannot keep the server from getting its slots back.
   c->release_reserve_ = std::min<uint32_t>(c->segment_->slot_count(), c->segment_->header().request_capacity / 4);
   c->attach_rings();
+  c->quarantine_ = CrashQuarantine(c->shapes_.size());
 
+  std::unique_ptr<ServerProcess> process;
   if (c->options_.spawn_server) {
     ServerCommand cmd{executable, name, scene_dir, config_file, overrides};
-    c->process_ = std::make_unique<ServerProcess>(std::move(cmd), c->options_.restart);
-    c->segment_->renderer_block().server_epoch.v.store(c->segment_->header().epoch, std::memory_order_relaxed);
-    c->process_->spawn_if_due(c->now());
+    process = std::make_unique<ServerProcess>(std::move(cmd), c->options_.restart);
   }
+  const auto heartbeat_timeout =
+      std::chrono::milliseconds(static_cast<int64_t>(config.protocol.heartbeat_timeout_ms));
+  c->supervisor_ = std::make_unique<ServerSupervisor>(*c->segment_, std::move(process), heartbeat_timeout);
+  c->supervisor_->start(c->now());
   spdlog::info("stream client: segment '{}' ({} slots x {} bytes), {} textures, server {}", name,
                c->segment_->slot_count(), c->segment_->slot_bytes(), c->shapes_.size(),
                c->options_.spawn_server ? executable.string() : std::string("external"));
@@ -239,7 +200,7 @@ StreamClient::~StreamClient() {
     out << stats_text();
     if (!out) spdlog::warn("could not write stream statistics to '{}' ($TEXSTREAM_STREAM_STATS)", file);
   }
-  process_.reset();  // kill and reap the server before the segment (and its name) goes away
+  supervisor_.reset();  // kill and reap the server before the segment (and its name) goes away
   segment_.reset();
 }
 
@@ -248,11 +209,7 @@ SteadyTime StreamClient::now() const {
 }
 
 void StreamClient::attach_rings() {
-  const SegmentHeader& h = segment_->header();
-  requests_ = SpscRingProducer<RequestRecord>(segment_->request_control(), segment_->request_records(),
-                                              h.request_capacity);
-  completions_ = SpscRingConsumer<CompletionRecord>(segment_->completion_control(), segment_->completion_records(),
-                                                    h.completion_capacity);
+  endpoint_ = RendererEndpoint(*segment_);
 }
 
 void StreamClient::begin_cycle() {
@@ -263,11 +220,7 @@ void StreamClient::begin_cycle() {
 }
 
 std::optional<uint64_t> StreamClient::server_read_position() const {
-  // acquire: pairs with the server's release-store of read_pos (as in SpscRingProducer::try_push).
-  const uint64_t read = std::as_const(*segment_).request_control()->read_pos.v.load(std::memory_order_acquire);
-  const uint64_t write = requests_.position();
-  if (read > write || write - read > requests_.capacity()) return std::nullopt;
-  return read;
+  return endpoint_.server_read_position();
 }
 
 bool StreamClient::slot_in_transit(uint32_t slot) {
@@ -280,35 +233,24 @@ bool StreamClient::slot_in_transit(uint32_t slot) {
   return true;
 }
 
-bool StreamClient::accepting_requests() const {
-  if (broken_) return false;
-  return process_ ? process_->serving() : true;
-}
-
 RequestOutcome StreamClient::try_request(TextureId texture, MipLevel mip, float priority) {
   IpcScope scope(*this);
   if (texture.value >= shapes_.size()) return RequestOutcome::kUnknownTexture;
   if (mip.value >= shapes_[texture.value].mip_count) return RequestOutcome::kBadMip;
-  if (quarantined_.count(texture.value) != 0) {
+  if (quarantine_.quarantined(texture)) {
     // Never sent: the texture states learn at the next poll that it failed for good (kCorrupt).
-    if (quarantine_refused_set_.insert(key(texture, mip)).second) quarantine_refused_.push_back(key(texture, mip));
+    quarantine_.refuse(texture, mip);
     return RequestOutcome::kQuarantined;
   }
-  if (!accepting_requests()) return RequestOutcome::kNoServer;
+  if (!supervisor_->accepting_requests()) return RequestOutcome::kNoServer;
   if (in_flight_.count(key(texture, mip))) return RequestOutcome::kAlreadyInFlight;
   if (in_flight_.size() >= static_cast<size_t>(config_.stream.max_requests_in_flight)) {
     return RequestOutcome::kInFlightLimit;
   }
   flush_releases();  // queued releases go first: the server waits for its slots
-  if (requests_.free_space() <= release_reserve_) return RequestOutcome::kRingFull;
-  RequestRecord r{};
-  r.kind = static_cast<uint32_t>(RequestKind::kLoad);
-  r.texture_id = texture.value;
-  r.mip_level = mip.value;
-  r.slot = kNoSlot;
-  r.generation = generation_.value;
-  r.priority = priority;
-  if (!requests_.try_push(r)) return RequestOutcome::kRingFull;  // a ring error: poll() restarts the server
+  if (endpoint_.request_free_space() <= release_reserve_) return RequestOutcome::kRingFull;
+  // A ring error: poll() restarts the server.
+  if (!endpoint_.push_load(texture, mip, generation_, priority)) return RequestOutcome::kRingFull;
   in_flight_.emplace(key(texture, mip), InFlight{generation_, now()});
   ++stats_.requests_sent;
   if (auto it = lost_.find(key(texture, mip)); it != lost_.end() && !it->second.resent) {
@@ -316,7 +258,7 @@ RequestOutcome StreamClient::try_request(TextureId texture, MipLevel mip, float 
     it->second.resent_at = now();
     ++stats_.lost_resent;
   }
-  ring_doorbell();
+  endpoint_.ring();
   return RequestOutcome::kSent;
 }
 
@@ -324,41 +266,20 @@ TextureStates::Sender StreamClient::sender() {
   return [this](const MipRequest& r) { return to_send_result(try_request(r.texture, r.mip, r.priority)); };
 }
 
-void StreamClient::ring_doorbell() {
-  RendererBlock& rb = segment_->renderer_block();
-  // release: pairs with the server's acquire-load of the doorbell; the records pushed before are visible.
-  rb.doorbell.v.fetch_add(1, std::memory_order_release);
-  // seq_cst fence: our push and bump are ordered before the load of `sleeping` below; pairs with the
-  // server's fence between storing sleeping = 1 and re-checking the ring, so one of us sees the other.
-  std::atomic_thread_fence(std::memory_order_seq_cst);
-  if (segment_->server_block().sleeping.v.load(std::memory_order_relaxed) == 1) futex_wake_all(rb.doorbell);
-}
-
 void StreamClient::release_slot(SlotIndex slot) {
   TS_ASSERT(slot.value < slot_held_.size() && slot_held_[slot.value], "releasing slot %u that we do not hold",
             slot.value);
-  release_queue_.push_back(slot);
+  endpoint_.release(slot);
   flush_releases();
 }
 
 void StreamClient::flush_releases() {
-  bool pushed = false;
-  while (!release_queue_.empty()) {
-    RequestRecord r{};
-    r.kind = static_cast<uint32_t>(RequestKind::kReleaseSlot);
-    r.texture_id = 0;
-    r.mip_level = 0;
-    r.slot = release_queue_.front().value;
-    r.generation = generation_.value;
-    const uint64_t position = requests_.position();
-    if (!requests_.try_push(r)) break;  // full (or a ring error, handled by poll): keep it for next time
-    slot_held_[release_queue_.front().value] = 0;  // the server owns it once it has read the record
-    release_pos_[release_queue_.front().value] = position;
-    release_queue_.pop_front();
-    ++stats_.releases_sent;
-    pushed = true;
-  }
-  if (pushed) ring_doorbell();
+  // Full (or a ring error, handled by poll): the rest wait for the next call.
+  stats_.releases_sent += endpoint_.flush_releases(generation_, [this](SlotIndex slot, uint64_t position) {
+    slot_held_[slot.value] = 0;         // the server owns it once it has read the record
+    release_pos_[slot.value] = position;
+  });
+  endpoint_.ring();
 }
 
 void StreamClient::protocol_error(const std::string& what) {
@@ -392,7 +313,7 @@ void StreamClient::on_server_gone(MipSink& sink, const std::string& why) {
   for (uint64_t k : lost) lost_[k] = Lost{};
   in_flight_.clear();
   held_.reset();
-  release_queue_.clear();
+  endpoint_.drop_releases();
   std::fill(slot_held_.begin(), slot_held_.end(), 0);  // the next server owns every slot
   std::fill(release_pos_.begin(), release_pos_.end(), kNoPosition);
   stats_.requests_lost += lost.size();
@@ -403,164 +324,37 @@ void StreamClient::on_server_gone(MipSink& sink, const std::string& why) {
     const auto texture = static_cast<uint32_t>(k >> 32);
     // A quarantined texture's lost request is its final answer; any other is asked again (kCancelled).
     sink.failed(TextureId(texture), MipLevel(static_cast<uint32_t>(k)),
-                quarantined_.count(texture) != 0 ? CompletionStatus::kCorrupt : CompletionStatus::kCancelled);
+                quarantine_.quarantined(texture) ? CompletionStatus::kCorrupt : CompletionStatus::kCancelled);
   }
 }
 
-void StreamClient::charge_crash(int signal) {
-  // Signals a process raises on itself when its own code fails; SIGKILL (and SIGTERM) come from outside.
-  const bool crash = signal == SIGSEGV || signal == SIGBUS || signal == SIGABRT || signal == SIGFPE ||
-                     signal == SIGILL;
-  if (!crash) return;
-  ++stats_.crash_signal_deaths;
-  charge_loading("died by signal " + std::to_string(signal));
-}
-
-void StreamClient::charge_hang() { charge_loading("hung (its heartbeat stalled) and was killed"); }
-
-void StreamClient::charge_loading(const std::string& how) {
-  const ServerBlock& sb = std::as_const(*segment_).server_block();
-  std::unordered_set<uint32_t> charged;  // two workers on one texture: one crash, one charge
-  for (uint32_t i = 0; i < kLoadingWords; ++i) {
-    // relaxed: the writer is dead and reaped; its stores are in the page.
-    const uint32_t word = sb.loading[i].v.load(std::memory_order_relaxed);
-    // A dead server's words are as untrusted as its completions: ids outside the table are ignored.
-    if (word == 0 || word - 1 >= shapes_.size()) continue;
-    const uint32_t texture = word - 1;
-    if (!charged.insert(texture).second || quarantined_.count(texture) != 0) continue;
-    const uint32_t n = ++crash_charges_[texture];
-    if (n < kQuarantineAfterCrashes) {
-      spdlog::warn("texstream-server {} while loading texture {} (crash {} of {} before it is quarantined)", how,
-                   texture, n, kQuarantineAfterCrashes);
-      continue;
-    }
-    quarantined_.insert(texture);
-    ++stats_.textures_quarantined;
-    spdlog::warn("texture {} quarantined: texstream-server crashed or hung {} times while loading it (last: {}); "
-                 "it is not requested again and stays on its colormap",
-                 texture, n, how);
+// What the supervisor asks of this client, with the sink of the current call.
+class StreamClient::SupervisorHooks final : public ServerSupervisor::Client {
+ public:
+  SupervisorHooks(StreamClient& owner, MipSink& sink) : owner_(owner), sink_(sink) {}
+  void server_gone(const ServerSupervisor::Death& death) override {
+    // The quarantine first (a quarantined texture's lost requests fail for good), and before the reset
+    // (which zeroes the words).
+    const ServerBlock& sb = std::as_const(*owner_.segment_).server_block();
+    if (owner_.quarantine_.charge_crash(death.crash_signal, sb)) ++owner_.stats_.crash_signal_deaths;
+    if (death.hung) owner_.quarantine_.charge_hang(sb);
+    owner_.on_server_gone(sink_, death.why);
+    if (!death.reset) return;
+    owner_.segment_->reset_after_server_death();
+    owner_.attach_rings();
   }
-}
+  void protocol_error(const std::string& what) override { owner_.protocol_error(what); }
 
-void StreamClient::fail_quarantined_requests(MipSink& sink) {
-  if (quarantine_refused_.empty()) return;
-  std::vector<uint64_t> refused;
-  refused.swap(quarantine_refused_);
-  quarantine_refused_set_.clear();
-  for (uint64_t k : refused) {
-    sink.failed(TextureId(static_cast<uint32_t>(k >> 32)), MipLevel(static_cast<uint32_t>(k)),
-                CompletionStatus::kCorrupt);
-  }
-}
-
-void StreamClient::watch_external_server(MipSink& sink) {
-  // A standalone server (server.spawn = false) is no child of ours: its death is told by its identity in the
-  // ServerBlock, pid + start time, looked at every kExternalServerCheck. Then its requests are lost and the
-  // block and rings are reset, as after a spawned server's death, so that the next standalone server (its
-  // supervisor restarts it, or a person does) can claim the segment: a server claims it only while the pid
-  // word is 0 (Server::run). The in-process server is this process: never dead here.
-  const SteadyTime t = now();
-  if (t < next_external_check_) return;
-  next_external_check_ = t + kExternalServerCheck;
-  const ServerBlock& sb = segment_->server_block();
-  const uint32_t pid = sb.pid.v.load(std::memory_order_acquire);
-  // start_time 0: a server between its claim of the pid word and publishing its start time.
-  const uint64_t start_time = sb.start_time.v.load(std::memory_order_acquire);
-  if (const uint32_t refused = sb.refused_by.v.load(std::memory_order_acquire);
-      pid == 0 && refused != 0 && stats_.standalone_refused_by == 0) {
-    stats_.standalone_refused_by = refused;
-    last_server_exit_ = "standalone texstream-server pid " + std::to_string(refused) + " refused segment '" +
-                        segment_->name() +
-                        "': it reads another scene than this renderer (its texture table differs; its log names "
-                        "both tables)";
-  }
-  if (pid == 0) {
-    // Nobody serves the segment yet: say so once after a while (a preload would otherwise wait silently).
-    if (external_unserved_since_ == SteadyTime{}) external_unserved_since_ = t;
-    if (!external_unserved_told_ && t - external_unserved_since_ >= kExternalUnservedWarning) {
-      spdlog::warn("no texstream-server has attached to segment '{}' for {} s (server.spawn = false): start one "
-                   "with texstream-server --segment {} --scene DIR",
-                   segment_->name(), std::chrono::duration_cast<std::chrono::seconds>(kExternalUnservedWarning).count(),
-                   segment_->name());
-      external_unserved_told_ = true;
-    }
-  } else {
-    external_unserved_since_ = SteadyTime{};
-    external_unserved_told_ = false;
-  }
-  if (pid == 0 || start_time == 0 || pid == static_cast<uint32_t>(::getpid())) return;
-  if (process_alive(static_cast<int>(pid), start_time)) return;
-  ++stats_.server_deaths;
-  last_server_exit_ = "standalone texstream-server pid " + std::to_string(pid) + " is gone";
-  spdlog::warn("{}: its requests are sent again once another server attaches", last_server_exit_);
-  on_server_gone(sink, last_server_exit_);
-  segment_->reset_after_server_death();
-  attach_rings();
-}
+ private:
+  StreamClient& owner_;
+  MipSink& sink_;
+};
 
 void StreamClient::supervise(MipSink& sink) {
-  const bool ring_broken = requests_.error() != RingError::kNone || completions_.error() != RingError::kNone ||
-                           !server_read_position().has_value();
+  const bool ring_broken = endpoint_.ring_broken() || !server_read_position().has_value();
   expire_requests(sink, now());
-  if (!process_) {
-    if (ring_broken && !broken_) {
-      protocol_error("a ring position of the external server is impossible; stopping until reset");
-      broken_ = true;
-      on_server_gone(sink, "ring corrupt");
-      return;
-    }
-    watch_external_server(sink);
-    return;
-  }
-  const SteadyTime t = now();
-  if (auto exit = process_->reap(t)) {
-    const ServerBlock& sb = segment_->server_block();
-    const uint32_t holder = sb.pid.v.load(std::memory_order_acquire);
-    const uint64_t holder_start = sb.start_time.v.load(std::memory_order_acquire);
-    if (holder != 0 && holder != static_cast<uint32_t>(exit->pid) && holder_start != 0 &&
-        process_alive(static_cast<int>(holder), holder_start)) {
-      // Our child found the segment held by another server (a standalone texstream-server on this
-      // protocol.segment_name) and left. A reset would pull the rings from under that server: it serves this
-      // renderer from now on, as with server.spawn = false, and no child is started again.
-      spdlog::warn("segment '{}' is served by a standalone texstream-server (pid {}): using it, as with "
-                   "server.spawn = false; child pid {} {}",
-                   segment_->name(), holder, exit->pid, exit->how);
-      process_.reset();
-      return;
-    }
-    ++stats_.server_deaths;
-    // Before on_server_gone (a quarantined texture's lost requests fail for good) and before the reset
-    // (which zeroes the words).
-    if (!exit->killed_by_us) charge_crash(exit->term_signal);
-    if (exit->hung) charge_hang();
-    // The server writes its pid when it attaches and leaves it there when it detaches; the reset clears it.
-    const bool attached = exit->pid > 0 && segment_->server_block().pid.v.load(std::memory_order_relaxed) ==
-                                               static_cast<uint32_t>(exit->pid);
-    stats_.server_deaths_before_attach = attached ? 0 : stats_.server_deaths_before_attach + 1;
-    const bool refused = !attached && !exit->killed_by_us && exit->exit_status == kServerExitBadConfig;
-    stats_.server_refusals_before_attach = refused ? stats_.server_refusals_before_attach + 1 : 0;
-    last_server_exit_ = "pid " + std::to_string(exit->pid) + " " + exit->how +
-                        (exit->killed_by_us ? " after we killed it: " + exit->kill_reason : "");
-    on_server_gone(sink, last_server_exit_);
-    // Only now, with the process reaped, are its words in the segment ours to reset.
-    segment_->reset_after_server_death();
-    attach_rings();
-  }
-  if (process_->serving()) {
-    if (ring_broken) {
-      protocol_error("a ring position is impossible");
-      process_->kill("it corrupted a ring position");
-    } else {
-      const ServerBlock& sb = segment_->server_block();
-      const auto timeout = std::chrono::milliseconds(static_cast<int64_t>(config_.protocol.heartbeat_timeout_ms));
-      process_->watch_heartbeat(sb.heartbeat.v.load(std::memory_order_relaxed),
-                                sb.attached.v.load(std::memory_order_relaxed) == 1, !in_flight_.empty(), timeout, t);
-    }
-  }
-  if (!process_->has_child()) {
-    segment_->renderer_block().server_epoch.v.store(segment_->header().epoch, std::memory_order_relaxed);
-    process_->spawn_if_due(t);
-  }
+  SupervisorHooks hooks(*this, sink);
+  supervisor_->supervise(now(), ring_broken, !in_flight_.empty(), hooks);
 }
 
 void StreamClient::poll(MipSink& renderer_sink, size_t max_mips) {
@@ -574,8 +368,8 @@ void StreamClient::poll(MipSink& renderer_sink, size_t max_mips) {
   // relaxed: a progress counter only; we are its sole writer.
   rb.heartbeat.v.store(rb.heartbeat.v.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
   supervise(sink);
-  fail_quarantined_requests(sink);
-  if (!accepting_requests()) return;
+  quarantine_.fail_refused(sink);
+  if (!supervisor_->accepting_requests()) return;
   flush_releases();
 
   size_t mips = 0;
@@ -589,11 +383,11 @@ void StreamClient::poll(MipSink& renderer_sink, size_t max_mips) {
   // Bounded by one ring's worth per poll: a server publishing as fast as we consume cannot hold us here.
   const uint32_t max_records = segment_->header().completion_capacity;
   for (uint32_t n = 0; n < max_records && mips < max_mips && !held_; ++n) {
-    const std::optional<CompletionRecord> record = completions_.try_pop();
+    const std::optional<CompletionRecord> record = endpoint_.poll();
     if (!record) break;
     handle_record(*record, sink, mips);
   }
-  if (completions_.error() != RingError::kNone) supervise(sink);  // act on a corrupt position this frame
+  if (endpoint_.completions_broken()) supervise(sink);  // act on a corrupt position this frame
 }
 
 void StreamClient::handle_record(const CompletionRecord& record, MipSink& sink, size_t& mips) {
@@ -707,14 +501,8 @@ bool StreamClient::deliver(const CheckedCompletion& c, MipSink& sink) {
 void StreamClient::restart_server(const std::string& why, MipSink& renderer_sink) {
   IpcScope scope(*this);
   TimedSink sink(*this, renderer_sink);
-  if (process_) {
-    process_->kill(why);  // the next poll reaps it, marks requests lost, resets and respawns
-    return;
-  }
-  on_server_gone(sink, why);
-  segment_->reset_after_server_death();
-  attach_rings();
-  broken_ = false;
+  SupervisorHooks hooks(*this, sink);
+  supervisor_->restart(why, hooks);
 }
 
 void StreamClient::expire_requests(MipSink& sink, SteadyTime t) {
@@ -741,7 +529,7 @@ void StreamClient::expire_requests(MipSink& sink, SteadyTime t) {
   // With no server attached nobody broke the protocol: nobody was there to answer (server.spawn = false and no
   // standalone server yet, or a spawned one that has not attached). Before, each expiry counted as a protocol
   // error of a server that did not exist.
-  if (const std::string unattached = unattached_reason(); !unattached.empty()) {
+  if (const std::string unattached = supervisor_->unattached_reason(); !unattached.empty()) {
     spdlog::warn("{} ({})", what, unattached);
     return;
   }
@@ -765,79 +553,39 @@ uint64_t StreamClient::overdue_lost(SteadyTime t) const {
   }));
 }
 
-std::string StreamClient::unattached_reason() const {
-  if (std::as_const(*segment_).server_block().attached.v.load(std::memory_order_acquire) == 1) return {};
-  std::string why = "no texstream-server is attached to segment '" + segment_->name() + "'";
-  if (!process_) {
-    why += " (server.spawn = false): start one with texstream-server --segment " + segment_->name() + " --scene DIR";
-  }
-  return why;
-}
-
 bool StreamClient::in_flight(TextureId texture, MipLevel mip) const { return in_flight_.count(key(texture, mip)) != 0; }
 
 StreamStats StreamClient::stats() const {
   StreamStats s = stats_;
   s.in_flight = in_flight_.size();
   s.slots_held = static_cast<uint64_t>(std::count(slot_held_.begin(), slot_held_.end(), uint8_t{1}));
-  s.releases_queued = release_queue_.size();
+  s.releases_queued = endpoint_.releases_queued();
   const ServerBlock& sb = std::as_const(*segment_).server_block();
   s.server_ram_cache_hits = past_hits_ + sb.ram_cache_hits.v.load(std::memory_order_relaxed);
   s.server_ram_cache_misses = past_misses_ + sb.ram_cache_misses.v.load(std::memory_order_relaxed);
   s.server_bytes_read = past_bytes_read_ + sb.bytes_read.v.load(std::memory_order_relaxed);
   s.server_requests_cancelled = past_cancelled_ + sb.requests_cancelled.v.load(std::memory_order_relaxed);
   s.unserved_after_restart += overdue_lost(now());
-  if (process_) {
-    s.server_crashes = process_->crashes();
-    s.server_restarts = process_->spawns() > 0 ? process_->spawns() - 1 : 0;
-    switch (process_->state()) {
+  s.server_deaths = supervisor_->server_deaths();
+  s.server_deaths_before_attach = supervisor_->server_deaths_before_attach();
+  s.server_refusals_before_attach = supervisor_->server_refusals_before_attach();
+  s.standalone_refused_by = supervisor_->standalone_refused_by();
+  s.textures_quarantined = quarantine_.textures_quarantined();
+  if (const ServerProcess* process = supervisor_->process()) {
+    s.server_crashes = supervisor_->server_crashes();
+    s.server_restarts = supervisor_->server_restarts();
+    switch (process->state()) {
       case ServerState::kStopped:
       case ServerState::kBackingOff: s.server_state = StreamServerState::kBackingOff; break;
       case ServerState::kRunning: s.server_state = StreamServerState::kRunning; break;
       case ServerState::kColormapOnly: s.server_state = StreamServerState::kColormapOnly; break;
     }
   } else {
-    s.server_state = broken_ ? StreamServerState::kBroken : StreamServerState::kExternal;
+    s.server_state = supervisor_->broken() ? StreamServerState::kBroken : StreamServerState::kExternal;
   }
   return s;
 }
 
-std::string StreamClient::stats_text() const {
-  const StreamStats s = stats();
-  std::ostringstream o;
-  o << "requests_sent " << s.requests_sent << "\n"
-    << "releases_sent " << s.releases_sent << "\n"
-    << "completions_ok " << s.completions_ok << "\n"
-    << "completions_rejected " << s.completions_rejected << "\n"
-    << "payload_checksum_failures " << s.payload_checksum_failures << "\n";
-  uint64_t failed = 0;
-  for (uint64_t f : s.completions_failed) failed += f;
-  o << "completions_failed " << failed << "\n"
-    << "requests_lost " << s.requests_lost << "\n"
-    << "requests_timed_out " << s.requests_timed_out << "\n"
-    << "bytes_received " << s.bytes_received << "\n"
-    << "protocol_errors " << s.protocol_errors << "\n"
-    << "server_restarts " << s.server_restarts << "\n"
-    << "server_deaths " << s.server_deaths << "\n"
-    << "server_crashes " << s.server_crashes << "\n"
-    << "server_deaths_before_attach " << s.server_deaths_before_attach << "\n"
-    << "server_refusals_before_attach " << s.server_refusals_before_attach << "\n"
-    << "crash_signal_deaths " << s.crash_signal_deaths << "\n"
-    << "textures_quarantined " << s.textures_quarantined << "\n"
-    << "lost_resent " << s.lost_resent << "\n"
-    << "lost_answered_in_time " << s.lost_answered_in_time << "\n"
-    << "unserved_after_restart " << s.unserved_after_restart << "\n"
-    << "in_flight " << s.in_flight << "\n"
-    << "server_state " << to_string(s.server_state) << "\n"
-    << "ipc_frames " << ipc_time_.samples() << "\n"
-    << "ipc_total_ms " << ipc_time_.total_ms() << "\n"
-    << "ipc_p50_us " << ipc_time_.quantile_us(0.5) << "\n"
-    << "ipc_p99_us " << ipc_time_.quantile_us(0.99) << "\n"
-    << "ipc_p999_us " << ipc_time_.quantile_us(0.999) << "\n"
-    << "ipc_p9999_us " << ipc_time_.quantile_us(0.9999) << "\n"
-    << "ipc_max_us " << static_cast<double>(ipc_time_.max_ns()) / 1e3 << "\n"
-    << "ipc_frames_over_1ms " << ipc_time_.above(1'000'000) << "\n";
-  return o.str();
-}
+std::string StreamClient::stats_text() const { return format_stream_stats(stats(), ipc_time_); }
 
 }  // namespace texstream

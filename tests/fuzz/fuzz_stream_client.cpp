@@ -65,11 +65,8 @@ struct Rig {
     attach();
   }
   void attach() {
-    const SegmentHeader& h = server_side->header();
-    requests = SpscRingConsumer<RequestRecord>(server_side->request_control(), server_side->request_records(),
-                                               h.request_capacity);
-    completions = SpscRingProducer<CompletionRecord>(server_side->completion_control(),
-                                                     server_side->completion_records(), h.completion_capacity);
+    requests = server_side->request_consumer();
+    completions = server_side->completion_producer();
   }
 };
 

@@ -72,10 +72,8 @@ class HostileServer {
     auto seg = Segment::open(name);
     EXPECT_TRUE(seg.ok()) << (seg.ok() ? "" : seg.error().message);
     seg_ = std::move(*seg);
-    const SegmentHeader& h = seg_->header();
-    requests_ = SpscRingConsumer<RequestRecord>(seg_->request_control(), seg_->request_records(), h.request_capacity);
-    completions_ = SpscRingProducer<CompletionRecord>(seg_->completion_control(), seg_->completion_records(),
-                                                      h.completion_capacity);
+    requests_ = seg_->request_consumer();
+    completions_ = seg_->completion_producer();
     seg_->server_block().attached.v.store(1);
   }
 
@@ -220,10 +218,8 @@ TEST(ChaosHostileServer, EveryLieIsRefusedAndOnlyExactPayloadsAreCommitted) {
   EXPECT_EQ(client->stats().slots_held, 0u);
   auto seg = Segment::open(name);
   ASSERT_TRUE(seg.ok());
-  SpscRingConsumer<RequestRecord> req((*seg)->request_control(), (*seg)->request_records(),
-                                      (*seg)->header().request_capacity);
-  SpscRingProducer<CompletionRecord> comp((*seg)->completion_control(), (*seg)->completion_records(),
-                                          (*seg)->header().completion_capacity);
+  SpscRingConsumer<RequestRecord> req = (*seg)->request_consumer();
+  SpscRingProducer<CompletionRecord> comp = (*seg)->completion_producer();
   client->begin_cycle();
   ASSERT_EQ(client->try_request(TextureId(0), MipLevel(4), 1.0f), RequestOutcome::kSent);
   auto r = req.try_pop();

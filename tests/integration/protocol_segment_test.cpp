@@ -46,8 +46,8 @@ TEST(Segment, CreateOpenShareRingsAndSlots) {
   EXPECT_EQ(s.header().epoch, r.header().epoch);
   EXPECT_EQ(s.renderer_block().pid, static_cast<uint32_t>(getpid()));
 
-  SpscRingProducer<RequestRecord> req(r.request_control(), r.request_records(), 64);
-  SpscRingConsumer<RequestRecord> srv(s.request_control(), s.request_records(), 64);
+  SpscRingProducer<RequestRecord> req = r.request_producer();
+  SpscRingConsumer<RequestRecord> srv = s.request_consumer();
   RequestRecord rec{};
   rec.kind = static_cast<uint32_t>(RequestKind::kLoad);
   rec.texture_id = 42;
@@ -229,7 +229,7 @@ TEST(Segment, ProducerKilledMidStreamLeavesOnlyWholeRecords) {
   if (child == 0) {
     auto seg = Segment::open(name);
     if (!seg.ok()) _exit(2);
-    SpscRingProducer<RequestRecord> p(seg.value()->request_control(), seg.value()->request_records(), 256);
+    SpscRingProducer<RequestRecord> p = seg.value()->request_producer();
     for (uint32_t i = 0;; ) {
       RequestRecord rec{};
       rec.kind = static_cast<uint32_t>(RequestKind::kLoad);
@@ -238,7 +238,7 @@ TEST(Segment, ProducerKilledMidStreamLeavesOnlyWholeRecords) {
       if (p.try_push(rec)) ++i;
     }
   }
-  SpscRingConsumer<RequestRecord> c(r.request_control(), r.request_records(), 256);
+  SpscRingConsumer<RequestRecord> c = r.request_consumer();
   uint32_t expected = 0, torn = 0;
   const auto t0 = std::chrono::steady_clock::now();
   bool killed = false;

@@ -69,10 +69,8 @@ int main(int argc, char** argv) {
   }
   Segment& seg = **opened;
   ServerBlock& block = seg.server_block();
-  SpscRingConsumer<RequestRecord> requests(seg.request_control(), seg.request_records(),
-                                           seg.header().request_capacity);
-  SpscRingProducer<CompletionRecord> completions(seg.completion_control(), seg.completion_records(),
-                                                 seg.header().completion_capacity);
+  SpscRingConsumer<RequestRecord> requests = seg.request_consumer();
+  SpscRingProducer<CompletionRecord> completions = seg.completion_producer();
   block.pid.v.store(static_cast<uint32_t>(::getpid()), std::memory_order_relaxed);
   block.attached.v.store(1, std::memory_order_release);
 

@@ -21,6 +21,7 @@
 
 #include "texstream/common/scene_format.hpp"
 #include "texstream/protocol/checksum.hpp"
+#include "texstream/protocol/doorbell.hpp"
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
 #include "texstream/server/storage/posix_storage.hpp"
@@ -205,10 +206,8 @@ class ServerFormatsTest : public ::testing::Test {
     auto seg = Segment::create(name_, params);
     ASSERT_TRUE(seg.ok()) << seg.error().message;
     segment_ = std::move(seg).value();
-    requests_ = SpscRingProducer<RequestRecord>(segment_->request_control(), segment_->request_records(),
-                                                segment_->header().request_capacity);
-    completions_ = SpscRingConsumer<CompletionRecord>(segment_->completion_control(), segment_->completion_records(),
-                                                      segment_->header().completion_capacity);
+    requests_ = segment_->request_producer();
+    completions_ = segment_->completion_consumer();
     ServerConfig config;
     config.idle_wait_ms = 5;
     auto server = Server::create(*segment_, dir_, config, storage_);
@@ -220,7 +219,7 @@ class ServerFormatsTest : public ::testing::Test {
   void TearDown() override {
     if (thread_.joinable()) {
       stop_ = true;
-      futex_wake_all(segment_->renderer_block().doorbell);
+      Doorbell(*segment_).wake_all();
       thread_.join();
     }
     server_.reset();
@@ -256,12 +255,7 @@ class ServerFormatsTest : public ::testing::Test {
       ring();
     }
   }
-  void ring() {
-    segment_->renderer_block().doorbell.v.fetch_add(1, std::memory_order_seq_cst);
-    if (segment_->server_block().sleeping.v.load(std::memory_order_seq_cst) == 1) {
-      futex_wake_all(segment_->renderer_block().doorbell);
-    }
-  }
+  void ring() { Doorbell(*segment_).ring(); }
   CompletionStatus status_of(uint32_t texture, uint32_t mip) {
     CompletionStatus s{};
     load(texture, mip, [&](const CompletionRecord& c) { s = CompletionStatus(c.status); });

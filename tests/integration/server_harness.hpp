@@ -7,7 +7,6 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
-#include <deque>
 #include <filesystem>
 #include <memory>
 #include <optional>
@@ -18,6 +17,7 @@
 #include <vector>
 
 #include "texstream/common/config.hpp"
+#include "texstream/protocol/renderer_endpoint.hpp"
 #include "texstream/protocol/segment.hpp"
 #include "texstream/server/dispatch/server.hpp"
 #include "texstream/server/storage/storage.hpp"
@@ -42,10 +42,7 @@ class ServerHarness {
       return nullptr;
     }
     h->segment_ = std::move(seg).value();
-    h->requests_ = SpscRingProducer<RequestRecord>(h->segment_->request_control(), h->segment_->request_records(),
-                                                   h->segment_->header().request_capacity);
-    h->completions_ = SpscRingConsumer<CompletionRecord>(
-        h->segment_->completion_control(), h->segment_->completion_records(), h->segment_->header().completion_capacity);
+    h->endpoint_ = RendererEndpoint(*h->segment_);
     auto server = server::Server::create(*h->segment_, scene, config, storage);
     if (!server.ok()) {
       error = server.error().message;
@@ -73,16 +70,13 @@ class ServerHarness {
       return nullptr;
     }
     h->segment_ = std::move(seg).value();
-    h->requests_ = SpscRingProducer<RequestRecord>(h->segment_->request_control(), h->segment_->request_records(),
-                                                   h->segment_->header().request_capacity);
-    h->completions_ = SpscRingConsumer<CompletionRecord>(
-        h->segment_->completion_control(), h->segment_->completion_records(), h->segment_->header().completion_capacity);
+    h->endpoint_ = RendererEndpoint(*h->segment_);
     return h;
   }
 
   ~ServerHarness() {
     stop_ = true;
-    futex_wake_all(segment_->renderer_block().doorbell);
+    Doorbell(*segment_).wake_all();  // the server thread sees stop_ when it wakes
     if (thread_.joinable()) thread_.join();
     server_.reset();
   }
@@ -92,67 +86,39 @@ class ServerHarness {
   const ServerBlock& server_block() const { return segment_->server_block(); }
 
   bool push(uint32_t texture, uint32_t mip, uint64_t generation, float priority) {
-    RequestRecord r{};
-    r.kind = static_cast<uint32_t>(RequestKind::kLoad);
-    r.texture_id = texture;
-    r.mip_level = mip;
-    r.generation = generation;
-    r.priority = priority;
-    if (!requests_.try_push(r)) return false;
-    pushed_ = true;
-    return true;
+    return endpoint_.push_load(TextureId(texture), MipLevel(mip), Generation(generation), priority);
   }
 
-  void ring() {
-    if (!pushed_) return;
-    pushed_ = false;
-    segment_->renderer_block().doorbell.v.fetch_add(1, std::memory_order_seq_cst);
-    if (segment_->server_block().sleeping.v.load(std::memory_order_seq_cst) == 1) {
-      futex_wake_all(segment_->renderer_block().doorbell);
-    }
-  }
+  void ring() { endpoint_.ring(); }
 
   // Calls on(completion, payload) for every completion now waiting (payload empty unless kOk), releases the
   // kOk slots, rings. Returns how many.
   template <class F>
   uint32_t poll(F&& on) {
     uint32_t n = 0;
-    flush_releases();
-    while (std::optional<CompletionRecord> c = completions_.try_pop()) {
+    endpoint_.flush_releases();
+    while (std::optional<CompletionRecord> c = endpoint_.poll()) {
       ++n;
       std::span<const std::byte> payload;
       if (c->status == static_cast<uint32_t>(CompletionStatus::kOk)) {
         payload = segment_->slot(c->slot).first(c->byte_size);
       }
       on(*c, payload);
-      if (c->status == static_cast<uint32_t>(CompletionStatus::kOk)) releases_.push_back(c->slot);
+      if (c->status == static_cast<uint32_t>(CompletionStatus::kOk)) endpoint_.release(SlotIndex(c->slot));
     }
-    flush_releases();
-    ring();
+    endpoint_.flush_releases();
+    endpoint_.ring();
     return n;
   }
 
  private:
   ServerHarness() = default;
-  void flush_releases() {
-    while (!releases_.empty()) {
-      RequestRecord r{};
-      r.kind = static_cast<uint32_t>(RequestKind::kReleaseSlot);
-      r.slot = releases_.front();
-      if (!requests_.try_push(r)) break;
-      pushed_ = true;
-      releases_.pop_front();
-    }
-  }
 
   std::unique_ptr<Segment> segment_;
-  SpscRingProducer<RequestRecord> requests_;
-  SpscRingConsumer<CompletionRecord> completions_;
+  RendererEndpoint endpoint_;  // the renderer's end, as StreamClient uses it
   std::unique_ptr<server::Server> server_;
   std::atomic<bool> stop_{false};
   std::thread thread_;
-  std::deque<uint32_t> releases_;
-  bool pushed_ = false;
 };
 
 }  // namespace texstream::test

@@ -19,6 +19,7 @@
 
 #include "texstream/common/scene_format.hpp"
 #include "texstream/protocol/checksum.hpp"
+#include "texstream/protocol/doorbell.hpp"
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
 
@@ -128,17 +129,14 @@ class ServerProcessTest : public ::testing::Test {
 
   // Plays the renderer on a mapping of the segment: loads mip 1 of texture 0 and checks the bytes.
   void stream_one_mip(Segment& seg) {
-    SpscRingProducer<RequestRecord> requests(seg.request_control(), seg.request_records(),
-                                             seg.header().request_capacity);
-    SpscRingConsumer<CompletionRecord> completions(seg.completion_control(), seg.completion_records(),
-                                                   seg.header().completion_capacity);
+    SpscRingProducer<RequestRecord> requests = seg.request_producer();
+    SpscRingConsumer<CompletionRecord> completions = seg.completion_consumer();
     RequestRecord r{};
     r.kind = static_cast<uint32_t>(RequestKind::kLoad);
     r.mip_level = 1;
     r.generation = 1;
     ASSERT_TRUE(requests.try_push(r));
-    seg.renderer_block().doorbell.v.fetch_add(1, std::memory_order_seq_cst);
-    if (seg.server_block().sleeping.v.load(std::memory_order_seq_cst) == 1) futex_wake_all(seg.renderer_block().doorbell);
+    Doorbell(seg).ring();
     std::optional<CompletionRecord> c;
     const auto deadline = std::chrono::steady_clock::now() + 10s;
     while (!(c = completions.try_pop()) && std::chrono::steady_clock::now() < deadline) std::this_thread::sleep_for(1ms);

@@ -98,9 +98,8 @@ TEST(ServerRingStressTest, TenMillionRecordsEachWayAcrossTwoProcesses) {
     auto mine = Segment::open(name);
     if (!mine.ok()) _exit(3);
     Segment& s = **mine;
-    SpscRingProducer<RequestRecord> requests(s.request_control(), s.request_records(), s.header().request_capacity);
-    SpscRingConsumer<CompletionRecord> completions(s.completion_control(), s.completion_records(),
-                                                   s.header().completion_capacity);
+    SpscRingProducer<RequestRecord> requests = s.request_producer();
+    SpscRingConsumer<CompletionRecord> completions = s.completion_consumer();
     const std::string err = pump(requests, completions, make_request, valid_completion);
     if (!err.empty()) {
       std::fprintf(stderr, "child: %s\n", err.c_str());
@@ -109,9 +108,8 @@ TEST(ServerRingStressTest, TenMillionRecordsEachWayAcrossTwoProcesses) {
     _exit(0);
   }
   Segment& s = **seg;
-  SpscRingProducer<CompletionRecord> completions(s.completion_control(), s.completion_records(),
-                                                 s.header().completion_capacity);
-  SpscRingConsumer<RequestRecord> requests(s.request_control(), s.request_records(), s.header().request_capacity);
+  SpscRingProducer<CompletionRecord> completions = s.completion_producer();
+  SpscRingConsumer<RequestRecord> requests = s.request_consumer();
   const auto t0 = std::chrono::steady_clock::now();
   const std::string err = pump(completions, requests, make_completion, valid_request);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

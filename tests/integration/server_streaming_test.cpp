@@ -20,6 +20,7 @@
 
 #include "texstream/common/scene_format.hpp"
 #include "texstream/protocol/checksum.hpp"
+#include "texstream/protocol/doorbell.hpp"
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
 #include "texstream/server/storage/posix_storage.hpp"
@@ -123,10 +124,8 @@ class ServerStreamingTest : public ::testing::Test {
     auto seg = Segment::create(name_, params);
     ASSERT_TRUE(seg.ok()) << seg.error().message;
     segment_ = std::move(seg).value();
-    requests_ = SpscRingProducer<RequestRecord>(segment_->request_control(), segment_->request_records(),
-                                                segment_->header().request_capacity);
-    completions_ = SpscRingConsumer<CompletionRecord>(segment_->completion_control(), segment_->completion_records(),
-                                                      segment_->header().completion_capacity);
+    requests_ = segment_->request_producer();
+    completions_ = segment_->completion_consumer();
   }
 
   void start_server(ServerConfig config = {}, Storage* storage = nullptr) {
@@ -141,19 +140,14 @@ class ServerStreamingTest : public ::testing::Test {
   void stop_server() {
     if (!thread_.joinable()) return;
     stop_ = true;
-    futex_wake_all(segment_->renderer_block().doorbell);
+    Doorbell(*segment_).wake_all();
     thread_.join();
     EXPECT_EQ(outcome_, RunOutcome::kStopped);
     EXPECT_EQ(segment_->server_block().attached.v.load(), 0u);
   }
 
   // The renderer's side of the doorbell protocol.
-  void ring_doorbell() {
-    segment_->renderer_block().doorbell.v.fetch_add(1, std::memory_order_seq_cst);
-    if (segment_->server_block().sleeping.v.load(std::memory_order_seq_cst) == 1) {
-      futex_wake_all(segment_->renderer_block().doorbell);
-    }
-  }
+  void ring_doorbell() { Doorbell(*segment_).ring(); }
 
   void push(const RequestRecord& r) {
     const auto deadline = std::chrono::steady_clock::now() + 10s;

@@ -74,10 +74,8 @@ class FakeServer {
 
   // After the client reset the segment (a "restart"): fresh ring endpoints, every slot ours again.
   void attach() {
-    const SegmentHeader& h = seg_->header();
-    requests_ = SpscRingConsumer<RequestRecord>(seg_->request_control(), seg_->request_records(), h.request_capacity);
-    completions_ = SpscRingProducer<CompletionRecord>(seg_->completion_control(), seg_->completion_records(),
-                                                      h.completion_capacity);
+    requests_ = seg_->request_consumer();
+    completions_ = seg_->completion_producer();
     owned_.assign(seg_->slot_count(), true);
     ServerBlock& sb = seg_->server_block();
     sb.pid.v.store(static_cast<uint32_t>(::getpid()));

@@ -49,6 +49,7 @@
 #include "texstream/common/config.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texstream/protocol/liveness.hpp"
+#include "texstream/protocol/renderer_endpoint.hpp"
 #include "texstream/protocol/segment.hpp"
 #include "texstream/server/cache/level_eviction_policy.hpp"
 #include "texstream/server/cache/lru_eviction_policy.hpp"
@@ -125,10 +126,7 @@ class Harness {
       return nullptr;
     }
     h->segment_ = std::move(seg).value();
-    h->requests_ = SpscRingProducer<RequestRecord>(h->segment_->request_control(), h->segment_->request_records(),
-                                                   h->segment_->header().request_capacity);
-    h->completions_ = SpscRingConsumer<CompletionRecord>(
-        h->segment_->completion_control(), h->segment_->completion_records(), h->segment_->header().completion_capacity);
+    h->endpoint_ = RendererEndpoint(*h->segment_);
     auto server = server::Server::create(*h->segment_, scene, config, h->storage_);
     if (!server.ok()) {
       std::fprintf(stderr, "server bench: %s\n", server.error().message.c_str());
@@ -154,10 +152,7 @@ class Harness {
     auto seg = Segment::create(fmt::format("texstream-bench-proc-{}-{}", getpid(), counter++), params);
     if (!seg.ok()) return nullptr;
     h->segment_ = std::move(seg).value();
-    h->requests_ = SpscRingProducer<RequestRecord>(h->segment_->request_control(), h->segment_->request_records(),
-                                                   h->segment_->header().request_capacity);
-    h->completions_ = SpscRingConsumer<CompletionRecord>(
-        h->segment_->completion_control(), h->segment_->completion_records(), h->segment_->header().completion_capacity);
+    h->endpoint_ = RendererEndpoint(*h->segment_);
     const std::string exe = (fs::read_symlink("/proc/self/exe").parent_path() / "texstream-server").string();
     std::vector<std::string> args{exe, "--segment", h->segment_->name(), "--scene", scene.string(), "--spawned",
                                   "--set", fmt::format("server.ram_cache_bytes={}", cache_bytes),
@@ -188,7 +183,7 @@ class Harness {
       return;
     }
     stop_ = true;
-    futex_wake_all(segment_->renderer_block().doorbell);
+    Doorbell(*segment_).wake_all();  // the server thread sees stop_ when it wakes
     if (thread_.joinable()) thread_.join();
     server_.reset();
   }
@@ -230,65 +225,37 @@ class Harness {
 
   // Pushes one load; false when the request ring is full.
   bool push(uint32_t texture, uint32_t mip, uint64_t generation, float priority) {
-    RequestRecord r{};
-    r.kind = static_cast<uint32_t>(RequestKind::kLoad);
-    r.texture_id = texture;
-    r.mip_level = mip;
-    r.generation = generation;
-    r.priority = priority;
-    if (!requests_.try_push(r)) return false;
-    pushed_since_ring_ = true;
-    return true;
+    return endpoint_.push_load(TextureId(texture), MipLevel(mip), Generation(generation), priority);
   }
 
   // The doorbell after a batch of pushes (the renderer's protocol: bump, then wake a sleeping server).
-  void ring() {
-    if (!pushed_since_ring_) return;
-    pushed_since_ring_ = false;
-    segment_->renderer_block().doorbell.v.fetch_add(1, std::memory_order_seq_cst);
-    if (segment_->server_block().sleeping.v.load(std::memory_order_seq_cst) == 1) {
-      futex_wake_all(segment_->renderer_block().doorbell);
-    }
-  }
+  void ring() { endpoint_.ring(); }
 
   // Pops every completion now waiting; calls on(c) for each, then hands kOk slots back. Returns how many.
   template <class F>
   uint32_t poll(F&& on) {
     uint32_t n = 0;
-    flush_releases();
-    while (std::optional<CompletionRecord> c = completions_.try_pop()) {
+    endpoint_.flush_releases();
+    while (std::optional<CompletionRecord> c = endpoint_.poll()) {
       ++n;
       on(*c);
-      if (c->status == static_cast<uint32_t>(CompletionStatus::kOk)) releases_.push_back(c->slot);
+      if (c->status == static_cast<uint32_t>(CompletionStatus::kOk)) endpoint_.release(SlotIndex(c->slot));
     }
-    flush_releases();
-    ring();
+    endpoint_.flush_releases();
+    endpoint_.ring();
     return n;
   }
 
  private:
   Harness() = default;
-  void flush_releases() {
-    while (!releases_.empty()) {
-      RequestRecord r{};
-      r.kind = static_cast<uint32_t>(RequestKind::kReleaseSlot);
-      r.slot = releases_.front();
-      if (!requests_.try_push(r)) break;
-      pushed_since_ring_ = true;
-      releases_.pop_front();
-    }
-  }
 
   std::unique_ptr<Segment> segment_;
-  SpscRingProducer<RequestRecord> requests_;
-  SpscRingConsumer<CompletionRecord> completions_;
+  RendererEndpoint endpoint_;  // the renderer's end, as StreamClient uses it
   server::PosixStorage storage_;
   std::unique_ptr<server::Server> server_;
   std::atomic<bool> stop_{false};
   std::thread thread_;
   std::atomic<pid_t> tid_{0};  // the dispatcher thread's id, once it runs
-  std::deque<uint32_t> releases_;
-  bool pushed_since_ring_ = false;
   pid_t pid_ = 0;  // start_process(): the server child
 };
 

@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "texstream/protocol/checksum.hpp"
+#include "texstream/protocol/doorbell.hpp"
 #include "texstream/server/storage/rate_limited_storage.hpp"
 
 namespace texstream::server {
@@ -161,8 +162,8 @@ Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const S
       scene_dir_(scene_dir),
       config_(config),
       textures_(std::move(textures)),
-      requests_(segment.request_control(), segment.request_records(), segment.header().request_capacity),
-      completions_(segment.completion_control(), segment.completion_records(), segment.header().completion_capacity),
+      requests_(segment.request_consumer()),
+      completions_(segment.completion_producer()),
       rate_limited_(config.rate_limit_mb_s > 0
                         ? std::make_unique<RateLimitedStorage>(storage, config.rate_limit_mb_s, &stats_.rate_limit_wait_us)
                         : nullptr),
@@ -183,15 +184,9 @@ Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const S
   drained_keys_.reserve(256);
   if (fault_injection_enabled()) completions_.set_mid_push_hook([] { fault_point(FaultPoint::kMidRingPush); });
   publish_each_completion_ = fault_injection_enabled();
-  ShmAtomic<uint32_t>* doorbell = &segment_.renderer_block().doorbell;
-  const ShmAtomic<uint32_t>* sleeping = &segment_.server_block().sleeping;
   // Only a sleeping dispatcher is woken: a wake per result was a syscall per miss, mostly for a dispatcher
-  // that was awake anyway. The pool published the result (seq_cst) before this seq_cst load, and
-  // idle_wait() stores `sleeping` (seq_cst) before it looks at results_ready(): one of the two sees the
-  // other. FUTEX_WAKE does not write the word: the renderer stays its only writer.
-  auto wake = [doorbell, sleeping] {
-    if (sleeping->v.load(std::memory_order_seq_cst) == 1) futex_wake_all(*doorbell);
-  };
+  // that was awake anyway (Doorbell::wake_sleeper: the pool publishes its result seq_cst before).
+  auto wake = [doorbell = Doorbell(segment_)] { doorbell.wake_sleeper(); };
   // Crash attribution (ServerBlock::loading, read by the renderer after a crash): the dispatcher's inline
   // loads take word 0 (none with a rate limit: every load then goes through the token bucket on a worker), the
   // local workers' words follow, the remote fetch workers' after them; threads beyond kLoadingWords are not
@@ -624,24 +619,17 @@ void Server::idle_wait() {
     if (requests_.size() > 0 || workers_->results_ready() || remote_workers_->results_ready()) return;
     std::this_thread::yield();
   }
-  ServerBlock& block = segment_.server_block();
-  RendererBlock& renderer = segment_.renderer_block();
   const auto idle = std::chrono::microseconds(static_cast<int64_t>(config_.idle_wait_ms * 1000.0));
   // Loads in flight or completions waiting for ring space: nap briefly (workers also wake us).
   const bool short_nap = loads_in_flight_ > 0 || !overflow_.empty();
   const auto timeout = short_nap                ? std::min(idle, kBusyWait)
                        : remote_in_flight_ > 0 ? std::min(idle, kRemoteBusyWait)
                                                : idle;
-  // The renderer pushes, bumps the doorbell, then (seq_cst) reads `sleeping` and wakes us if it is 1. We
-  // store `sleeping` and read the doorbell, both seq_cst (a store-load pair no weaker order keeps; seq_cst
-  // operations rather than a fence so that TSan sees them), and only then re-check the ring: a push we miss
-  // here bumped the doorbell after our read, so futex_wait returns at once instead of sleeping on it.
-  block.sleeping.v.store(1, std::memory_order_seq_cst);  // pairs with the renderer's seq_cst load of sleeping
-  const uint32_t seen = renderer.doorbell.v.load(std::memory_order_seq_cst);  // pairs with its bump (release+)
-  if (requests_.size() == 0 && !workers_->results_ready() && !remote_workers_->results_ready()) {
-    futex_wait(renderer.doorbell, seen, timeout);
-  }
-  block.sleeping.v.store(0, std::memory_order_relaxed);  // relaxed: a late 0 costs the renderer one wake call
+  // The server's half of the doorbell (doorbell.hpp): the ring and the workers' results are re-checked after
+  // `sleeping` is published, so neither a push nor a result can slip in unseen.
+  Doorbell(segment_).sleep(timeout, [this] {
+    return requests_.size() > 0 || workers_->results_ready() || remote_workers_->results_ready();
+  });
 }
 
 }  // namespace texstream::server

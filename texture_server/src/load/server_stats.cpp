@@ -51,8 +51,8 @@ std::string format_stats(const ServerStats& s, const MipCacheStats& c) {
                                 {"miss", &s.miss_latency}}) {
     out += fmt::format("latency {:4} (request→completion, us): n={} mean={:.1f} p50={:.0f} p90={:.0f} p99={:.0f} "
                        "max={}\n",
-                       name, h->count(), h->mean_us(), h->percentile_us(50), h->percentile_us(90),
-                       h->percentile_us(99), h->max_us());
+                       name, h->count(), h->mean(), h->percentile(50), h->percentile(90),
+                       h->percentile(99), h->max());
   }
   // The process's decode helpers (one pool for every server in it); no line while no decode ever ran.
   if (const std::optional<DecodeHelperPoolStats> d = default_decode_helper_pool_stats()) {

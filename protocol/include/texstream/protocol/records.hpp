@@ -6,6 +6,8 @@
 #include <cstdint>
 #include <type_traits>
 
+#include "texstream/common/ids.hpp"
+
 namespace texstream {
 
 inline constexpr uint32_t kNoSlot = 0xffffffffu;
@@ -76,5 +78,24 @@ static_assert(offsetof(CompletionRecord, height) == 40);
 static_assert(offsetof(CompletionRecord, checksum) == 48);
 
 const char* to_string(CompletionStatus status);
+
+// The two requests the renderer sends, built in one place (RendererEndpoint pushes them).
+inline RequestRecord make_load_request(TextureId texture, MipLevel mip, Generation generation, float priority) {
+  RequestRecord r{};
+  r.kind = static_cast<uint32_t>(RequestKind::kLoad);
+  r.texture_id = texture.value;
+  r.mip_level = mip.value;
+  r.slot = kNoSlot;
+  r.generation = generation.value;
+  r.priority = priority;
+  return r;
+}
+inline RequestRecord make_release_request(SlotIndex slot, Generation generation) {
+  RequestRecord r{};
+  r.kind = static_cast<uint32_t>(RequestKind::kReleaseSlot);
+  r.slot = slot.value;
+  r.generation = generation.value;
+  return r;
+}
 
 }  // namespace texstream

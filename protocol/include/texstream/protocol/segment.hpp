@@ -44,6 +44,22 @@ class Segment {
   ServerBlock& server_block() { return *server_block_; }
   const ServerBlock& server_block() const { return *server_block_; }
 
+  // The two rings, one end each: the renderer produces requests and consumes completions, the server the
+  // other way round. Each call makes a new end that resumes from the published position: take new ones after
+  // reset_after_server_death(). Process memory only; the segment's words are those of the rings.
+  SpscRingProducer<RequestRecord> request_producer() {
+    return {request_control_, request_records_, header_copy_.request_capacity};
+  }
+  SpscRingConsumer<RequestRecord> request_consumer() {
+    return {request_control_, request_records_, header_copy_.request_capacity};
+  }
+  SpscRingProducer<CompletionRecord> completion_producer() {
+    return {completion_control_, completion_records_, header_copy_.completion_capacity};
+  }
+  SpscRingConsumer<CompletionRecord> completion_consumer() {
+    return {completion_control_, completion_records_, header_copy_.completion_capacity};
+  }
+  // The rings' raw words, for tests that corrupt a position or a record on purpose.
   RingControl* request_control() { return request_control_; }
   const RingControl* request_control() const { return request_control_; }
   RequestRecord* request_records() { return request_records_; }

@@ -105,6 +105,14 @@ class SpscRingProducer {
     return static_cast<uint32_t>(capacity_ - (write_pos_ - read));
   }
 
+  // Producer thread only: the consumer's published read position, or nullopt when it is impossible (the
+  // ring itself notices that only when it pushes, and a ring that looks full never pushes).
+  std::optional<uint64_t> consumer_position() const {
+    const uint64_t read = control_->read_pos.v.load(std::memory_order_acquire);  // pairs with consumer's release
+    if (read > write_pos_ || write_pos_ - read > capacity_) return std::nullopt;
+    return read;
+  }
+
   RingError error() const { return error_; }
   uint64_t position() const { return write_pos_; }
   uint32_t capacity() const { return capacity_; }

@@ -1,6 +1,6 @@
 #pragma once
-// The renderer's end of the shared-memory protocol: it creates the segment, spawns and supervises
-// texstream-server (ServerProcess), sends load requests, and receives, validates and hands over completed
+// The renderer's end of the shared-memory protocol: it creates the segment, has texstream-server spawned
+// and supervised (ServerSupervisor), sends load requests, and receives, validates and hands over completed
 // mips. No Vulkan: the renderer gives it a MipSink that says where a mip's bytes go (e.g. a mapped staging
 // buffer) and what to do with them once checked.
 //
@@ -18,19 +18,13 @@
 // to us; a kReleaseSlot request hands it back. We track which slots we hold, so a completion naming a slot
 // we already hold is refused (and never released twice).
 //
-// Crash quarantine (issue 9): the server records in ServerBlock::loading the texture each load worker is
-// working on. When the server dies by a crash signal it raised itself (SIGSEGV, SIGBUS, SIGABRT, SIGFPE,
-// SIGILL: never SIGKILL, which is the watchdog, texstream-chaos or the OOM killer), the textures in those
-// words are charged one crash each, read before the segment is reset. A texture charged
-// kQuarantineAfterCrashes times is quarantined for this client's life: it is never requested again (every
-// request of it fails at once with kCorrupt, as a broken file does, so the texture states leave it on its
-// colormap), and its requests lost with the dead server fail with kCorrupt instead of kCancelled. A
-// texture that merely shared a crash with a guilty one is charged once and served on.
+// Three parts: this client (requests, completions, validation, slot ownership) over the protocol's
+// RendererEndpoint; ServerSupervisor (server_supervisor.hpp: spawn, reap, watchdog, restart, a standalone
+// server's death); CrashQuarantine (crash_quarantine.hpp: which texture a crash is charged to).
 //
 // Single-threaded: the renderer's frame thread makes every call.
 #include <chrono>
 #include <cstdint>
-#include <deque>
 #include <filesystem>
 #include <functional>
 #include <memory>
@@ -38,7 +32,6 @@
 #include <span>
 #include <string>
 #include <unordered_map>
-#include <unordered_set>
 #include <vector>
 
 #include "texstream/common/config.hpp"
@@ -46,31 +39,17 @@
 #include "texstream/protocol/completion_check.hpp"
 #include "texstream/common/ids.hpp"
 #include "texstream/protocol/records.hpp"
+#include "texstream/protocol/renderer_endpoint.hpp"
 #include "texstream/protocol/segment.hpp"
 #include "texstream/protocol/spsc_ring.hpp"
+#include "texstream/stream/crash_quarantine.hpp"
+#include "texstream/stream/mip_sink.hpp"
 #include "texstream/stream/server_process.hpp"
+#include "texstream/stream/server_supervisor.hpp"
+#include "texstream/stream/stream_stats.hpp"
 #include "texstream/stream/texture_states.hpp"
 
 namespace texstream {
-
-// Where completed mips go. Implemented by the renderer; called only from within StreamClient::poll.
-class MipSink {
- public:
-  virtual ~MipSink() = default;
-  // Room for `bytes` of (texture, mip), or an empty span for "no room now": the completion then stays
-  // pending (its slot still ours) and is offered again first by the next poll. A non-empty span must hold
-  // at least `bytes` bytes (a shorter one is a bug of the sink and aborts).
-  virtual std::span<std::byte> reserve(TextureId texture, MipLevel mip, uint64_t bytes) = 0;
-  // `data` (the first `bytes` of the reserved span) holds the mip, checksum verified.
-  virtual void commit(TextureId texture, MipLevel mip, std::span<std::byte> data) = 0;
-  // The answer for (texture, mip) was refused: a record that failed validation (then `reserved` is
-  // empty), or a payload whose checksum did not match (then `reserved` is the span reserve() gave, free
-  // again). Nothing is uploaded; the texture state machine counts it and asks again.
-  virtual void reject(TextureId texture, MipLevel mip, std::span<std::byte> reserved) = 0;
-  // The request ended without a payload: the server's status, or kCancelled for a request lost with a
-  // dead or restarted server. The texture state machine decides whether to ask again.
-  virtual void failed(TextureId texture, MipLevel mip, CompletionStatus status) = 0;
-};
 
 // Why a request was or was not sent.
 enum class RequestOutcome : uint8_t {
@@ -87,77 +66,6 @@ const char* to_string(RequestOutcome outcome);
 // kSent and kQuarantined (answered kCorrupt at the next poll) → kSent; other outcomes about this one
 // (texture, mip) → kSkip; outcomes about the whole pipe → kStop.
 SendResult to_send_result(RequestOutcome outcome);
-
-enum class StreamServerState : uint8_t {
-  kExternal,      // spawn_server = false: someone else serves the segment
-  kRunning,
-  kBackingOff,
-  kColormapOnly,
-  kBroken,        // external server broke a ring: nothing is sent until reset_external_server()
-};
-const char* to_string(StreamServerState state);
-
-// Time the renderer's frame thread spends inside the client (poll, try_request, begin_cycle, restarts),
-// without the time spent in the MipSink's callbacks (the renderer's own work). One sample per "frame": from
-// one poll() to the next, so requests sent after a poll count with it. Issue 9 bounds it: no frame may be
-// blocked by IPC for more than 1 ms (p99.99). 10 µs buckets up to 20 ms; the maximum is kept exactly.
-class IpcTimeHistogram {
- public:
-  static constexpr uint64_t kBucketNs = 10'000;
-  static constexpr size_t kBuckets = 2000;
-  void add(uint64_t ns);
-  uint64_t samples() const { return samples_; }
-  uint64_t max_ns() const { return max_ns_; }
-  double total_ms() const { return static_cast<double>(total_ns_) / 1e6; }
-  // Upper edge of the bucket holding quantile q (0..1), in µs; the exact maximum above the last bucket.
-  double quantile_us(double q) const;
-  uint64_t above(uint64_t ns) const;  // samples longer than ns (bucket resolution)
-
- private:
-  std::vector<uint64_t> buckets_ = std::vector<uint64_t>(kBuckets, 0);
-  uint64_t overflow_ = 0, samples_ = 0, max_ns_ = 0, total_ns_ = 0;
-};
-
-struct StreamStats {
-  uint64_t requests_sent = 0;
-  uint64_t releases_sent = 0;
-  uint64_t completions_ok = 0;                           // committed to the sink (checksum matched)
-  uint64_t completions_rejected = 0;                     // kOk whose payload the checks refused
-  uint64_t payload_checksum_failures = 0;                // of those: copied, checksum did not match
-  uint64_t completions_failed[kMaxCompletionStatus + 1] = {};  // by CompletionStatus value
-  uint64_t requests_lost = 0;                            // in flight when the server died
-  uint64_t requests_timed_out = 0;                       // unanswered for StreamClientOptions::request_timeout
-  uint64_t bytes_received = 0;                           // payload bytes committed
-  uint64_t protocol_errors = 0;
-  uint64_t server_restarts = 0;                          // spawns after the first
-  uint64_t server_deaths = 0;
-  uint64_t server_crashes = 0;                           // deaths counted as crashes (RestartPolicy)
-  // Servers in a row (up to now) that died before attaching to the segment: a binary that cannot start (a
-  // bad option, a missing library) rather than one that crashed while serving. 0 once one attached.
-  uint64_t server_deaths_before_attach = 0;
-  // Of those, the ones in a row that exited with kServerExitBadConfig: the server refused its arguments,
-  // configuration or scene, which no restart changes. 0 once one attached or died any other way.
-  uint64_t server_refusals_before_attach = 0;
-  // server.spawn = false: the pid of a standalone server that refused the segment because it reads another
-  // scene (ServerBlock::refused_by); 0 if none. No restart of ours changes that: the run ends (renderer_app).
-  uint32_t standalone_refused_by = 0;
-  uint64_t crash_signal_deaths = 0;                      // deaths by a crash signal the server raised itself
-  uint64_t textures_quarantined = 0;                     // loaded during kQuarantineAfterCrashes such deaths
-  // Recovery (issue 9): a request in flight when the server died, sent again to a later server, must be
-  // answered (any status) within kRecoveryDeadline of being sent again.
-  uint64_t lost_resent = 0;                              // lost requests sent again
-  uint64_t lost_answered_in_time = 0;
-  uint64_t unserved_after_restart = 0;                   // answered late, or still unanswered past the deadline
-  uint64_t in_flight = 0;
-  uint64_t slots_held = 0;                               // handed to us, not yet handed back
-  uint64_t releases_queued = 0;                          // waiting for room in the request ring
-  // Copied from ServerBlock, summed over every server this client has run.
-  uint64_t server_ram_cache_hits = 0;
-  uint64_t server_ram_cache_misses = 0;
-  uint64_t server_bytes_read = 0;
-  uint64_t server_requests_cancelled = 0;
-  StreamServerState server_state = StreamServerState::kExternal;
-};
 
 struct StreamClientOptions {
   // false: do not spawn texstream-server. Whoever serves the segment opens it by name (Segment::open) —
@@ -178,9 +86,7 @@ struct StreamClientOptions {
 class StreamClient {
  public:
   static constexpr std::chrono::milliseconds kRecoveryDeadline{2000};  // issue 9: served within 2 s of a restart
-  // Crashes while a texture was being loaded before it is quarantined (issue 9: "a file that crashed it
-  // twice"): one is forgiven, as a texture may share a crash with another one that caused it.
-  static constexpr uint32_t kQuarantineAfterCrashes = 2;
+  static constexpr uint32_t kQuarantineAfterCrashes = CrashQuarantine::kQuarantineAfterCrashes;
   // Removes stale "texstream-" segments, creates this one (protocol.segment_name or "texstream-<pid>",
   // sized from `config.protocol`), and spawns the server (unless options.spawn_server is false) with
   // `--scene scene_dir`, `--config config_file` (if not empty) and each override as `--set`.
@@ -221,16 +127,16 @@ class StreamClient {
   bool in_flight(TextureId texture, MipLevel mip) const;
   // stats()'s standalone_refused_by and server_refusals_before_attach without building the whole StreamStats
   // (the renderer asks every frame; stats() counts held slots and scans the lost requests).
-  uint32_t standalone_refused_by() const { return stats_.standalone_refused_by; }
-  uint64_t server_refusals_before_attach() const { return stats_.server_refusals_before_attach; }
+  uint32_t standalone_refused_by() const { return supervisor_->standalone_refused_by(); }
+  uint64_t server_refusals_before_attach() const { return supervisor_->server_refusals_before_attach(); }
   // Empty if a server is attached to the segment now; else why not, for an error that has to say it.
-  std::string unattached_reason() const;
-  bool quarantined(TextureId texture) const { return quarantined_.count(texture.value) != 0; }
+  std::string unattached_reason() const { return supervisor_->unattached_reason(); }
+  bool quarantined(TextureId texture) const { return quarantine_.quarantined(texture); }
   const Segment& segment() const { return *segment_; }
   Segment& segment() { return *segment_; }
-  int server_pid() const { return process_ ? process_->pid() : -1; }
+  int server_pid() const { return supervisor_->server_pid(); }
   // How the last spawned server ended ("pid 12 exited with status 2"); empty if none has.
-  const std::string& last_server_exit() const { return last_server_exit_; }
+  const std::string& last_server_exit() const { return supervisor_->last_server_exit(); }
 
   // Kills the spawned server as if it had hung (tests of the restart path; a renderer's "restart server"
   // key). With spawn_server = false: marks everything in flight lost and resets the segment's rings — the
@@ -244,7 +150,6 @@ class StreamClient {
     SteadyTime sent_at{};
   };
   void expire_requests(MipSink& sink, SteadyTime t);
-  void watch_external_server(MipSink& sink);
   // A request lost with a dead server, until it is answered by a later one (or no longer wanted).
   struct Lost {
     bool resent = false;
@@ -252,32 +157,21 @@ class StreamClient {
   };
   class TimedSink;   // forwards to the renderer's sink and measures the time spent there
   class IpcScope;    // measures one client call into the current frame's IPC time
+  class SupervisorHooks;  // what the supervisor asks of us, with the current call's sink
   void note_answered(uint64_t k);
   uint64_t overdue_lost(SteadyTime t) const;
 
   StreamClient() = default;
   SteadyTime now() const;
   void attach_rings();
-  void ring_doorbell();
   void flush_releases();
   void release_slot(SlotIndex slot);
   void supervise(MipSink& sink);
   void on_server_gone(MipSink& sink, const std::string& why);
-  // A server died by signal `signal`: if it is a crash signal, charges the textures its workers were loading
-  // (ServerBlock::loading; before the segment is reset) and quarantines those charged often enough.
-  void charge_crash(int signal);
-  // The same for a server we killed because it hung while serving (its heartbeat stalled): a texture whose
-  // load blocks the server (a file that blocks every read, a stuck mount) is charged like one that crashes it.
-  void charge_hang();
-  // Charges the textures in ServerBlock::loading with one death described by `how` ("died by signal 11").
-  void charge_loading(const std::string& how);
-  // Fails (kCorrupt) the requests of quarantined textures refused since the last poll.
-  void fail_quarantined_requests(MipSink& sink);
   void protocol_error(const std::string& what);
   // Returns false when the sink had no room (the completion is held).
   bool deliver(const CheckedCompletion& c, MipSink& sink);
   void handle_record(const CompletionRecord& record, MipSink& sink, size_t& mips);
-  bool accepting_requests() const;
   // The request ring's read position as published by the server, checked against ours (the ring itself
   // only notices an impossible position when it pushes, and a full-looking ring never pushes).
   std::optional<uint64_t> server_read_position() const;
@@ -290,23 +184,20 @@ class StreamClient {
   StreamClientOptions options_;
   std::vector<TextureShape> shapes_;
   std::unique_ptr<Segment> segment_;
-  std::unique_ptr<ServerProcess> process_;  // null when spawn_server is false
-  SpscRingProducer<RequestRecord> requests_;
-  SpscRingConsumer<CompletionRecord> completions_;
+  std::unique_ptr<ServerSupervisor> supervisor_;  // whoever serves the segment: spawned or standalone
+  CrashQuarantine quarantine_;
+  RendererEndpoint endpoint_;              // the rings and the doorbell; rebuilt after every reset
   Generation generation_{0};
   std::unordered_map<uint64_t, InFlight> in_flight_;
   std::vector<uint8_t> slot_held_;          // by slot index: handed to us and not yet handed back
-  std::deque<SlotIndex> release_queue_;     // held slots whose kReleaseSlot found no room in the ring
   // By slot: request-ring position of the kReleaseSlot that handed it back (kNoPosition: none pending). The
   // slot is the server's only once it has read that record; naming it in a completion earlier is a violation.
   std::vector<uint64_t> release_pos_;
   std::optional<CheckedCompletion> held_;  // passed every check; the sink had no room
   uint32_t release_reserve_ = 0;            // request-ring records kept free for releases
-  bool broken_ = false;                     // external server broke a ring
   StreamStats stats_;
   // ServerBlock counters of servers that have died (the block is zeroed by the reset).
   uint64_t past_hits_ = 0, past_misses_ = 0, past_bytes_read_ = 0, past_cancelled_ = 0;
-  std::string last_server_exit_;
   std::unordered_map<uint64_t, Lost> lost_;
   IpcTimeHistogram ipc_time_;
   uint64_t frame_ipc_ns_ = 0;   // the open frame's client time so far
@@ -314,16 +205,6 @@ class StreamClient {
   uint64_t sink_ns_ = 0;        // time inside the sink during the current client call
   int ipc_depth_ = 0;           // nested client calls (poll → restart paths) count once
   SteadyTime next_expiry_scan_{};
-  // server.spawn = false: when watch_external_server() looks at the standalone server's identity next.
-  static constexpr std::chrono::milliseconds kExternalServerCheck{100};
-  SteadyTime next_external_check_{};
-  static constexpr std::chrono::seconds kExternalUnservedWarning{3};
-  SteadyTime external_unserved_since_{};  // since when no server has held the segment ({}: one does)
-  bool external_unserved_told_ = false;
-  std::unordered_map<uint32_t, uint32_t> crash_charges_;  // texture id → crashes while it was being loaded
-  std::unordered_set<uint32_t> quarantined_;              // texture ids
-  std::vector<uint64_t> quarantine_refused_;              // keys refused by try_request, failed at next poll
-  std::unordered_set<uint64_t> quarantine_refused_set_;   // the same keys: each failed once per poll
 };
 
 }  // namespace texstream

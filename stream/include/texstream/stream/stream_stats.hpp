@@ -1,0 +1,86 @@
+#pragma once
+// What StreamClient counts and how it prints it: StreamStats, the IPC time per frame, and the `key value`
+// text that texstream-chaos reads ($TEXSTREAM_STREAM_STATS).
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+#include "texstream/common/latency_histogram.hpp"
+#include "texstream/protocol/records.hpp"
+
+namespace texstream {
+
+enum class StreamServerState : uint8_t {
+  kExternal,      // spawn_server = false: someone else serves the segment
+  kRunning,
+  kBackingOff,
+  kColormapOnly,
+  kBroken,        // external server broke a ring: nothing is sent until reset_external_server()
+};
+const char* to_string(StreamServerState state);
+
+// Time the renderer's frame thread spends inside the client (poll, try_request, begin_cycle, restarts),
+// without the time spent in the MipSink's callbacks (the renderer's own work). One sample per "frame": from
+// one poll() to the next, so requests sent after a poll count with it. Issue 9 bounds it: no frame may be
+// blocked by IPC for more than 1 ms (p99.99). The project's one histogram (common/latency_histogram.hpp) in
+// 10 µs units with 2048 exact buckets (up to 20.48 ms: the old linear 10 µs buckets); the maximum is exact.
+class IpcTimeHistogram {
+ public:
+  static constexpr uint64_t kBucketNs = 10'000;
+  void add(uint64_t ns) { h_.record_one_writer(ns); }  // the frame thread only
+  uint64_t samples() const { return h_.count(); }
+  uint64_t max_ns() const { return h_.max(); }
+  double total_ms() const { return static_cast<double>(h_.sum()) / 1e6; }
+  // Upper edge of the bucket holding quantile q (0..1), in µs; the exact maximum above the last bucket.
+  double quantile_us(double q) const;
+  uint64_t above(uint64_t ns) const { return h_.count_above(ns); }  // samples longer than ns (bucket resolution)
+
+ private:
+  LogLinearHistogram<11, 11, kBucketNs> h_;
+};
+
+struct StreamStats {
+  uint64_t requests_sent = 0;
+  uint64_t releases_sent = 0;
+  uint64_t completions_ok = 0;                           // committed to the sink (checksum matched)
+  uint64_t completions_rejected = 0;                     // kOk whose payload the checks refused
+  uint64_t payload_checksum_failures = 0;                // of those: copied, checksum did not match
+  uint64_t completions_failed[kMaxCompletionStatus + 1] = {};  // by CompletionStatus value
+  uint64_t requests_lost = 0;                            // in flight when the server died
+  uint64_t requests_timed_out = 0;                       // unanswered for StreamClientOptions::request_timeout
+  uint64_t bytes_received = 0;                           // payload bytes committed
+  uint64_t protocol_errors = 0;
+  uint64_t server_restarts = 0;                          // spawns after the first
+  uint64_t server_deaths = 0;
+  uint64_t server_crashes = 0;                           // deaths counted as crashes (RestartPolicy)
+  // Servers in a row (up to now) that died before attaching to the segment: a binary that cannot start (a
+  // bad option, a missing library) rather than one that crashed while serving. 0 once one attached.
+  uint64_t server_deaths_before_attach = 0;
+  // Of those, the ones in a row that exited with kServerExitBadConfig: the server refused its arguments,
+  // configuration or scene, which no restart changes. 0 once one attached or died any other way.
+  uint64_t server_refusals_before_attach = 0;
+  // server.spawn = false: the pid of a standalone server that refused the segment because it reads another
+  // scene (ServerBlock::refused_by); 0 if none. No restart of ours changes that: the run ends (renderer_app).
+  uint32_t standalone_refused_by = 0;
+  uint64_t crash_signal_deaths = 0;                      // deaths by a crash signal the server raised itself
+  uint64_t textures_quarantined = 0;                     // loaded during kQuarantineAfterCrashes such deaths
+  // Recovery (issue 9): a request in flight when the server died, sent again to a later server, must be
+  // answered (any status) within kRecoveryDeadline of being sent again.
+  uint64_t lost_resent = 0;                              // lost requests sent again
+  uint64_t lost_answered_in_time = 0;
+  uint64_t unserved_after_restart = 0;                   // answered late, or still unanswered past the deadline
+  uint64_t in_flight = 0;
+  uint64_t slots_held = 0;                               // handed to us, not yet handed back
+  uint64_t releases_queued = 0;                          // waiting for room in the request ring
+  // Copied from ServerBlock, summed over every server this client has run.
+  uint64_t server_ram_cache_hits = 0;
+  uint64_t server_ram_cache_misses = 0;
+  uint64_t server_bytes_read = 0;
+  uint64_t server_requests_cancelled = 0;
+  StreamServerState server_state = StreamServerState::kExternal;
+};
+
+// `key value` lines: every StreamStats counter and the IPC-time quantiles.
+std::string format_stream_stats(const StreamStats& s, const IpcTimeHistogram& ipc_time);
+
+}  // namespace texstream
