@@ -141,6 +141,9 @@ TEST(ChaosCorruptFiles, TheRealServerRefusesEveryDamagedMipByNameAndKeepsServing
     config.protocol.segment_name = chaos_test::unique("corrupt");
     config.server.executable = server.string();
     config.stream.max_requests_in_flight = 64;
+    // Not a watchdog test: a server starved of CPU on a busy machine (its heartbeat stalled 1.4 s at load 17)
+    // must not be taken for a hung one and counted as a death.
+    config.protocol.heartbeat_timeout_ms = 10 * Config{}.protocol.heartbeat_timeout_ms;
     auto started = StreamClient::start(config, source.shapes(), corpus_dir, "", {"server.log_level=info"}, {});
     ASSERT_TRUE(started.ok()) << started.error().message;
     auto client = std::move(*started);

@@ -283,6 +283,8 @@ TEST(StreamCrashQuarantine, TheRealServerRecordsTheTextureItLoadsAndTwoCrashesOn
   f.shapes.assign(2, {1024, 1024, mips, TexelFormat::kRgba8});
   f.config.server.executable = server.string();
   f.config.protocol.staging_slot_bytes = 4 << 20;  // mip 0 of 1024x1024 RGBA8
+  // Only the two SIGSEGVs may end a server: on a busy machine a starved heartbeat must not count as a hang.
+  f.config.protocol.heartbeat_timeout_ms = 10 * Config{}.protocol.heartbeat_timeout_ms;
   // 1 MB/s and a 1 MiB burst: reading a 4 MiB mip 0 waits ~3 s in the token bucket, inside the load worker,
   // with its texture recorded: the window in which the test crashes the server.
   const std::vector<std::string> overrides{"protocol.staging_slot_bytes=4194304", "server.worker_threads=1",
