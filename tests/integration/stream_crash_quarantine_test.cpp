@@ -285,10 +285,11 @@ TEST(StreamCrashQuarantine, TheRealServerRecordsTheTextureItLoadsAndTwoCrashesOn
   f.config.protocol.staging_slot_bytes = 4 << 20;  // mip 0 of 1024x1024 RGBA8
   // Only the two SIGSEGVs may end a server: on a busy machine a starved heartbeat must not count as a hang.
   f.config.protocol.heartbeat_timeout_ms = 10 * Config{}.protocol.heartbeat_timeout_ms;
-  // 1 MB/s and a 1 MiB burst: reading a 4 MiB mip 0 waits ~3 s in the token bucket, inside the load worker,
-  // with its texture recorded: the window in which the test crashes the server.
+  // 0.1 MB/s: reading a 4 MiB mip 0 waits >= 30 s in the token bucket, inside the load worker, with its
+  // texture recorded: the window in which the test crashes the server. At 1 MB/s (~3 s) it closed under ASan
+  // on a busy machine while ASan was still reporting the SIGSEGV: the death then named no texture.
   const std::vector<std::string> overrides{"protocol.staging_slot_bytes=4194304", "server.worker_threads=1",
-                                           "server.rate_limit_mb_s=1", "server.log_level=warn"};
+                                           "server.rate_limit_mb_s=0.1", "server.log_level=warn"};
   // The servers inherit this: the SIGSEGVs below leave no core files.
   const rlimit no_core{0, 0};
   ASSERT_EQ(::setrlimit(RLIMIT_CORE, &no_core), 0);
