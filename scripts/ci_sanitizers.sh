@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Issue 9's CI stage (scripts/test.sh runs it after the Release build and its tests; .ci/run runs test.sh):
 #   asan   an ASan+UBSan build of the whole test suite, run through CTest          (build-asan)
+#          (target texstream_tests: the test executables and what they spawn, not the tools and benches no test runs)
 #   tsan   a TSan build of the ring / stream / recovery tests                      (build-tsan)
+#          (those test executables and texstream-server only)
 #   chaos  texstream-chaos --quick: >= 20 SIGKILLs under a rendering renderer      (build, Release)
 #   fuzz   each libFuzzer target for --fuzz-seconds, clang-14                       (build-fuzz)
 #   scripts/ci_sanitizers.sh [--skip-asan] [--skip-tsan] [--skip-chaos] [--skip-fuzz] [--fuzz-seconds N]
@@ -63,7 +65,7 @@ stage() {
 asan() {
   cmake -S . -B "$rel"-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DTEXSTREAM_SANITIZE=address,undefined \
     >/dev/null || return 1
-  cmake --build "$rel"-asan -j"$jobs" || return 1
+  cmake --build "$rel"-asan -j"$jobs" --target texstream_tests || return 1
   ctest --test-dir "$rel"-asan --output-on-failure -j"$jobs" --timeout 900
 }
 

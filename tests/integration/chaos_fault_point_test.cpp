@@ -14,6 +14,7 @@
 #include <fstream>
 #include <thread>
 
+#include "../support/patience.hpp"
 #include "chaos_test_support.hpp"
 #include "texstream/protocol/spsc_ring.hpp"
 #include "texstream/server/support/fault_point.hpp"
@@ -135,7 +136,7 @@ TEST(FaultPoint, ArmFileKillsAtTheNextPassAndIsClaimed) {
   if (pid == 0) {
     ::setenv("TEXSTREAM_FAULT_ARM", arm.c_str(), 1);
     const auto t0 = std::chrono::steady_clock::now();
-    while (std::chrono::steady_clock::now() - t0 < 5s) {
+    while (std::chrono::steady_clock::now() - t0 < test::kHangAfter) {
       fault_point(FaultPoint::kSlotWrite);
       if (std::chrono::steady_clock::now() - t0 < 50ms) std::ofstream(marker) << "early";
       fault_point(FaultPoint::kEviction);
@@ -152,7 +153,7 @@ TEST(FaultPoint, ArmFileKillsAtTheNextPassAndIsClaimed) {
   }
   int status = 0;
   ::waitpid(pid, &status, 0);
-  ASSERT_TRUE(WIFSIGNALED(status)) << "not killed within 5 s of arming";
+  ASSERT_TRUE(WIFSIGNALED(status)) << "not killed within " << test::kHangAfter.count() << " s of arming";
   EXPECT_EQ(WTERMSIG(status), SIGKILL);
   EXPECT_FALSE(fs::exists(arm)) << "the arm file must be claimed";
   EXPECT_TRUE(fs::exists(marker)) << "it must not have died before the arm file appeared";

@@ -21,6 +21,8 @@
 #include <string>
 #include <thread>
 
+#include "../support/patience.hpp"
+
 namespace texstream::test {
 
 inline constexpr const char* kNginxBinary = "/usr/sbin/nginx";
@@ -149,7 +151,7 @@ class NginxOrigin {
       ::execl(kNginxBinary, kNginxBinary, "-p", prefix.c_str(), "-c", conf.c_str(), static_cast<char*>(nullptr));
       ::_exit(127);
     }
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+    const auto deadline = std::chrono::steady_clock::now() + kHangAfter;
     while (std::chrono::steady_clock::now() < deadline) {
       if (loopback_accepts(port_)) return true;
       int status = 0;

@@ -154,12 +154,13 @@ TEST(RenderCli, AServerThatCannotStartEndsPreloadLockstepAndStreamingRunsWithIts
       {"render.preload_all=true", {"died before attaching to the segment 3 times in a row", "server.executable"}, 60},
       {"render.lockstep=true", {"render.lockstep: texstream-server died during the run"}, 60},
       // Streaming runs: a server that exits with status 2 (bad arguments, configuration or scene) refuses for
-      // good; before, the run drew colormap frames, restarting it, and reported success. A long run (400 paced
-      // frames: 6.7 s) ends at the third refusal, within a second (back-off 50 + 100 ms); a run shorter than
-      // that ends with the refusal it saw.
-      {"render.lockstep=false --set render.frames=400",
-       {"texstream-server refused to start, 3 times in a row", "[server] and [storage] keys"}, 5},
-      {"render.lockstep=false", {"texstream-server refused to start, 1 time in a row"}, 60}};
+      // good; before, the run drew colormap frames, restarting it, and reported success. A long run (20000
+      // paced frames: 333 s, past the `timeout 120`) ends at the third refusal (back-off 50 + 100 ms), not at its
+      // end; a run shorter than that ends with the refusals it saw (1 on a quiet machine; a slower one may see
+      // a second before its 5 frames are drawn).
+      {"render.lockstep=false --set render.frames=20000",
+       {"texstream-server refused to start, 3 times in a row", "[server] and [storage] keys"}, 60},
+      {"render.lockstep=false", {"texstream-server refused to start, ", "in a row"}, 60}};
   for (const auto& [mode, messages, within_s] : runs) {
     const auto t0 = std::chrono::steady_clock::now();
     const int rc = run("timeout 120 " + (kBin / "texstream-render").string() + " --set scene.dir=" +

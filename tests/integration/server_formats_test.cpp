@@ -19,6 +19,7 @@
 #include <tuple>
 #include <vector>
 
+#include "../support/patience.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texstream/protocol/checksum.hpp"
 #include "texstream/protocol/doorbell.hpp"
@@ -239,7 +240,7 @@ class ServerFormatsTest : public ::testing::Test {
     ASSERT_TRUE(requests_.try_push(r));
     ring();
     std::optional<CompletionRecord> c;
-    const auto deadline = std::chrono::steady_clock::now() + 10s;
+    const auto deadline = std::chrono::steady_clock::now() + test::kHangAfter;
     while (!(c = completions_.try_pop())) {
       ASSERT_LT(std::chrono::steady_clock::now(), deadline) << "no completion for texture " << texture;
       std::this_thread::sleep_for(200us);

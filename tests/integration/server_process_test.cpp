@@ -17,6 +17,7 @@
 #include <thread>
 #include <vector>
 
+#include "../support/patience.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texstream/protocol/checksum.hpp"
 #include "texstream/protocol/doorbell.hpp"
@@ -25,6 +26,7 @@
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
+using texstream::test::kHangAfter;
 
 namespace texstream {
 namespace {
@@ -138,9 +140,9 @@ class ServerProcessTest : public ::testing::Test {
     ASSERT_TRUE(requests.try_push(r));
     Doorbell(seg).ring();
     std::optional<CompletionRecord> c;
-    const auto deadline = std::chrono::steady_clock::now() + 10s;
+    const auto deadline = std::chrono::steady_clock::now() + kHangAfter;
     while (!(c = completions.try_pop()) && std::chrono::steady_clock::now() < deadline) std::this_thread::sleep_for(1ms);
-    ASSERT_TRUE(c) << "no completion within 10 s";
+    ASSERT_TRUE(c) << "no completion within " << kHangAfter.count() << " s";
     ASSERT_EQ(c->status, uint32_t(CompletionStatus::kOk));
     ASSERT_EQ(c->byte_size, 16u * 16u * 4u);
     const uint64_t offset = mip_chain_offset(TexelFormat::kRgba8, 32, 32, 1);
@@ -149,7 +151,7 @@ class ServerProcessTest : public ::testing::Test {
   }
 
   bool wait_attached(Segment& seg, uint32_t want) {
-    const auto deadline = std::chrono::steady_clock::now() + 10s;
+    const auto deadline = std::chrono::steady_clock::now() + kHangAfter;
     while (seg.server_block().attached.v.load(std::memory_order_acquire) != want) {
       if (std::chrono::steady_clock::now() >= deadline) return false;
       std::this_thread::sleep_for(2ms);
@@ -193,16 +195,16 @@ class ServerProcessTest : public ::testing::Test {
 
 TEST_F(ServerProcessTest, BadArgumentsExitWithCode2) {
   const pid_t no_segment = spawn_server({"--scene", dir_.string()});
-  EXPECT_EQ(wait_exit(no_segment, 10s), 2);
+  EXPECT_EQ(wait_exit(no_segment, kHangAfter), 2);
   const pid_t bad_key = spawn_server({"--segment", name_, "--set", "server.no_such_key=1"});
-  EXPECT_EQ(wait_exit(bad_key, 10s), 2);
+  EXPECT_EQ(wait_exit(bad_key, kHangAfter), 2);
   const pid_t bad_range = spawn_server({"--segment", name_, "--set", "server.worker_threads=0"});
-  EXPECT_EQ(wait_exit(bad_range, 10s), 2);
+  EXPECT_EQ(wait_exit(bad_range, kHangAfter), 2);
 }
 
 TEST_F(ServerProcessTest, MissingSegmentExitsWithCode3WhenSpawned) {
   const pid_t pid = spawn_server(server_args(true));
-  EXPECT_EQ(wait_exit(pid, 10s), 3);
+  EXPECT_EQ(wait_exit(pid, kHangAfter), 3);
 }
 
 TEST_F(ServerProcessTest, AStandaloneServerStartedBeforeItsRendererWaitsForIt) {
@@ -218,7 +220,7 @@ TEST_F(ServerProcessTest, AStandaloneServerStartedBeforeItsRendererWaitsForIt) {
   ASSERT_TRUE(wait_attached(**seg, 1)) << "the waiting server never attached";
   stream_one_mip(**seg);
   kill(pid, SIGTERM);
-  EXPECT_EQ(wait_exit(pid, 10s), 0);
+  EXPECT_EQ(wait_exit(pid, kHangAfter), 0);
   kill(owner, SIGKILL);
   waitpid(owner, nullptr, 0);
 }
@@ -229,7 +231,7 @@ TEST_F(ServerProcessTest, AStandaloneServerWithAWrongSceneExitsAtOnceNamingTheFi
   const fs::path log = dir_ / "stderr.txt";
   const fs::path missing = dir_ / "no-such-scene";
   const pid_t pid = spawn_server({"--segment", name_, "--scene", missing.string()}, log);
-  EXPECT_EQ(wait_exit(pid, 10s), 2);
+  EXPECT_EQ(wait_exit(pid, kHangAfter), 2);
   const std::string text = read_text(log);
   EXPECT_NE(text.find((missing / "textures.bin").string()), std::string::npos) << text;
   EXPECT_EQ(text.find("waiting for the next renderer"), std::string::npos) << text;
@@ -244,7 +246,7 @@ TEST_F(ServerProcessTest, HeaderMismatchExitsWithCode3NamingTheField) {
   header->layout_version = kLayoutVersion + 1;
   const fs::path log = dir_ / "stderr.txt";
   const pid_t pid = spawn_server(server_args(), log);
-  EXPECT_EQ(wait_exit(pid, 10s), 3);
+  EXPECT_EQ(wait_exit(pid, kHangAfter), 3);
   std::ifstream f(log);
   std::ostringstream buffer;
   buffer << f.rdbuf();
@@ -256,7 +258,7 @@ TEST_F(ServerProcessTest, MissingSceneExitsWithCode2) {
   auto seg = Segment::create(name_, {});
   ASSERT_TRUE(seg.ok()) << seg.error().message;
   const pid_t pid = spawn_server({"--segment", name_, "--scene", (dir_ / "nope").string()});
-  EXPECT_EQ(wait_exit(pid, 10s), 2);
+  EXPECT_EQ(wait_exit(pid, kHangAfter), 2);
 }
 
 TEST_F(ServerProcessTest, AServerReadingAnotherSceneRefusesTheSegmentNamingBoth) {
@@ -272,7 +274,7 @@ TEST_F(ServerProcessTest, AServerReadingAnotherSceneRefusesTheSegmentNamingBoth)
   ASSERT_TRUE(seg.ok()) << seg.error().message;
   const fs::path spawned_log = dir_ / "spawned.txt";
   const pid_t spawned = spawn_server(server_args(/*spawned=*/true), spawned_log);
-  EXPECT_EQ(wait_exit(spawned, 10s), 2);
+  EXPECT_EQ(wait_exit(spawned, kHangAfter), 2);
   std::string text = read_text(spawned_log);
   EXPECT_NE(text.find("texture table of 999 textures"), std::string::npos) << text;
   EXPECT_NE(text.find("has 1 (fingerprint"), std::string::npos) << text;
@@ -282,7 +284,7 @@ TEST_F(ServerProcessTest, AServerReadingAnotherSceneRefusesTheSegmentNamingBoth)
 
   const fs::path log = dir_ / "standalone.txt";
   const pid_t pid = spawn_server(server_args(), log);
-  const auto deadline = std::chrono::steady_clock::now() + 10s;
+  const auto deadline = std::chrono::steady_clock::now() + kHangAfter;
   while ((*seg)->server_block().refused_by.v.load() == 0 && std::chrono::steady_clock::now() < deadline) {
     std::this_thread::sleep_for(2ms);
   }
@@ -291,7 +293,12 @@ TEST_F(ServerProcessTest, AServerReadingAnotherSceneRefusesTheSegmentNamingBoth)
   std::this_thread::sleep_for(300ms);
   int status = 0;
   EXPECT_EQ(waitpid(pid, &status, WNOHANG), 0) << "a standalone server must wait for the next renderer";
-  text = read_text(log);
+  // The refusal is published before it is logged: wait for the line rather than for a fixed time.
+  const auto logged_by = std::chrono::steady_clock::now() + kHangAfter;
+  while ((text = read_text(log)).find("refused, waiting for the next renderer") == std::string::npos &&
+         std::chrono::steady_clock::now() < logged_by) {
+    std::this_thread::sleep_for(10ms);
+  }
   EXPECT_NE(text.find("read different scenes"), std::string::npos) << text;
   EXPECT_NE(text.find("refused, waiting for the next renderer"), std::string::npos) << text;
   seg.value().reset();  // the creator's mapping goes, and with it the name
@@ -306,7 +313,7 @@ TEST_F(ServerProcessTest, AServerReadingAnotherSceneRefusesTheSegmentNamingBoth)
   EXPECT_EQ((*seg2)->server_block().pid.v.load(), static_cast<uint32_t>(pid));
   stream_one_mip(**seg2);
   kill(pid, SIGTERM);
-  EXPECT_EQ(wait_exit(pid, 10s), 0);
+  EXPECT_EQ(wait_exit(pid, kHangAfter), 0);
 }
 
 TEST_F(ServerProcessTest, StreamsAMipAndExitsCleanlyOnSigterm) {
@@ -318,7 +325,7 @@ TEST_F(ServerProcessTest, StreamsAMipAndExitsCleanlyOnSigterm) {
   EXPECT_TRUE(process_alive(pid, (*seg)->server_block().start_time.v.load()));
   stream_one_mip(**seg);
   kill(pid, SIGTERM);
-  EXPECT_EQ(wait_exit(pid, 10s), 0);
+  EXPECT_EQ(wait_exit(pid, kHangAfter), 0);
   EXPECT_EQ((*seg)->server_block().attached.v.load(), 0u);
 }
 
@@ -332,7 +339,7 @@ TEST_F(ServerProcessTest, SpawnedServerExitsWhenTheSegmentOwnerDies) {
   stream_one_mip(**seg);
   kill(owner, SIGKILL);
   waitpid(owner, nullptr, 0);
-  EXPECT_EQ(wait_exit(pid, 10s), 0) << "the server must notice its renderer's death (pidfd) and exit 0";
+  EXPECT_EQ(wait_exit(pid, kHangAfter), 0) << "the server must notice its renderer's death (pidfd) and exit 0";
 }
 
 TEST_F(ServerProcessTest, StandaloneServerWaitsForTheNextRendererOnTheSameName) {
@@ -365,7 +372,7 @@ TEST_F(ServerProcessTest, StandaloneServerWaitsForTheNextRendererOnTheSameName) 
   ASSERT_TRUE(wait_attached(**seg2, 1)) << "the standalone server never attached to the new segment";
   stream_one_mip(**seg2);
   kill(pid, SIGTERM);
-  EXPECT_EQ(wait_exit(pid, 10s), 0);
+  EXPECT_EQ(wait_exit(pid, kHangAfter), 0);
   kill(second, SIGKILL);
   waitpid(second, nullptr, 0);
 }
@@ -382,7 +389,7 @@ TEST_F(ServerProcessTest, ASecondServerOnASegmentTouchesNothing) {
   // A spawned one leaves at once, naming the holder.
   const fs::path log = dir_ / "second.txt";
   const pid_t second = spawn_server(server_args(true), log);
-  EXPECT_EQ(wait_exit(second, 10s), 3);
+  EXPECT_EQ(wait_exit(second, kHangAfter), 3);
   std::ifstream f(log);
   std::ostringstream text;
   text << f.rdbuf();
@@ -405,7 +412,7 @@ TEST_F(ServerProcessTest, ASecondServerOnASegmentTouchesNothing) {
   EXPECT_EQ((*seg)->server_block().pid.v.load(), static_cast<uint32_t>(third));
   stream_one_mip(**seg);
   kill(third, SIGTERM);
-  EXPECT_EQ(wait_exit(third, 10s), 0);
+  EXPECT_EQ(wait_exit(third, kHangAfter), 0);
 }
 
 TEST_F(ServerProcessTest, Sigusr1PrintsStatisticsAndKeepsServing) {
@@ -417,7 +424,7 @@ TEST_F(ServerProcessTest, Sigusr1PrintsStatisticsAndKeepsServing) {
   stream_one_mip(**seg);
   kill(pid, SIGUSR1);
   std::string text;
-  const auto deadline = std::chrono::steady_clock::now() + 10s;
+  const auto deadline = std::chrono::steady_clock::now() + kHangAfter;
   while (text.find("latency miss") == std::string::npos && std::chrono::steady_clock::now() < deadline) {
     std::this_thread::sleep_for(10ms);
     text = read_text(log);
@@ -428,7 +435,7 @@ TEST_F(ServerProcessTest, Sigusr1PrintsStatisticsAndKeepsServing) {
   int status = 0;
   EXPECT_EQ(waitpid(pid, &status, WNOHANG), 0) << "SIGUSR1 must not stop the server";
   kill(pid, SIGTERM);
-  EXPECT_EQ(wait_exit(pid, 10s), 0);
+  EXPECT_EQ(wait_exit(pid, kHangAfter), 0);
 }
 
 TEST_F(ServerProcessTest, SpawnedServerDiesWithItsParent) {
@@ -444,7 +451,7 @@ TEST_F(ServerProcessTest, SpawnedServerDiesWithItsParent) {
   kill(owner, SIGKILL);
   waitpid(owner, nullptr, 0);
   // The server is the owner's child, not ours: watch its identity (pid + start time) disappear.
-  const auto deadline = std::chrono::steady_clock::now() + 10s;
+  const auto deadline = std::chrono::steady_clock::now() + kHangAfter;
   while (process_alive(server, start) && std::chrono::steady_clock::now() < deadline) std::this_thread::sleep_for(5ms);
   EXPECT_FALSE(process_alive(server, start)) << "a --spawned server must die with its parent";
 }

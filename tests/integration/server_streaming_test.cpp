@@ -18,6 +18,7 @@
 #include <thread>
 #include <vector>
 
+#include "../support/patience.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texstream/protocol/checksum.hpp"
 #include "texstream/protocol/doorbell.hpp"
@@ -150,7 +151,7 @@ class ServerStreamingTest : public ::testing::Test {
   void ring_doorbell() { Doorbell(*segment_).ring(); }
 
   void push(const RequestRecord& r) {
-    const auto deadline = std::chrono::steady_clock::now() + 10s;
+    const auto deadline = std::chrono::steady_clock::now() + test::kHangAfter;
     while (!requests_.try_push(r)) {
       ASSERT_LT(std::chrono::steady_clock::now(), deadline) << "request ring stayed full";
       std::this_thread::sleep_for(1ms);
@@ -173,7 +174,7 @@ class ServerStreamingTest : public ::testing::Test {
     push(r);
   }
 
-  std::optional<CompletionRecord> next(std::chrono::milliseconds timeout = 10s) {
+  std::optional<CompletionRecord> next(std::chrono::milliseconds timeout = test::kHangAfter) {
     const auto deadline = std::chrono::steady_clock::now() + timeout;
     for (;;) {
       if (auto c = completions_.try_pop()) return c;

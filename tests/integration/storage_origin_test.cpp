@@ -16,6 +16,7 @@
 #include <sstream>
 #include <thread>
 
+#include "../support/patience.hpp"
 #include "fake_http_origin.hpp"
 #include "nginx_origin.hpp"
 #include "process_test_support.hpp"
@@ -27,6 +28,8 @@
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
+using texstream::test::kHangAfter;
+using texstream::test::promptly;
 
 namespace texstream::test {
 namespace {
@@ -89,7 +92,7 @@ class StorageOriginTest : public ::testing::Test {
     auto h = ServerHarness::start(scene_, ServerConfig{}, storage, error);
     EXPECT_NE(h, nullptr) << error;
     if (!h) return {};
-    return drive(*h, wanted, 20s);
+    return drive(*h, wanted, kHangAfter);
   }
 
   static StorageConfig http_config(const std::string& origin) {
@@ -104,8 +107,9 @@ class StorageOriginTest : public ::testing::Test {
     return c;
   }
 
-  // One load through `origin`: it must end in `expected` within `deadline`, the log must name `url_part`,
-  // and the server must still answer the next request (the renderer keeps drawing).
+  // One load through `origin`: it must end in `expected` within `deadline` (what the configured timeouts
+  // allow) plus the time its work takes on a busy machine, the log must name `url_part`, and the server must
+  // still answer the next request (the renderer keeps drawing).
   void expect_failure(const StorageConfig& config, CompletionStatus expected, std::chrono::milliseconds deadline,
                       const std::string& url_part) {
     auto stack = server::make_storage_stack(config, scene_);
@@ -114,17 +118,17 @@ class StorageOriginTest : public ::testing::Test {
     auto h = ServerHarness::start((*stack)->scene_dir, ServerConfig{}, (*stack)->storage(), error);
     ASSERT_NE(h, nullptr) << error;
     const auto t0 = std::chrono::steady_clock::now();
-    DriveResult r = drive(*h, {{0, 0, 1.0f}}, deadline + 2s);
+    DriveResult r = drive(*h, {{0, 0, 1.0f}}, kHangAfter);
     const auto took = std::chrono::steady_clock::now() - t0;
-    ASSERT_TRUE(r.complete) << "no final answer within " << (deadline + 2s).count() << " ms";
+    ASSERT_TRUE(r.complete) << "no final answer within " << kHangAfter.count() << " s";
     EXPECT_EQ(r.status[0], static_cast<uint32_t>(expected))
         << "got " << to_string(static_cast<CompletionStatus>(r.status[0]));
-    EXPECT_LT(took, deadline) << "the error came after "
+    EXPECT_LT(took, deadline + promptly(100ms)) << "the error came after "
                               << std::chrono::duration_cast<std::chrono::milliseconds>(took).count() << " ms";
     EXPECT_NE(log_text().find(url_part), std::string::npos) << "the log does not name " << url_part << ":\n"
                                                             << log_text();
     // Still serving: another texture's request is answered too (by the same failing origin: an error).
-    DriveResult again = drive(*h, {{1, 0, 1.0f}}, deadline + 2s);
+    DriveResult again = drive(*h, {{1, 0, 1.0f}}, kHangAfter);
     EXPECT_TRUE(again.complete);
   }
 
@@ -152,7 +156,7 @@ TEST_F(StorageOriginTest, NginxOriginServesEveryMipAndTheDiskCacheSurvivesAResta
     std::string error;
     auto h = ServerHarness::start((*stack)->scene_dir, ServerConfig{}, (*stack)->storage(), error);
     ASSERT_NE(h, nullptr) << error;
-    const DriveResult r = drive(*h, wanted, 30s);
+    const DriveResult r = drive(*h, wanted, kHangAfter);
     ASSERT_TRUE(r.complete);
     EXPECT_EQ(r.ok, wanted.size());
     EXPECT_EQ(r.checksum, reference.checksum) << "bytes through nginx differ from the local files";
@@ -167,7 +171,7 @@ TEST_F(StorageOriginTest, NginxOriginServesEveryMipAndTheDiskCacheSurvivesAResta
   std::string error;
   auto h = ServerHarness::start((*stack)->scene_dir, ServerConfig{}, (*stack)->storage(), error);
   ASSERT_NE(h, nullptr) << error;
-  const DriveResult r = drive(*h, wanted, 30s);
+  const DriveResult r = drive(*h, wanted, kHangAfter);
   ASSERT_TRUE(r.complete);
   EXPECT_EQ(r.ok, wanted.size());
   EXPECT_EQ(r.checksum, reference.checksum);
@@ -208,7 +212,7 @@ TEST_F(StorageOriginTest, RamHitsAreServedWhileASlowFetchIsInFlightAndWaitingFet
   ASSERT_TRUE(table.ok());
   const uint32_t coarsest = (*table)[2].mip_count - 1;
   // Warm the RAM cache with texture 2's coarsest mip (header + mip: two slow reads).
-  ASSERT_TRUE(drive(*h, {{2, coarsest, 1.0f}}, 15s).complete);
+  ASSERT_TRUE(drive(*h, {{2, coarsest, 1.0f}}, kHangAfter).complete);
   // Texture 0 mip 0 takes the only remote-fetch worker; texture 1 waits for it; texture 2 is a RAM hit.
   const uint64_t fetches_before = h->server().remote_fetches();
   ASSERT_TRUE(h->push(0, 0, 100, 5.0f));
@@ -216,7 +220,7 @@ TEST_F(StorageOriginTest, RamHitsAreServedWhileASlowFetchIsInFlightAndWaitingFet
   // Wait until the remote-fetch worker has taken texture 0 (its fetch then runs >= 1500 ms). A fixed sleep
   // (50 ms, then 250 ms) was too short under ASan on a loaded 2-core machine: texture 1 was taken instead and
   // could no longer go stale.
-  const auto taken_deadline = std::chrono::steady_clock::now() + 5s;
+  const auto taken_deadline = std::chrono::steady_clock::now() + kHangAfter;
   while (h->server().remote_fetches() == fetches_before && std::chrono::steady_clock::now() < taken_deadline) {
     std::this_thread::sleep_for(1ms);
   }
@@ -230,11 +234,20 @@ TEST_F(StorageOriginTest, RamHitsAreServedWhileASlowFetchIsInFlightAndWaitingFet
   };
   double hit_ms = -1, cancelled_ms = -1;
   bool texture0_done = false, next_batch_sent = false;
+  bool hit_before_texture0 = false, cancelled_before_texture0 = false;
   std::chrono::steady_clock::time_point t1;
-  while (ms_since(t0) < 3000 && (hit_ms < 0 || cancelled_ms < 0)) {
+  const double give_up_ms = std::chrono::duration<double, std::milli>(kHangAfter).count();
+  while (ms_since(t0) < give_up_ms && (hit_ms < 0 || cancelled_ms < 0)) {
+    // Completions come in ring order: what came before texture 0's did not wait behind its fetch.
     h->poll([&](const CompletionRecord& rec, std::span<const std::byte>) {
-      if (rec.texture_id == 2 && rec.status == uint32_t(CompletionStatus::kOk)) hit_ms = ms_since(t0);
-      if (rec.texture_id == 1 && rec.status == uint32_t(CompletionStatus::kCancelled)) cancelled_ms = ms_since(t1);
+      if (rec.texture_id == 2 && rec.status == uint32_t(CompletionStatus::kOk) && hit_ms < 0) {
+        hit_ms = ms_since(t0);
+        hit_before_texture0 = !texture0_done;
+      }
+      if (rec.texture_id == 1 && rec.status == uint32_t(CompletionStatus::kCancelled)) {
+        cancelled_ms = ms_since(t1);
+        cancelled_before_texture0 = !texture0_done;
+      }
       if (rec.texture_id == 0) texture0_done = true;
     });
     if (hit_ms >= 0 && !next_batch_sent) {
@@ -246,13 +259,13 @@ TEST_F(StorageOriginTest, RamHitsAreServedWhileASlowFetchIsInFlightAndWaitingFet
     }
     std::this_thread::sleep_for(100us);
   }
-  // The hit came long before the 1500 ms fetch ended: it did not wait behind it. (The bound is loose on
-  // purpose: 200 ms failed once under ASan on a loaded CI machine; waiting behind the fetch costs >= 1500 ms.)
+  // The hit and the cancellation came before the >= 1500 ms fetch ended: neither waited behind it. Told by
+  // their order, not by a time (200 ms, then 750 ms, failed under ASan on a loaded 2-core machine).
+  std::printf("hit after %.1f ms, stale load cancelled %.1f ms after the next batch\n", hit_ms, cancelled_ms);
   ASSERT_GE(hit_ms, 0.0);
-  EXPECT_LT(hit_ms, 750.0);
-  EXPECT_FALSE(texture0_done) << "texture 0's slow fetch ended before the hit: the hit waited for it";
+  EXPECT_TRUE(hit_before_texture0) << "texture 0's slow fetch ended before the hit: the hit waited for it";
   ASSERT_GE(cancelled_ms, 0.0) << "the waiting remote load was not cancelled by the newer batch";
-  EXPECT_LT(cancelled_ms, 750.0);
+  EXPECT_TRUE(cancelled_before_texture0) << "the stale load was cancelled only after the fetch it waited for";
 }
 
 TEST_F(StorageOriginTest, TheServerProcessReadsThroughNginxAndASecondOneOnItsCacheFolderIsRefused) {
@@ -284,7 +297,7 @@ TEST_F(StorageOriginTest, TheServerProcessReadsThroughNginxAndASecondOneOnItsCac
       ::waitpid(pid, nullptr, 0);
     }
   } reaper{pid};
-  const auto deadline = std::chrono::steady_clock::now() + 10s;
+  const auto deadline = std::chrono::steady_clock::now() + kHangAfter;
   while (h->server_block().attached.v.load() != 1 && std::chrono::steady_clock::now() < deadline) {
     std::this_thread::sleep_for(5ms);
   }
@@ -299,13 +312,13 @@ TEST_F(StorageOriginTest, TheServerProcessReadsThroughNginxAndASecondOneOnItsCac
   EXPECT_NE(second.find(cache.string()), std::string::npos) << second;
 
   // The first one serves through nginx.
-  const DriveResult r = drive(*h, {{0, 0, 1.0f}, {1, 0, 1.0f}}, 10s);
+  const DriveResult r = drive(*h, {{0, 0, 1.0f}, {1, 0, 1.0f}}, kHangAfter);
   EXPECT_TRUE(r.complete);
   EXPECT_EQ(r.ok, 2u) << slurp(log);
   ::kill(pid, SIGTERM);
   int status = 0;
   bool reaped = false;
-  const auto stop_deadline = std::chrono::steady_clock::now() + 5s;
+  const auto stop_deadline = std::chrono::steady_clock::now() + kHangAfter;
   while (!(reaped = ::waitpid(pid, &status, WNOHANG) == pid) && std::chrono::steady_clock::now() < stop_deadline) {
     std::this_thread::sleep_for(5ms);
   }
@@ -345,8 +358,9 @@ TEST_F(StorageOriginTest, AnOriginThatComesBackIsReadAgain) {
   auto h = ServerHarness::start((*stack)->scene_dir, ServerConfig{}, (*stack)->storage(), error);
   ASSERT_NE(h, nullptr) << error;
   origin->stop();
+  const auto outage_start = std::chrono::steady_clock::now();
   for (int round = 0; round < 6; ++round) {
-    const DriveResult down = drive(*h, wanted, 5s);
+    const DriveResult down = drive(*h, wanted, kHangAfter);
     ASSERT_TRUE(down.complete) << "round " << round;
     for (size_t i = 0; i < wanted.size(); ++i) {
       EXPECT_EQ(down.status[i], static_cast<uint32_t>(CompletionStatus::kTimedOut))
@@ -359,15 +373,19 @@ TEST_F(StorageOriginTest, AnOriginThatComesBackIsReadAgain) {
     for (size_t at = text.find("timed out ("); at != std::string::npos; at = text.find("timed out (", at + 1)) ++n;
     return n;
   }();
-  EXPECT_LE(warnings, 2u) << "18 failed loads within seconds should log one warning per 5 s:\n" << log_text();
+  // One warning per kTimedOutLogPeriod (5 s): 18 failed loads log 1 or 2 on a quiet machine, more only if
+  // the outage itself lasted longer.
+  const auto outage = std::chrono::steady_clock::now() - outage_start;
+  const auto periods = static_cast<size_t>(outage / server::MipLoader::kTimedOutLogPeriod);
+  EXPECT_LE(warnings, periods + 2) << "18 failed loads should log one warning per 5 s:\n" << log_text();
   ASSERT_TRUE(origin->restart()) << "nginx did not come back on port " << origin->port();
-  const DriveResult back = drive(*h, wanted, 10s);
+  const DriveResult back = drive(*h, wanted, kHangAfter);
   ASSERT_TRUE(back.complete);
   EXPECT_EQ(back.ok, wanted.size());
   EXPECT_EQ(back.checksum, reference.checksum);
   // The warnings left out during the outage are counted in one line once the rate limit's period has passed,
   // although no load times out any more (the count used to wait for the next timeout, so was never printed).
-  const auto deadline = std::chrono::steady_clock::now() + server::MipLoader::kTimedOutLogPeriod + 3s;
+  const auto deadline = std::chrono::steady_clock::now() + server::MipLoader::kTimedOutLogPeriod + kHangAfter;
   while (log_text().find("more load(s) timed out") == std::string::npos && std::chrono::steady_clock::now() < deadline) {
     std::this_thread::sleep_for(20ms);
   }

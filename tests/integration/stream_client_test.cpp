@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "../support/forked_child.hpp"
+#include "../support/patience.hpp"
 #include "texstream/protocol/checksum.hpp"
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
@@ -271,9 +272,9 @@ TEST(StreamClient, RequestsUnansweredWithNoServerAttachedAreNoProtocolError) {
   ASSERT_TRUE(started.ok()) << started.error().message;
   StreamClient& client = **started;
   RecordingSink sink;
-  // Polls until `n` requests have timed out (or 5 s).
+  // Polls until `n` requests have timed out (or a hang).
   const auto poll_until_timed_out = [&](uint64_t n) {
-    const auto end = std::chrono::steady_clock::now() + 5s;
+    const auto end = std::chrono::steady_clock::now() + test::kHangAfter;
     while (client.stats().requests_timed_out < n && std::chrono::steady_clock::now() < end) {
       client.poll(sink, 16);
       std::this_thread::sleep_for(5ms);
@@ -453,12 +454,13 @@ TEST(StreamClient, DoorbellWakesASleepingServer) {
     std::atomic_thread_fence(std::memory_order_seq_cst);
     sleeping = true;
     const auto t0 = std::chrono::steady_clock::now();
-    // A 10 s wait: only the wake (or the value changing before the wait) ends it in time.
-    while (rb.doorbell.v.load(std::memory_order_acquire) == seen && std::chrono::steady_clock::now() - t0 < 10s) {
-      futex_wait(rb.doorbell, seen, std::chrono::microseconds(10'000'000));
+    // A wait of test::kHangAfter: only the wake (or the value changing before the wait) ends it in time.
+    while (rb.doorbell.v.load(std::memory_order_acquire) == seen &&
+           std::chrono::steady_clock::now() - t0 < test::kHangAfter) {
+      futex_wait(rb.doorbell, seen, test::kHangAfter);
     }
     sb.sleeping.v.store(0, std::memory_order_relaxed);
-    woke = std::chrono::steady_clock::now() - t0 < 5s;
+    woke = std::chrono::steady_clock::now() - t0 < test::promptly(500ms);
   });
   while (!sleeping) std::this_thread::sleep_for(1ms);
   std::this_thread::sleep_for(20ms);  // let it enter the futex
@@ -467,7 +469,7 @@ TEST(StreamClient, DoorbellWakesASleepingServer) {
   ASSERT_TRUE(client->request(TextureId(0), MipLevel(6), 1));
   t.join();
   EXPECT_TRUE(woke);
-  EXPECT_LT(std::chrono::steady_clock::now() - t0, 5s);
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, test::promptly(500ms));
   EXPECT_EQ(server.drain().size(), 1u);
 }
 
@@ -751,7 +753,7 @@ TEST(StreamClient, ConcurrentFakeServerStreamsEveryMipOfEveryTexture) {
   } sink;
   sink.states = &states;
   const std::vector<StreamCandidate> list{{TextureId(2), 0, 30}, {TextureId(0), 0, 20}, {TextureId(1), 0, 10}};
-  const auto deadline = std::chrono::steady_clock::now() + 30s;
+  const auto deadline = std::chrono::steady_clock::now() + test::kHangAfter;
   while (states.counts().final < 3 || states.counts().pending > 0) {
     ASSERT_LT(std::chrono::steady_clock::now(), deadline) << "streaming did not finish";
     client->begin_cycle();
@@ -811,7 +813,7 @@ struct VirtualClock {
 template <class Pred>
 bool poll_until(StreamClient& client, MipSink& sink, Pred pred, const VirtualClock* clock = nullptr,
                 std::chrono::milliseconds step = 0ms) {
-  const auto deadline = std::chrono::steady_clock::now() + 10s;
+  const auto deadline = std::chrono::steady_clock::now() + test::kHangAfter;
   while (std::chrono::steady_clock::now() < deadline) {
     client.poll(sink, 16);
     if (pred()) return true;

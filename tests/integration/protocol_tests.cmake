@@ -1,2 +1,0 @@
-texstream_add_integration_test(protocol_segment_tests ${CMAKE_CURRENT_LIST_DIR}/protocol_segment_test.cpp)
-target_link_libraries(protocol_segment_tests PRIVATE texstream::protocol)
