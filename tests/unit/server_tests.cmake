@@ -10,7 +10,6 @@ texstream_add_unit_test(server_unit_tests
   ${CMAKE_CURRENT_LIST_DIR}/server_flat_mip_map_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/server_slot_pool_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/server_open_file_cache_test.cpp
-  ${CMAKE_CURRENT_LIST_DIR}/server_fast_checksum_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/server_tail_read_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/server_small_payload_pool_test.cpp
   ${CMAKE_CURRENT_LIST_DIR}/server_node_pool_test.cpp)

@@ -6,7 +6,7 @@
 #include <array>
 #include <cstring>
 
-#include "texstream/server/support/fast_checksum.hpp"
+#include "texstream/protocol/checksum.hpp"
 #include "texstream/server/decode/oiio_mip_decoder.hpp"
 
 namespace texstream::server {
@@ -485,13 +485,13 @@ CompletionRecord MipLoader::load(const LoadRequest& request, const scene::Textur
 
   // The checksum is of the bytes we meant to hand over (equal to the slot's unless the renderer wrote into a
   // slot it does not own, which the renderer's own check then catches).
-  const uint64_t checksum = fast_payload_checksum(target.data(), bytes);
+  const uint64_t checksum = payload_checksum(target.data(), bytes);
   if (keep) {
     keep->checksum = checksum;
     copy_into_slot(slot.data(), keep->bytes.data(), bytes);  // kSlotWrite halfway
   }
   if (tail) {
-    for (TailMip& t : tail->mips) t.mip->checksum = fast_payload_checksum(t.mip->bytes.data(), t.mip->bytes.size());
+    for (TailMip& t : tail->mips) t.mip->checksum = payload_checksum(t.mip->bytes.data(), t.mip->bytes.size());
   }
   if (keep && tail && hold_read) {
     // Held back (see hold_read): the asked mip and its tail go into the cache together in release_held().
