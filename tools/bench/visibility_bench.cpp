@@ -74,12 +74,6 @@ constexpr int kRunWarmupFrames = 2;
 constexpr double kFarOffset[3] = {4.0e6, 5.0e6, 0.0};
 constexpr double kIdenticalPsnr = 999.0;  // stands for "infinite" (identical pictures) in the summary
 
-std::string arg_value(const std::vector<std::string>& args, const std::string& key, const std::string& fallback) {
-  for (size_t i = 0; i + 1 < args.size(); ++i)
-    if (args[i] == key) return args[i + 1];
-  return fallback;
-}
-
 bool generate_scene(const fs::path& dir, uint32_t textures) {
   const fs::path gen = fs::read_symlink("/proc/self/exe").parent_path() / "texstream-gen";
   const std::string cmd = gen.string() + " --out '" + dir.string() + "' --textures " + std::to_string(textures) +
@@ -205,9 +199,15 @@ PairedRun renderer_frame_pairs(const fs::path& profile, const fs::path& scene, c
   return r;
 }
 
-int run_visibility(const std::vector<std::string>& args) {
-  const bool quick = has_flag(args, "--quick");
-  const std::string device = arg_value(args, "--device", "lavapipe");
+struct VisibilityArgs {
+  bool quick = false;
+  std::string device = "lavapipe";
+  std::string scene;
+};
+
+int run_visibility(const VisibilityArgs& args) {
+  const bool quick = args.quick;
+  const std::string device = args.device;
   if (device != "lavapipe" && device != "gpu") {
     std::fprintf(stderr, "visibility bench: --device must be lavapipe or gpu, not '%s'\n", device.c_str());
     return 2;
@@ -225,7 +225,7 @@ int run_visibility(const std::vector<std::string>& args) {
     cfg.render.height_px = 270;
   }
 
-  fs::path scene_dir = arg_value(args, "--scene", "");
+  fs::path scene_dir = args.scene;
   fs::path temp;
   if (scene_dir.empty()) {
     temp = fs::temp_directory_path() / ("texstream_vis_bench_" + std::to_string(::getpid()));
@@ -494,7 +494,14 @@ int run_visibility(const std::vector<std::string>& args) {
 
 }  // namespace
 
-TEXSTREAM_BENCH_COMMAND(visibility, "GPU visibility: LOD accuracy, exact visible set, large coordinates, cost",
-                        run_visibility);
+std::function<int()> define_visibility(CLI::App& app) {
+  auto a = std::make_shared<VisibilityArgs>();
+  app.add_flag("--quick", a->quick, "the short run");
+  app.add_option("--device", a->device, "lavapipe or gpu: the profile in config/");
+  app.add_option("--scene", a->scene, "a generated scene (default: one generated for the run)");
+  return [a] { return run_visibility(*a); };
+}
+
+TEXSTREAM_BENCH_COMMAND(visibility, "GPU visibility: LOD accuracy, exact visible set, large coordinates, cost", define_visibility);
 
 }  // namespace texstream::bench
