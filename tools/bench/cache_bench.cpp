@@ -42,6 +42,7 @@
 #include "texstream/common/camera_path.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texstream/render/cache/sparse_memory.hpp"
+#include "texstream/render/measure/image_metrics.hpp"
 #include "texstream/render/vulkan/vulkan_context.hpp"
 
 namespace fs = std::filesystem;
@@ -74,8 +75,8 @@ double mse(const Image& a, const Image& b) {
   return s / static_cast<double>(a.rgb.size());
 }
 
-// PSNR in dB, capped at 100 dB for identical frames (MSE 0).
-double psnr(double m) { return m <= 0 ? 100.0 : std::min(100.0, 10.0 * std::log10(255.0 * 255.0 / m)); }
+// PSNR in dB: the renderer's, capped at 100 dB for identical frames (MSE 0).
+double psnr(double m) { return render::psnr_db(m); }
 
 fs::path self_dir() {
   std::error_code ec;
