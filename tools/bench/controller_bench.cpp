@@ -411,7 +411,9 @@ std::function<int()> define_controller(CLI::App& app) {
   auto a = std::make_shared<ControllerArgs>();
   app.add_flag("--quick", a->quick, "the short run");
   app.add_option("--seed", a->seed, "seed of the stress sequences");
-  app.add_option("--plant", a->plant, "key=value: a closed-loop plant setting (repeatable)")->expected(1)->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  app.add_option("--plant", a->plant, "key=value: a closed-loop plant setting (repeatable)")
+      ->expected(1)
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
   app.add_flag("--loop-only", a->loop_only, "only the closed loop, no stress sequences");
   return [a] { return run_controller(*a); };
 }
