@@ -281,22 +281,6 @@ Status get_vec3(const json& j, const char* key, std::array<double, 3>& out, cons
   return ok_status();
 }
 
-// DDS constants (Microsoft "DDS_HEADER structure" / "DDS_PIXELFORMAT structure").
-constexpr uint32_t kDdsMagic = 0x20534444;  // "DDS "
-constexpr uint32_t kDdsdCaps = 0x1, kDdsdHeight = 0x2, kDdsdWidth = 0x4, kDdsdPitch = 0x8,
-                   kDdsdPixelFormat = 0x1000, kDdsdMipMapCount = 0x20000, kDdsdLinearSize = 0x80000;
-constexpr uint32_t kDdpfAlphaPixels = 0x1, kDdpfFourCC = 0x4, kDdpfRgb = 0x40;
-constexpr uint32_t kDdsCapsComplex = 0x8, kDdsCapsTexture = 0x1000, kDdsCapsMipMap = 0x400000;
-constexpr uint32_t kFourCCDxt1 = 0x31545844;  // "DXT1"
-constexpr uint32_t kFourCCDx10 = 0x30315844;  // "DX10"
-
-// Word offsets (in uint32) into the 128 bytes, counting the magic as word 0.
-enum DdsWord : size_t {
-  kWMagic = 0, kWSize = 1, kWFlags = 2, kWHeight = 3, kWWidth = 4, kWPitchOrLinearSize = 5, kWDepth = 6,
-  kWMipMapCount = 7, kWPfSize = 19, kWPfFlags = 20, kWPfFourCC = 21, kWPfBitCount = 22, kWPfRMask = 23,
-  kWPfGMask = 24, kWPfBMask = 25, kWPfAMask = 26, kWCaps = 27, kWCaps2 = 28,
-};
-
 }  // namespace
 
 // ---------------------------------------------------------------- manifest
@@ -771,82 +755,5 @@ std::string texture_path_text(const fs::path& dir, TextureId id) {
 }
 
 fs::path texture_path(const fs::path& dir, TextureId id) { return fs::path(texture_path_text(dir, id)); }
-
-std::array<std::byte, kDdsHeaderBytes> make_dds_header(TexelFormat format, uint32_t width, uint32_t height,
-                                                       uint32_t mip_count) {
-  TS_ASSERT(valid_texture_extent(width, height), "DDS extent %ux%u", width, height);
-  TS_ASSERT(mip_count >= 1 && mip_count <= full_mip_count(width, height), "DDS mip_count %u for %ux%u", mip_count,
-            width, height);
-  uint32_t w[kDdsHeaderBytes / 4] = {};
-  w[kWMagic] = kDdsMagic;
-  w[kWSize] = 124;
-  w[kWFlags] = kDdsdCaps | kDdsdHeight | kDdsdWidth | kDdsdPixelFormat | kDdsdMipMapCount;
-  w[kWHeight] = height;
-  w[kWWidth] = width;
-  w[kWDepth] = 0;
-  w[kWMipMapCount] = mip_count;
-  w[kWPfSize] = 32;
-  if (format == TexelFormat::kBc1) {
-    w[kWFlags] |= kDdsdLinearSize;
-    w[kWPitchOrLinearSize] = static_cast<uint32_t>(mip_bytes(format, width, height, 0));
-    w[kWPfFlags] = kDdpfFourCC;
-    w[kWPfFourCC] = kFourCCDxt1;
-  } else {
-    TS_ASSERT(format == TexelFormat::kRgba8, "DDS format %u", static_cast<uint32_t>(format));
-    w[kWFlags] |= kDdsdPitch;
-    w[kWPitchOrLinearSize] = width * 4;
-    w[kWPfFlags] = kDdpfRgb | kDdpfAlphaPixels;
-    w[kWPfBitCount] = 32;
-    w[kWPfRMask] = 0x000000ffu;
-    w[kWPfGMask] = 0x0000ff00u;
-    w[kWPfBMask] = 0x00ff0000u;
-    w[kWPfAMask] = 0xff000000u;
-  }
-  w[kWCaps] = kDdsCapsTexture | (mip_count > 1 ? kDdsCapsComplex | kDdsCapsMipMap : 0u);
-  std::array<std::byte, kDdsHeaderBytes> out{};
-  std::memcpy(out.data(), w, sizeof w);  // little-endian host: the format's byte order
-  return out;
-}
-
-Result<DdsInfo> parse_dds_header(std::span<const std::byte> bytes, const std::string& what) {
-  if (bytes.size() < kDdsHeaderBytes)
-    return make_error(ErrorCode::kCorrupt, what + ": " + std::to_string(bytes.size()) +
-                                               " bytes, shorter than a DDS header (128)");
-  uint32_t w[kDdsHeaderBytes / 4];
-  std::memcpy(w, bytes.data(), sizeof w);
-  if (w[kWMagic] != kDdsMagic) return make_error(ErrorCode::kCorrupt, what + ": not a DDS file (bad magic)");
-  if (w[kWSize] != 124 || w[kWPfSize] != 32)
-    return make_error(ErrorCode::kCorrupt, what + ": DDS header or pixel-format size field is wrong");
-  DdsInfo info{};
-  info.width = w[kWWidth];
-  info.height = w[kWHeight];
-  if (!valid_texture_extent(info.width, info.height))
-    return make_error(ErrorCode::kCorrupt, what + ": extent " + std::to_string(info.width) + "x" +
-                                               std::to_string(info.height) + " outside 1.." +
-                                               std::to_string(kMaxTextureExtent));
-  if ((w[kWCaps2] & 0xfe00u) != 0 || ((w[kWFlags] & 0x800000u) != 0 && w[kWDepth] > 1))
-    return make_error(ErrorCode::kUnsupported, what + ": cube maps and volume textures are not served");
-  const uint32_t pf = w[kWPfFlags];
-  if ((pf & kDdpfFourCC) != 0) {
-    if (w[kWPfFourCC] == kFourCCDx10)
-      return make_error(ErrorCode::kUnsupported, what + ": DX10 extension header is not supported");
-    if (w[kWPfFourCC] != kFourCCDxt1)
-      return make_error(ErrorCode::kUnsupported, what + ": FourCC other than DXT1 is not supported");
-    info.format = TexelFormat::kBc1;
-  } else if ((pf & kDdpfRgb) != 0 && w[kWPfBitCount] == 32 && w[kWPfRMask] == 0x000000ffu &&
-             w[kWPfGMask] == 0x0000ff00u && w[kWPfBMask] == 0x00ff0000u &&
-             ((pf & kDdpfAlphaPixels) == 0 || w[kWPfAMask] == 0xff000000u)) {
-    info.format = TexelFormat::kRgba8;
-  } else {
-    return make_error(ErrorCode::kUnsupported, what + ": pixel format is neither DXT1 nor 32-bit RGBA (R in the low byte)");
-  }
-  // Without DDSD_MIPMAPCOUNT the file holds only the base level; a count of 0 means the same by convention.
-  info.mip_count = (w[kWFlags] & kDdsdMipMapCount) != 0 ? std::max(1u, w[kWMipMapCount]) : 1u;
-  if (info.mip_count > full_mip_count(info.width, info.height))
-    return make_error(ErrorCode::kCorrupt, what + ": mip count " + std::to_string(info.mip_count) + " exceeds the " +
-                                               std::to_string(full_mip_count(info.width, info.height)) +
-                                               " levels of a full chain");
-  return info;
-}
 
 }  // namespace texstream::scene

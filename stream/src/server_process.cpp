@@ -2,7 +2,6 @@
 
 #include <pthread.h>
 #include <signal.h>
-#include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -13,9 +12,8 @@
 #include <system_error>
 #include <utility>
 
+#include "texstream/common/child_process.hpp"
 #include "texstream/protocol/liveness.hpp"
-
-extern char** environ;
 
 namespace texstream {
 
@@ -33,33 +31,17 @@ std::string describe_status(int status) {
   return "ended with wait status " + std::to_string(status);
 }
 
-// posix_spawn attributes: the child starts with no blocked signals and default dispositions for the
-// signals a renderer may ignore or catch, so `--spawned` servers die of SIGTERM/SIGPIPE as expected.
-struct SpawnAttr {
-  posix_spawnattr_t attr{};
-  posix_spawn_file_actions_t actions{};
-  SpawnAttr() {
-    posix_spawnattr_init(&attr);
-    posix_spawn_file_actions_init(&actions);
-    sigset_t none;
-    sigemptyset(&none);
-    posix_spawnattr_setsigmask(&attr, &none);
-    sigset_t defaults;
-    sigemptyset(&defaults);
-    for (int sig : {SIGPIPE, SIGINT, SIGTERM, SIGHUP, SIGCHLD, SIGUSR1, SIGUSR2}) sigaddset(&defaults, sig);
-    posix_spawnattr_setsigdefault(&attr, &defaults);
-    posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
-    // Close every descriptor past stdio in the child (glibc >= 2.34): our pidfds, the shared-memory fd and
-    // the Vulkan driver's files must not leak into the server or keep them alive after we close them.
-    posix_spawn_file_actions_addclosefrom_np(&actions, 3);
-  }
-  ~SpawnAttr() {
-    posix_spawn_file_actions_destroy(&actions);
-    posix_spawnattr_destroy(&attr);
-  }
-  SpawnAttr(const SpawnAttr&) = delete;
-  SpawnAttr& operator=(const SpawnAttr&) = delete;
-};
+// The child starts with no blocked signals and default dispositions for the signals a renderer may ignore or
+// catch, so `--spawned` servers die of SIGTERM/SIGPIPE as expected. Every descriptor past stdio is closed in
+// the child: our pidfds, the shared-memory fd and the Vulkan driver's files must not leak into the server or
+// keep them alive after we close them.
+SpawnOptions server_spawn_options() {
+  SpawnOptions o;
+  o.signals.reset = true;
+  o.signals.defaults = {SIGPIPE, SIGINT, SIGTERM, SIGHUP, SIGCHLD, SIGUSR1, SIGUSR2};
+  o.fds.push_back(SpawnFd::close_from(3));
+  return o;
+}
 
 }  // namespace
 
@@ -161,25 +143,17 @@ void ServerProcess::spawner_main() {
 }
 
 void ServerProcess::run_child() {
-  const std::vector<std::string> args = command_.argv();
-  std::vector<char*> argv;
-  argv.reserve(args.size() + 1);
-  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));  // posix_spawn's signature
-  argv.push_back(nullptr);
-  pid_t pid = -1;
-  int err = 0;
-  {
-    SpawnAttr sa;
-    err = posix_spawn(&pid, argv[0], &sa.actions, &sa.attr, argv.data(), environ);
-  }
-  if (err != 0) {
-    spdlog::error("texstream-server '{}' could not be spawned: {}", command_.executable.string(), std::strerror(err));
+  const Result<pid_t> spawned = spawn_process(command_.argv(), server_spawn_options());
+  if (!spawned) {
+    spdlog::error("texstream-server '{}' could not be spawned: {}", command_.executable.string(),
+                  spawned.error().message);
     std::lock_guard lock(mutex_);
     shared_.spawning = false;
-    shared_.exit = ServerExit{0, std::string("could not be spawned: ") + std::strerror(err), 0, -1, false, {}};
+    shared_.exit = ServerExit{0, "could not be spawned: " + spawned.error().message, 0, -1, false, {}};
     changed_.notify_all();
     return;
   }
+  const pid_t pid = *spawned;
   {
     std::lock_guard lock(mutex_);
     shared_.spawning = false;

@@ -10,7 +10,7 @@
 #include <span>
 
 #include "texstream/common/scene_format.hpp"
-#include "texstream/server/load/dds_layout.hpp"
+#include "texstream/common/dds.hpp"
 #include "texstream/server/cache/eviction_policy.hpp"
 #include "texstream/server/cache/mip_cache.hpp"
 #include "texstream/server/load/mip_loader.hpp"
@@ -58,10 +58,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   std::memcpy(pick, data, 16);
   const std::span<const std::byte> file(reinterpret_cast<const std::byte*>(data + 16), size - 16);
 
-  (void)scene::parse_dds_header(file, "fuzz.dds");
-  if (auto layout = server::parse_dds_layout(file, "fuzz.dds")) {
+  if (auto layout = scene::parse_dds_layout(file, "fuzz.dds")) {
     for (uint32_t l = 0; l < layout->mip_count && l < 32; ++l) {
-      if (layout->encoding == server::DdsEncoding::kOther) break;
+      if (layout->encoding == scene::DdsEncoding::kOther) break;
       const uint64_t off = layout->mip_offset(l), n = layout->mip_size(l);
       check(off >= layout->data_offset);
       check(off + n >= off);  // no wrap-around

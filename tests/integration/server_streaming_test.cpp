@@ -25,7 +25,7 @@
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
 #include "texstream/server/storage/posix_storage.hpp"
-#include "texstream/server/load/dds_layout.hpp"
+#include "texstream/common/dds.hpp"
 #include "texstream/server/dispatch/server.hpp"
 
 namespace fs = std::filesystem;
@@ -265,7 +265,7 @@ TEST_F(ServerStreamingTest, RepeatedRequestIsARamCacheHitThatReadsNothing) {
   expect_payload(*first);
   release(first->slot);
   const uint64_t read_after_first = stats().bytes_read.v.load();
-  EXPECT_EQ(read_after_first, kDdsMaxHeaderBytes + 128 * 128 * 4);
+  EXPECT_EQ(read_after_first, scene::kDdsMaxHeaderBytes + 128 * 128 * 4);
   EXPECT_EQ(stats().ram_cache_misses.v.load(), 1u);
   EXPECT_EQ(stats().ram_cache_hits.v.load(), 0u);
   load(kRgbaB, 0, 2);

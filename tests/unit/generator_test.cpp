@@ -195,12 +195,13 @@ TEST_F(GeneratorTest, FilesAgreeWithEachOther) {
     const fs::path p = scene::texture_path(dir, TextureId{id});
     const auto bytes = read_all(p);
     ASSERT_GE(bytes.size(), scene::kDdsHeaderBytes) << p;
-    auto info = scene::parse_dds_header(std::as_bytes(std::span(bytes)), p.string());
+    auto info = scene::parse_dds_layout(std::as_bytes(std::span(bytes)), p.string());
     ASSERT_TRUE(info.ok()) << info.error().message;
     EXPECT_EQ(info->width, t.width);
     EXPECT_EQ(info->height, t.height);
     EXPECT_EQ(info->mip_count, t.mip_count);
-    EXPECT_EQ(info->format, TexelFormat::kRgba8);
+    EXPECT_EQ(info->encoding, scene::DdsEncoding::kRgba8);
+    EXPECT_EQ(info->data_offset, scene::kDdsHeaderBytes);
     ASSERT_EQ(bytes.size(), scene::dds_file_bytes(TexelFormat::kRgba8, t.width, t.height, t.mip_count)) << p;
 
     // Each mip is the linear-light box filter of the one before.
@@ -246,9 +247,10 @@ TEST_F(GeneratorTest, Bc1FilesMatchTableAndColormap) {
     EXPECT_EQ(t.format, static_cast<uint32_t>(TexelFormat::kBc1));
     const fs::path p = scene::texture_path(dir, TextureId{id});
     const auto bytes = read_all(p);
-    auto info = scene::parse_dds_header(std::as_bytes(std::span(bytes)), p.string());
+    auto info = scene::parse_dds_layout(std::as_bytes(std::span(bytes)), p.string());
     ASSERT_TRUE(info.ok()) << info.error().message;
-    EXPECT_EQ(info->format, TexelFormat::kBc1);
+    EXPECT_EQ(info->encoding, scene::DdsEncoding::kBc1);
+    EXPECT_EQ(info->data_offset, scene::kDdsHeaderBytes);
     EXPECT_EQ(info->width, t.width);
     EXPECT_EQ(info->height, t.height);
     EXPECT_EQ(info->mip_count, t.mip_count);

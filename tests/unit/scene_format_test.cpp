@@ -301,15 +301,17 @@ TEST(TexturePath, EqualsThePathAppendsForEveryFolderSpelling) {
 TEST(DdsHeader, RoundTripsBothFormats) {
   for (TexelFormat f : {TexelFormat::kRgba8, TexelFormat::kBc1}) {
     const auto h = make_dds_header(f, 512, 8, 10);
-    auto info = parse_dds_header(h, "t.dds");
+    auto info = parse_dds_layout(h, "t.dds");
     ASSERT_TRUE(info.ok()) << info.error().message;
-    EXPECT_EQ(info->format, f);
+    EXPECT_EQ(info->encoding, f == TexelFormat::kBc1 ? DdsEncoding::kBc1 : DdsEncoding::kRgba8);
     EXPECT_EQ(info->width, 512u);
     EXPECT_EQ(info->height, 8u);
     EXPECT_EQ(info->mip_count, 10u);
+    EXPECT_EQ(info->data_offset, kDdsHeaderBytes);
   }
 }
 
+// Damaged headers are refused; a pixel format that cannot be served raw parses as kOther (decoded, not cut).
 TEST(DdsHeader, RejectsWhatWeCannotServe) {
   const auto good = make_dds_header(TexelFormat::kRgba8, 64, 32, 7);
   const auto with_word = [&](size_t word, uint32_t value) {
@@ -317,17 +319,19 @@ TEST(DdsHeader, RejectsWhatWeCannotServe) {
     std::memcpy(h.data() + 4 * word, &value, 4);
     return h;
   };
-  EXPECT_FALSE(parse_dds_header(std::span(good).first(127), "a.dds").ok());
-  expect_fails(parse_dds_header(with_word(0, 0x12345678), "a.dds"), "a.dds");
-  EXPECT_FALSE(parse_dds_header(with_word(1, 100), "a.dds").ok());     // header size
-  EXPECT_FALSE(parse_dds_header(with_word(3, 0), "a.dds").ok());       // height 0
-  EXPECT_FALSE(parse_dds_header(with_word(4, 40000), "a.dds").ok());   // width > 32768
-  EXPECT_FALSE(parse_dds_header(with_word(7, 8), "a.dds").ok());       // 8 mips for 64x32
-  EXPECT_FALSE(parse_dds_header(with_word(23, 0x00ff0000u), "a.dds").ok());  // BGRA masks
+  EXPECT_FALSE(parse_dds_layout(std::span(good).first(127), "a.dds").ok());
+  expect_fails(parse_dds_layout(with_word(0, 0x12345678), "a.dds"), "a.dds");
+  EXPECT_FALSE(parse_dds_layout(with_word(1, 100), "a.dds").ok());     // header size
+  EXPECT_FALSE(parse_dds_layout(with_word(3, 0), "a.dds").ok());       // height 0
+  EXPECT_FALSE(parse_dds_layout(with_word(4, 40000), "a.dds").ok());   // width > 32768
+  EXPECT_FALSE(parse_dds_layout(with_word(7, 8), "a.dds").ok());       // 8 mips for 64x32
+  const auto bgra = parse_dds_layout(with_word(23, 0x00ff0000u), "a.dds");  // BGRA masks
+  ASSERT_TRUE(bgra.ok()) << bgra.error().message;
+  EXPECT_EQ(bgra->encoding, DdsEncoding::kOther);
   auto dx10 = with_word(20, 0x4);
   const uint32_t fourcc = 0x30315844;
   std::memcpy(dx10.data() + 4 * 21, &fourcc, 4);
-  expect_fails(parse_dds_header(dx10, "a.dds"), "DX10");
+  expect_fails(parse_dds_layout(dx10, "a.dds"), "DX10");  // the 128 bytes end inside the DX10 extension
 }
 
 // Writes a DDS with known texels at every mip and checks that OpenImageIO reads the same extents and texels.

@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "texstream/common/scene_format.hpp"
-#include "texstream/server/load/dds_layout.hpp"
+#include "texstream/common/dds.hpp"
 #include "texstream/server/load/server_stats.hpp"
 #include "texstream/server/decode/texel_conversion.hpp"
 #include "texstream/server/load/texture_file_index.hpp"
@@ -45,9 +45,9 @@ constexpr uint32_t kDxt1 = 0x31545844u, kDx10 = 0x30315844u, kDxt5 = 0x35545844u
 TEST(DdsLayoutTest, GeneratorHeaderIsRawWithMipsAfter128Bytes) {
   for (TexelFormat f : {TexelFormat::kRgba8, TexelFormat::kBc1}) {
     const auto h = scene::make_dds_header(f, 64, 32, full_mip_count(64, 32));
-    auto l = parse_dds_layout(h, "gen.dds");
+    auto l = scene::parse_dds_layout(h, "gen.dds");
     ASSERT_TRUE(l.ok()) << l.error().message;
-    EXPECT_EQ(l->encoding, f == TexelFormat::kBc1 ? DdsEncoding::kBc1 : DdsEncoding::kRgba8);
+    EXPECT_EQ(l->encoding, f == TexelFormat::kBc1 ? scene::DdsEncoding::kBc1 : scene::DdsEncoding::kRgba8);
     EXPECT_EQ(l->mip_count, 7u);
     for (uint32_t m = 0; m < 7; ++m) EXPECT_EQ(l->mip_offset(m), scene::dds_mip_offset(f, 64, 32, m));
   }
@@ -55,43 +55,43 @@ TEST(DdsLayoutTest, GeneratorHeaderIsRawWithMipsAfter128Bytes) {
 
 TEST(DdsLayoutTest, Dx10Bc1DataStartsAfter148Bytes) {
   const auto h = dds_header(16, 16, 5, kDx10, true, 71);
-  auto l = parse_dds_layout(h, "dx10.dds");
+  auto l = scene::parse_dds_layout(h, "dx10.dds");
   ASSERT_TRUE(l.ok()) << l.error().message;
-  EXPECT_EQ(l->encoding, DdsEncoding::kBc1);
+  EXPECT_EQ(l->encoding, scene::DdsEncoding::kBc1);
   EXPECT_EQ(l->mip_offset(0), 148u);
   EXPECT_EQ(l->mip_offset(1), 148u + 128u);  // 16x16 BC1 = 16 blocks of 8 bytes
   EXPECT_EQ(l->mip_size(4), 8u);             // 1x1 is one block
 }
 
 TEST(DdsLayoutTest, OtherEncodingsAreForOpenImageIOAndNoMipCountMeansOne) {
-  auto dxt5 = parse_dds_layout(dds_header(8, 8, 0, kDxt5), "dxt5.dds");
+  auto dxt5 = scene::parse_dds_layout(dds_header(8, 8, 0, kDxt5), "dxt5.dds");
   ASSERT_TRUE(dxt5.ok());
-  EXPECT_EQ(dxt5->encoding, DdsEncoding::kOther);
+  EXPECT_EQ(dxt5->encoding, scene::DdsEncoding::kOther);
   EXPECT_EQ(dxt5->mip_count, 1u);
-  auto dxt1 = parse_dds_layout(dds_header(8, 8, 2, kDxt1), "short-chain.dds");
+  auto dxt1 = scene::parse_dds_layout(dds_header(8, 8, 2, kDxt1), "short-chain.dds");
   ASSERT_TRUE(dxt1.ok());
   EXPECT_EQ(dxt1->mip_count, 2u);
 }
 
 TEST(DdsLayoutTest, HostileHeadersAreCorruptNamingThePath) {
   auto h = dds_header(8, 8, 9, kDxt1);  // 9 mips for 8x8 (4 at most)
-  auto r = parse_dds_layout(h, "bad.dds");
+  auto r = scene::parse_dds_layout(h, "bad.dds");
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.error().code, ErrorCode::kCorrupt);
   EXPECT_NE(r.error().message.find("bad.dds"), std::string::npos);
-  EXPECT_FALSE(parse_dds_layout(dds_header(0, 8, 1, kDxt1), "zero.dds").ok());
-  EXPECT_FALSE(parse_dds_layout(dds_header(1u << 20, 8, 1, kDxt1), "huge.dds").ok());
+  EXPECT_FALSE(scene::parse_dds_layout(dds_header(0, 8, 1, kDxt1), "zero.dds").ok());
+  EXPECT_FALSE(scene::parse_dds_layout(dds_header(1u << 20, 8, 1, kDxt1), "huge.dds").ok());
   const auto legacy = dds_header(8, 8, 1, kDxt1);
-  EXPECT_FALSE(parse_dds_layout(std::span(legacy).first(100), "short.dds").ok());
+  EXPECT_FALSE(scene::parse_dds_layout(std::span(legacy).first(100), "short.dds").ok());
   const auto dx10 = dds_header(8, 8, 1, kDx10, true, 71);
-  EXPECT_FALSE(parse_dds_layout(std::span(dx10).first(140), "dx10cut.dds").ok());
+  EXPECT_FALSE(scene::parse_dds_layout(std::span(dx10).first(140), "dx10cut.dds").ok());
   auto cube = dds_header(8, 8, 1, kDxt1);
   cube[112] = std::byte{0x00};
   cube[113] = std::byte{0x02};  // caps2 cubemap
-  EXPECT_FALSE(parse_dds_layout(cube, "cube.dds").ok());
+  EXPECT_FALSE(scene::parse_dds_layout(cube, "cube.dds").ok());
   auto arr = dds_header(8, 8, 1, kDx10, true, 71);
   arr[140] = std::byte{6};  // array of 6
-  EXPECT_FALSE(parse_dds_layout(arr, "array.dds").ok());
+  EXPECT_FALSE(scene::parse_dds_layout(arr, "array.dds").ok());
 }
 
 TEST(TexelConversionTest, ChannelCountsExpandToRgba8) {

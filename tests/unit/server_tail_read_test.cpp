@@ -18,7 +18,7 @@
 #include "texstream/common/scene_format.hpp"
 #include "texstream/protocol/checksum.hpp"
 #include "texstream/protocol/segment_layout.hpp"
-#include "texstream/server/load/dds_layout.hpp"
+#include "texstream/common/dds.hpp"
 #include "texstream/server/cache/lru_eviction_policy.hpp"
 #include "texstream/server/cache/mip_cache.hpp"
 #include "texstream/server/load/mip_loader.hpp"
@@ -272,7 +272,7 @@ TEST_F(TailRead, AWrongLayoutGuessIsReadAgainTheOrdinaryWay) {
   const auto put = [&](size_t offset, uint32_t v) { std::memcpy(dx10.data() + offset, &v, 4); };
   put(80, 0x4);          // pixel format flags: FourCC
   put(84, 0x30315844u);  // "DX10"
-  dx10.resize(kDdsMaxHeaderBytes);
+  dx10.resize(scene::kDdsMaxHeaderBytes);
   put(128, 28);  // DXGI_FORMAT_R8G8B8A8_UNORM
   put(132, 3);   // texture 2D
   put(136, 0);
@@ -285,7 +285,7 @@ TEST_F(TailRead, AWrongLayoutGuessIsReadAgainTheOrdinaryWay) {
   EXPECT_EQ(storage_.counters.scatter_reads, 2);  // the guess, then the real range
   EXPECT_EQ(storage_.counters.reads, 1);          // the header, on its own
   const uint64_t chain = mip_chain_offset(TexelFormat::kRgba8, 64, 64, 7);
-  EXPECT_EQ(stats_.bytes_read.load(), (scene::kDdsHeaderBytes + chain) + kDdsMaxHeaderBytes + chain);
+  EXPECT_EQ(stats_.bytes_read.load(), (scene::kDdsHeaderBytes + chain) + scene::kDdsMaxHeaderBytes + chain);
   // Every mip's bytes are the file's own (mip_of() computes legacy offsets: the same bytes, 20 bytes later).
   for (uint32_t l = 6; l-- > 0;) expect_hit(l);
   // Known now: the next load of the texture neither guesses nor reads the header again.

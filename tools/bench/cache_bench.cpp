@@ -42,6 +42,7 @@
 #include "texstream/common/camera_path.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texstream/render/cache/sparse_memory.hpp"
+#include "texstream/render/measure/image_metrics.hpp"
 #include "texstream/render/vulkan/vulkan_context.hpp"
 
 namespace fs = std::filesystem;
@@ -74,8 +75,8 @@ double mse(const Image& a, const Image& b) {
   return s / static_cast<double>(a.rgb.size());
 }
 
-// PSNR in dB, capped at 100 dB for identical frames (MSE 0).
-double psnr(double m) { return m <= 0 ? 100.0 : std::min(100.0, 10.0 * std::log10(255.0 * 255.0 / m)); }
+// PSNR in dB: the renderer's, capped at 100 dB for identical frames (MSE 0).
+double psnr(double m) { return render::psnr_db(m); }
 
 fs::path self_dir() {
   std::error_code ec;
@@ -512,11 +513,16 @@ bool validation_layer_installed() {
   });
 }
 
-int run_cache(const std::vector<std::string>& args) {
-  const bool quick = has_flag(args, "--quick");
+struct CacheArgs {
+  bool quick = false;
   std::string device = "lavapipe";
-  for (size_t i = 0; i + 1 < args.size(); ++i)
-    if (args[i] == "--device") device = args[i + 1];
+  std::string scene_1m = "/work/scale1m";
+  bool keep = false;
+};
+
+int run_cache(const CacheArgs& args) {
+  const bool quick = args.quick;
+  const std::string device = args.device;
   if (device != "lavapipe" && device != "gpu") {
     std::fprintf(stderr, "cache bench: --device must be lavapipe or gpu\n");
     return 2;
@@ -676,9 +682,7 @@ int run_cache(const std::vector<std::string>& args) {
   // geometry the view really draws. Each scene gets one untimed warm-up run (page cache, the renderer's
   // first build of mesh_index.bin where the scene lacks it), then the fastest of kStartupRuns timed runs.
   constexpr int kStartupRuns = 3;
-  fs::path scale1m = "/work/scale1m";
-  for (size_t i = 0; i + 1 < args.size(); ++i)
-    if (args[i] == "--scene-1m") scale1m = args[i + 1];
+  const fs::path scale1m = args.scene_1m;
   double startup_ratio = -1;
   if (fs::exists(scale1m / "scene.json")) {
     const fs::path pose = static_path(c, scale1m / "camera_path.txt", "startup_pose.txt");
@@ -726,7 +730,7 @@ int run_cache(const std::vector<std::string>& args) {
                 scale1m.c_str(), scale1m.c_str());
   }
 
-  if (!has_flag(args, "--keep")) {
+  if (!args.keep) {
     std::error_code ec;
     fs::remove_all(c.work, ec);
   } else {
@@ -745,6 +749,15 @@ int run_cache(const std::vector<std::string>& args) {
 
 }  // namespace
 
-TEXSTREAM_BENCH_COMMAND(cache, "sparse texture cache: convergence, budget, bind cost, pop-in, startup", run_cache);
+std::function<int()> define_cache(CLI::App& app) {
+  auto a = std::make_shared<CacheArgs>();
+  app.add_flag("--quick", a->quick, "the short run");
+  app.add_option("--device", a->device, "lavapipe or gpu: the profile in config/");
+  app.add_option("--scene-1m", a->scene_1m, "the 1M-texture scene of the start-up phase (skipped if absent)");
+  app.add_flag("--keep", a->keep, "keep the work folder");
+  return [a] { return run_cache(*a); };
+}
+
+TEXSTREAM_BENCH_COMMAND(cache, "sparse texture cache: convergence, budget, bind cost, pop-in, startup", define_cache);
 
 }  // namespace texstream::bench

@@ -316,24 +316,20 @@ bool set_plant_option(PlantOptions& po, const std::string& kv) {
   return false;
 }
 
-int run_controller(const std::vector<std::string>& args) {
-  const bool quick = has_flag(args, "--quick");
+struct ControllerArgs {
+  bool quick = false;
   uint64_t seed = 1;
+  std::vector<std::string> plant;  // key=value, in the order given
+  bool loop_only = false;
+};
+
+int run_controller(const ControllerArgs& args) {
+  const bool quick = args.quick;
+  const uint64_t seed = args.seed;
   PlantOptions po;
-  bool skip_stress = false;
-  for (size_t i = 0; i < args.size(); ++i) {
-    const bool has_value = i + 1 < args.size();
-    if (args[i] == "--seed" && has_value) {
-      seed = std::strtoull(args[++i].c_str(), nullptr, 10);
-    } else if (args[i] == "--plant" && has_value) {
-      if (!set_plant_option(po, args[++i])) return 2;
-    } else if (args[i] == "--loop-only") {
-      skip_stress = true;
-    } else if (args[i] != "--quick") {
-      std::fprintf(stderr, "controller: unknown option '%s' (--quick, --seed N, --plant key=value, --loop-only)\n",
-                   args[i].c_str());
-      return 2;
-    }
+  const bool skip_stress = args.loop_only;
+  for (const std::string& kv : args.plant) {
+    if (!set_plant_option(po, kv)) return 2;
   }
 
   Stopwatch total;
@@ -411,9 +407,20 @@ int run_controller(const std::vector<std::string>& args) {
   return stress.bad_outputs == 0 && drift_ok ? 0 : 1;
 }
 
+std::function<int()> define_controller(CLI::App& app) {
+  auto a = std::make_shared<ControllerArgs>();
+  app.add_flag("--quick", a->quick, "the short run");
+  app.add_option("--seed", a->seed, "seed of the stress sequences");
+  app.add_option("--plant", a->plant, "key=value: a closed-loop plant setting (repeatable)")
+      ->expected(1)
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  app.add_flag("--loop-only", a->loop_only, "only the closed loop, no stress sequences");
+  return [a] { return run_controller(*a); };
+}
+
 }  // namespace
 
 TEXSTREAM_BENCH_COMMAND(controller, "adaptive controller: stress sequences, drift, closed-loop plant (Eq. 4-7)",
-                        run_controller);
+                        define_controller);
 
 }  // namespace texstream::bench

@@ -1,7 +1,7 @@
-// texstream-bench: one executable, one subcommand per benchmark (see bench_registry.hpp).
+// texstream-bench: one executable, one CLI11 subcommand per benchmark (see bench_registry.hpp).
 #include <cstdio>
-#include <cstring>
-#include <string>
+#include <functional>
+#include <utility>
 #include <vector>
 
 #include "bench_registry.hpp"
@@ -21,19 +21,24 @@ const std::vector<Command>& commands() { return registry(); }
 }  // namespace texstream::bench
 
 int main(int argc, char** argv) {
-  using texstream::bench::commands;
-  auto usage = [] {
-    std::fprintf(stderr, "usage: texstream-bench <command> [--quick] [options]\ncommands:\n");
-    for (const auto& c : commands()) std::fprintf(stderr, "  %-12s %s\n", c.name, c.help);
-  };
-  if (argc < 2 || std::strcmp(argv[1], "--help") == 0 || std::strcmp(argv[1], "-h") == 0) {
-    usage();
-    return argc < 2 ? 2 : 0;
+  CLI::App app{"texstream-bench: one subcommand per benchmark; --quick finishes in about a minute"};
+  app.require_subcommand(1);
+  std::vector<std::pair<CLI::App*, std::function<int()>>> runs;
+  for (const auto& c : texstream::bench::commands()) {
+    CLI::App* sub = app.add_subcommand(c.name, c.help);
+    runs.emplace_back(sub, c.define(*sub));
   }
-  for (const auto& c : commands()) {
-    if (std::strcmp(argv[1], c.name) == 0) return c.run(std::vector<std::string>(argv + 2, argv + argc));
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    // Usage errors exit with 2, as before the subcommands were CLI11's (scripts and tests check it).
+    app.exit(e);
+    return 2;
   }
-  std::fprintf(stderr, "texstream-bench: unknown command '%s'\n", argv[1]);
-  usage();
+  for (auto& [sub, run] : runs) {
+    if (sub->parsed()) return run();
+  }
   return 2;
 }

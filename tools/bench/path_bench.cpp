@@ -55,12 +55,6 @@ constexpr uint32_t kFullWidth = 640, kFullHeight = 360;
 // is the seed's median s at α = 12-16 ms (Table 3: 0.75-0.96 MB).
 constexpr double kLockstepLoadMb = 1.0;
 
-std::string flag_value(const std::vector<std::string>& args, const std::string& flag) {
-  for (size_t i = 0; i + 1 < args.size(); ++i)
-    if (args[i] == flag) return args[i + 1];
-  return "";
-}
-
 struct Plan {
   fs::path bin, config, scene, path_file, out;
   std::vector<std::string> common;  // --set for every run
@@ -120,27 +114,21 @@ double ratio(double a, double b) {
   return a / b;
 }
 
-int run_path(const std::vector<std::string>& args) {
+struct PathArgs {
+  bool quick = false;
+  bool keep_frames = false;
+  std::string scene, path, out, config, size;  // empty: the default
+};
+
+int run_path(const PathArgs& args) {
   Stopwatch total;
-  for (size_t i = 0; i < args.size(); ++i) {
-    const std::string& a = args[i];
-    const bool valued = a == "--scene" || a == "--path" || a == "--out" || a == "--config" || a == "--size";
-    if (valued && i + 1 < args.size()) {
-      ++i;
-    } else if (a != "--quick" && a != "--keep-frames") {
-      std::fprintf(stderr, "usage: texstream-bench path [--quick] [--scene DIR] [--path FILE] [--out DIR] "
-                           "[--config FILE] [--size WxH] [--keep-frames]\npath bench: unknown or incomplete argument '%s'\n",
-                   a.c_str());
-      return 2;
-    }
-  }
   BenchResults res;
-  res.quick = has_flag(args, "--quick");
+  res.quick = args.quick;
   res.load_before = load_average();
   res.cores = std::thread::hardware_concurrency();
   Plan plan;
   plan.bin = self_dir();
-  plan.config = flag_value(args, "--config");
+  plan.config = args.config;
   if (plan.config.empty()) {
     // The default device is lavapipe: its profile (seed 000 §4.3: α about twice the latency without streaming).
     const fs::path lavapipe = fs::path(TEXSTREAM_PATH_BENCH_SOURCE_DIR) / "config" / "lavapipe.toml";
@@ -152,9 +140,9 @@ int run_path(const std::vector<std::string>& args) {
     return 2;
   }
   const double alpha_ms = base_config->controller.alpha_ms;
-  plan.scene = flag_value(args, "--scene");
+  plan.scene = args.scene;
   if (plan.scene.empty()) plan.scene = fs::path(TEXSTREAM_PATH_BENCH_SOURCE_DIR) / "scenes" / "default";
-  plan.out = flag_value(args, "--out");
+  plan.out = args.out;
   if (plan.out.empty()) plan.out = "out/bench-path";
   std::error_code ec;
   plan.out = fs::absolute(plan.out);
@@ -169,8 +157,8 @@ int run_path(const std::vector<std::string>& args) {
     return 2;
   }
   plan.scene = fs::absolute(plan.scene);
-  const fs::path source_path = flag_value(args, "--path").empty() ? scene->dir / scene->manifest.camera_path
-                                                                  : fs::path(flag_value(args, "--path"));
+  const fs::path source_path = args.path.empty() ? scene->dir / scene->manifest.camera_path
+                                                                  : fs::path(args.path);
   auto path = CameraPath::load(source_path);
   if (!path || path->keys().empty()) {
     std::fprintf(stderr, "path bench: --path %s: %s\n", source_path.c_str(),
@@ -201,7 +189,7 @@ int run_path(const std::vector<std::string>& args) {
   res.out = plan.out;
   res.width = res.quick ? kQuickWidth : kFullWidth;
   res.height = res.quick ? kQuickHeight : kFullHeight;
-  if (const std::string size = flag_value(args, "--size"); !size.empty()) {
+  if (const std::string size = args.size; !size.empty()) {
     unsigned w = 0, h = 0;
     char extra = 0;
     // At least one SSIM window (11 px) per axis; the renderer's own limit is 16.
@@ -304,7 +292,7 @@ int run_path(const std::vector<std::string>& args) {
   } else {
     h.lockstep_difference = "a lock-step run failed";
   }
-  if (!has_flag(args, "--keep-frames")) {
+  if (!args.keep_frames) {
     // The reference PNGs are the bulk of the output (one per frame); the report does not need them.
     fs::remove_all(plan.out / "runs" / "reference" / "frames", ec);
   }
@@ -338,7 +326,18 @@ int run_path(const std::vector<std::string>& args) {
 
 }  // namespace
 
-TEXSTREAM_BENCH_COMMAND(path, "run time against image error on a camera path: seed tables, baselines, report",
-                        run_path);
+std::function<int()> define_path(CLI::App& app) {
+  auto a = std::make_shared<PathArgs>();
+  app.add_flag("--quick", a->quick, "the short run");
+  app.add_option("--scene", a->scene, "a generated scene (default: one generated for the run)");
+  app.add_option("--path", a->path, "camera path file (default: the scene's)");
+  app.add_option("--out", a->out, "folder for runs, report.md and plots");
+  app.add_option("--config", a->config, "renderer configuration (default: the bench's)");
+  app.add_option("--size", a->size, "frame size WxH");
+  app.add_flag("--keep-frames", a->keep_frames, "keep the runs' frames");
+  return [a] { return run_path(*a); };
+}
+
+TEXSTREAM_BENCH_COMMAND(path, "run time against image error on a camera path: seed tables, baselines, report", define_path);
 
 }  // namespace texstream::bench

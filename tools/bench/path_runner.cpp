@@ -1,7 +1,6 @@
 #include "path_runner.hpp"
 
 #include <fcntl.h>
-#include <spawn.h>
 #include <sys/wait.h>
 
 #include <algorithm>
@@ -10,9 +9,9 @@
 #include <fstream>
 
 #include "bench_util.hpp"
+#include "texstream/common/child_process.hpp"
 #include "path_analysis.hpp"
 
-extern char** environ;
 
 namespace fs = std::filesystem;
 
@@ -40,23 +39,14 @@ fs::path self_dir() {
 }
 
 int run_process(const std::vector<std::string>& argv, const fs::path& log) {
-  posix_spawn_file_actions_t fa;
-  posix_spawn_file_actions_init(&fa);
-  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_adddup2(&fa, 1, 2);
-  std::vector<char*> args;
-  for (const std::string& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-  args.push_back(nullptr);
-  pid_t pid = -1;
-  const int rc = posix_spawn(&pid, args[0], &fa, nullptr, args.data(), environ);
-  posix_spawn_file_actions_destroy(&fa);
-  if (rc != 0) return -1;
-  int status = 0;
-  while (waitpid(pid, &status, 0) < 0) {
-    if (errno != EINTR) return -1;
-  }
-  if (WIFEXITED(status)) return WEXITSTATUS(status);
-  return WIFSIGNALED(status) ? 128 + WTERMSIG(status) : -1;
+  SpawnOptions options;
+  options.fds = {SpawnFd::open(1, log.string(), O_WRONLY | O_CREAT | O_TRUNC, 0644), SpawnFd::dup2(1, 2)};
+  const Result<pid_t> pid = spawn_process(argv, options);
+  if (!pid) return -1;
+  const std::optional<ExitStatus> e = wait_process(*pid);
+  if (!e) return -1;
+  if (e->exited) return e->code;
+  return e->signal != 0 ? 128 + e->signal : -1;
 }
 
 int run_python(const fs::path& script, const std::vector<std::string>& args, const fs::path& log) {

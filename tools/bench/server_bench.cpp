@@ -673,37 +673,6 @@ MemoryResult memory_run(const Scene& s, double seconds, uint64_t cache_budget) {
 
 // ---------------------------------------------------------------------------------------------------------
 
-std::optional<Options> parse(const std::vector<std::string>& args) {
-  Options o;
-  for (size_t i = 0; i < args.size(); ++i) {
-    const std::string& a = args[i];
-    const bool has_value = i + 1 < args.size();
-    if (a == "--quick") {
-      o.quick = true;
-    } else if (a == "--scene" && has_value) {
-      o.scene = args[++i];
-    } else if (a == "--memory-minutes" && has_value) {
-      o.memory_minutes = std::atof(args[++i].c_str());
-    } else if (a == "--phases" && has_value) {
-      o.phases = args[++i];
-    } else if (a == "--profile-misses" && has_value) {
-      o.profile_misses = static_cast<uint32_t>(std::atoi(args[++i].c_str()));
-    } else if (a == "--miss-rounds" && has_value) {
-      o.miss_rounds = static_cast<uint32_t>(std::atoi(args[++i].c_str()));
-    } else if (a == "--textures" && has_value) {
-      o.textures = static_cast<uint32_t>(std::atoi(args[++i].c_str()));
-    } else {
-      std::fprintf(stderr,
-                   "usage: texstream-bench server [--quick] [--scene DIR] [--memory-minutes M] [--textures N]\n"
-                   "                              [--phases memory,hits,misses,trace] [--profile-misses N] [--miss-rounds N]\n"
-                   "unknown or incomplete argument '%s'\n",
-                   a.c_str());
-      return std::nullopt;
-    }
-  }
-  return o;
-}
-
 bool generate_scene(const fs::path& dir, uint32_t textures) {
   const fs::path gen = fs::read_symlink("/proc/self/exe").parent_path() / "texstream-gen";
   // fmt rather than operator+: GCC 12 -O3 warns falsely (-Wrestrict) on some std::string concatenations.
@@ -715,9 +684,8 @@ bool generate_scene(const fs::path& dir, uint32_t textures) {
   return rc == 0;
 }
 
-int run_server_bench(const std::vector<std::string>& args) {
-  const std::optional<Options> opt = parse(args);
-  if (!opt) return 2;
+int run_server_bench(const Options& options) {
+  const Options* const opt = &options;
   spdlog::set_level(spdlog::level::warn);  // the servers' info lines would drown the report
   const Stopwatch total;
   Scene s;
@@ -1066,9 +1034,21 @@ int run_server_bench(const std::vector<std::string>& args) {
   return 0;
 }
 
+std::function<int()> define_server(CLI::App& app) {
+  auto o = std::make_shared<Options>();
+  app.add_flag("--quick", o->quick, "the short run (about a minute on the 2-core machine)");
+  app.add_option("--scene", o->scene, "a generated scene (default: one generated for the run)");
+  app.add_option("--memory-minutes", o->memory_minutes, "length of the memory phase (default: the mode's)");
+  app.add_option("--textures", o->textures, "textures of the generated scene (default: 3000, 6000 full)");
+  app.add_option("--phases", o->phases, "run only these of memory,hits,misses,trace");
+  app.add_option("--profile-misses", o->profile_misses, "stream the miss set N more times first, for a profiler");
+  app.add_option("--miss-rounds", o->miss_rounds, "rounds of the misses phase (default: the mode's)");
+  return [o] { return run_server_bench(*o); };
+}
+
 }  // namespace
 
 TEXSTREAM_BENCH_COMMAND(server, "Texture server: RAM-cache hits vs memcpy, misses vs read(), latency, vs OIIO ImageCache, memory",
-                        run_server_bench);
+                        define_server);
 
 }  // namespace texstream::bench

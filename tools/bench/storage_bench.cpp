@@ -432,19 +432,7 @@ Failure run_failure(const Plan& plan, const char* name, const StorageConfig& c, 
   return f;
 }
 
-int run_storage(const std::vector<std::string>& args) {
-  Plan plan;
-  plan.quick = has_flag(args, "--quick");
-  for (size_t i = 0; i < args.size(); ++i) {
-    if (args[i] == "--out" && i + 1 < args.size()) {
-      plan.out = args[++i];
-    } else if (args[i] == "--phases" && i + 1 < args.size()) {
-      plan.phases = args[++i];
-    } else if (args[i] != "--quick") {
-      std::fprintf(stderr, "usage: texstream-bench storage [--quick] [--out DIR] [--phases hits,reuse,links,policies,inflight,failures,fig12]\n");
-      return 2;
-    }
-  }
+int run_storage(Plan plan) {
   spdlog::set_level(spdlog::level::err);  // expected failures (phase 6) would flood the output
   Stopwatch total;
   plan.textures = plan.quick ? 48 : 192;
@@ -634,6 +622,14 @@ int run_storage(const std::vector<std::string>& args) {
 
 }  // namespace
 
-TEXSTREAM_BENCH_COMMAND(storage, "remote/slow storage: nginx origin, disk cache, bimodal hits, failures", run_storage);
+std::function<int()> define_storage(CLI::App& app) {
+  auto plan = std::make_shared<Plan>();
+  app.add_flag("--quick", plan->quick, "the short run");
+  app.add_option("--out", plan->out, "folder for the CSV files and plots");
+  app.add_option("--phases", plan->phases, "run only these of hits,reuse,links,policies,inflight,failures,fig12");
+  return [plan] { return run_storage(*plan); };
+}
+
+TEXSTREAM_BENCH_COMMAND(storage, "remote/slow storage: nginx origin, disk cache, bimodal hits, failures", define_storage);
 
 }  // namespace texstream::bench

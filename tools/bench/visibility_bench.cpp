@@ -9,7 +9,7 @@
 //   2. visible_set_exact: with tau = 0 and the off-screen FOV equal to the viewport's (the wide pass then adds
 //      nothing), the meshes with weight > 0 must be exactly the ids found in a mesh-id render of the same view.
 //   3. offset_psnr_db: the same view with the city centred at (0,0,0) and at (4e6, 5e6, 0): PSNR of the two
-//      pictures (inf when identical; reported as 999).
+//      pictures (the renderer's PSNR: 100 when identical, its cap).
 //   4. feedback_cost_frac: frame time with feedback (metadata + wide pass + compaction + prefix read-back, and
 //      the CPU merge + parallel sort of the list) against the same frames without: texstream-render's frames
 //      over the fly-through, each drawn both ways back to back (render.feedback_pairs), every frame a cycle (the
@@ -41,6 +41,7 @@
 #include "texstream/common/camera_path.hpp"
 #include "texstream/common/config.hpp"
 #include "texstream/render/measure/frame_log.hpp"
+#include "texstream/render/measure/image_metrics.hpp"
 #include "texstream/render/scene/scene_data.hpp"
 #include "texstream/render/frame/view_renderer.hpp"
 #include "texstream/render/frame/visibility_list.hpp"
@@ -72,13 +73,7 @@ constexpr int kRunRepeatsFull = 16;
 constexpr int kRunWarmupFrames = 2;
 // The seed's test (seed 000 §4) offsets: a city at map coordinates 10^6..10^7 m.
 constexpr double kFarOffset[3] = {4.0e6, 5.0e6, 0.0};
-constexpr double kIdenticalPsnr = 999.0;  // stands for "infinite" (identical pictures) in the summary
-
-std::string arg_value(const std::vector<std::string>& args, const std::string& key, const std::string& fallback) {
-  for (size_t i = 0; i + 1 < args.size(); ++i)
-    if (args[i] == key) return args[i + 1];
-  return fallback;
-}
+constexpr double kIdenticalPsnr = render::kPsnrCapDb;  // identical pictures: the renderer's PSNR cap
 
 bool generate_scene(const fs::path& dir, uint32_t textures) {
   const fs::path gen = fs::read_symlink("/proc/self/exe").parent_path() / "texstream-gen";
@@ -88,18 +83,12 @@ bool generate_scene(const fs::path& dir, uint32_t textures) {
   return WIFEXITED(status) && WEXITSTATUS(status) == 0;
 }
 
+// The renderer's PSNR over R, G, B of two RGBA8 pictures of one size (rows do not matter to the mean).
 double psnr(const std::vector<uint8_t>& a, const std::vector<uint8_t>& b) {
   if (a.size() != b.size() || a.empty()) return 0.0;
-  double se = 0;
-  size_t n = 0;
-  for (size_t i = 0; i < a.size(); ++i) {
-    if (i % 4 == 3) continue;  // alpha is always 255
-    const double d = static_cast<double>(a[i]) - static_cast<double>(b[i]);
-    se += d * d;
-    ++n;
-  }
-  if (se == 0) return kIdenticalPsnr;
-  return 10.0 * std::log10(255.0 * 255.0 / (se / static_cast<double>(n)));
+  const auto pixels = static_cast<uint32_t>(a.size() / 4);
+  const render::RgbaView va{std::as_bytes(std::span(a)), pixels, 1}, vb{std::as_bytes(std::span(b)), pixels, 1};
+  return render::psnr_db(render::mse_rgb(va, vb));
 }
 
 std::vector<CameraPose> views_along(const CameraPath& path, int count) {
@@ -205,9 +194,15 @@ PairedRun renderer_frame_pairs(const fs::path& profile, const fs::path& scene, c
   return r;
 }
 
-int run_visibility(const std::vector<std::string>& args) {
-  const bool quick = has_flag(args, "--quick");
-  const std::string device = arg_value(args, "--device", "lavapipe");
+struct VisibilityArgs {
+  bool quick = false;
+  std::string device = "lavapipe";
+  std::string scene;
+};
+
+int run_visibility(const VisibilityArgs& args) {
+  const bool quick = args.quick;
+  const std::string device = args.device;
   if (device != "lavapipe" && device != "gpu") {
     std::fprintf(stderr, "visibility bench: --device must be lavapipe or gpu, not '%s'\n", device.c_str());
     return 2;
@@ -225,7 +220,7 @@ int run_visibility(const std::vector<std::string>& args) {
     cfg.render.height_px = 270;
   }
 
-  fs::path scene_dir = arg_value(args, "--scene", "");
+  fs::path scene_dir = args.scene;
   fs::path temp;
   if (scene_dir.empty()) {
     temp = fs::temp_directory_path() / ("texstream_vis_bench_" + std::to_string(::getpid()));
@@ -494,7 +489,14 @@ int run_visibility(const std::vector<std::string>& args) {
 
 }  // namespace
 
-TEXSTREAM_BENCH_COMMAND(visibility, "GPU visibility: LOD accuracy, exact visible set, large coordinates, cost",
-                        run_visibility);
+std::function<int()> define_visibility(CLI::App& app) {
+  auto a = std::make_shared<VisibilityArgs>();
+  app.add_flag("--quick", a->quick, "the short run");
+  app.add_option("--device", a->device, "lavapipe or gpu: the profile in config/");
+  app.add_option("--scene", a->scene, "a generated scene (default: one generated for the run)");
+  return [a] { return run_visibility(*a); };
+}
+
+TEXSTREAM_BENCH_COMMAND(visibility, "GPU visibility: LOD accuracy, exact visible set, large coordinates, cost", define_visibility);
 
 }  // namespace texstream::bench

@@ -2,7 +2,6 @@
 
 #include <fcntl.h>
 #include <signal.h>
-#include <spawn.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -13,7 +12,7 @@
 #include <cstring>
 #include <thread>
 
-extern char** environ;
+#include "texstream/common/child_process.hpp"
 
 namespace texstream::server {
 
@@ -53,31 +52,17 @@ Result<std::unique_ptr<DecodeHelper>> DecodeHelper::spawn(const std::filesystem:
     ::close(sv[1]);
     if (theirs < 0) return make_error(ErrorCode::kIo, fmt::format("decode helper: fcntl: {}", std::strerror(errno)));
   }
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_adddup2(&actions, theirs, kHelperFd);
-  posix_spawn_file_actions_addopen(&actions, STDIN_FILENO, "/dev/null", O_RDONLY, 0);
-  posix_spawnattr_t attr;
-  posix_spawnattr_init(&attr);
+  SpawnOptions options;
+  options.fds = {SpawnFd::dup2(theirs, kHelperFd), SpawnFd::open(STDIN_FILENO, "/dev/null", O_RDONLY, 0)};
   // The server's signal mask and handlers (SIGUSR1 for statistics, ...) are not the helper's.
-  sigset_t none, all;
-  sigemptyset(&none);
-  sigfillset(&all);
-  posix_spawnattr_setsigmask(&attr, &none);
-  posix_spawnattr_setsigdefault(&attr, &all);
-  posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
+  options.signals.reset = true;
   const std::string exe_string = exe.string();
-  const std::string fd_arg = std::to_string(kHelperFd);
-  char* argv[] = {const_cast<char*>(exe_string.c_str()), const_cast<char*>("--fd"), const_cast<char*>(fd_arg.c_str()),
-                  nullptr};
-  pid_t pid = -1;
-  const int rc = ::posix_spawn(&pid, exe_string.c_str(), &actions, &attr, argv, environ);
-  posix_spawn_file_actions_destroy(&actions);
-  posix_spawnattr_destroy(&attr);
+  const Result<pid_t> spawned = spawn_process({exe_string, "--fd", std::to_string(kHelperFd)}, options);
   ::close(theirs);
-  if (rc != 0) {
-    return make_error(ErrorCode::kIo, fmt::format("cannot start the decode helper '{}': {}", exe_string, std::strerror(rc)));
+  if (!spawned) {
+    return make_error(ErrorCode::kIo, fmt::format("cannot start the decode helper: {}", spawned.error().message));
   }
+  const pid_t pid = *spawned;
   return std::unique_ptr<DecodeHelper>(new DecodeHelper(pid, std::move(mine)));
 }
 

@@ -32,26 +32,9 @@ constexpr std::chrono::microseconds kRemoteBusyWait{10000};
 // worker lets it go on at once; the cost is that up to this many jobs per worker can no longer be superseded.
 constexpr uint32_t kJobsPerWorker = 2;
 
-// The dispatcher loads a local miss itself, up to this size; workers take the rest (a decode, a remote or slow
-// texture, a mip larger than this). A hand-off to a worker and back costs two wake-ups and context switches,
-// and on the 2-core machine that was most of a miss (texstream-bench server, misses: 0.64-0.69 GB/s with
-// workers only, 0.79-0.93 GB/s inline once every worker's queue was full; the loader alone does ~2.4 GB/s).
-// An inline load of a raw DDS mip brings the texture's coarse tail and its queued levels along in one read
-// (MipLoader::load, read_tail), after which the renderer's next requests for the texture are hits.
-// The limit was 64 KiB, so the finest mips of 256^2 and 512^2 RGBA8 textures (256 KiB, 1 MiB: most of a
-// city's bytes) went to the workers. Raised to 1 MiB, misses gained 8-10 % (texstream-bench server --phases
-// misses, median of rounds over alternating runs: 0.456 -> 0.513 of plain read() in 6 runs each, 0.466 ->
-// 0.515 in 8). 1 MiB from the page cache is 60-150 us: hits queued behind it wait that long, against a
-// renderer that takes completions once per 16-33 ms frame. (Tried: tail reads on a free worker, the texture's
-// other misses parked until it finished: misses at 0.26 of read() against 0.28 inline, 4 runs each: the
-// hand-off costs what the overlap gains on 2 cores. Tried again with a prefetch thread: a texture's first
-// request handed at once to a thread that reads its chain into the cache, up to 4 textures ahead, the
-// dispatcher only copying hits: misses at 0.36 and 0.36 of read() against 0.53 and 0.51 inline, alternating
-// runs. The dispatcher then waited 43 % of the time for reads that shared the cores with the renderer's
-// polling: a third busy thread on 2 cores, and the renderer's share is what a real renderer renders with.)
-// A remote mip is never read here (the attempt is local-only: it comes back kUnfilled at once and goes to the
-// remote path), and a texture whose inline load was slow or that is not a DDS served raw is not loaded inline
-// again (inline_ok_): a cold disk or a decoded format costs the dispatcher at most one load per texture.
+// The dispatcher loads a local miss up to this size itself: a hand-off to a worker costs two wake-ups, most of
+// a miss on 2 cores (1 MiB rather than 64 KiB: misses +8-10 %).
+// Measurements, the rules around it and what was tried: docs/design/inline_miss_loads.md.
 constexpr uint64_t kInlineMissBytes = 1 << 20;
 // An inline load that took longer than this (a disk read, a decode) marks its texture as not for inline loads.
 constexpr uint64_t kInlineSlowNs = 250'000;

@@ -6,7 +6,7 @@
 #include <array>
 #include <cstring>
 
-#include "texstream/server/support/fast_checksum.hpp"
+#include "texstream/protocol/checksum.hpp"
 #include "texstream/server/decode/oiio_mip_decoder.hpp"
 
 namespace texstream::server {
@@ -69,9 +69,10 @@ std::string extent_text(Extent2D e) { return std::to_string(e.width) + "x" + std
 
 // The layout texstream-gen writes for a texture table entry (scene_format.hpp: legacy header, mips finest
 // first, no DX10 extension): read_mip()'s guess before a texture's header has been read.
-DdsLayout generated_dds_layout(const scene::TextureRecord& record) {
-  DdsLayout l;
-  l.encoding = static_cast<TexelFormat>(record.format) == TexelFormat::kBc1 ? DdsEncoding::kBc1 : DdsEncoding::kRgba8;
+scene::DdsLayout generated_dds_layout(const scene::TextureRecord& record) {
+  scene::DdsLayout l;
+  l.encoding = static_cast<TexelFormat>(record.format) == TexelFormat::kBc1 ? scene::DdsEncoding::kBc1
+                                                                          : scene::DdsEncoding::kRgba8;
   l.width = record.width;
   l.height = record.height;
   l.mip_count = record.mip_count;
@@ -207,8 +208,8 @@ void MipLoader::release_held() {
 bool MipLoader::serves_raw(TextureId texture, TexelFormat format) const {
   const std::optional<TextureFileEntry> e = index_.find(texture);
   if (!e || e->kind != TextureFileKind::kDds || !e->dds) return false;
-  return format == TexelFormat::kRgba8 ? e->dds->encoding == DdsEncoding::kRgba8
-                                       : e->dds->encoding == DdsEncoding::kBc1;
+  return format == TexelFormat::kRgba8 ? e->dds->encoding == scene::DdsEncoding::kRgba8
+                                       : e->dds->encoding == scene::DdsEncoding::kBc1;
 }
 
 bool MipLoader::open_texture(const LoadRequest& request, Opened& opened, CompletionRecord& error) {
@@ -260,7 +261,7 @@ CompletionStatus MipLoader::read_tail(const LoadRequest& request, const scene::T
   // if it is small or wanted (asked for and queued), not cached, has the texture table's extent and exactly
   // the bytes the table implies, fits kMaxTailReadBytes and gets a cache payload; the first that does not
   // ends the range on that side (it must stay contiguous).
-  const DdsLayout& dds = *opened.entry.dds;
+  const scene::DdsLayout& dds = *opened.entry.dds;
   const TexelFormat format = static_cast<TexelFormat>(record.format);
   const uint32_t level = request.mip.value;
   const uint32_t levels = std::min(dds.mip_count, record.mip_count);
@@ -328,8 +329,8 @@ CompletionStatus MipLoader::read_tail(const LoadRequest& request, const scene::T
   if (guessed) {
     // The guess holds only if the file's own header says exactly that; a short file, another header or any
     // other difference: start over the ordinary way (header first), which reports what is wrong, if anything.
-    const Result<DdsLayout> real = parse_dds_layout(std::span(header).first(std::min<uint64_t>(*got, header.size())),
-                                                    opened.path);
+    const Result<scene::DdsLayout> real =
+        scene::parse_dds_layout(std::span(header).first(std::min<uint64_t>(*got, header.size())), opened.path);
     if (*got != total || !real.ok() || *real != dds) {
       tail.mips.clear();
       retry = true;
@@ -363,17 +364,17 @@ CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::Te
     const bool guessed = !opened.entry.dds && tail != nullptr && guess_layout;
     if (guessed) opened.entry.dds = generated_dds_layout(record);
     if (!opened.entry.dds) {
-      std::array<std::byte, kDdsMaxHeaderBytes> header{};
+      std::array<std::byte, scene::kDdsMaxHeaderBytes> header{};
       if (local_only && !opened.file->local(0, header.size())) return CompletionStatus::kUnfilled;
       Result<uint64_t> got = opened.file->read_at(header, 0);
       if (!got.ok()) return fail_status(request, read_status(got.error().code), path, got.error().message);
       count_read(*got);
-      Result<DdsLayout> layout = parse_dds_layout(std::span(header).first(*got), path);
+      Result<scene::DdsLayout> layout = scene::parse_dds_layout(std::span(header).first(*got), path);
       if (!layout.ok()) return fail_status(request, CompletionStatus::kCorrupt, path, layout.error().message);
       opened.entry.dds = *layout;
       index_.remember(request.texture, opened.entry);
     }
-    const DdsLayout& dds = *opened.entry.dds;
+    const scene::DdsLayout& dds = *opened.entry.dds;
     if (level >= dds.mip_count) {
       return fail_status(request, CompletionStatus::kCorrupt, path,
                          "the file has " + std::to_string(dds.mip_count) + " mips, mip " + std::to_string(level) +
@@ -386,11 +387,11 @@ CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::Te
                              extent_text({dds.width, dds.height}) + " at mip 0), the texture table says " +
                              extent_text(expected));
     }
-    if (format == TexelFormat::kBc1 && dds.encoding != DdsEncoding::kBc1) {
+    if (format == TexelFormat::kBc1 && dds.encoding != scene::DdsEncoding::kBc1) {
       return fail_status(request, CompletionStatus::kCorrupt, path,
                          "the texture table says bc1 but the file is not BC1/DXT1 (the server never encodes BC1)");
     }
-    decode = format == TexelFormat::kRgba8 && dds.encoding != DdsEncoding::kRgba8;
+    decode = format == TexelFormat::kRgba8 && dds.encoding != scene::DdsEncoding::kRgba8;
     if (!decode && tail != nullptr && (target.size() <= kTailMipBytes || wanted_levels != 0)) {
       bool retry = false;
       const CompletionStatus s =
@@ -484,13 +485,13 @@ CompletionRecord MipLoader::load(const LoadRequest& request, const scene::Textur
 
   // The checksum is of the bytes we meant to hand over (equal to the slot's unless the renderer wrote into a
   // slot it does not own, which the renderer's own check then catches).
-  const uint64_t checksum = fast_payload_checksum(target.data(), bytes);
+  const uint64_t checksum = payload_checksum(target.data(), bytes);
   if (keep) {
     keep->checksum = checksum;
     copy_into_slot(slot.data(), keep->bytes.data(), bytes);  // kSlotWrite halfway
   }
   if (tail) {
-    for (TailMip& t : tail->mips) t.mip->checksum = fast_payload_checksum(t.mip->bytes.data(), t.mip->bytes.size());
+    for (TailMip& t : tail->mips) t.mip->checksum = payload_checksum(t.mip->bytes.data(), t.mip->bytes.size());
   }
   if (keep && tail && hold_read) {
     // Held back (see hold_read): the asked mip and its tail go into the cache together in release_held().

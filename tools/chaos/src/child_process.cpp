@@ -3,7 +3,6 @@
 #include <dirent.h>
 #include <fcntl.h>
 #include <signal.h>
-#include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -12,66 +11,27 @@
 #include <sstream>
 #include <thread>
 
-extern char** environ;
-
 namespace texstream::chaos {
-
-std::string ExitStatus::describe() const {
-  if (exited) return "exited with status " + std::to_string(code);
-  return "killed by signal " + std::to_string(signal) + " (" + strsignal(signal) + ")";
-}
-
-namespace {
-ExitStatus decode(int status) {
-  ExitStatus e;
-  if (WIFEXITED(status)) {
-    e.exited = true;
-    e.code = WEXITSTATUS(status);
-  } else if (WIFSIGNALED(status)) {
-    e.signal = WTERMSIG(status);
-  }
-  return e;
-}
-}  // namespace
 
 Result<ChildProcess> ChildProcess::spawn(const std::vector<std::string>& argv, const std::filesystem::path& log,
                                          const std::vector<std::string>& env) {
-  std::vector<char*> args;
-  for (const std::string& a : argv) args.push_back(const_cast<char*>(a.c_str()));  // posix_spawn's signature
-  args.push_back(nullptr);
-  std::vector<std::string> env_strings;
-  for (char** e = environ; *e; ++e) env_strings.emplace_back(*e);
-  for (const std::string& e : env) env_strings.push_back(e);
-  std::vector<char*> envp;
-  for (const std::string& e : env_strings) envp.push_back(const_cast<char*>(e.c_str()));
-  envp.push_back(nullptr);
-
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-  posix_spawn_file_actions_adddup2(&actions, 1, 2);
-  pid_t pid = -1;
-  const int err = posix_spawn(&pid, args[0], &actions, nullptr, args.data(), envp.data());
-  posix_spawn_file_actions_destroy(&actions);
-  if (err != 0) return make_error(ErrorCode::kIo, "cannot start '" + argv[0] + "': " + std::strerror(err));
-  return ChildProcess(pid);
+  SpawnOptions options;
+  options.fds = {SpawnFd::open(1, log.string(), O_WRONLY | O_CREAT | O_APPEND, 0644), SpawnFd::dup2(1, 2)};
+  options.extra_env = env;
+  const Result<pid_t> pid = spawn_process(argv, options);
+  if (!pid) return pid.error();
+  return ChildProcess(*pid);
 }
 
 ChildProcess::~ChildProcess() {
-  if (pid_ <= 0) return;
-  ::kill(pid_, SIGKILL);
-  int status = 0;
-  while (::waitpid(pid_, &status, 0) < 0 && errno == EINTR) {
-  }
+  if (pid_ > 0) kill_and_wait_process(pid_);
 }
 
 std::optional<ExitStatus> ChildProcess::try_wait() {
   if (pid_ <= 0) return std::nullopt;
-  int status = 0;
-  const pid_t r = ::waitpid(pid_, &status, WNOHANG);
-  if (r != pid_) return std::nullopt;
-  pid_ = -1;
-  return decode(status);
+  std::optional<ExitStatus> e = try_wait_process(pid_);
+  if (e) pid_ = -1;
+  return e;
 }
 
 std::optional<ExitStatus> ChildProcess::wait_for(std::chrono::milliseconds timeout) {

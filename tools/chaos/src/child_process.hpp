@@ -10,16 +10,12 @@
 #include <string>
 #include <vector>
 
+#include "texstream/common/child_process.hpp"
 #include "texstream/common/result.hpp"
 
 namespace texstream::chaos {
 
-struct ExitStatus {
-  bool exited = false;   // normal exit (code), else killed by `signal`
-  int code = 0;
-  int signal = 0;
-  std::string describe() const;
-};
+using texstream::ExitStatus;
 
 class ChildProcess {
  public:

@@ -23,9 +23,10 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// DDS_HEADER field offsets in the file ("DDS " magic first; Microsoft's DDS_HEADER / DDS_PIXELFORMAT).
-constexpr size_t kOffSize = 4, kOffHeight = 12, kOffWidth = 16, kOffMipCount = 28, kOffPfFlags = 80,
-                 kOffFourCc = 84;
+// The header fields this corpus damages, at the offsets common's one DDS parser reads.
+constexpr size_t kOffSize = scene::dds_field::kSize, kOffHeight = scene::dds_field::kHeight,
+                 kOffWidth = scene::dds_field::kWidth, kOffMipCount = scene::dds_field::kMipMapCount,
+                 kOffPfFlags = scene::dds_field::kPfFlags, kOffFourCc = scene::dds_field::kPfFourCC;
 
 using Bytes = std::vector<std::byte>;
 

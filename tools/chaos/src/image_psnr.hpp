@@ -1,5 +1,6 @@
 #pragma once
-// PSNR of two images of the same size (RGB, 8 bit), read with OpenImageIO. +inf when identical.
+// PSNR of two image files of the same size, read with OpenImageIO and measured by the renderer's one PSNR
+// (render/measure/image_metrics.hpp): over R, G, B, capped at kPsnrCapDb (100 dB) for identical images.
 #include <filesystem>
 
 #include "texstream/common/result.hpp"

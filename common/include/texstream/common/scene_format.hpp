@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "texstream/common/dds.hpp"
 #include "texstream/common/result.hpp"
 #include "texstream/common/ids.hpp"
 #include "texstream/common/texel_format.hpp"
@@ -176,27 +177,6 @@ std::filesystem::path texture_path(const std::filesystem::path& dir, TextureId i
 // allocation each): what the server opens per miss (Storage::open_text).
 std::string texture_path_text(const std::filesystem::path& dir, TextureId id);
 
-// ---- DDS (the generator's per-texture file; also readable by OpenImageIO and image viewers) ----
-inline constexpr uint64_t kDdsHeaderBytes = 128;  // "DDS " + DDS_HEADER (124 bytes), no DX10 extension
-
-std::array<std::byte, kDdsHeaderBytes> make_dds_header(TexelFormat format, uint32_t width, uint32_t height,
-                                                       uint32_t mip_count);
-
-struct DdsInfo {
-  TexelFormat format;
-  uint32_t width;
-  uint32_t height;
-  uint32_t mip_count;
-};
-// Parses the 128 header bytes of a DDS we can serve (RGBA8 with standard masks, or DXT1). Names `what`
-// (the path) in errors.
-Result<DdsInfo> parse_dds_header(std::span<const std::byte> bytes, const std::string& what);
-
-inline uint64_t dds_mip_offset(TexelFormat format, uint32_t width, uint32_t height, uint32_t level) {
-  return kDdsHeaderBytes + mip_chain_offset(format, width, height, level);
-}
-inline uint64_t dds_file_bytes(TexelFormat format, uint32_t width, uint32_t height, uint32_t mip_count) {
-  return kDdsHeaderBytes + mip_chain_offset(format, width, height, mip_count);
-}
+// The DDS header itself (writer and parser) is in dds.hpp.
 
 }  // namespace texstream::scene

@@ -23,8 +23,8 @@ struct ImageError {
   double ssim = 1;     // mean SSIM over the luma of the whole frame
 };
 
-// PSNR of identical frames is infinite; a finite cap keeps averages and plots meaningful. 100 dB is an MSE
-// of 6.5e-6, far below one 8-bit step on any pixel of a 16 K frame.
+// PSNR of identical frames is infinite; a finite cap keeps averages, JSON and plots meaningful. 100 dB is an
+// MSE of 6.5e-6, far below one 8-bit step on any pixel of a 16 K frame. The tree's one PSNR (chaos, benches).
 inline constexpr double kPsnrCapDb = 100.0;
 
 // SSIM constants of Wang et al. 2004 (§III.C and their reference ssim_index.m): an 11x11 circular-symmetric

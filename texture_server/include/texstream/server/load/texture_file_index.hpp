@@ -19,7 +19,7 @@
 #include <vector>
 
 #include "texstream/common/ids.hpp"
-#include "texstream/server/load/dds_layout.hpp"
+#include "texstream/common/dds.hpp"
 
 namespace texstream::server {
 
@@ -36,7 +36,7 @@ std::string texture_file_path_text(const std::filesystem::path& scene_dir, Textu
 
 struct TextureFileEntry {
   TextureFileKind kind = TextureFileKind::kDds;
-  std::optional<DdsLayout> dds;  // kDds once its header has been parsed
+  std::optional<scene::DdsLayout> dds;  // kDds once its header has been parsed
 };
 
 class TextureFileIndex {

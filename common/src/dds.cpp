@@ -1,24 +1,21 @@
-#include "texstream/server/load/dds_layout.hpp"
+#include "texstream/common/dds.hpp"
 
 #include <cstring>
 
-namespace texstream::server {
+#include "texstream/common/contract.hpp"
+
+namespace texstream::scene {
 
 namespace {
 
-// Field offsets in bytes from the start of the file (the "DDS " magic is bytes 0-3), from Microsoft's
-// DDS_HEADER / DDS_PIXELFORMAT / DDS_HEADER_DXT10 documentation.
-constexpr size_t kMagic = 0, kSize = 4, kFlags = 8, kHeight = 12, kWidth = 16, kDepth = 24, kMipMapCount = 28;
-constexpr size_t kPfFlags = 80, kPfFourCC = 84, kPfBitCount = 88, kPfRMask = 92, kPfGMask = 96, kPfBMask = 100,
-                 kPfAMask = 104, kCaps2 = 112;
-constexpr size_t kDx10Format = 128, kDx10Dimension = 132, kDx10ArraySize = 140;
-constexpr uint64_t kLegacyHeaderBytes = 128;
+using namespace dds_field;
 
 constexpr uint32_t kDdsMagic = 0x20534444u;  // "DDS "
-constexpr uint32_t kDdsdMipMapCount = 0x20000u;
-constexpr uint32_t kDdsdDepth = 0x800000u;
-constexpr uint32_t kDdpfFourCC = 0x4u;
-constexpr uint32_t kDdpfRgb = 0x40u;
+constexpr uint32_t kDdsdCaps = 0x1u, kDdsdHeight = 0x2u, kDdsdWidth = 0x4u, kDdsdPitch = 0x8u,
+                   kDdsdPixelFormat = 0x1000u, kDdsdMipMapCount = 0x20000u, kDdsdLinearSize = 0x80000u,
+                   kDdsdDepth = 0x800000u;
+constexpr uint32_t kDdpfAlphaPixels = 0x1u, kDdpfFourCC = 0x4u, kDdpfRgb = 0x40u;
+constexpr uint32_t kDdsCapsComplex = 0x8u, kDdsCapsTexture = 0x1000u, kDdsCapsMipMap = 0x400000u;
 constexpr uint32_t kCaps2Cubemap = 0x200u;
 constexpr uint32_t kCaps2Volume = 0x200000u;
 constexpr uint32_t kFourCCDxt1 = 0x31545844u;   // "DXT1"
@@ -33,11 +30,50 @@ uint32_t word(std::span<const std::byte> b, size_t offset) {
   return v;
 }
 
+void put(std::array<std::byte, kDdsHeaderBytes>& b, size_t offset, uint32_t v) {
+  std::memcpy(b.data() + offset, &v, 4);  // little-endian host: the format's byte order
+}
+
 Error corrupt(const std::string& what, const std::string& why) {
   return make_error(ErrorCode::kCorrupt, what + ": DDS " + why);
 }
 
 }  // namespace
+
+std::array<std::byte, kDdsHeaderBytes> make_dds_header(TexelFormat format, uint32_t width, uint32_t height,
+                                                       uint32_t mip_count) {
+  TS_ASSERT(valid_texture_extent(width, height), "DDS extent %ux%u", width, height);
+  TS_ASSERT(mip_count >= 1 && mip_count <= full_mip_count(width, height), "DDS mip_count %u for %ux%u", mip_count,
+            width, height);
+  std::array<std::byte, kDdsHeaderBytes> h{};
+  uint32_t flags = kDdsdCaps | kDdsdHeight | kDdsdWidth | kDdsdPixelFormat | kDdsdMipMapCount;
+  put(h, kMagic, kDdsMagic);
+  put(h, kSize, 124);
+  put(h, kHeight, height);
+  put(h, kWidth, width);
+  put(h, kDepth, 0);
+  put(h, kMipMapCount, mip_count);
+  put(h, kPfSize, 32);
+  if (format == TexelFormat::kBc1) {
+    flags |= kDdsdLinearSize;
+    put(h, kPitchOrLinearSize, static_cast<uint32_t>(mip_bytes(format, width, height, 0)));
+    put(h, kPfFlags, kDdpfFourCC);
+    put(h, kPfFourCC, kFourCCDxt1);
+  } else {
+    TS_ASSERT(format == TexelFormat::kRgba8, "DDS format %u", static_cast<uint32_t>(format));
+    flags |= kDdsdPitch;
+    put(h, kPitchOrLinearSize, width * 4);
+    put(h, kPfFlags, kDdpfRgb | kDdpfAlphaPixels);
+    put(h, kPfBitCount, 32);
+    put(h, kPfRMask, 0x000000ffu);
+    put(h, kPfGMask, 0x0000ff00u);
+    put(h, kPfBMask, 0x00ff0000u);
+    put(h, kPfAMask, 0xff000000u);
+  }
+  put(h, kFlags, flags);
+  put(h, kCaps, kDdsCapsTexture | (mip_count > 1 ? kDdsCapsComplex | kDdsCapsMipMap : 0u));
+  return h;
+}
 
 uint64_t DdsLayout::mip_offset(uint32_t level) const {
   const TexelFormat f = encoding == DdsEncoding::kBc1 ? TexelFormat::kBc1 : TexelFormat::kRgba8;
@@ -50,7 +86,7 @@ uint64_t DdsLayout::mip_size(uint32_t level) const {
 }
 
 Result<DdsLayout> parse_dds_layout(std::span<const std::byte> bytes, const std::string& what) {
-  if (bytes.size() < kLegacyHeaderBytes) {
+  if (bytes.size() < kDdsHeaderBytes) {
     return corrupt(what, "file of " + std::to_string(bytes.size()) + " bytes is shorter than a header (128)");
   }
   if (word(bytes, kMagic) != kDdsMagic) return corrupt(what, "magic is not 'DDS '");
@@ -75,7 +111,7 @@ Result<DdsLayout> parse_dds_layout(std::span<const std::byte> bytes, const std::
                              std::to_string(full_mip_count(l.width, l.height)) + " for " + std::to_string(l.width) +
                              "x" + std::to_string(l.height));
   }
-  l.data_offset = kLegacyHeaderBytes;
+  l.data_offset = kDdsHeaderBytes;
 
   const uint32_t pf_flags = word(bytes, kPfFlags);
   const uint32_t fourcc = word(bytes, kPfFourCC);
@@ -104,4 +140,4 @@ Result<DdsLayout> parse_dds_layout(std::span<const std::byte> bytes, const std::
   return l;
 }
 
-}  // namespace texstream::server
+}  // namespace texstream::scene

@@ -1,5 +1,5 @@
 // Compiled with -mavx512f (CMakeLists.txt): XXH3's AVX-512 code, inlined. Called only after the CPU was checked
-// (fast_checksum.cpp). Like fast_checksum_avx2.cpp, it holds nothing but xxHash's own static functions, so no
+// (checksum.cpp). Like checksum_avx2.cpp, it holds nothing but xxHash's own static functions, so no
 // AVX-512 copy of an inline C++ function shared with other translation units can be kept by the linker.
 // GCC 12's own avx512fintrin.h trips -Wuninitialized and -Wmaybe-uninitialized (its _mm512_undefined_*
 // helpers, GCC bug 105593): a warning about the compiler's header, not this code; this file holds nothing else.
@@ -14,8 +14,8 @@
 #include <cstddef>
 #include <cstdint>
 
-namespace texstream::server {
+namespace texstream {
 
 uint64_t payload_checksum_avx512(const void* data, size_t bytes) { return XXH3_64bits(data, bytes); }
 
-}  // namespace texstream::server
+}  // namespace texstream
