@@ -174,4 +174,15 @@ TextureStateCounts TextureStates::counts() const {
   return c;
 }
 
+void TextureStates::apply(std::span<const TextureEvent> events) {
+  for (const TextureEvent& e : events) {
+    switch (e.kind) {
+      case TextureEvent::Kind::kCommitted: on_committed(e.texture, e.mip); break;
+      case TextureEvent::Kind::kFailed: on_failed(e.texture, e.mip, e.status); break;
+      case TextureEvent::Kind::kRejected: on_rejected(e.texture, e.mip); break;
+      case TextureEvent::Kind::kInvalidated: invalidate(e.texture); break;
+    }
+  }
+}
+
 }  // namespace texstream

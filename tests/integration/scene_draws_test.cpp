@@ -85,7 +85,7 @@ struct Draw {
 
 std::vector<Draw> draws_of(const SceneGpu& g, uint32_t count) {
   std::vector<Draw> out;
-  const auto* d = g.indirect.as<VkDrawIndexedIndirectCommand>();
+  const auto* d = g.indirect().as<VkDrawIndexedIndirectCommand>();
   for (uint32_t i = 0; i < count; ++i) {
     EXPECT_EQ(d[i].instanceCount, 1u);
     EXPECT_EQ(d[i].vertexOffset, 0);
@@ -123,7 +123,7 @@ TEST(SceneDraws, AdjacentMeshesMergePerPartInIndexOrderAndInstancesDrawAlone) {
   EXPECT_EQ(rec.main_meshes, 4u);
   EXPECT_EQ(rec.wide_meshes, 2u);
   // Each drawn mesh once, in the broad phase's order: what compact.comp visits.
-  const uint32_t* drawn = g->scene.drawn.as<uint32_t>();
+  const uint32_t* drawn = g->scene.drawn().as<uint32_t>();
   EXPECT_EQ(std::vector<uint32_t>(drawn, drawn + rec.mesh_count), visible);
 
   // Without 4 and 7, the main list's 3 and 6 stay apart (5 is not in view) and 0 merges with nothing.
@@ -134,8 +134,8 @@ TEST(SceneDraws, AdjacentMeshesMergePerPartInIndexOrderAndInstancesDrawAlone) {
   EXPECT_EQ(rec.draw_count, 3u);  // nothing reaches outside
 
   // Stored absolute (relative 2 1 0 + first vertex), each vertex carrying its owner's id.
-  const uint32_t* idx = g->scene.indices.as<uint32_t>();
-  const uint32_t* vm = g->scene.vertex_mesh.as<uint32_t>();
+  const uint32_t* idx = g->scene.indices().as<uint32_t>();
+  const uint32_t* vm = g->scene.vertex_mesh().as<uint32_t>();
   EXPECT_EQ((std::array<uint32_t, 3>{idx[12], idx[13], idx[14]}), (std::array<uint32_t, 3>{14, 13, 12}));
   EXPECT_EQ((std::array<uint32_t, 3>{vm[12], vm[13], vm[14]}), (std::array<uint32_t, 3>{7, 7, 7}));
   EXPECT_EQ((std::array<uint32_t, 3>{vm[18], vm[19], vm[20]}), (std::array<uint32_t, 3>{6, 6, 6}));
@@ -151,7 +151,7 @@ TEST(SceneDraws, AnInstanceSeenBeforeItsOwnerOwnsTheRangesInstead) {
   ASSERT_TRUE(g->scene.make_resident(s, std::vector<uint32_t>{1, 0}, nullptr).ok());
   EXPECT_TRUE(g->scene.is_instanced(1));
   EXPECT_FALSE(g->scene.is_instanced(2));
-  EXPECT_EQ(g->scene.vertex_mesh.as<uint32_t>()[3], 2u);
+  EXPECT_EQ(g->scene.vertex_mesh().as<uint32_t>()[3], 2u);
 }
 
 TEST(SceneDraws, PartlySharedRangesAreRefusedNamingTheMeshAndLeaveNothingResident) {
@@ -180,6 +180,6 @@ TEST(SceneDraws, PartlySharedRangesAreRefusedNamingTheMeshAndLeaveNothingResiden
   EXPECT_FALSE(g->scene.is_instanced(3));
   EXPECT_TRUE(g->scene.is_instanced(0));
   EXPECT_FALSE(g->scene.is_instanced(1));
-  EXPECT_EQ(g->scene.vertex_mesh.as<uint32_t>()[0], 3u);
-  EXPECT_EQ(g->scene.vertex_mesh.as<uint32_t>()[3], 1u);
+  EXPECT_EQ(g->scene.vertex_mesh().as<uint32_t>()[0], 3u);
+  EXPECT_EQ(g->scene.vertex_mesh().as<uint32_t>()[3], 1u);
 }

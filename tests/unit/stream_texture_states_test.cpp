@@ -354,6 +354,36 @@ TEST(TextureStates, EvictionResetsToInitialAndRefusesTheLateAnswer) {
             std::vector<uint32_t>{0});
 }
 
+// The frame loop hands the cache's events over in one list (TextureCache::take_events): the same states as
+// the calls one by one, in the same order.
+TEST(TextureStates, ApplyingEventsEqualsTheCallsInOrder) {
+  TextureStates direct(table()), applied(table());
+  Recorder rec;
+  const std::vector<StreamCandidate> list{cand(T0, 0), cand(T1, 0), cand(T2, 0)};
+  ASSERT_EQ(mips_of(direct.run_cycle(list, kHuge, 0, rec.fn())), mips_of(applied.run_cycle(list, kHuge, 0, rec.fn())));
+  direct.on_committed(T0, MipLevel(6));
+  direct.on_failed(T1, MipLevel(8), CompletionStatus::kIoError);
+  direct.on_rejected(T2, MipLevel(4));
+  direct.invalidate(T0);
+  direct.on_committed(T0, MipLevel(6));  // a late answer, refused after the invalidate
+  using K = TextureEvent::Kind;
+  applied.apply(std::vector<TextureEvent>{{K::kCommitted, T0, MipLevel(6)},
+                                          {K::kFailed, T1, MipLevel(8), CompletionStatus::kIoError},
+                                          {K::kRejected, T2, MipLevel(4)},
+                                          {K::kInvalidated, T0},
+                                          {K::kCommitted, T0, MipLevel(6)}});
+  for (TextureId t : {T0, T1, T2}) {
+    const TextureStateView a = direct.view(t), b = applied.view(t);
+    EXPECT_EQ(a.phase, b.phase) << t.value;
+    EXPECT_EQ(a.resident, b.resident) << t.value;
+    EXPECT_EQ(a.pending, b.pending) << t.value;
+    EXPECT_EQ(a.failures, b.failures) << t.value;
+  }
+  EXPECT_EQ(applied.view(T0).phase, TexturePhase::kInitial);
+  EXPECT_EQ(applied.view(T1).failures, 1u);
+  EXPECT_EQ(applied.view(T2).failures, 1u);
+}
+
 TEST(TextureStates, SenderSkipLeavesTheTextureAloneAndStopEndsTheCycle) {
   TextureStates s(table());
   const std::vector<StreamCandidate> list{cand(T0, 0), cand(T1, 0), cand(T2, 0)};

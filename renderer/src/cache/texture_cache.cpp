@@ -33,10 +33,9 @@ VkFormat cache_vk_format(TexelFormat format) {
   return format == TexelFormat::kBc1 ? VK_FORMAT_BC1_RGBA_SRGB_BLOCK : VK_FORMAT_R8G8B8A8_SRGB;
 }
 
-TextureCache::TextureCache(const TextureCacheOptions& options, const SceneData& scene, TextureStates& states)
+TextureCache::TextureCache(const TextureCacheOptions& options, const SceneData& scene)
     : options_(options),
       scene_(scene),
-      states_(states),
       ring_(options.staging_bytes),
       allocator_(options.layer_extent, options.layers),
       residency_(scene.texture_records().size()),
@@ -44,7 +43,7 @@ TextureCache::TextureCache(const TextureCacheOptions& options, const SceneData& 
       entry_written_(scene.texture_records().size(), false) {}
 
 Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& ctx, const TextureCacheOptions& options,
-                                                           const SceneData& scene, TextureStates& states) {
+                                                           const SceneData& scene) {
   const auto t0 = std::chrono::steady_clock::now();
   if (options.layer_extent == 0 || (options.layer_extent & (options.layer_extent - 1)) != 0) {
     return make_error(ErrorCode::kInvalidArgument, "cache.layer_extent_px = " + std::to_string(options.layer_extent) +
@@ -55,7 +54,7 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
                       "cache.layers = " + std::to_string(options.layers) + " exceeds the device's maxImageArrayLayers " +
                           std::to_string(ctx.properties().limits.maxImageArrayLayers));
   }
-  std::unique_ptr<TextureCache> c(new TextureCache(options, scene, states));
+  std::unique_ptr<TextureCache> c(new TextureCache(options, scene));
   c->mip_levels_ = floor_log2(options.layer_extent) + 1;
   SparseImageInfo info;
   info.format = cache_vk_format(options.format);
@@ -151,11 +150,11 @@ void TextureCache::reject(TextureId texture, MipLevel mip, std::span<std::byte> 
     release_staging(it->second);
     reserved_.erase(it);
   }
-  states_.on_rejected(texture, mip);
+  events_.push_back({TextureEvent::Kind::kRejected, texture, mip});
 }
 
 void TextureCache::failed(TextureId texture, MipLevel mip, CompletionStatus status) {
-  states_.on_failed(texture, mip, status);
+  events_.push_back({TextureEvent::Kind::kFailed, texture, mip, status});
 }
 
 void TextureCache::evict(TextureId texture) {
@@ -181,7 +180,7 @@ void TextureCache::evict(TextureId texture) {
   };
   std::erase_if(queued_, drop);
   std::erase_if(ready_, drop);
-  states_.invalidate(texture);
+  events_.push_back({TextureEvent::Kind::kInvalidated, texture});
 }
 
 void TextureCache::evict_all(const std::vector<TextureId>& textures) {
@@ -204,7 +203,7 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
       unplaceable_logged_[texture.value] = true;
     }
     release_staging(alloc);
-    states_.on_failed(texture, mip, CompletionStatus::kNotFound);
+    events_.push_back({TextureEvent::Kind::kFailed, texture, mip, CompletionStatus::kNotFound});
     return;
   }
   const scene::TextureRecord& rec = scene_.texture_records()[texture.value];
@@ -225,7 +224,7 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
       }
       release_staging(alloc);
       // Not the file's fault, but it can never be shown: kNotFound marks it broken, so it is not asked again.
-      states_.on_failed(texture, mip, CompletionStatus::kNotFound);
+      events_.push_back({TextureEvent::Kind::kFailed, texture, mip, CompletionStatus::kNotFound});
       return;
     }
     region = *placed;
@@ -239,7 +238,7 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
   if ((region->extent >> mip.value) < block_size(options_.format)) {
     // A BC1 level smaller than a block in a shared layer: writing it would overwrite a neighbour's texels.
     release_staging(alloc);
-    states_.on_rejected(texture, mip);
+    events_.push_back({TextureEvent::Kind::kRejected, texture, mip});
     return;
   }
   queued_.push_back(Copy{texture, mip.value, alloc, residency_[texture.value].epoch, 0});
@@ -307,7 +306,7 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
       spdlog::error("texture cache: {}", st.error().message);
       for (const Copy& c : ready_) {
         release_staging(c.staging);
-        states_.on_rejected(c.texture, MipLevel(c.mip));
+        events_.push_back({TextureEvent::Kind::kRejected, c.texture, MipLevel(c.mip)});
       }
       ready_.clear();
     }
@@ -404,7 +403,7 @@ void TextureCache::on_submission_complete(uint64_t serial) {
     publish(c.texture);
     ++stats_.mips_uploaded;
     stats_.bytes_uploaded += c.staging.size;
-    states_.on_committed(c.texture, MipLevel(c.mip));
+    events_.push_back({TextureEvent::Kind::kCommitted, c.texture, MipLevel(c.mip)});
   }
 }
 

@@ -354,14 +354,14 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
 
   constexpr size_t kBuffers = 8;
   const std::array<VkDescriptorBufferInfo, kBuffers> buffers{{
-      {scene_.frame_uniforms.handle(), 0, VK_WHOLE_SIZE},
-      {scene_.meshes.handle(), 0, VK_WHOLE_SIZE},
+      {scene_.frame_uniforms().handle(), 0, VK_WHOLE_SIZE},
+      {scene_.meshes().handle(), 0, VK_WHOLE_SIZE},
       {cache.texture_table(), 0, VK_WHOLE_SIZE},
-      {scene_.mesh_meta.handle(), 0, VK_WHOLE_SIZE},
-      {scene_.compacted.handle(), 0, VK_WHOLE_SIZE},
-      {scene_.readback.handle(), 0, VK_WHOLE_SIZE},
+      {scene_.mesh_meta().handle(), 0, VK_WHOLE_SIZE},
+      {scene_.compacted().handle(), 0, VK_WHOLE_SIZE},
+      {scene_.readback().handle(), 0, VK_WHOLE_SIZE},
       {probe_.handle(), 0, VK_WHOLE_SIZE},
-      {scene_.drawn.handle(), 0, VK_WHOLE_SIZE},
+      {scene_.drawn().handle(), 0, VK_WHOLE_SIZE},
   }};
   const VkDescriptorImageInfo image{sampler_.get(), cache.image_view(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
   const VkDescriptorImageInfo probe_image{probe_sampler_.get(), cache.image_view(),
@@ -569,7 +569,7 @@ void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const
   const uint32_t main_count = std::min(frame.main_count, frame.draw_count);
   const uint32_t wide_first = std::min(frame.wide_first, frame.draw_count);
   // The fields of the frame uniforms that describe these passes (the caller fills the rest before record()).
-  auto* fu = scene_.frame_uniforms.as<gpu::FrameUniforms>();
+  auto* fu = scene_.frame_uniforms().as<gpu::FrameUniforms>();
   fu->flags.x = frame.feedback ? (fu->flags.x | gpu::kFlagFeedback) : (fu->flags.x & ~gpu::kFlagFeedback);
   fu->view = {options_.debug_view, options_.width, frame.mesh_count, 0};
   if (timestamps_) {
@@ -585,7 +585,7 @@ void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const
                  VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT);
   // The list this frame compacts into: straight into the host-visible read-back list when a streaming cycle
   // is about to start (compact.comp with COMPACT_TO_HOST), else the device-local one.
-  const GpuBuffer& list = frame.read_back_list ? scene_.readback : scene_.compacted;
+  const GpuBuffer& list = frame.read_back_list ? scene_.readback() : scene_.compacted();
   if (frame.feedback) vkCmdFillBuffer(cmd, list.handle(), 0, sizeof(gpu::CompactListHeader), 0);
 
   auto begin_pass = [&](VkRenderPass pass, VkFramebuffer fb, uint32_t w, uint32_t h, bool main) {
@@ -615,12 +615,12 @@ void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const
     if (count == 0) return;
     vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, layout_.get(), 0, 1, &set_, 0, nullptr);
     vkCmdPushConstants(cmd, layout_.get(), kAllStages, 0, sizeof pc, &pc);
-    const std::array<VkBuffer, 2> vbs{scene_.vertices.handle(), scene_.vertex_mesh.handle()};
+    const std::array<VkBuffer, 2> vbs{scene_.vertices().handle(), scene_.vertex_mesh().handle()};
     const std::array<VkDeviceSize, 2> offsets{0, 0};
     vkCmdBindVertexBuffers(cmd, 0, 2, vbs.data(), offsets.data());
-    vkCmdBindIndexBuffer(cmd, scene_.indices.handle(), 0, VK_INDEX_TYPE_UINT32);
+    vkCmdBindIndexBuffer(cmd, scene_.indices().handle(), 0, VK_INDEX_TYPE_UINT32);
     vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline);
-    vkCmdDrawIndexedIndirect(cmd, scene_.indirect.handle(), VkDeviceSize{first} * sizeof(VkDrawIndexedIndirectCommand),
+    vkCmdDrawIndexedIndirect(cmd, scene_.indirect().handle(), VkDeviceSize{first} * sizeof(VkDrawIndexedIndirectCommand),
                              count, sizeof(VkDrawIndexedIndirectCommand));
   };
   // Main pass: the pre-pass (depth + owner id), then the shading subpass over the same draws.

@@ -1,26 +1,20 @@
 #include "texstream/render/frame/view_renderer.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cstring>
 
-#include "texstream/render/scene/camera.hpp"
 #include "texstream/render/frame/frame_capture.hpp"
-#include "texstream/render/frame/frame_constants.hpp"
+#include "texstream/render/frame/frame_plan.hpp"
+#include "texstream/render/frame/render_stack.hpp"
+#include "texstream/render/scene/camera.hpp"
 #include "texstream/render/scene/scene_gpu.hpp"
-#include "texstream/render/frame/scene_passes.hpp"
-#include "texstream/render/vulkan/shader_compiler.hpp"
-#include "texstream/render/cache/texture_cache.hpp"
-#include "texstream/stream/texture_states.hpp"
-#include "texstream/render/vulkan/vk_check.hpp"
-#include "texstream/render/vulkan/vulkan_context.hpp"
 
 namespace texstream::render {
 
 namespace {
 
 using Clock = std::chrono::steady_clock;
-// Same as renderer_app.cpp: the wide metadata pass renders at 1/4 of the viewport per axis.
-constexpr uint32_t kWidePassDivisor = 4;
 // Nothing is streamed here: a small cache image is enough to give the shaders (and the LOD probe) a texture.
 constexpr uint32_t kCacheLayers = 2;
 constexpr uint64_t kStagingBytes = 1u << 20;
@@ -45,32 +39,17 @@ int64_t decode_mesh_id(uint8_t r, uint8_t g, uint8_t b) {
 struct ViewRenderer::Impl {
   Config cfg;
   ViewRendererOptions options;
-  SceneData scene;
-  std::unique_ptr<VulkanContext> ctx;
-  std::unique_ptr<TextureStates> states;
-  std::unique_ptr<TextureCache> cache;
-  std::unique_ptr<SceneGpu> gpu;
-  std::unique_ptr<ShaderCompiler> compiler;
-  std::unique_ptr<ScenePasses> passes;
-  std::unique_ptr<FrameCapture> capture;
-  std::unique_ptr<BroadPhase> broad_phase;
-  UniqueCommandPool pool;
-  VkCommandBuffer cmd = VK_NULL_HANDLE;
-  UniqueFence fence;
-  std::vector<uint32_t> visible;
-  std::vector<uint32_t> new_textures;
-  uint64_t serial = 0;
+  SceneData scene;  // before the stack, which reads it until it is gone
+  std::unique_ptr<RenderStack> stack;
 };
 
 ViewRenderer::ViewRenderer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 
-ViewRenderer::~ViewRenderer() {
-  if (impl_ && impl_->ctx) vkDeviceWaitIdle(impl_->ctx->device());  // nothing to do about a failure here
-}
+ViewRenderer::~ViewRenderer() = default;
 
 const SceneData& ViewRenderer::scene() const { return impl_->scene; }
-uint32_t ViewRenderer::validation_errors() const { return impl_->ctx->validation_errors(); }
-bool ViewRenderer::probe_is_anisotropic() const { return impl_->passes->probe_is_anisotropic(); }
+uint32_t ViewRenderer::validation_errors() const { return impl_->stack->context().validation_errors(); }
+bool ViewRenderer::probe_is_anisotropic() const { return impl_->stack->passes().probe_is_anisotropic(); }
 
 Result<std::unique_ptr<ViewRenderer>> ViewRenderer::create(const Config& cfg, SceneData scene,
                                                             const ViewRendererOptions& options) {
@@ -85,155 +64,86 @@ Result<std::unique_ptr<ViewRenderer>> ViewRenderer::create(const Config& cfg, Sc
       for (int a = 0; a < 3; ++a) mesh.origin[a] += options.scene_offset[a];
   }
 
-  VulkanContextOptions vo;
-  vo.device_substring = cfg.render.device;
-  vo.validation = cfg.render.validation;
-  vo.need_bc1 = m.scene.manifest.texture_format == TexelFormat::kBc1;
-  auto ctx = VulkanContext::create(vo);
-  if (!ctx) return ctx.error();
-  m.ctx = std::move(*ctx);
-
-  m.states = std::make_unique<TextureStates>(m.scene.shapes());
-  TextureCacheOptions co;
-  co.format = m.scene.manifest.texture_format;
-  co.layer_extent = static_cast<uint32_t>(cfg.cache.layer_extent_px);
-  co.layers = kCacheLayers;
-  co.staging_bytes = kStagingBytes;
-  auto cache = TextureCache::create(*m.ctx, co, m.scene, *m.states);
-  if (!cache) return cache.error();
-  m.cache = std::move(*cache);
-  auto gpu = SceneGpu::create(*m.ctx, m.scene, options.stage_geometry);
-  if (!gpu) return gpu.error();
-  m.gpu = std::make_unique<SceneGpu>(std::move(*gpu));
-  m.compiler = std::make_unique<ShaderCompiler>(ShaderCompiler::default_source_dir(),
-                                                ShaderCompiler::default_cache_dir());
-  ScenePassesOptions po;
-  po.width = static_cast<uint32_t>(cfg.render.width_px);
-  po.height = static_cast<uint32_t>(cfg.render.height_px);
-  po.wide_width = std::max(16u, po.width / kWidePassDivisor);
-  po.wide_height = std::max(16u, po.height / kWidePassDivisor);
-  po.debug_view = gpu_debug_view(cfg.render.debug_view);
+  RenderStackOptions so;
+  so.vulkan.device_substring = cfg.render.device;
+  so.vulkan.validation = cfg.render.validation;
+  so.vulkan.need_bc1 = m.scene.manifest.texture_format == TexelFormat::kBc1;
+  so.cache.format = m.scene.manifest.texture_format;
+  so.cache.layer_extent = static_cast<uint32_t>(cfg.cache.layer_extent_px);
+  so.cache.layers = kCacheLayers;
+  so.cache.staging_bytes = kStagingBytes;
+  so.stage_geometry = options.stage_geometry;
+  auto passes = scene_passes_options(cfg);
+  if (!passes) return passes.error();
+  ScenePassesOptions& po = so.passes;
+  po = *passes;
   po.lod_probe = options.lod_probe;
   po.probe_anisotropy = static_cast<float>(cfg.stream.max_anisotropy);
   po.timestamps = options.timestamps;
-  auto passes = ScenePasses::create(*m.ctx, *m.compiler, po, *m.gpu, *m.cache);
-  if (!passes) return passes.error();
-  m.passes = std::move(*passes);
-  auto capture = FrameCapture::create(*m.ctx, po.width, po.height);
-  if (!capture) return capture.error();
-  m.capture = std::make_unique<FrameCapture>(std::move(*capture));
-  m.broad_phase = BroadPhase::for_scene(m.scene);
-
-  VkDevice device = m.ctx->device();
-  VkCommandPoolCreateInfo pci{};
-  pci.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
-  pci.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
-  pci.queueFamilyIndex = m.ctx->queue_family();
-  VkCommandPool pool = VK_NULL_HANDLE;
-  TS_VK_TRY(vkCreateCommandPool(device, &pci, nullptr, &pool));
-  m.pool = UniqueCommandPool(device, pool);
-  VkCommandBufferAllocateInfo ai{};
-  ai.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
-  ai.commandPool = pool;
-  ai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
-  ai.commandBufferCount = 1;
-  TS_VK_TRY(vkAllocateCommandBuffers(device, &ai, &m.cmd));
-  VkFenceCreateInfo fci{};
-  fci.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
-  VkFence fence = VK_NULL_HANDLE;
-  TS_VK_TRY(vkCreateFence(device, &fci, nullptr, &fence));
-  m.fence = UniqueFence(device, fence);
+  auto stack = RenderStack::create(m.scene, so);
+  if (!stack) return stack.error();
+  m.stack = std::move(*stack);
   return std::unique_ptr<ViewRenderer>(new ViewRenderer(std::move(impl)));
 }
 
 Result<ViewResult> ViewRenderer::render(const CameraPose& pose, const ViewRequest& request) {
   Impl& m = *impl_;
+  RenderStack& stack = *m.stack;
   const auto& r = m.cfg.render;
   const CameraLens lens{r.fov_y_deg, r.offscreen_fov_y_deg,
                         static_cast<double>(r.width_px) / static_cast<double>(r.height_px), r.near_m, r.far_m};
   const Camera cam = make_camera(pose, lens);
   ViewResult out;
-  out.width = m.passes->options().width;
-  out.height = m.passes->options().height;
+  out.width = stack.passes().options().width;
+  out.height = stack.passes().options().height;
 
+  // The frame loop's plan (frame_plan.hpp): meshes drawn for the first time are checked and uploaded in this
+  // submission.
   const auto t0 = Clock::now();
-  // The wide frustum for both passes, then split by the viewport's: each pass draws only what it can see.
-  m.broad_phase->query(Frustum::from_matrix(cam.wide_proj * cam.view), cam.position, m.visible, &out.broad_phase);
-  ViewportSplit split =
-      m.broad_phase->split_by_viewport(Frustum::from_matrix(cam.proj * cam.view), cam.position, m.visible);
-  out.submitted = m.visible.size();
-  FrameRecording rec;
-  rec.main = main_pass_constants(cam);
-  rec.wide = wide_pass_constants(cam, r.fov_y_deg, r.offscreen_fov_y_deg, out.height, m.passes->options().wide_height);
-  if (m.options.drop_unsampled) {
-    const auto& po = m.passes->options();
-    const uint32_t bits = m.ctx->properties().limits.subPixelPrecisionBits;
-    split = m.broad_phase->drop_unsampled(
-        SampleGrid::from_columns(rec.main.view_proj.m, po.width, po.height, bits),
-        SampleGrid::from_columns(rec.wide.view_proj.m, po.wide_width, po.wide_height, bits), cam.position,
-        m.visible, split);
-  }
-  out.unsampled = out.submitted - m.visible.size();
-  out.broad_phase_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-
-  // As the frame loop does: meshes drawn for the first time are checked and uploaded in this submission.
-  m.new_textures.clear();
-  TS_TRY(m.gpu->make_resident(m.scene, m.visible, &m.new_textures));
-  TS_TRY(m.cache->prepare_textures(m.new_textures));
-  m.gpu->write_draws(m.scene, m.visible, cam.position, split, rec);
+  FramePlanOptions fo;
+  fo.drop_unsampled = m.options.drop_unsampled;
+  fo.stats = &out.broad_phase;
+  fo.step = [&](const char* name) {
+    if (std::strcmp(name, "broad_phase") == 0)
+      out.broad_phase_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  };
+  auto plan = plan_frame(stack, cam, m.cfg, fo);
+  if (!plan) return plan.error();
+  FrameRecording& rec = plan->rec;
+  out.submitted = plan->submitted;
+  out.unsampled = plan->unsampled;
   out.main_meshes = rec.main_meshes;
   out.wide_meshes = rec.wide_meshes;
   out.main_draws = rec.main_count;
   out.wide_draws = rec.draw_count - rec.wide_first;
   rec.feedback = request.feedback;
   rec.read_back_list = request.feedback && request.read_back;
-  *m.gpu->frame_uniforms.as<gpu::FrameUniforms>() = frame_uniforms(
-      cam, m.cfg, m.gpu->mesh_count, m.gpu->compact_capacity, m.cache->layer_extent(), m.cache->mip_levels());
   if (m.options.lod_probe) {
-    auto bytes = m.passes->probe().bytes();
+    auto bytes = stack.passes().probe().bytes();
     std::memset(bytes.data(), 0, bytes.size());
   }
 
-  VkDevice device = m.ctx->device();
-  TS_VK_TRY(vkResetCommandBuffer(m.cmd, 0));
-  VkCommandBufferBeginInfo bi{};
-  bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
-  bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
-  TS_VK_TRY(vkBeginCommandBuffer(m.cmd, &bi));
-  m.cache->record_uploads(m.cmd, ++m.serial);
-  TS_TRY(m.gpu->record_uploads(m.scene, m.cmd));
-  m.passes->record(m.cmd, rec);
-  if (request.capture) m.capture->record(m.cmd, m.passes->colour().handle());
-  TS_VK_TRY(vkEndCommandBuffer(m.cmd));
-  VkSubmitInfo si{};
-  si.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
-  si.commandBufferCount = 1;
-  si.pCommandBuffers = &m.cmd;
-  VkFence fence = m.fence.get();
-  TS_VK_TRY(vkResetFences(device, 1, &fence));
-  const auto t1 = Clock::now();
-  TS_VK_TRY(vkQueueSubmit(m.ctx->queue(), 1, &si, fence));
-  TS_VK_TRY(vkWaitForFences(device, 1, &fence, VK_TRUE, UINT64_MAX));
-  out.gpu_ms = std::chrono::duration<double, std::milli>(Clock::now() - t1).count();
-  m.cache->on_submission_complete(m.serial);
-  out.pass_times = m.passes->read_pass_times();
+  Submission sub;
+  sub.passes = &rec;
+  sub.capture = request.capture;
+  TS_TRY(stack.submit(sub));
+  out.gpu_ms = stack.last_gpu_ms();
+  out.pass_times = stack.passes().read_pass_times();
 
+  const SceneGpu& gpu = stack.scene_gpu();
   if (rec.read_back_list) {
-    const auto* header = m.gpu->readback.as<gpu::CompactListHeader>();
-    out.list_count = header->count;
-    const uint32_t used = std::min(header->count, m.gpu->compact_capacity);
-    const auto* entries = reinterpret_cast<const gpu::CompactEntry*>(m.gpu->readback.bytes().data() +
-                                                                     sizeof(gpu::CompactListHeader));
-    out.entries.assign(entries, entries + used);
+    out.list_count = gpu.read_back_count();
+    const auto entries = gpu.read_back_entries();
+    out.entries.assign(entries.begin(), entries.end());
   }
   if (request.capture) {
-    const auto px = m.capture->pixels();
+    const auto px = stack.capture().pixels();
     const size_t n = static_cast<size_t>(out.width) * out.height * 4;
     out.rgba.resize(n);
     std::memcpy(out.rgba.data(), px.data(), std::min(n, px.size()));
   }
   if (m.options.lod_probe) {
-    const auto* p = m.passes->probe().as<gpu::LodProbeSample>();
+    const auto* p = stack.passes().probe().as<gpu::LodProbeSample>();
     out.probe.assign(p, p + static_cast<size_t>(out.width) * out.height);
   }
   return out;

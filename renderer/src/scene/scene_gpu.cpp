@@ -91,9 +91,9 @@ Result<SceneGpu> SceneGpu::create(const VulkanContext& ctx, const SceneData& sce
   SceneGpu g;
   g.ctx_ = &ctx;
   const auto records = scene.mesh_records();
-  g.mesh_count = static_cast<uint32_t>(records.size());
-  g.compact_capacity = g.mesh_count;
-  const VkDeviceSize n = std::max<VkDeviceSize>(g.mesh_count, 1);  // zero-sized buffers are invalid
+  g.mesh_count_ = static_cast<uint32_t>(records.size());
+  g.compact_capacity_ = g.mesh_count_;
+  const VkDeviceSize n = std::max<VkDeviceSize>(g.mesh_count_, 1);  // zero-sized buffers are invalid
   constexpr VkBufferUsageFlags kDst = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
 
   auto make = [&](GpuBuffer& out, VkDeviceSize size, VkBufferUsageFlags usage, MemoryUse use) -> Status {
@@ -114,27 +114,27 @@ Result<SceneGpu> SceneGpu::create(const VulkanContext& ctx, const SceneData& sce
   const VkDeviceSize ibytes = std::max<VkDeviceSize>(scene.indices().size() * sizeof(uint32_t), 4);
   g.in_place_ = !always_stage && unified_memory(ctx);
   const MemoryUse geometry = g.in_place_ ? MemoryUse::kHostVisible : MemoryUse::kDeviceLocal;
-  TS_TRY(make(g.vertices, vbytes, VK_BUFFER_USAGE_VERTEX_BUFFER_BIT | kDst, geometry));
-  TS_TRY(make(g.vertex_mesh, vmbytes, VK_BUFFER_USAGE_VERTEX_BUFFER_BIT | kDst, geometry));
-  TS_TRY(make(g.indices, ibytes, VK_BUFFER_USAGE_INDEX_BUFFER_BIT | kDst, geometry));
-  TS_TRY(make(g.meshes, n * sizeof(gpu::MeshGpu), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible));
+  TS_TRY(make(g.vertices_, vbytes, VK_BUFFER_USAGE_VERTEX_BUFFER_BIT | kDst, geometry));
+  TS_TRY(make(g.vertex_mesh_, vmbytes, VK_BUFFER_USAGE_VERTEX_BUFFER_BIT | kDst, geometry));
+  TS_TRY(make(g.indices_, ibytes, VK_BUFFER_USAGE_INDEX_BUFFER_BIT | kDst, geometry));
+  TS_TRY(make(g.meshes_, n * sizeof(gpu::MeshGpu), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible));
   // Two lists (main pass, wide pass), each at most one draw per mesh.
-  TS_TRY(make(g.indirect, 2 * n * sizeof(VkDrawIndexedIndirectCommand), VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
+  TS_TRY(make(g.indirect_, 2 * n * sizeof(VkDrawIndexedIndirectCommand), VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
               MemoryUse::kHostVisible));
-  TS_TRY(make(g.drawn, n * sizeof(uint32_t), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible));
-  TS_TRY(make(g.mesh_meta, n * sizeof(gpu::MeshMeta), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst, geometry));
+  TS_TRY(make(g.drawn_, n * sizeof(uint32_t), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible));
+  TS_TRY(make(g.mesh_meta_, n * sizeof(gpu::MeshMeta), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst, geometry));
   const VkDeviceSize list_bytes = sizeof(gpu::CompactListHeader) + n * sizeof(gpu::CompactEntry);
-  TS_TRY(make(g.compacted, list_bytes,
+  TS_TRY(make(g.compacted_, list_bytes,
               VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst,
               MemoryUse::kDeviceLocal));
   // Written by compact.comp (COMPACT_TO_HOST): only the header and the used prefix, only when a streaming cycle
   // starts.
-  TS_TRY(make(g.readback, list_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst, MemoryUse::kHostRead));
-  TS_TRY(make(g.frame_uniforms, sizeof(gpu::FrameUniforms), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT,
+  TS_TRY(make(g.readback_, list_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst, MemoryUse::kHostRead));
+  TS_TRY(make(g.frame_uniforms_, sizeof(gpu::FrameUniforms), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT,
               MemoryUse::kHostVisible));
-  g.resident_.assign((static_cast<size_t>(g.mesh_count) + 63) / 64, 0);
-  g.in_list_.assign((static_cast<size_t>(g.mesh_count) + 63) / 64, 0);
-  g.instanced_.assign((static_cast<size_t>(g.mesh_count) + 63) / 64, 0);
+  g.resident_.assign((static_cast<size_t>(g.mesh_count_) + 63) / 64, 0);
+  g.in_list_.assign((static_cast<size_t>(g.mesh_count_) + 63) / 64, 0);
+  g.instanced_.assign((static_cast<size_t>(g.mesh_count_) + 63) / 64, 0);
   // Bits per vertex and index (10^7 of them: 1.25 MB of zeros); the owner's id only where its index range
   // starts, in zero pages from the kernel (committed only where the view's meshes lie). A word per element
   // cost ~30 ms of page faults on a 10^5-mesh first frame.
@@ -150,7 +150,7 @@ Status SceneGpu::make_resident(const SceneData& scene, std::span<const uint32_t>
   stats_.meshes_uploaded = 0;
   fresh_.clear();
   for (uint32_t id : ids) {
-    TS_ASSERT(id < mesh_count, "make_resident of mesh %u of %u", id, mesh_count);
+    TS_ASSERT(id < mesh_count_, "make_resident of mesh %u of %u", id, mesh_count_);
     if (is_resident(id)) continue;
     resident_[id >> 6] |= uint64_t{1} << (id & 63);  // also skips a repeated id
     fresh_.push_back(id);
@@ -222,18 +222,18 @@ Status SceneGpu::make_resident(const SceneData& scene, std::span<const uint32_t>
   for (uint32_t id : fresh_) {
     const scene::MeshRecord& m = records[id];
     if (in_place_ && is_instanced(id)) {
-      mesh_meta.as<gpu::MeshMeta>()[id] = kEmptyMeta;  // its geometry is its owner's
+      mesh_meta_.as<gpu::MeshMeta>()[id] = kEmptyMeta;  // its geometry is its owner's
       stats_.bytes_uploaded += sizeof(gpu::MeshMeta);
     } else if (in_place_) {
       // No submission reads a mesh before it is resident, so its ranges can be written now; the next
       // vkQueueSubmit makes the host writes visible to the GPU.
       const size_t vb = size_t{m.vertex_count} * sizeof(scene::Vertex);
       const size_t ib = size_t{m.index_count} * sizeof(uint32_t);
-      std::memcpy(vertices.bytes().data() + size_t{m.first_vertex} * sizeof(scene::Vertex),
+      std::memcpy(vertices_.bytes().data() + size_t{m.first_vertex} * sizeof(scene::Vertex),
                   scene.vertices().data() + m.first_vertex, vb);
-      absolute_indices(m, scene.indices(), indices.as<uint32_t>() + m.first_index);
-      std::fill_n(vertex_mesh.as<uint32_t>() + m.first_vertex, m.vertex_count, id);
-      mesh_meta.as<gpu::MeshMeta>()[id] = kEmptyMeta;
+      absolute_indices(m, scene.indices(), indices_.as<uint32_t>() + m.first_index);
+      std::fill_n(vertex_mesh_.as<uint32_t>() + m.first_vertex, m.vertex_count, id);
+      mesh_meta_.as<gpu::MeshMeta>()[id] = kEmptyMeta;
       stats_.bytes_uploaded += vb + ib + size_t{m.vertex_count} * sizeof(uint32_t) + sizeof(gpu::MeshMeta);
     } else {
       queued_.push_back(id);
@@ -308,11 +308,11 @@ Status SceneGpu::record_uploads(const SceneData& scene, VkCommandBuffer cmd) {
   queued_.clear();
 
   VkBuffer src = staging_.handle();
-  if (!vregions.empty()) vkCmdCopyBuffer(cmd, src, vertices.handle(), static_cast<uint32_t>(vregions.size()), vregions.data());
+  if (!vregions.empty()) vkCmdCopyBuffer(cmd, src, vertices_.handle(), static_cast<uint32_t>(vregions.size()), vregions.data());
   if (!idregions.empty())
-    vkCmdCopyBuffer(cmd, src, vertex_mesh.handle(), static_cast<uint32_t>(idregions.size()), idregions.data());
-  if (!iregions.empty()) vkCmdCopyBuffer(cmd, src, indices.handle(), static_cast<uint32_t>(iregions.size()), iregions.data());
-  vkCmdCopyBuffer(cmd, src, mesh_meta.handle(), static_cast<uint32_t>(mregions.size()), mregions.data());
+    vkCmdCopyBuffer(cmd, src, vertex_mesh_.handle(), static_cast<uint32_t>(idregions.size()), idregions.data());
+  if (!iregions.empty()) vkCmdCopyBuffer(cmd, src, indices_.handle(), static_cast<uint32_t>(iregions.size()), iregions.data());
+  vkCmdCopyBuffer(cmd, src, mesh_meta_.handle(), static_cast<uint32_t>(mregions.size()), mregions.data());
   VkMemoryBarrier b{};
   b.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
   b.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
@@ -328,10 +328,10 @@ Status SceneGpu::record_uploads(const SceneData& scene, VkCommandBuffer cmd) {
 void SceneGpu::write_draws(const SceneData& scene, std::span<const uint32_t> visible,
                            const std::array<double, 3>& camera, const ViewportSplit& split, FrameRecording& rec) {
   // `drawn` holds mesh_count ids: the broad phase returns each mesh at most once.
-  TS_ASSERT(visible.size() <= mesh_count, "write_draws of %zu meshes of %u", visible.size(), mesh_count);
+  TS_ASSERT(visible.size() <= mesh_count_, "write_draws of %zu meshes of %u", visible.size(), mesh_count_);
   const size_t main_end = std::min<size_t>(split.main_end, visible.size());
-  auto* mesh_out = meshes.as<gpu::MeshGpu>();
-  auto* drawn_out = drawn.as<uint32_t>();
+  auto* mesh_out = meshes_.as<gpu::MeshGpu>();
+  auto* drawn_out = drawn_.as<uint32_t>();
   const auto records = scene.mesh_records();
   uint32_t drawn_count = 0;
   for (const uint32_t id : visible) {
@@ -377,7 +377,7 @@ std::pair<uint32_t, uint32_t> SceneGpu::write_list(const SceneData& scene, std::
     hi = std::max(hi, w);
     ++meshes_listed;
   }
-  auto* draws = indirect.as<VkDrawIndexedIndirectCommand>() + draw_at;
+  auto* draws = indirect_.as<VkDrawIndexedIndirectCommand>() + draw_at;
   uint32_t count = 0;
   bool open = false;  // whether draws[count - 1] is a run that the next adjacent mesh may extend
   for (size_t w = lo; w <= hi && w < in_list_.size(); ++w) {

@@ -6,7 +6,8 @@
 // Pure and deterministic: no clock, no I/O, no Vulkan. The caller feeds it one cycle's sorted visibility
 // list and hands each chosen mip to a `send` function (in the renderer: StreamClient::try_request); events
 // from the streaming side (a mip uploaded, a load failed, a cache layer evicted) come back through
-// on_committed / on_failed / on_rejected / invalidate. Single-threaded: one owner calls everything.
+// on_committed / on_failed / on_rejected / invalidate, or as a list of TextureEvents through apply(). Single-
+// threaded: one owner calls everything (in the renderer the frame loop, which hands over the cache's events).
 //
 // How the paper's synchronous loop maps onto an asynchronous server:
 //   * The paper's `texture.mipLevel` (the displayed level) is `resident`: the finest level the renderer
@@ -91,6 +92,22 @@ struct CycleResult {
 // no such level: its initial mip is its base level 0. Clamped to the texture's last stored level.
 uint32_t initial_mip_level(const TextureShape& shape);
 
+// What the streaming side learnt about one texture, in the order it happened: the renderer's texture cache
+// collects them (TextureCache::take_events) and the frame loop hands them to TextureStates::apply, so the
+// states are fed from one side only.
+struct TextureEvent {
+  enum class Kind : uint8_t {
+    kCommitted,    // on_committed(texture, mip)
+    kFailed,       // on_failed(texture, mip, status)
+    kRejected,     // on_rejected(texture, mip)
+    kInvalidated,  // invalidate(texture)
+  };
+  Kind kind;
+  TextureId texture;
+  MipLevel mip{};
+  CompletionStatus status = CompletionStatus::kOk;
+};
+
 class TextureStates {
  public:
   // Failures that are not the texture's fault (unfilled, cancelled, timed out: the server was busy, the
@@ -122,6 +139,8 @@ class TextureStates {
   // The cache evicted the texture (seed 000 §3.6: its layer was reused): back to Initial, nothing resident,
   // nothing pending (a late answer to the old request is then refused by on_committed). Broken stays broken.
   void invalidate(TextureId texture);
+  // Each event in order, as the call its kind names.
+  void apply(std::span<const TextureEvent> events);
 
   size_t size() const { return states_.size(); }
   bool contains(TextureId texture) const { return texture.value < states_.size(); }

@@ -7,14 +7,17 @@
 // counted: small regions share pages, SparsePageTable) in the frame that first copies into that level, by
 // one vkQueueBindSparse for the whole frame; the frame's submission waits on bind_wait() before its copies.
 // A mip becomes visible to the shader (TextureGpu: [finest, coarsest] resident) and to the texture state
-// machine (on_committed) only after the GPU copy that wrote it has completed; staging space is reused only
+// machine (a kCommitted event) only after the GPU copy that wrote it has completed; staging space is reused only
 // then. So the shader, which clamps every sample to that range, never reads an unbound page.
 //
 // Budget (cache.memory_bytes): bound pages x page size never exceed it. When a frame's copies need more
 // pages than are free, the oldest layer is evicted (seed §3.6's ring order; its textures go back to Initial
-// through TextureStates::invalidate) until they fit. An evicted texture is hidden at once (the table entry is
+// through a kInvalidated event) until they fit. An evicted texture is hidden at once (the table entry is
 // host-visible and read by the next submission only); its pages are unbound only after every submission that
 // could have sampled them has completed.
+//
+// The cache does not touch the texture state machine: what it learns (a mip published, rejected or failed, a
+// texture evicted) is queued as TextureEvents, in order, and the frame loop hands them over (take_events).
 //
 // Frame-thread only; every method runs between frames, when no submitted work reads the texture table.
 #include <vulkan/vulkan.h>
@@ -25,6 +28,7 @@
 #include <filesystem>
 #include <memory>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "texstream/common/result.hpp"
@@ -84,7 +88,7 @@ inline constexpr size_t kTraceEntries = size_t{1} << 16;
 class TextureCache final : public MipSink {
  public:
   static Result<std::unique_ptr<TextureCache>> create(const VulkanContext& ctx, const TextureCacheOptions& options,
-                                                      const SceneData& scene, TextureStates& states);
+                                                      const SceneData& scene);
 
   // The texture table entries of `textures` (not resident, City Colormap colour), written the first time a
   // texture is named: by the meshes a frame draws for the first time (SceneGpu::make_resident), or by a commit.
@@ -110,6 +114,8 @@ class TextureCache final : public MipSink {
   BindWait bind_wait() const { return bind_wait_; }
   // Submission `serial` (and every earlier one) has completed: publish what it copied.
   void on_submission_complete(uint64_t serial);
+  // What the texture state machine must hear since the last call, oldest first (TextureStates::apply).
+  std::vector<TextureEvent> take_events() { return std::exchange(events_, {}); }
 
   VkImageView image_view() const { return sparse_->view(); }
   VkBuffer texture_table() const { return table_.handle(); }
@@ -144,7 +150,7 @@ class TextureCache final : public MipSink {
     uint64_t serial;  // submission that carries it (after record_uploads)
   };
 
-  TextureCache(const TextureCacheOptions& options, const SceneData& scene, TextureStates& states);
+  TextureCache(const TextureCacheOptions& options, const SceneData& scene);
   void evict(TextureId texture);
   void evict_all(const std::vector<TextureId>& textures);
   // Takes the page references of copy `c`, evicting oldest layers while the budget is short. False when
@@ -156,7 +162,7 @@ class TextureCache final : public MipSink {
 
   TextureCacheOptions options_;
   const SceneData& scene_;
-  TextureStates& states_;
+  std::vector<TextureEvent> events_;  // for the texture state machine, oldest first (take_events)
   uint32_t mip_levels_ = 1;
   std::unique_ptr<SparseMemory> sparse_;
   std::unique_ptr<SparsePageTable> pages_;

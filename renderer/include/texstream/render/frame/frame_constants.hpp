@@ -1,7 +1,7 @@
 #pragma once
 // The per-frame GPU constants of the scene passes, computed from a camera and the configuration: the main and
-// wide passes' push constants and the frame uniforms. One definition for the frame loop (renderer_app.cpp) and
-// the offline ViewRenderer (tests, benchmark).
+// wide passes' push constants and the frame uniforms. One definition, used by the one frame plan
+// (frame_plan.hpp) of the frame loop and the offline ViewRenderer (tests, benchmark).
 #include "texstream/common/config.hpp"
 #include "texstream/render/scene/camera.hpp"
 #include "texstream/render/scene/gpu_structs.hpp"

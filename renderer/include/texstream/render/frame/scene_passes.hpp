@@ -35,7 +35,7 @@ namespace texstream::render {
 class VulkanContext;
 class ShaderCompiler;
 class TextureCache;
-struct SceneGpu;
+class SceneGpu;
 
 struct ScenePassesOptions {
   uint32_t width = 960;

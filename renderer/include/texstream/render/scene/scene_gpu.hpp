@@ -18,6 +18,7 @@
 // draws (record_uploads; on unified memory written in place by make_resident): a frame draws every mesh it
 // needs, complete, and start-up uploads nothing. Its
 // metadata entry is set to "no fragment" the same way, and its gpu::MeshGpu entry is written with its draw.
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <span>
@@ -42,7 +43,8 @@ struct SceneGpuStats {
   uint64_t bytes_uploaded = 0;   // geometry and metadata bytes copied, all frames
 };
 
-struct SceneGpu {
+class SceneGpu {
+ public:
   // `always_stage`: copy geometry through staging even on unified memory (the discrete-GPU path, for tests).
   static Result<SceneGpu> create(const VulkanContext& ctx, const SceneData& scene, bool always_stage = false);
 
@@ -72,21 +74,31 @@ struct SceneGpu {
   bool is_instanced(uint32_t mesh) const { return (instanced_[mesh >> 6] >> (mesh & 63)) & 1u; }
   const SceneGpuStats& stats() const { return stats_; }
 
-  uint32_t mesh_count = 0;
-  uint32_t compact_capacity = 0;  // entries of the compacted list (= mesh count: every mesh fits)
-  GpuBuffer vertices;             // scene::Vertex, device-local (host-visible too on unified memory), filled
-                                  // per mesh on first use
-  GpuBuffer vertex_mesh;          // uint32 per vertex: the id of the mesh the vertex belongs to, the same way
-  GpuBuffer indices;              // uint32, absolute (meshes.bin's index + the mesh's first vertex), the same way
-  GpuBuffer meshes;               // gpu::MeshGpu[mesh_count], host-visible, written for each draw
-  GpuBuffer indirect;             // VkDrawIndexedIndirectCommand[2 * mesh_count], host-visible: the main pass's
-                                  // list, then the wide pass's (at most one draw per mesh each)
-  GpuBuffer drawn;                // uint32[mesh_count], host-visible: the frame's drawn meshes (compact.comp)
-  GpuBuffer mesh_meta;            // gpu::MeshMeta[mesh_count], device-local, set on first use, reset by compact.comp
-  GpuBuffer compacted;            // gpu::CompactListHeader + gpu::CompactEntry[capacity], device-local
-  GpuBuffer readback;             // same layout, host-visible: header + used prefix, written only when a
-                                  // streaming cycle starts (compact.comp, COMPACT_TO_HOST)
-  GpuBuffer frame_uniforms;       // gpu::FrameUniforms, host-visible
+  uint32_t mesh_count() const { return mesh_count_; }
+  uint32_t compact_capacity() const { return compact_capacity_; }
+  // The frame's constants, written by the frame plan before the passes are recorded.
+  void set_frame_uniforms(const gpu::FrameUniforms& uniforms) { *frame_uniforms_.as<gpu::FrameUniforms>() = uniforms; }
+  // The GPU's count of the last read-back compacted list (may exceed compact_capacity()) and its used prefix;
+  // valid after a submission whose FrameRecording had read_back_list set has completed.
+  uint32_t read_back_count() const { return readback_.as<gpu::CompactListHeader>()->count; }
+  std::span<const gpu::CompactEntry> read_back_entries() const {
+    const auto* entries =
+        reinterpret_cast<const gpu::CompactEntry*>(readback_.bytes().data() + sizeof(gpu::CompactListHeader));
+    return {entries, std::min(read_back_count(), compact_capacity_)};
+  }
+
+  // The buffers, for the passes that bind them (ScenePasses) and for tests; only SceneGpu writes them, except
+  // the passes' own view fields of the frame uniforms.
+  const GpuBuffer& vertices() const { return vertices_; }
+  const GpuBuffer& vertex_mesh() const { return vertex_mesh_; }
+  const GpuBuffer& indices() const { return indices_; }
+  const GpuBuffer& meshes() const { return meshes_; }
+  const GpuBuffer& indirect() const { return indirect_; }
+  const GpuBuffer& drawn() const { return drawn_; }
+  const GpuBuffer& mesh_meta() const { return mesh_meta_; }
+  const GpuBuffer& compacted() const { return compacted_; }
+  const GpuBuffer& readback() const { return readback_; }
+  const GpuBuffer& frame_uniforms() const { return frame_uniforms_; }
 
  private:
   // One pass's list: the meshes' merged draws from draw position `draw_at`; returns {meshes, draws}.
@@ -96,6 +108,21 @@ struct SceneGpu {
   void emit_draw(uint32_t id, uint32_t first_index, uint32_t index_count, VkDrawIndexedIndirectCommand* draws,
                  uint32_t& count, bool& open) const;
 
+  uint32_t mesh_count_ = 0;
+  uint32_t compact_capacity_ = 0;  // entries of the compacted list (= mesh count: every mesh fits)
+  GpuBuffer vertices_;             // scene::Vertex, device-local (host-visible too on unified memory), filled
+                                   // per mesh on first use
+  GpuBuffer vertex_mesh_;          // uint32 per vertex: the id of the mesh the vertex belongs to, the same way
+  GpuBuffer indices_;              // uint32, absolute (meshes.bin's index + the mesh's first vertex), the same way
+  GpuBuffer meshes_;               // gpu::MeshGpu[mesh_count], host-visible, written for each draw
+  GpuBuffer indirect_;             // VkDrawIndexedIndirectCommand[2 * mesh_count], host-visible: the main pass's
+                                   // list, then the wide pass's (at most one draw per mesh each)
+  GpuBuffer drawn_;                // uint32[mesh_count], host-visible: the frame's drawn meshes (compact.comp)
+  GpuBuffer mesh_meta_;            // gpu::MeshMeta[mesh_count], device-local, set on first use, reset by compact.comp
+  GpuBuffer compacted_;            // gpu::CompactListHeader + gpu::CompactEntry[capacity], device-local
+  GpuBuffer readback_;             // same layout, host-visible: header + used prefix, written only when a
+                                   // streaming cycle starts (compact.comp, COMPACT_TO_HOST)
+  GpuBuffer frame_uniforms_;       // gpu::FrameUniforms, host-visible
   const VulkanContext* ctx_ = nullptr;
   bool in_place_ = false;           // unified memory: make_resident writes the buffers, nothing is queued
   std::vector<uint64_t> resident_;  // one bit per mesh

@@ -1,0 +1,198 @@
+// How completions come into the frame loop and how a streaming cycle starts (renderer.hpp): real time (at
+// most controller.load_time_ms a frame), lock-step (every answer to the previous cycle, in texture order),
+// and whole mip chains (render.preload_all, render.blocking_loads).
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <limits>
+#include <thread>
+
+#include "renderer.hpp"
+#include "texstream/render/cache/completion_sinks.hpp"
+#include "texstream/render/frame/visibility_list.hpp"
+
+namespace texstream::render {
+
+namespace {
+
+// Lock-step (DESIGN "Determinism and measurement"): the longest a frame waits for the server to answer the
+// previous cycle before the run is declared stuck. Generous: a cold server on a loaded 2-core machine.
+constexpr std::chrono::seconds kLockstepTimeout{60};
+
+// load_fully(): this many rounds in a row that send requests but publish no mip end the load with an error
+// instead of spinning (a server that answers everything with retryable failures, a cache that evicts what it
+// just loaded). A healthy round publishes at least one mip; 64 rounds is far beyond any retry burst.
+constexpr uint32_t kMaxFruitlessLoadRounds = 64;
+
+}  // namespace
+
+void Renderer::tell_states() { states_->apply(stack_->cache().take_events()); }
+
+Result<Renderer::Clock::duration> Renderer::take_completions() {
+  TextureCache& cache = stack_->cache();
+  if (!cfg_.render.lockstep) {
+    LoadTimeSink timed(cache, Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                                 std::chrono::duration<double, std::milli>(cfg_.controller.load_time_ms)));
+    client_->poll(timed, static_cast<size_t>(cfg_.stream.max_mips_per_cycle));
+    if (timed.limited()) record_.count_load_time_limited();
+    TS_TRY(server_not_refusing(kMaxDeathsBeforeAttach));
+    return Clock::duration{0};
+  }
+  // Lock-step: the frame first takes every answer to the previous cycle (or as many as the staging ring
+  // holds), so what it shows depends on the frame index only, not on timing.
+  const auto wait_start = Clock::now();
+  OrderedCommitSink ordered(cache);
+  LoadTimeSink all(ordered, Clock::time_point::max());
+  while (client_->stats().in_flight > 0) {
+    client_->poll(all, std::numeric_limits<size_t>::max());
+    if (all.no_room() || client_->stats().in_flight == 0) break;
+    if (Clock::now() - wait_start > kLockstepTimeout) {
+      return make_error(ErrorCode::kTimeout, "render.lockstep: " + std::to_string(client_->stats().in_flight) +
+                                                 " requests still unanswered after " +
+                                                 std::to_string(kLockstepTimeout.count()) + " s");
+    }
+    std::this_thread::sleep_for(std::chrono::microseconds(200));
+  }
+  ordered.flush();  // the whole frame's arrivals, in (texture, mip) order
+  const Clock::duration waited = Clock::now() - wait_start;
+  // A server that died took its requests along: what the next frames show would depend on when it came
+  // back, which is what lock-step promises to rule out (and a server that cannot start would leave a run of
+  // colormap frames that reports success).
+  if (client_->stats().server_deaths != deaths_before_frames_) {
+    return make_error(ErrorCode::kPeerDead, "render.lockstep: texstream-server died during the run (" +
+                                                client_->last_server_exit() +
+                                                "); its frames would depend on when it came back");
+  }
+  return waited;
+}
+
+std::vector<StreamCandidate> Renderer::read_candidates() {
+  uint64_t skipped = 0;
+  const auto candidates = build_candidates(stack_->scene_gpu().read_back_entries(), scene_.mesh_records().size(),
+                                           scene_.texture_records().size(), &skipped);
+  if (skipped) spdlog::warn("visibility list: {} entries with a bad mesh id skipped", skipped);
+  return candidates;
+}
+
+void Renderer::start_cycle() {
+  const auto candidates = read_candidates();
+  tell_states();
+  client_->begin_cycle();
+  ++cycles_;
+  // stream.max_mips_per_cycle caps the requests of one cycle on top of the load size s.
+  uint64_t sent = 0;
+  const auto max_mips = static_cast<uint64_t>(cfg_.stream.max_mips_per_cycle);
+  auto send = client_->sender();
+  // Algorithm 1: the cycle stops at load size s and refines a texture only while desired + b < resident.
+  load_bytes_ = controller_->load_bytes();
+  const auto bias = static_cast<float>(controller_->mip_bias());
+  const auto result = states_->run_cycle(candidates, load_bytes_, bias, [&](const MipRequest& r) {
+    if (sent >= max_mips) return SendResult::kStop;
+    const SendResult s = send(r);
+    if (s == SendResult::kSent) ++sent;
+    return s;
+  });
+  last_cycle_sent_ = result.sent.size();
+  spdlog::debug("cycle {}: {} candidates, {} requests, {} bytes", cycles_, candidates.size(), result.sent.size(),
+                result.bytes);
+}
+
+Status Renderer::upload_now() {
+  Submission s;
+  s.uploads = Uploads::kMips;
+  return stack_->submit(s);
+}
+
+Status Renderer::load_fully(std::vector<StreamCandidate> wanted, bool no_evictions) {
+  TextureCache& cache = stack_->cache();
+  // Desired level 0 and no bias: Algorithm 1 then refines each texture one level per round, coarsest first,
+  // until its base level is resident (Final). Each round waits for every answer before the next, so the
+  // state machine sees the previous level published first.
+  for (StreamCandidate& c : wanted) c.desired_mip = 0.0f;
+  const uint64_t evictions_before = cache.stats().evictions;
+  uint32_t fruitless = 0;
+  auto idle_since = Clock::now();
+  for (;;) {
+    const uint64_t published_before = cache.stats().mips_uploaded;
+    tell_states();
+    client_->begin_cycle();
+    ++cycles_;
+    // A round asks for at most half the staging ring, so all its answers are held and committed at once
+    // (in texture order) below: which answers share a poll is timing, and must not decide cache regions.
+    const uint64_t round_cap = static_cast<uint64_t>(cfg_.render.staging_bytes) / 2;
+    uint64_t round_bytes = 0;
+    auto client_send = client_->sender();
+    auto send = [&](const MipRequest& r) {
+      if (round_bytes > 0 && round_bytes + r.bytes > round_cap) return SendResult::kStop;
+      const SendResult sr = client_send(r);
+      if (sr == SendResult::kSent) round_bytes += r.bytes;
+      return sr;
+    };
+    const auto result = states_->run_cycle(wanted, std::numeric_limits<uint64_t>::max(), 0.0f, send,
+                                           static_cast<size_t>(cfg_.stream.max_mips_per_cycle));
+    if (result.sent.empty() && client_->stats().in_flight == 0) {
+      // Nothing to send: either every wanted texture is complete (or broken), or the server takes no
+      // requests right now (starting, restarting after a crash): then wait for it, within the timeout.
+      const auto incomplete = std::count_if(wanted.begin(), wanted.end(), [&](const StreamCandidate& c) {
+        const TextureStateView v = states_->view(c.texture);
+        return !v.broken && v.resident != 0u;
+      });
+      if (incomplete == 0) return ok_status();
+      if (Clock::now() - idle_since > kLockstepTimeout) {
+        const std::string unattached = client_->unattached_reason();
+        return make_error(ErrorCode::kTimeout,
+                          std::to_string(incomplete) + " textures still incomplete and the server takes no requests (" +
+                              to_string(client_->stats().server_state) + ") after " +
+                              std::to_string(kLockstepTimeout.count()) + " s" +
+                              (unattached.empty() ? "" : ": " + unattached));
+      }
+      client_->poll(cache, 0);  // supervision: reap, restart
+      TS_TRY(server_can_start());
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      continue;
+    }
+    idle_since = Clock::now();
+    auto last_progress = Clock::now();
+    uint64_t answered = client_->stats().completions_ok;
+    OrderedCommitSink ordered(cache);  // arrival order must not decide cache regions (reruns identical)
+    while (client_->stats().in_flight > 0) {
+      LoadTimeSink all(ordered, Clock::time_point::max());
+      client_->poll(all, std::numeric_limits<size_t>::max());
+      TS_TRY(server_can_start());
+      if (all.no_room()) {  // only if one mip is above half the ring: upload to free it
+        ordered.flush();
+        TS_TRY(upload_now());
+      }
+      if (client_->stats().completions_ok != answered) {
+        answered = client_->stats().completions_ok;
+        last_progress = Clock::now();
+      } else if (Clock::now() - last_progress > kLockstepTimeout) {
+        return make_error(ErrorCode::kTimeout, std::to_string(client_->stats().in_flight) +
+                                                   " requests unanswered for " +
+                                                   std::to_string(kLockstepTimeout.count()) + " s while loading "
+                                                   "whole mip chains");
+      } else if (client_->stats().in_flight > 0) {
+        std::this_thread::sleep_for(std::chrono::microseconds(200));
+      }
+    }
+    ordered.flush();
+    TS_TRY(upload_now());
+    if (cache.stats().evictions != evictions_before) {
+      if (no_evictions) {
+        return make_error(ErrorCode::kResourceExhausted,
+                          "render.preload_all: the cache evicted textures while loading the whole scene; raise "
+                          "cache.memory_bytes (now " + std::to_string(cfg_.cache.memory_bytes) +
+                              ") and cache.layers (now " + std::to_string(cfg_.cache.layers) + ")");
+      }
+      return ok_status();  // the visible set does not fit: draw with what is resident
+    }
+    fruitless = cache.stats().mips_uploaded == published_before ? fruitless + 1 : 0;
+    if (fruitless >= kMaxFruitlessLoadRounds) {
+      return make_error(ErrorCode::kTimeout, std::to_string(kMaxFruitlessLoadRounds) +
+                                                 " load rounds in a row published no mip (" +
+                                                 std::to_string(result.sent.size()) + " requests in the last)");
+    }
+  }
+}
+
+}  // namespace texstream::render
