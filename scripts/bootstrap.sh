@@ -16,7 +16,7 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   xvfb xauth
   nginx python3-matplotlib
-  clang libclang-rt-14-dev
+  clang libclang-rt-14-dev clang-format-14
 )
 BACKPORTS_PACKAGES=(mesa-vulkan-drivers)
 

@@ -88,7 +88,8 @@ Status validate_header(const SegmentHeader& h, uint64_t mapped_bytes) {
     return header_error("boost_version", std::to_string(h.boost_version), std::to_string(BOOST_VERSION));
   }
   if (h.request_record_bytes != sizeof(RequestRecord)) {
-    return header_error("request_record_bytes", std::to_string(h.request_record_bytes), std::to_string(sizeof(RequestRecord)));
+    return header_error("request_record_bytes", std::to_string(h.request_record_bytes),
+                        std::to_string(sizeof(RequestRecord)));
   }
   if (h.completion_record_bytes != sizeof(CompletionRecord)) {
     return header_error("completion_record_bytes", std::to_string(h.completion_record_bytes),
@@ -112,7 +113,8 @@ Status validate_header(const SegmentHeader& h, uint64_t mapped_bytes) {
   // Every offset is recomputed from the sizes: a header may not place a region anywhere else.
   const SegmentLayout l = compute_layout({h.request_capacity, h.completion_capacity, h.slot_count, h.slot_bytes});
   if (h.request_ring_offset != l.request_ring_offset) {
-    return header_error("request_ring_offset", std::to_string(h.request_ring_offset), std::to_string(l.request_ring_offset));
+    return header_error("request_ring_offset", std::to_string(h.request_ring_offset),
+                        std::to_string(l.request_ring_offset));
   }
   if (h.completion_ring_offset != l.completion_ring_offset) {
     return header_error("completion_ring_offset", std::to_string(h.completion_ring_offset),
@@ -151,11 +153,11 @@ Status populate(const std::string& name, void* base, uint64_t bytes) {
 
 Result<std::unique_ptr<Segment>> Segment::create(const std::string& name, const SegmentParams& params) {
   if (!is_pow2(params.request_capacity) || params.request_capacity > kMaxRingCapacity ||
-      !is_pow2(params.completion_capacity) || params.completion_capacity > kMaxRingCapacity ||
-      params.slot_count == 0 || params.slot_count > kMaxSlotCount || params.slot_bytes == 0 ||
-      params.slot_bytes > kMaxSlotBytes) {
-    return make_error(ErrorCode::kInvalidArgument, "segment '" + name + "': ring capacities must be powers of two <= 65536, "
-                                                   "slot_count 1..16384, slot_bytes 1..64 MiB");
+      !is_pow2(params.completion_capacity) || params.completion_capacity > kMaxRingCapacity || params.slot_count == 0 ||
+      params.slot_count > kMaxSlotCount || params.slot_bytes == 0 || params.slot_bytes > kMaxSlotBytes) {
+    return make_error(ErrorCode::kInvalidArgument, "segment '" + name +
+                                                       "': ring capacities must be powers of two <= 65536, "
+                                                       "slot_count 1..16384, slot_bytes 1..64 MiB");
   }
   std::unique_ptr<Segment> seg(new Segment());
   seg->impl_ = std::make_unique<Impl>();
@@ -225,7 +227,8 @@ Result<std::unique_ptr<Segment>> Segment::open(const std::string& name) {
   auto* rb = reinterpret_cast<RendererBlock*>(base + kSegmentHeaderBytes);
   // acquire: pairs with the creator's release-store of `ready`.
   if (rb->ready.v.load(std::memory_order_acquire) != 1) {
-    return make_error(ErrorCode::kProtocol, "shared segment '" + name + "' is not ready (its creator has not finished)");
+    return make_error(ErrorCode::kProtocol,
+                      "shared segment '" + name + "' is not ready (its creator has not finished)");
   }
   std::memcpy(&seg->header_copy_, base, sizeof(SegmentHeader));  // read once; only the copy is used
   if (auto st = validate_header(seg->header_copy_, mapped); !st.ok()) {
@@ -254,13 +257,26 @@ std::span<std::byte> Segment::slot(uint32_t index) {
 
 void Segment::reset_after_server_death() {
   TS_ASSERT(owner_, "only the segment's creator may reset it");
-  new (server_block_) ServerBlock{};
+  // The server block's pid word is the claim a waiting standalone server takes by compare-and-swap from 0:
+  // it keeps the dead server's pid while the rings, the epoch and the rest of the block are reset, and is
+  // freed last, so a new server never sees the dead one's ring positions (docs/design/test_time_bounds.md).
   new (request_control_) RingControl{};
   new (completion_control_) RingControl{};
   std::random_device rd;
   header_copy_.epoch = (uint64_t{rd()} << 32) ^ rd();
   // The header is otherwise read-only; only the epoch changes, and only while no server is attached.
   reinterpret_cast<SegmentHeader*>(base_)->epoch = header_copy_.epoch;
+  ServerBlock& b = *server_block_;
+  // relaxed: published by the release-store of `pid` below.
+  for (auto* w : {&b.attached, &b.sleeping, &b.refused_by}) w->v.store(0, std::memory_order_relaxed);
+  for (auto* w : {&b.start_time, &b.heartbeat, &b.completions, &b.requests_received, &b.requests_cancelled,
+                  &b.ram_cache_hits, &b.ram_cache_misses, &b.bytes_read}) {
+    w->v.store(0, std::memory_order_relaxed);
+  }
+  for (auto& w : b.loading) w.v.store(0, std::memory_order_relaxed);
+  // release: pairs with the claiming server's acq_rel compare-and-swap (Server::run): whoever takes the
+  // segment next sees every reset above.
+  b.pid.v.store(0, std::memory_order_release);
 }
 
 bool Segment::remove(const std::string& name) { return bip::shared_memory_object::remove(name.c_str()); }

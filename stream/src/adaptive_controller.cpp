@@ -7,7 +7,7 @@
 
 #include "texstream/common/contract.hpp"
 
-namespace texstream {
+namespace texstream::stream {
 
 namespace {
 
@@ -224,4 +224,4 @@ double AdaptiveController::mip_bias() const {
   return 0.0;
 }
 
-}  // namespace texstream
+}  // namespace texstream::stream

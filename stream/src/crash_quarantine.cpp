@@ -4,7 +4,7 @@
 
 #include <spdlog/spdlog.h>
 
-namespace texstream {
+namespace texstream::stream {
 
 bool CrashQuarantine::charge_crash(int signal, const ServerBlock& block) {
   // Signals a process raises on itself when its own code fails; SIGKILL (and SIGTERM) come from outside.
@@ -56,4 +56,4 @@ void CrashQuarantine::fail_refused(MipSink& sink) {
   }
 }
 
-}  // namespace texstream
+}  // namespace texstream::stream

@@ -15,7 +15,7 @@
 #include "texstream/common/child_process.hpp"
 #include "texstream/protocol/liveness.hpp"
 
-namespace texstream {
+namespace texstream::stream {
 
 namespace {
 
@@ -381,4 +381,4 @@ ServerState ServerProcess::state() const {
   return ServerState::kStopped;
 }
 
-}  // namespace texstream
+}  // namespace texstream::stream

@@ -6,7 +6,7 @@
 
 #include "texstream/protocol/liveness.hpp"
 
-namespace texstream {
+namespace texstream::stream {
 
 ServerSupervisor::ServerSupervisor(Segment& segment, std::unique_ptr<ServerProcess> process,
                                    std::chrono::milliseconds heartbeat_timeout)
@@ -141,4 +141,4 @@ std::string ServerSupervisor::unattached_reason() const {
   return why;
 }
 
-}  // namespace texstream
+}  // namespace texstream::stream

@@ -19,7 +19,7 @@
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/common/texel_format.hpp"
 
-namespace texstream {
+namespace texstream::stream {
 
 namespace {
 
@@ -588,4 +588,4 @@ StreamStats StreamClient::stats() const {
 
 std::string StreamClient::stats_text() const { return format_stream_stats(stats(), ipc_time_); }
 
-}  // namespace texstream
+}  // namespace texstream::stream

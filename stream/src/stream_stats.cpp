@@ -4,7 +4,7 @@
 #include <cmath>
 #include <sstream>
 
-namespace texstream {
+namespace texstream::stream {
 
 const char* to_string(StreamServerState state) {
   switch (state) {
@@ -65,4 +65,4 @@ std::string format_stream_stats(const StreamStats& s, const IpcTimeHistogram& ip
   return o.str();
 }
 
-}  // namespace texstream
+}  // namespace texstream::stream

@@ -6,7 +6,7 @@
 #include "texstream/common/contract.hpp"
 #include "texstream/common/texel_format.hpp"
 
-namespace texstream {
+namespace texstream::stream {
 
 const char* to_string(TexturePhase phase) {
   switch (phase) {
@@ -185,4 +185,4 @@ void TextureStates::apply(std::span<const TextureEvent> events) {
   }
 }
 
-}  // namespace texstream
+}  // namespace texstream::stream

@@ -21,7 +21,7 @@ std::vector<TextureShape> shapes() {
   return {{64, 64, 7, TexelFormat::kRgba8}, {128, 32, 8, TexelFormat::kRgba8}, {256, 256, 9, TexelFormat::kBc1}};
 }
 
-class Sink : public MipSink {
+class Sink : public stream::MipSink {
  public:
   std::span<std::byte> reserve(TextureId, MipLevel, uint64_t bytes) override {
     buf_.assign(bytes, std::byte{0});
@@ -38,7 +38,7 @@ class Sink : public MipSink {
 };
 
 struct Rig {
-  std::unique_ptr<StreamClient> client;
+  std::unique_ptr<stream::StreamClient> client;
   std::unique_ptr<Segment> server_side;
   SpscRingConsumer<RequestRecord> requests;
   SpscRingProducer<CompletionRecord> completions;
@@ -51,11 +51,11 @@ struct Rig {
     c.protocol.staging_slot_count = 4;
     c.protocol.staging_slot_bytes = 64 << 10;
     c.cache.layer_extent_px = 64;
-    StreamClientOptions o;
+    stream::StreamClientOptions o;
     o.spawn_server = false;
-    auto started = StreamClient::start(c, shapes(), "/nonexistent", "", {}, o);
+    auto started = stream::StreamClient::start(c, shapes(), "/nonexistent", "", {}, o);
     if (!started) {  // a harness bug, not a finding: say why before stopping
-      std::fprintf(stderr, "fuzz_stream_client: StreamClient::start failed: %s\n", started.error().message.c_str());
+      std::fprintf(stderr, "fuzz_stream_client: stream::StreamClient::start failed: %s\n", started.error().message.c_str());
       __builtin_trap();
     }
     client = std::move(*started);
@@ -94,7 +94,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   }
   rig.client->poll(sink, 64);
   if (rig.client->stats().slots_held > rig.server_side->slot_count()) __builtin_trap();
-  if (rig.client->stats().server_state == StreamServerState::kBroken) {
+  if (rig.client->stats().server_state == stream::StreamServerState::kBroken) {
     rig.client->reset_external_server(sink);
     rig.attach();
   }

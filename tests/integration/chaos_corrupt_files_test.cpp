@@ -54,7 +54,7 @@ struct Answer {
   std::vector<std::byte> bytes;
 };
 
-class RecordingSink : public MipSink {
+class RecordingSink : public stream::MipSink {
  public:
   std::span<std::byte> reserve(TextureId, MipLevel, uint64_t bytes) override {
     buffer_.assign(bytes, std::byte{0});
@@ -133,7 +133,7 @@ TEST(ChaosCorruptFiles, TheRealServerRefusesEveryDamagedMipByNameAndKeepsServing
 
   const fs::path log = corpus_dir / "server.log";
   std::map<std::pair<uint32_t, uint32_t>, Answer> answers;
-  StreamStats st;
+  stream::StreamStats st;
   Clock::duration took{};
   {
     StderrToFile redirect(log);
@@ -144,7 +144,7 @@ TEST(ChaosCorruptFiles, TheRealServerRefusesEveryDamagedMipByNameAndKeepsServing
     // Not a watchdog test: a server starved of CPU on a busy machine (its heartbeat stalled 1.4 s at load 17)
     // must not be taken for a hung one and counted as a death.
     config.protocol.heartbeat_timeout_ms = 10 * Config{}.protocol.heartbeat_timeout_ms;
-    auto started = StreamClient::start(config, source.shapes(), corpus_dir, "", {"server.log_level=info"}, {});
+    auto started = stream::StreamClient::start(config, source.shapes(), corpus_dir, "", {"server.log_level=info"}, {});
     ASSERT_TRUE(started.ok()) << started.error().message;
     auto client = std::move(*started);
     RecordingSink sink;
@@ -162,7 +162,7 @@ TEST(ChaosCorruptFiles, TheRealServerRefusesEveryDamagedMipByNameAndKeepsServing
         const auto& [t, m] = wanted[(next + n) % wanted.size()];
         if (sink.answers.count({t, m}) || client->in_flight(TextureId(t), MipLevel(m))) continue;
         const auto out = client->try_request(TextureId(t), MipLevel(m), 1.0f);
-        if (to_send_result(out) == SendResult::kStop) break;
+        if (stream::to_send_result(out) == stream::SendResult::kStop) break;
       }
       next += 7;
       client->poll(sink, 64);

@@ -47,7 +47,7 @@ Config config(const std::string& segment) {
 }
 
 // Commits must be exactly the pattern; everything else is counted.
-class VerifyingSink : public MipSink {
+class VerifyingSink : public stream::MipSink {
  public:
   std::span<std::byte> reserve(TextureId, MipLevel, uint64_t bytes) override {
     buffer_.assign(bytes, std::byte{0});
@@ -167,10 +167,10 @@ void scribble(Segment& seg, const std::atomic<bool>& stop, uint64_t seed, uint64
 
 TEST(ChaosHostileServer, EveryLieIsRefusedAndOnlyExactPayloadsAreCommitted) {
   const std::string name = chaos_test::unique("hostile");
-  StreamClientOptions external;
+  stream::StreamClientOptions external;
   external.spawn_server = false;
   external.request_timeout = 200ms;  // garbled answers leave requests in flight: free them quickly
-  auto started = StreamClient::start(config(name), shapes(), "/nonexistent-scene", "", {}, external);
+  auto started = stream::StreamClient::start(config(name), shapes(), "/nonexistent-scene", "", {}, external);
   ASSERT_TRUE(started.ok()) << started.error().message;
   auto client = std::move(*started);
   HostileServer hostile(name, 42);
@@ -184,7 +184,7 @@ TEST(ChaosHostileServer, EveryLieIsRefusedAndOnlyExactPayloadsAreCommitted) {
   // At least 3 s, and on a busy machine until each kind of damage below has been seen (or a hang).
   const auto start = Clock::now();
   const auto seen_enough = [&] {
-    const StreamStats s = client->stats();
+    const stream::StreamStats s = client->stats();
     return sink.good_commits > 0 && s.protocol_errors > 100 && s.requests_timed_out > 0 &&
            s.payload_checksum_failures > 0;
   };
@@ -204,7 +204,7 @@ TEST(ChaosHostileServer, EveryLieIsRefusedAndOnlyExactPayloadsAreCommitted) {
   server.join();
   scribbler.join();
 
-  const StreamStats st = client->stats();
+  const stream::StreamStats st = client->stats();
   std::printf("hostile: %llu good commits, %llu rejects, %llu failures, %llu protocol errors, %llu checksum "
               "failures, %llu scribbles, longest poll %.3f ms, IPC p99.99 %.1f us\n",
               static_cast<unsigned long long>(sink.good_commits), static_cast<unsigned long long>(sink.rejects),
@@ -228,7 +228,7 @@ TEST(ChaosHostileServer, EveryLieIsRefusedAndOnlyExactPayloadsAreCommitted) {
   SpscRingConsumer<RequestRecord> req = (*seg)->request_consumer();
   SpscRingProducer<CompletionRecord> comp = (*seg)->completion_producer();
   client->begin_cycle();
-  ASSERT_EQ(client->try_request(TextureId(0), MipLevel(4), 1.0f), RequestOutcome::kSent);
+  ASSERT_EQ(client->try_request(TextureId(0), MipLevel(4), 1.0f), stream::RequestOutcome::kSent);
   auto r = req.try_pop();
   ASSERT_TRUE(r.has_value());
   const Extent2D e = mip_extent(64, 64, 4);

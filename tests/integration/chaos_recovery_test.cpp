@@ -28,7 +28,7 @@ using test::kHangAfter;
 using test::promptly;
 namespace fs = std::filesystem;
 
-class CountingSink : public MipSink {
+class CountingSink : public stream::MipSink {
  public:
   explicit CountingSink(const SmallScene& s) : scene_(s) {}
   std::span<std::byte> reserve(TextureId, MipLevel, uint64_t bytes) override {
@@ -63,7 +63,7 @@ class CountingSink : public MipSink {
 
 struct Rig {
   SmallScene scene{8};
-  std::unique_ptr<StreamClient> client;
+  std::unique_ptr<stream::StreamClient> client;
   CountingSink sink{scene};
 
   // Only the watchdog test keeps the default heartbeat timeout: elsewhere a server starved of CPU on a busy
@@ -76,7 +76,7 @@ struct Rig {
     config.protocol.heartbeat_timeout_ms = heartbeat_timeout_ms;
     config.server.executable = server.string();
     config.scene.dir = scene.dir.string();
-    auto c = StreamClient::start(config, scene.shapes(), scene.dir, "", {"server.log_level=warn"}, {});
+    auto c = stream::StreamClient::start(config, scene.shapes(), scene.dir, "", {"server.log_level=warn"}, {});
     EXPECT_TRUE(c.ok()) << (c.ok() ? "" : c.error().message);
     if (c.ok()) client = std::move(*c);
   }
@@ -122,7 +122,7 @@ TEST(ChaosRecovery, DeathIsToldPromptlyAndTheRestartedServerAnswersTheLostReques
   std::printf("server death told after %.2f ms\n", ms(told));
   EXPECT_LT(told, promptly(100ms)) << "the pidfd tells a death within 100 ms on a quiet machine";
 
-  StreamStats st = rig.client->stats();
+  stream::StreamStats st = rig.client->stats();
   EXPECT_EQ(st.requests_lost, static_cast<uint64_t>(sent));
   EXPECT_EQ(st.in_flight, 0u);
   EXPECT_EQ(st.slots_held, 0u);
@@ -200,9 +200,9 @@ TEST(ChaosRecovery, ARestartStormEndsInNormalStreaming) {
   const auto took = Clock::now() - after_storm;
   std::printf("normal streaming %.1f ms after a storm of %d kills\n", ms(took), kKills);
   EXPECT_LT(took, promptly(500ms)) << "streaming resumes within 500 ms of the last kill on a quiet machine";
-  const StreamStats st = rig.client->stats();
+  const stream::StreamStats st = rig.client->stats();
   EXPECT_EQ(st.server_deaths, static_cast<uint64_t>(kKills));
-  EXPECT_EQ(st.server_state, StreamServerState::kRunning);
+  EXPECT_EQ(st.server_state, stream::StreamServerState::kRunning);
   EXPECT_EQ(st.protocol_errors, 0u);
   EXPECT_EQ(st.unserved_after_restart, 0u);
 }
@@ -222,7 +222,7 @@ TEST(ChaosRecovery, TheServerExitsWhenItsRendererIsKilledAndTheStaleSegmentIsRem
     Config config;
     config.protocol.segment_name = segment;
     config.server.executable = server.string();
-    auto c = StreamClient::start(config, scene.shapes(), scene.dir, "", {"server.log_level=warn"}, {});
+    auto c = stream::StreamClient::start(config, scene.shapes(), scene.dir, "", {"server.log_level=warn"}, {});
     int pid = -1;
     if (c.ok()) {
       CountingSink sink(scene);
@@ -257,9 +257,9 @@ TEST(ChaosRecovery, TheServerExitsWhenItsRendererIsKilledAndTheStaleSegmentIsRem
   if (!fs::exists("/dev/shm/" + segment)) std::printf("the stale segment was already removed by another start\n");
   Config next;
   next.protocol.segment_name = chaos_test::unique("next");
-  StreamClientOptions external;
+  stream::StreamClientOptions external;
   external.spawn_server = false;
-  auto c = StreamClient::start(next, scene.shapes(), scene.dir, "", {}, external);
+  auto c = stream::StreamClient::start(next, scene.shapes(), scene.dir, "", {}, external);
   ASSERT_TRUE(c.ok()) << c.error().message;
   EXPECT_FALSE(fs::exists("/dev/shm/" + segment)) << "stale segment of a dead renderer left behind";
 }

@@ -178,7 +178,7 @@ struct Event {
   bool reserved = false;  // reject: a reserved span was handed back
 };
 
-class RecordingSink : public MipSink {
+class RecordingSink : public stream::MipSink {
  public:
   std::span<std::byte> reserve(TextureId t, MipLevel m, uint64_t bytes) override {
     ++reserves;
@@ -227,14 +227,14 @@ class RecordingSink : public MipSink {
   std::map<std::pair<uint32_t, uint32_t>, std::vector<std::byte>> committed;
 };
 
-StreamClientOptions external() {
-  StreamClientOptions o;
+stream::StreamClientOptions external() {
+  stream::StreamClientOptions o;
   o.spawn_server = false;
   return o;
 }
 
-std::unique_ptr<StreamClient> start_external(const Config& config) {
-  auto c = StreamClient::start(config, shapes(), "/nonexistent-scene", "", {}, external());
+std::unique_ptr<stream::StreamClient> start_external(const Config& config) {
+  auto c = stream::StreamClient::start(config, shapes(), "/nonexistent-scene", "", {}, external());
   EXPECT_TRUE(c.ok()) << (c.ok() ? "" : c.error().message);
   return c.ok() ? std::move(*c) : nullptr;
 }
@@ -242,7 +242,7 @@ std::unique_ptr<StreamClient> start_external(const Config& config) {
 // A chosen protocol.segment_name (not a "texstream-" one, which the start-up sweep covers) left behind by a
 // SIGKILLed renderer: the next renderer takes the name over. Before, it failed with "File exists" until
 // someone removed /dev/shm/<name> by hand.
-TEST(StreamClient, TakesOverAChosenSegmentNameLeftByAKilledRenderer) {
+TEST(stream::StreamClient, TakesOverAChosenSegmentNameLeftByAKilledRenderer) {
   const std::string name = "ts-test-chosen-" + std::to_string(::getpid());
   const pid_t child = test::fork_sleeper([&] {
     auto seg = Segment::create(name, {16, 16, 2, 4096});
@@ -264,13 +264,13 @@ TEST(StreamClient, TakesOverAChosenSegmentNameLeftByAKilledRenderer) {
 // none (server.spawn = false and no standalone server yet) they fail as timed out, and no protocol error is
 // counted: before, a renderer waiting for its standalone server reported "texstream-server broke the
 // protocol" once per expiry, of a server that did not exist.
-TEST(StreamClient, RequestsUnansweredWithNoServerAttachedAreNoProtocolError) {
+TEST(stream::StreamClient, RequestsUnansweredWithNoServerAttachedAreNoProtocolError) {
   const Config config = small_config(unique_name("noserver"));
-  StreamClientOptions o = external();
+  stream::StreamClientOptions o = external();
   o.request_timeout = std::chrono::milliseconds(50);
-  auto started = StreamClient::start(config, shapes(), "/nonexistent-scene", "", {}, o);
+  auto started = stream::StreamClient::start(config, shapes(), "/nonexistent-scene", "", {}, o);
   ASSERT_TRUE(started.ok()) << started.error().message;
-  StreamClient& client = **started;
+  stream::StreamClient& client = **started;
   RecordingSink sink;
   // Polls until `n` requests have timed out (or a hang).
   const auto poll_until_timed_out = [&](uint64_t n) {
@@ -300,7 +300,7 @@ TEST(StreamClient, RequestsUnansweredWithNoServerAttachedAreNoProtocolError) {
   EXPECT_EQ(client.stats().protocol_errors, 1u);
 }
 
-TEST(StreamClient, StreamsMipsAndHandsEverySlotBack) {
+TEST(stream::StreamClient, StreamsMipsAndHandsEverySlotBack) {
   const Config config = small_config(unique_name("happy"));
   auto client = start_external(config);
   ASSERT_TRUE(client);
@@ -311,9 +311,9 @@ TEST(StreamClient, StreamsMipsAndHandsEverySlotBack) {
   EXPECT_EQ(client->segment().renderer_block().generation.v.load(), 1u);
   ASSERT_TRUE(client->request(TextureId(0), MipLevel(4), 5.0f));
   ASSERT_TRUE(client->request(TextureId(2), MipLevel(6), 3.0f));
-  EXPECT_EQ(client->try_request(TextureId(0), MipLevel(4), 5.0f), RequestOutcome::kAlreadyInFlight);
-  EXPECT_EQ(client->try_request(TextureId(9), MipLevel(0), 1.0f), RequestOutcome::kUnknownTexture);
-  EXPECT_EQ(client->try_request(TextureId(0), MipLevel(7), 1.0f), RequestOutcome::kBadMip);
+  EXPECT_EQ(client->try_request(TextureId(0), MipLevel(4), 5.0f), stream::RequestOutcome::kAlreadyInFlight);
+  EXPECT_EQ(client->try_request(TextureId(9), MipLevel(0), 1.0f), stream::RequestOutcome::kUnknownTexture);
+  EXPECT_EQ(client->try_request(TextureId(0), MipLevel(7), 1.0f), stream::RequestOutcome::kBadMip);
   EXPECT_GE(client->segment().renderer_block().doorbell.v.load(), 2u) << "each push rings the doorbell";
 
   const auto loads = server.drain();
@@ -331,7 +331,7 @@ TEST(StreamClient, StreamsMipsAndHandsEverySlotBack) {
   ASSERT_EQ(sink.count(Event::kCommit), 2u);
   EXPECT_TRUE(sink.payload_ok(0, 4));
   EXPECT_TRUE(sink.payload_ok(2, 6));
-  const StreamStats st = client->stats();
+  const stream::StreamStats st = client->stats();
   EXPECT_EQ(st.completions_ok, 2u);
   EXPECT_EQ(st.bytes_received, 64u + 8u);  // 4x4 RGBA8 (64 B) + 4x4 BC1 (one 8-byte block)
   EXPECT_EQ(st.in_flight, 0u);
@@ -352,7 +352,7 @@ TEST(StreamClient, StreamsMipsAndHandsEverySlotBack) {
   EXPECT_TRUE(client->request(TextureId(1), MipLevel(5), 1.0f));
 }
 
-TEST(StreamClient, NoRoomInTheSinkKeepsTheCompletionAndItsSlot) {
+TEST(stream::StreamClient, NoRoomInTheSinkKeepsTheCompletionAndItsSlot) {
   const Config config = small_config(unique_name("noroom"));
   auto client = start_external(config);
   ASSERT_TRUE(client);
@@ -389,7 +389,7 @@ TEST(StreamClient, NoRoomInTheSinkKeepsTheCompletionAndItsSlot) {
   EXPECT_EQ(server.bad_releases, 0);
 }
 
-TEST(StreamClient, RingLimitsAndQueuedReleases) {
+TEST(stream::StreamClient, RingLimitsAndQueuedReleases) {
   Config config = small_config(unique_name("limits"));
   config.protocol.request_ring_capacity = 4;  // 1 record kept for releases (capacity / 4)
   config.protocol.completion_ring_capacity = 4;
@@ -400,12 +400,12 @@ TEST(StreamClient, RingLimitsAndQueuedReleases) {
   RecordingSink sink;
   client->begin_cycle();
   // A, B, C fill the ring but for the record kept for releases.
-  EXPECT_EQ(client->try_request(TextureId(0), MipLevel(6), 1), RequestOutcome::kSent);
-  EXPECT_EQ(client->try_request(TextureId(0), MipLevel(5), 1), RequestOutcome::kSent);
-  EXPECT_EQ(client->try_request(TextureId(0), MipLevel(4), 1), RequestOutcome::kSent);
-  EXPECT_EQ(client->try_request(TextureId(0), MipLevel(3), 1), RequestOutcome::kRingFull)
+  EXPECT_EQ(client->try_request(TextureId(0), MipLevel(6), 1), stream::RequestOutcome::kSent);
+  EXPECT_EQ(client->try_request(TextureId(0), MipLevel(5), 1), stream::RequestOutcome::kSent);
+  EXPECT_EQ(client->try_request(TextureId(0), MipLevel(4), 1), stream::RequestOutcome::kSent);
+  EXPECT_EQ(client->try_request(TextureId(0), MipLevel(3), 1), stream::RequestOutcome::kRingFull)
       << "the last ring record is kept for slot releases";
-  EXPECT_EQ(to_send_result(RequestOutcome::kRingFull), SendResult::kStop);
+  EXPECT_EQ(stream::to_send_result(stream::RequestOutcome::kRingFull), stream::SendResult::kStop);
 
   // The server takes A, B, C and answers A: its release goes out with the next poll.
   const auto abc = server.drain();
@@ -414,16 +414,16 @@ TEST(StreamClient, RingLimitsAndQueuedReleases) {
   client->poll(sink, 16);
   EXPECT_EQ(client->stats().releases_sent, 1u);
   // D and E take the ring to [release A, D, E]; B and C are still in flight: the limit of 4 is reached.
-  EXPECT_EQ(client->try_request(TextureId(1), MipLevel(7), 1), RequestOutcome::kSent);
-  EXPECT_EQ(client->try_request(TextureId(1), MipLevel(6), 1), RequestOutcome::kSent);
-  EXPECT_EQ(client->try_request(TextureId(1), MipLevel(5), 1), RequestOutcome::kInFlightLimit);
-  EXPECT_EQ(to_send_result(RequestOutcome::kInFlightLimit), SendResult::kStop);
+  EXPECT_EQ(client->try_request(TextureId(1), MipLevel(7), 1), stream::RequestOutcome::kSent);
+  EXPECT_EQ(client->try_request(TextureId(1), MipLevel(6), 1), stream::RequestOutcome::kSent);
+  EXPECT_EQ(client->try_request(TextureId(1), MipLevel(5), 1), stream::RequestOutcome::kInFlightLimit);
+  EXPECT_EQ(stream::to_send_result(stream::RequestOutcome::kInFlightLimit), stream::SendResult::kStop);
   // B and C complete while the server has not read the ring: one release fits, the other waits locally.
   server.answer(abc[1], shapes()[0]);
   server.answer(abc[2], shapes()[0]);
   client->poll(sink, 16);
   EXPECT_EQ(sink.count(Event::kCommit), 3u);
-  StreamStats st = client->stats();
+  stream::StreamStats st = client->stats();
   EXPECT_EQ(st.releases_sent, 2u);
   EXPECT_EQ(st.releases_queued, 1u);
   EXPECT_EQ(st.slots_held, 1u) << "a queued release still holds its slot";
@@ -439,7 +439,7 @@ TEST(StreamClient, RingLimitsAndQueuedReleases) {
   EXPECT_EQ(server.owned_count(), 4u);
 }
 
-TEST(StreamClient, DoorbellWakesASleepingServer) {
+TEST(stream::StreamClient, DoorbellWakesASleepingServer) {
   const Config config = small_config(unique_name("doorbell"));
   auto client = start_external(config);
   ASSERT_TRUE(client);
@@ -481,7 +481,7 @@ struct BadCase {
   bool slot_goes_back;  // the client should return the slot the record hands over
 };
 
-TEST(StreamClient, RefusesEveryBadRecordAndKeepsWorking) {
+TEST(stream::StreamClient, RefusesEveryBadRecordAndKeepsWorking) {
   const std::vector<BadCase> cases = {
       {"slot out of range", [](CompletionRecord& c, const Segment& s) { c.slot = s.slot_count(); }, false},
       {"slot far out of range", [](CompletionRecord& c, const Segment&) { c.slot = 0x7fffffffu; }, false},
@@ -517,7 +517,7 @@ TEST(StreamClient, RefusesEveryBadRecordAndKeepsWorking) {
     const CompletionRecord sent = server.answer(loads[0], shapes()[0], [&](CompletionRecord& c) { bc.edit(c, server.segment()); });
     client->poll(sink, 16);
 
-    const StreamStats st = client->stats();
+    const stream::StreamStats st = client->stats();
     EXPECT_EQ(st.protocol_errors, 1u);
     EXPECT_EQ(st.completions_ok, 0u);
     EXPECT_EQ(sink.count(Event::kCommit), 0u) << "nothing unchecked reaches the sink";
@@ -542,11 +542,11 @@ TEST(StreamClient, RefusesEveryBadRecordAndKeepsWorking) {
     client->poll(sink, 16);
     EXPECT_EQ(sink.count(Event::kCommit), 1u);
     EXPECT_TRUE(sink.payload_ok(0, 2));
-    EXPECT_EQ(client->stats().server_state, StreamServerState::kExternal);
+    EXPECT_EQ(client->stats().server_state, stream::StreamServerState::kExternal);
   }
 }
 
-TEST(StreamClient, WrongChecksumHandsTheReservedRoomBack) {
+TEST(stream::StreamClient, WrongChecksumHandsTheReservedRoomBack) {
   const Config config = small_config(unique_name("cksum"));
   auto client = start_external(config);
   ASSERT_TRUE(client);
@@ -562,7 +562,7 @@ TEST(StreamClient, WrongChecksumHandsTheReservedRoomBack) {
   EXPECT_EQ(client->stats().completions_rejected, 1u);
 }
 
-TEST(StreamClient, APayloadChangedAfterPublishingIsRefused) {
+TEST(stream::StreamClient, APayloadChangedAfterPublishingIsRefused) {
   // The server rewrites the slot after publishing the completion (and its checksum). The sink's reserve(),
   // which runs just before the client's one copy, spoils the slot: the copy no longer matches the checksum.
   const Config config = small_config(unique_name("copy"));
@@ -585,7 +585,7 @@ TEST(StreamClient, APayloadChangedAfterPublishingIsRefused) {
   EXPECT_EQ(sink.count(Event::kCommit), 0u);
 }
 
-TEST(StreamClient, ASlotNotYetBackWithTheServerIsNeverAcceptedOrReleasedTwice) {
+TEST(stream::StreamClient, ASlotNotYetBackWithTheServerIsNeverAcceptedOrReleasedTwice) {
   const Config config = small_config(unique_name("twice"));
   auto client = start_external(config);
   ASSERT_TRUE(client);
@@ -615,7 +615,7 @@ TEST(StreamClient, ASlotNotYetBackWithTheServerIsNeverAcceptedOrReleasedTwice) {
   EXPECT_EQ(server.bad_releases, 0);
 }
 
-TEST(StreamClient, UnsolicitedAnswersAreRefusedAndTheirSlotReturned) {
+TEST(stream::StreamClient, UnsolicitedAnswersAreRefusedAndTheirSlotReturned) {
   const Config config = small_config(unique_name("unsolicited"));
   auto client = start_external(config);
   ASSERT_TRUE(client);
@@ -648,7 +648,7 @@ TEST(StreamClient, UnsolicitedAnswersAreRefusedAndTheirSlotReturned) {
   EXPECT_EQ(server.bad_releases, 0);
 }
 
-TEST(StreamClient, AFloodOfGarbageIsBoundedPerPoll) {
+TEST(stream::StreamClient, AFloodOfGarbageIsBoundedPerPoll) {
   Config config = small_config(unique_name("flood"));
   auto client = start_external(config);
   ASSERT_TRUE(client);
@@ -667,7 +667,7 @@ TEST(StreamClient, AFloodOfGarbageIsBoundedPerPoll) {
   EXPECT_TRUE(sink.events.empty());
 }
 
-TEST(StreamClient, APositionThatJumpsBreaksTheExternalServerUntilReset) {
+TEST(stream::StreamClient, APositionThatJumpsBreaksTheExternalServerUntilReset) {
   const Config config = small_config(unique_name("jump"));
   auto client = start_external(config);
   ASSERT_TRUE(client);
@@ -680,11 +680,11 @@ TEST(StreamClient, APositionThatJumpsBreaksTheExternalServerUntilReset) {
   // The completion ring's write position leaps past a whole ring: impossible for an honest producer.
   client->segment().completion_control()->write_pos.v.store(1000, std::memory_order_release);
   client->poll(sink, 16);
-  EXPECT_EQ(client->stats().server_state, StreamServerState::kBroken);
+  EXPECT_EQ(client->stats().server_state, stream::StreamServerState::kBroken);
   EXPECT_EQ(client->stats().requests_lost, 2u);
   EXPECT_EQ(sink.count(Event::kFailed), 2u);
   for (const Event& e : sink.events) EXPECT_EQ(e.status, CompletionStatus::kCancelled);
-  EXPECT_EQ(client->try_request(TextureId(0), MipLevel(4), 1), RequestOutcome::kNoServer);
+  EXPECT_EQ(client->try_request(TextureId(0), MipLevel(4), 1), stream::RequestOutcome::kNoServer);
   client->poll(sink, 16);  // stays broken, reads nothing
   EXPECT_EQ(sink.events.size(), 2u);
 
@@ -693,7 +693,7 @@ TEST(StreamClient, APositionThatJumpsBreaksTheExternalServerUntilReset) {
   server.reset();
   client->reset_external_server(sink);
   EXPECT_NE(client->segment().header().epoch, epoch);
-  EXPECT_EQ(client->stats().server_state, StreamServerState::kExternal);
+  EXPECT_EQ(client->stats().server_state, stream::StreamServerState::kExternal);
   server = std::make_unique<FakeServer>(config.protocol.segment_name);
   ASSERT_TRUE(client->request(TextureId(0), MipLevel(4), 1));
   for (const auto& l : server->drain()) server->answer(l, shapes()[0]);
@@ -703,14 +703,14 @@ TEST(StreamClient, APositionThatJumpsBreaksTheExternalServerUntilReset) {
 
   // The request ring's read position (published by the server) jumping ahead is caught on the next push.
   client->segment().request_control()->read_pos.v.store(1u << 20, std::memory_order_release);
-  EXPECT_NE(client->try_request(TextureId(2), MipLevel(4), 1), RequestOutcome::kSent);
+  EXPECT_NE(client->try_request(TextureId(2), MipLevel(4), 1), stream::RequestOutcome::kSent);
   client->poll(sink, 16);
-  EXPECT_EQ(client->stats().server_state, StreamServerState::kBroken);
+  EXPECT_EQ(client->stats().server_state, stream::StreamServerState::kBroken);
 }
 
 // ---- the fake server in its own thread, against a frame loop ----
 
-TEST(StreamClient, ConcurrentFakeServerStreamsEveryMipOfEveryTexture) {
+TEST(stream::StreamClient, ConcurrentFakeServerStreamsEveryMipOfEveryTexture) {
   const Config config = small_config(unique_name("thread"));
   auto client = start_external(config);
   ASSERT_TRUE(client);
@@ -735,9 +735,9 @@ TEST(StreamClient, ConcurrentFakeServerStreamsEveryMipOfEveryTexture) {
     owned_at_end = server.owned_count();
   });
 
-  TextureStates states(shapes());
+  stream::TextureStates states(shapes());
   struct StateSink : RecordingSink {
-    TextureStates* states = nullptr;
+    stream::TextureStates* states = nullptr;
     void commit(TextureId t, MipLevel m, std::span<std::byte> d) override {
       RecordingSink::commit(t, m, d);
       EXPECT_TRUE(states->on_committed(t, m));
@@ -752,7 +752,7 @@ TEST(StreamClient, ConcurrentFakeServerStreamsEveryMipOfEveryTexture) {
     }
   } sink;
   sink.states = &states;
-  const std::vector<StreamCandidate> list{{TextureId(2), 0, 30}, {TextureId(0), 0, 20}, {TextureId(1), 0, 10}};
+  const std::vector<stream::StreamCandidate> list{{TextureId(2), 0, 30}, {TextureId(0), 0, 20}, {TextureId(1), 0, 10}};
   const auto deadline = std::chrono::steady_clock::now() + test::kHangAfter;
   while (states.counts().final < 3 || states.counts().pending > 0) {
     ASSERT_LT(std::chrono::steady_clock::now(), deadline) << "streaming did not finish";
@@ -770,9 +770,9 @@ TEST(StreamClient, ConcurrentFakeServerStreamsEveryMipOfEveryTexture) {
   server_thread.join();
   for (uint32_t t = 0; t < 3; ++t) {
     EXPECT_EQ(states.view(TextureId(t)).resident, 0u);
-    for (uint32_t m = 0; m <= initial_mip_level(shapes()[t]); ++m) EXPECT_TRUE(sink.payload_ok(t, m)) << t << "/" << m;
+    for (uint32_t m = 0; m <= stream::initial_mip_level(shapes()[t]); ++m) EXPECT_TRUE(sink.payload_ok(t, m)) << t << "/" << m;
   }
-  const StreamStats st = client->stats();
+  const stream::StreamStats st = client->stats();
   EXPECT_EQ(st.protocol_errors, 0u);
   EXPECT_EQ(st.completions_ok, 5u + 6u + 7u);  // levels 4..0 of 64², 5..0 of 128x32 (4x1 first), 6..0 of BC1 256²
   EXPECT_EQ(st.slots_held, 0u);
@@ -803,15 +803,15 @@ std::filesystem::path write_script(const std::filesystem::path& dir, const std::
 
 // A virtual clock the test advances by hand.
 struct VirtualClock {
-  std::shared_ptr<SteadyTime> t = std::make_shared<SteadyTime>(std::chrono::steady_clock::now());
-  std::function<SteadyTime()> fn() const {
+  std::shared_ptr<stream::SteadyTime> t = std::make_shared<stream::SteadyTime>(std::chrono::steady_clock::now());
+  std::function<stream::SteadyTime()> fn() const {
     return [t = t] { return *t; };
   }
   void advance(std::chrono::milliseconds d) const { *t += d; }
 };
 
 template <class Pred>
-bool poll_until(StreamClient& client, MipSink& sink, Pred pred, const VirtualClock* clock = nullptr,
+bool poll_until(stream::StreamClient& client, stream::MipSink& sink, Pred pred, const VirtualClock* clock = nullptr,
                 std::chrono::milliseconds step = 0ms) {
   const auto deadline = std::chrono::steady_clock::now() + test::kHangAfter;
   while (std::chrono::steady_clock::now() < deadline) {
@@ -827,15 +827,15 @@ TEST(StreamClientRestart, ServerDeathLosesInFlightResetsTheSegmentAndRespawns) {
   TempDir dir;
   Config config = small_config(unique_name("death"));
   config.server.executable = write_script(dir.path, "stand-in", "exec sleep 60").string();
-  StreamClientOptions opt;
+  stream::StreamClientOptions opt;
   opt.restart.first_delay = 1ms;
-  auto started = StreamClient::start(config, shapes(), dir.path, "", {}, opt);
+  auto started = stream::StreamClient::start(config, shapes(), dir.path, "", {}, opt);
   ASSERT_TRUE(started.ok()) << started.error().message;
   auto client = std::move(*started);
   RecordingSink sink;
   const int first_pid = client->server_pid();
   ASSERT_GT(first_pid, 0);
-  EXPECT_EQ(client->stats().server_state, StreamServerState::kRunning);
+  EXPECT_EQ(client->stats().server_state, stream::StreamServerState::kRunning);
   EXPECT_EQ(client->segment().renderer_block().server_epoch.v.load(), client->segment().header().epoch);
 
   auto server = std::make_unique<FakeServer>(config.protocol.segment_name);
@@ -852,7 +852,7 @@ TEST(StreamClientRestart, ServerDeathLosesInFlightResetsTheSegmentAndRespawns) {
   const uint64_t epoch = client->segment().header().epoch;
   ASSERT_EQ(::kill(first_pid, SIGKILL), 0);
   ASSERT_TRUE(poll_until(*client, sink, [&] { return client->stats().server_deaths == 1; }));
-  StreamStats st = client->stats();
+  stream::StreamStats st = client->stats();
   EXPECT_EQ(st.requests_lost, 3u);
   EXPECT_EQ(st.in_flight, 0u);
   EXPECT_EQ(st.slots_held, 0u) << "slots of a dead server are not ours to release";
@@ -882,10 +882,10 @@ TEST(StreamClientRestart, AHungServerIsKilledAndReplaced) {
   config.server.executable = write_script(dir.path, "stand-in", "exec sleep 60").string();
   config.protocol.heartbeat_timeout_ms = 100;
   VirtualClock clock;
-  StreamClientOptions opt;
+  stream::StreamClientOptions opt;
   opt.clock = clock.fn();
   opt.restart.first_delay = 10ms;
-  auto started = StreamClient::start(config, shapes(), dir.path, "", {}, opt);
+  auto started = stream::StreamClient::start(config, shapes(), dir.path, "", {}, opt);
   ASSERT_TRUE(started.ok()) << started.error().message;
   auto client = std::move(*started);
   RecordingSink sink;
@@ -909,23 +909,23 @@ TEST(StreamClientRestart, AHungServerIsKilledAndReplaced) {
   EXPECT_EQ(client->stats().server_deaths, 0u);
   clock.advance(20ms);  // 110 ms since the last progress, work outstanding
   client->poll(sink, 16);
-  EXPECT_EQ(client->try_request(TextureId(0), MipLevel(4), 1), RequestOutcome::kNoServer) << "being killed";
+  EXPECT_EQ(client->try_request(TextureId(0), MipLevel(4), 1), stream::RequestOutcome::kNoServer) << "being killed";
   ASSERT_TRUE(poll_until(*client, sink, [&] { return client->stats().server_deaths == 1; }));
   EXPECT_EQ(sink.count(Event::kFailed), 1u);
-  EXPECT_EQ(client->stats().server_state, StreamServerState::kBackingOff);
+  EXPECT_EQ(client->stats().server_state, stream::StreamServerState::kBackingOff);
   clock.advance(10ms);
   ASSERT_TRUE(poll_until(*client, sink, [&] { return client->server_pid() > 0; }));
   EXPECT_NE(client->server_pid(), pid);
-  EXPECT_EQ(client->stats().server_state, StreamServerState::kRunning);
+  EXPECT_EQ(client->stats().server_state, stream::StreamServerState::kRunning);
 }
 
 TEST(StreamClientRestart, ACorruptRingPositionKillsAndRestartsTheSpawnedServer) {
   TempDir dir;
   Config config = small_config(unique_name("corrupt"));
   config.server.executable = write_script(dir.path, "stand-in", "exec sleep 60").string();
-  StreamClientOptions opt;
+  stream::StreamClientOptions opt;
   opt.restart.first_delay = 1ms;
-  auto started = StreamClient::start(config, shapes(), dir.path, "", {}, opt);
+  auto started = stream::StreamClient::start(config, shapes(), dir.path, "", {}, opt);
   ASSERT_TRUE(started.ok()) << started.error().message;
   auto client = std::move(*started);
   RecordingSink sink;
@@ -943,7 +943,7 @@ TEST(StreamClientRestart, ACorruptRingPositionKillsAndRestartsTheSpawnedServer) 
 TEST(StreamClientRestart, MissingServerExecutableIsAStartError) {
   Config config = small_config(unique_name("noexe"));
   config.server.executable = "/nonexistent/texstream-server";
-  auto c = StreamClient::start(config, shapes(), "/tmp", "", {}, {});
+  auto c = stream::StreamClient::start(config, shapes(), "/tmp", "", {}, {});
   ASSERT_FALSE(c.ok());
   EXPECT_NE(c.error().message.find("/nonexistent/texstream-server"), std::string::npos) << c.error().message;
   EXPECT_NE(c.error().message.find("server.executable"), std::string::npos) << c.error().message;
@@ -954,7 +954,7 @@ TEST(StreamClientRestart, DestroyingTheClientKillsTheServerAndRemovesTheSegment)
   TempDir dir;
   Config config = small_config(unique_name("dtor"));
   config.server.executable = write_script(dir.path, "stand-in", "exec sleep 60").string();
-  auto started = StreamClient::start(config, shapes(), dir.path, "", {}, {});
+  auto started = stream::StreamClient::start(config, shapes(), dir.path, "", {}, {});
   ASSERT_TRUE(started.ok()) << started.error().message;
   const int pid = (*started)->server_pid();
   ASSERT_GT(pid, 0);

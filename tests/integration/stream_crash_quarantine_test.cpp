@@ -37,7 +37,7 @@ const fs::path kFakeServer = fs::path(TEXSTREAM_BIN_DIR) / "quarantine_fake_serv
 
 using test::ScopedEnv;
 
-class RecordingSink : public MipSink {
+class RecordingSink : public stream::MipSink {
  public:
   std::span<std::byte> reserve(TextureId, MipLevel, uint64_t) override { return {}; }
   void commit(TextureId t, MipLevel m, std::span<std::byte>) override {
@@ -81,8 +81,8 @@ struct Fixture {
     std::error_code ec;
     fs::remove_all(dir, ec);
   }
-  std::unique_ptr<StreamClient> start() {
-    auto started = StreamClient::start(config, shapes, dir, "", {}, {});
+  std::unique_ptr<stream::StreamClient> start() {
+    auto started = stream::StreamClient::start(config, shapes, dir, "", {}, {});
     EXPECT_TRUE(started.ok()) << started.error().message;
     return started.ok() ? std::move(*started) : nullptr;
   }
@@ -91,7 +91,7 @@ struct Fixture {
 // Asks for mip 0 of every texture without a final answer (and not in flight), then polls, until `done` or
 // the deadline.
 template <class Done>
-bool drive(StreamClient& client, RecordingSink& sink, uint32_t textures, std::chrono::seconds deadline, Done done) {
+bool drive(stream::StreamClient& client, RecordingSink& sink, uint32_t textures, std::chrono::seconds deadline, Done done) {
   const auto end = Clock::now() + deadline;
   while (Clock::now() < end) {
     client.begin_cycle();
@@ -109,9 +109,9 @@ bool drive(StreamClient& client, RecordingSink& sink, uint32_t textures, std::ch
 
 // Drives mip 0 of textures 0..3 until each has a final answer: texture 2 (the fake server's bad one) must be
 // quarantined (kCorrupt), the others answered by the server (kNotFound: the fake has no files).
-void expect_texture_2_quarantined(StreamClient& client, RecordingSink& sink) {
+void expect_texture_2_quarantined(stream::StreamClient& client, RecordingSink& sink) {
   const bool answered = drive(client, sink, 4, test::kHangAfter, [&] { return sink.final_status.size() == 4; });
-  const StreamStats st = client.stats();
+  const stream::StreamStats st = client.stats();
   ASSERT_TRUE(answered) << "not every texture got a final answer: " << sink.final_status.size() << " of 4; "
                         << st.server_deaths << " server deaths, state " << to_string(st.server_state);
   EXPECT_EQ(sink.status(2, 0), CompletionStatus::kCorrupt);
@@ -121,9 +121,9 @@ void expect_texture_2_quarantined(StreamClient& client, RecordingSink& sink) {
 
 // Drives mip 0 of textures 0..3 until the server (which dies whenever texture 2 is loaded) has died 3 times:
 // texture 2 must never be quarantined and must still be asked for.
-void expect_three_deaths_without_quarantine(StreamClient& client, RecordingSink& sink) {
+void expect_three_deaths_without_quarantine(stream::StreamClient& client, RecordingSink& sink) {
   const bool died = drive(client, sink, 4, test::kHangAfter, [&] { return client.stats().server_deaths >= 3; });
-  const StreamStats st = client.stats();
+  const stream::StreamStats st = client.stats();
   ASSERT_TRUE(died) << st.server_deaths << " deaths";
   EXPECT_FALSE(client.quarantined(TextureId(2)));
   EXPECT_EQ(st.textures_quarantined, 0u);
@@ -140,7 +140,7 @@ TEST(StreamCrashQuarantine, ATextureLoadingDuringTwoCrashesIsQuarantinedAndTheOt
   ASSERT_TRUE(client);
   RecordingSink sink;
   ASSERT_NO_FATAL_FAILURE(expect_texture_2_quarantined(*client, sink));
-  const StreamStats st = client->stats();
+  const stream::StreamStats st = client->stats();
   EXPECT_FALSE(client->quarantined(TextureId(1))) << "charged for one crash only";
   EXPECT_EQ(st.crash_signal_deaths, 2u);
   EXPECT_EQ(st.server_deaths, 2u);
@@ -148,15 +148,15 @@ TEST(StreamCrashQuarantine, ATextureLoadingDuringTwoCrashesIsQuarantinedAndTheOt
 
   // Quarantined: another mip is refused without being sent and fails for good at the next poll; the server
   // lives on.
-  EXPECT_EQ(client->try_request(TextureId(2), MipLevel(1), 1.0f), RequestOutcome::kQuarantined);
-  EXPECT_EQ(client->try_request(TextureId(2), MipLevel(1), 1.0f), RequestOutcome::kQuarantined);
+  EXPECT_EQ(client->try_request(TextureId(2), MipLevel(1), 1.0f), stream::RequestOutcome::kQuarantined);
+  EXPECT_EQ(client->try_request(TextureId(2), MipLevel(1), 1.0f), stream::RequestOutcome::kQuarantined);
   EXPECT_FALSE(client->in_flight(TextureId(2), MipLevel(1)));
   client->poll(sink, 8);
   EXPECT_EQ(sink.status(2, 1), CompletionStatus::kCorrupt);
   const uint64_t sent = client->stats().requests_sent;
   // Texture 3's mip 1 still goes to the (same) server and is answered.
   const auto end = Clock::now() + test::kHangAfter;
-  ASSERT_EQ(client->try_request(TextureId(3), MipLevel(1), 1.0f), RequestOutcome::kSent);
+  ASSERT_EQ(client->try_request(TextureId(3), MipLevel(1), 1.0f), stream::RequestOutcome::kSent);
   while (!sink.answered(3, 1) && Clock::now() < end) {
     client->poll(sink, 8);
     std::this_thread::sleep_for(2ms);
@@ -170,18 +170,18 @@ TEST(StreamCrashQuarantine, ATextureLoadingDuringTwoCrashesIsQuarantinedAndTheOt
   // kCorrupt at the next poll and is broken (colormap only, never asked for again).
   class StatesSink : public RecordingSink {
    public:
-    explicit StatesSink(TextureStates& s) : states(s) {}
+    explicit StatesSink(stream::TextureStates& s) : states(s) {}
     void failed(TextureId t, MipLevel m, CompletionStatus st) override {
       RecordingSink::failed(t, m, st);
       states.on_failed(t, m, st);
     }
-    TextureStates& states;
+    stream::TextureStates& states;
   };
-  TextureStates states(f.shapes);
+  stream::TextureStates states(f.shapes);
   StatesSink states_sink(states);
-  const std::vector<StreamCandidate> wanted{{TextureId(2), 0.0f, 1.0f}};
+  const std::vector<stream::StreamCandidate> wanted{{TextureId(2), 0.0f, 1.0f}};
   client->begin_cycle();
-  const CycleResult cycle = states.run_cycle(wanted, 1 << 20, 0.0f, client->sender());
+  const stream::CycleResult cycle = states.run_cycle(wanted, 1 << 20, 0.0f, client->sender());
   ASSERT_EQ(cycle.sent.size(), 1u);
   EXPECT_TRUE(states.view(TextureId(2)).pending.has_value());
   client->poll(states_sink, 8);
@@ -209,7 +209,7 @@ TEST(StreamCrashQuarantine, DeathsBySigkillNeverQuarantine) {
 struct StallingServer {
   Fixture f;
   ScopedEnv stall;
-  std::unique_ptr<StreamClient> client;
+  std::unique_ptr<stream::StreamClient> client;
   StallingServer(const std::string& tag, const char* mode) : f(tag), stall(mode, "2") {
     f.config.protocol.heartbeat_timeout_ms = 300;
     client = f.start();
@@ -226,7 +226,7 @@ TEST(StreamCrashQuarantine, ATextureLoadingDuringTwoHangsIsQuarantined) {
   ASSERT_TRUE(s.client);
   RecordingSink sink;
   ASSERT_NO_FATAL_FAILURE(expect_texture_2_quarantined(*s.client, sink));
-  const StreamStats st = s.client->stats();
+  const stream::StreamStats st = s.client->stats();
   EXPECT_EQ(st.crash_signal_deaths, 0u) << "a hang is no crash signal";
   EXPECT_EQ(st.server_deaths, 2u);
   EXPECT_EQ(st.textures_quarantined, 1u);
@@ -293,7 +293,7 @@ TEST(StreamCrashQuarantine, TheRealServerRecordsTheTextureItLoadsAndTwoCrashesOn
   // The servers inherit this: the SIGSEGVs below leave no core files.
   const rlimit no_core{0, 0};
   ASSERT_EQ(::setrlimit(RLIMIT_CORE, &no_core), 0);
-  auto started = StreamClient::start(f.config, f.shapes, f.dir, "", overrides, {});
+  auto started = stream::StreamClient::start(f.config, f.shapes, f.dir, "", overrides, {});
   ASSERT_TRUE(started.ok()) << started.error().message;
   auto client = std::move(*started);
   RecordingSink sink;
@@ -325,7 +325,7 @@ TEST(StreamCrashQuarantine, TheRealServerRecordsTheTextureItLoadsAndTwoCrashesOn
   EXPECT_FALSE(client->quarantined(TextureId(0)));
   EXPECT_EQ(sink.status(1, 0), CompletionStatus::kCorrupt);
   EXPECT_EQ(client->stats().crash_signal_deaths, 2u);
-  EXPECT_EQ(client->try_request(TextureId(1), MipLevel(5), 1.0f), RequestOutcome::kQuarantined);
+  EXPECT_EQ(client->try_request(TextureId(1), MipLevel(5), 1.0f), stream::RequestOutcome::kQuarantined);
 
   // The next server serves texture 0 (a small mip: no rate-limit wait) and is never asked for texture 1.
   class CountingSink : public RecordingSink {

@@ -83,9 +83,9 @@ struct TinyScene {
   }
 };
 
-class CheckingSink : public MipSink {
+class CheckingSink : public stream::MipSink {
  public:
-  CheckingSink(const TinyScene& s, TextureStates& states) : scene_(s), states_(states) {}
+  CheckingSink(const TinyScene& s, stream::TextureStates& states) : scene_(s), states_(states) {}
   std::span<std::byte> reserve(TextureId, MipLevel, uint64_t bytes) override {
     buffer_.assign(bytes, std::byte{0});
     return buffer_;
@@ -113,7 +113,7 @@ class CheckingSink : public MipSink {
 
  private:
   const TinyScene& scene_;
-  TextureStates& states_;
+  stream::TextureStates& states_;
   std::vector<std::byte> buffer_;
 };
 
@@ -134,13 +134,13 @@ TEST(StreamRealServer, StreamsEveryMipOfATinySceneEndToEnd) {
   // The server reads its own configuration: pass what differs from the defaults as overrides.
   const std::vector<std::string> overrides{"protocol.staging_slot_count=4", "server.worker_threads=1",
                                            "server.log_level=warn"};
-  auto started = StreamClient::start(config, shapes, scene.dir, "", overrides, {});
+  auto started = stream::StreamClient::start(config, shapes, scene.dir, "", overrides, {});
   ASSERT_TRUE(started.ok()) << started.error().message;
   auto client = std::move(*started);
 
-  TextureStates states(shapes);
+  stream::TextureStates states(shapes);
   CheckingSink sink(scene, states);
-  const std::vector<StreamCandidate> list{{TextureId(0), 0, 2}, {TextureId(1), 0, 1}};
+  const std::vector<stream::StreamCandidate> list{{TextureId(0), 0, 2}, {TextureId(1), 0, 1}};
   const auto deadline = std::chrono::steady_clock::now() + 60s;
   while (states.counts().final < 2 || states.counts().pending > 0) {
     ASSERT_LT(std::chrono::steady_clock::now(), deadline)
@@ -151,13 +151,13 @@ TEST(StreamRealServer, StreamsEveryMipOfATinySceneEndToEnd) {
     client->poll(sink, 8);
     std::this_thread::sleep_for(1ms);
   }
-  const StreamStats st = client->stats();
+  const stream::StreamStats st = client->stats();
   // Texture 0 (64x32): levels 4..0; texture 1 (32x32): levels 3..0 — coarsest (4x4-ish) first.
   EXPECT_EQ(sink.commits, 5 + 4);
   EXPECT_EQ(st.completions_ok, 9u);
   EXPECT_EQ(st.protocol_errors, 0u);
   EXPECT_EQ(st.server_deaths, 0u);
-  EXPECT_EQ(st.server_state, StreamServerState::kRunning);
+  EXPECT_EQ(st.server_state, stream::StreamServerState::kRunning);
   EXPECT_EQ(states.view(TextureId(0)).resident, 0u);
   EXPECT_EQ(states.view(TextureId(1)).resident, 0u);
 }

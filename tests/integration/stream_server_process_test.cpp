@@ -44,12 +44,12 @@ fs::path write_script(const fs::path& dir, const std::string& name, const std::s
   return p;
 }
 
-ServerCommand command(const fs::path& exe) {
-  return ServerCommand{exe, "texstream-seg", "/scenes/tiny", "", {}};
+stream::ServerCommand command(const fs::path& exe) {
+  return stream::ServerCommand{exe, "texstream-seg", "/scenes/tiny", "", {}};
 }
 
 // Polls reap() (real time passes, the virtual `now` does not) until the child's death is reported.
-std::optional<ServerExit> wait_reap(ServerProcess& p, SteadyTime now) {
+std::optional<stream::ServerExit> wait_reap(stream::ServerProcess& p, stream::SteadyTime now) {
   const auto deadline = std::chrono::steady_clock::now() + kHangAfter;
   while (std::chrono::steady_clock::now() < deadline) {
     if (auto e = p.reap(now)) return e;
@@ -59,7 +59,7 @@ std::optional<ServerExit> wait_reap(ServerProcess& p, SteadyTime now) {
 }
 
 // The pid once the spawner thread has started the child (spawn_if_due only posts the spawn).
-int wait_pid(const ServerProcess& p) {
+int wait_pid(const stream::ServerProcess& p) {
   const auto deadline = std::chrono::steady_clock::now() + kHangAfter;
   while (std::chrono::steady_clock::now() < deadline) {
     if (p.pid() > 0) return p.pid();
@@ -68,8 +68,8 @@ int wait_pid(const ServerProcess& p) {
   return -1;
 }
 
-TEST(ServerCommand, ArgvFollowsTheServerCommandLine) {
-  ServerCommand c{"/opt/bin/texstream-server", "texstream-42", "/data/city", "/etc/ts.toml",
+TEST(stream::ServerCommand, ArgvFollowsTheServerCommandLine) {
+  stream::ServerCommand c{"/opt/bin/texstream-server", "texstream-42", "/data/city", "/etc/ts.toml",
                   {"server.worker_threads=1", "protocol.heartbeat_timeout_ms=500"}};
   EXPECT_EQ(c.argv(), (std::vector<std::string>{"/opt/bin/texstream-server", "--segment", "texstream-42", "--scene",
                                                  "/data/city", "--config", "/etc/ts.toml", "--set",
@@ -81,15 +81,15 @@ TEST(ServerCommand, ArgvFollowsTheServerCommandLine) {
                                                  "/data/city", "--spawned"}));
 }
 
-TEST(ServerProcess, PassesTheCommandLineToTheChild) {
+TEST(stream::ServerProcess, PassesTheCommandLineToTheChild) {
   TempDir dir;
   const fs::path out = dir.path / "args.txt";
   const fs::path exe = write_script(dir.path, "record-args", "printf '%s\\n' \"$@\" > '" + out.string() + "'");
-  ServerCommand cmd{exe, "texstream-seg", "/scenes/tiny", "/etc/cfg.toml", {"server.log_level=debug"}};
-  ServerProcess p(cmd, {});
-  const SteadyTime t0 = std::chrono::steady_clock::now();
+  stream::ServerCommand cmd{exe, "texstream-seg", "/scenes/tiny", "/etc/cfg.toml", {"server.log_level=debug"}};
+  stream::ServerProcess p(cmd, {});
+  const stream::SteadyTime t0 = std::chrono::steady_clock::now();
   ASSERT_TRUE(p.spawn_if_due(t0));
-  EXPECT_EQ(p.state(), ServerState::kRunning);
+  EXPECT_EQ(p.state(), stream::ServerState::kRunning);
   const auto e = wait_reap(p, t0);
   ASSERT_TRUE(e.has_value());
   EXPECT_EQ(e->how, "exited with status 0");
@@ -100,12 +100,12 @@ TEST(ServerProcess, PassesTheCommandLineToTheChild) {
                       "server.log_level=debug\n--spawned\n");
 }
 
-TEST(ServerProcess, BacksOffExponentiallyThenGoesColormapOnly) {
+TEST(stream::ServerProcess, BacksOffExponentiallyThenGoesColormapOnly) {
   TempDir dir;
   const fs::path exe = write_script(dir.path, "crash", "exit 3");
-  ServerProcess p(command(exe), RestartPolicy{});  // 50 ms doubling, 5 crashes in 30 s, slow retry 30 s
-  SteadyTime now = std::chrono::steady_clock::now();
-  EXPECT_EQ(p.state(), ServerState::kStopped);
+  stream::ServerProcess p(command(exe), stream::RestartPolicy{});  // 50 ms doubling, 5 crashes in 30 s, slow retry 30 s
+  stream::SteadyTime now = std::chrono::steady_clock::now();
+  EXPECT_EQ(p.state(), stream::ServerState::kStopped);
   ASSERT_TRUE(p.spawn_if_due(now));
   // Delays after the 1st..4th crash: 50, 100, 200, 400 ms.
   for (int64_t delay_ms : {50, 100, 200, 400}) {
@@ -113,29 +113,29 @@ TEST(ServerProcess, BacksOffExponentiallyThenGoesColormapOnly) {
     ASSERT_TRUE(e.has_value());
     EXPECT_EQ(e->how, "exited with status 3");
     EXPECT_FALSE(e->killed_by_us);
-    EXPECT_EQ(p.state(), ServerState::kBackingOff);
+    EXPECT_EQ(p.state(), stream::ServerState::kBackingOff);
     EXPECT_FALSE(p.spawn_if_due(now + std::chrono::milliseconds(delay_ms - 1))) << delay_ms;
     now += std::chrono::milliseconds(delay_ms);
     ASSERT_TRUE(p.spawn_if_due(now)) << delay_ms;
   }
   // The 5th crash within 30 s: colormap only, next try in 30 s.
   ASSERT_TRUE(wait_reap(p, now).has_value());
-  EXPECT_EQ(p.state(), ServerState::kColormapOnly);
+  EXPECT_EQ(p.state(), stream::ServerState::kColormapOnly);
   EXPECT_FALSE(p.spawn_if_due(now + 29s));
   now += 30s;
   ASSERT_TRUE(p.spawn_if_due(now)) << "colormap only still retries slowly";
   ASSERT_TRUE(wait_reap(p, now).has_value());
-  EXPECT_EQ(p.state(), ServerState::kColormapOnly) << "a crash on the slow retry keeps it colormap only";
+  EXPECT_EQ(p.state(), stream::ServerState::kColormapOnly) << "a crash on the slow retry keeps it colormap only";
   EXPECT_EQ(p.next_spawn_at(), now + 30s);
   EXPECT_EQ(p.spawns(), 6u);
   EXPECT_EQ(p.deaths(), 6u);
 }
 
-TEST(ServerProcess, OldCrashesAgeOutOfTheWindow) {
+TEST(stream::ServerProcess, OldCrashesAgeOutOfTheWindow) {
   TempDir dir;
   const fs::path exe = write_script(dir.path, "crash", "exit 1");
-  ServerProcess p(command(exe), RestartPolicy{});
-  SteadyTime now = std::chrono::steady_clock::now();
+  stream::ServerProcess p(command(exe), stream::RestartPolicy{});
+  stream::SteadyTime now = std::chrono::steady_clock::now();
   ASSERT_TRUE(p.spawn_if_due(now));
   ASSERT_TRUE(wait_reap(p, now).has_value());
   now += 50ms;
@@ -148,56 +148,56 @@ TEST(ServerProcess, OldCrashesAgeOutOfTheWindow) {
   EXPECT_EQ(p.next_spawn_at(), now + 50ms) << "back to the first delay";
 }
 
-TEST(ServerProcess, ColormapOnlyEndsAfterAServerRunsAWholeWindow) {
+TEST(stream::ServerProcess, ColormapOnlyEndsAfterAServerRunsAWholeWindow) {
   TempDir dir;
   const fs::path flag = dir.path / "stay";
   // Crashes until the flag file exists, then stays up.
   const fs::path exe = write_script(dir.path, "flaky", "[ -e '" + flag.string() + "' ] && exec sleep 60\nexit 2");
-  RestartPolicy policy;
+  stream::RestartPolicy policy;
   policy.crash_limit = 2;
-  ServerProcess p(command(exe), policy);
-  SteadyTime now = std::chrono::steady_clock::now();
+  stream::ServerProcess p(command(exe), policy);
+  stream::SteadyTime now = std::chrono::steady_clock::now();
   ASSERT_TRUE(p.spawn_if_due(now));
   ASSERT_TRUE(wait_reap(p, now).has_value());
   now += 50ms;
   ASSERT_TRUE(p.spawn_if_due(now));
   ASSERT_TRUE(wait_reap(p, now).has_value());
-  EXPECT_EQ(p.state(), ServerState::kColormapOnly);
+  EXPECT_EQ(p.state(), stream::ServerState::kColormapOnly);
   std::ofstream(flag) << "1";
   now += 30s;
   ASSERT_TRUE(p.spawn_if_due(now));
-  EXPECT_EQ(p.state(), ServerState::kRunning);
+  EXPECT_EQ(p.state(), stream::ServerState::kRunning);
   std::this_thread::sleep_for(50ms);
   EXPECT_FALSE(p.reap(now + 29s).has_value());
   EXPECT_FALSE(p.reap(now + 30s).has_value());  // a whole window alive: no longer colormap only
   p.kill("test");
   ASSERT_TRUE(wait_reap(p, now + 30s).has_value());
-  EXPECT_EQ(p.state(), ServerState::kBackingOff) << "one crash after a stable run is an ordinary restart";
+  EXPECT_EQ(p.state(), stream::ServerState::kBackingOff) << "one crash after a stable run is an ordinary restart";
 }
 
-TEST(ServerProcess, SpawnFailureCountsAsACrash) {
+TEST(stream::ServerProcess, SpawnFailureCountsAsACrash) {
   TempDir dir;
   // Exists and is executable for access(), but exec fails: not a valid program.
   const fs::path exe = dir.path / "not-a-program";
   std::ofstream(exe) << "\x7f" "ELF garbage";
   fs::permissions(exe, fs::perms::owner_all);
-  ServerProcess p(command(exe), {});
-  const SteadyTime now = std::chrono::steady_clock::now();
+  stream::ServerProcess p(command(exe), {});
+  const stream::SteadyTime now = std::chrono::steady_clock::now();
   EXPECT_TRUE(p.spawn_if_due(now)) << "posted to the spawner thread";
   const auto e = wait_reap(p, now);
   ASSERT_TRUE(e.has_value());
   EXPECT_NE(e->how.find("could not be spawned"), std::string::npos) << e->how;
   EXPECT_EQ(e->pid, 0);
-  EXPECT_EQ(p.state(), ServerState::kBackingOff);
+  EXPECT_EQ(p.state(), stream::ServerState::kBackingOff);
   EXPECT_EQ(p.next_spawn_at(), now + 50ms);
   EXPECT_EQ(p.crashes(), 1u);
 }
 
-TEST(ServerProcess, KillPostedWhileSpawningKillsTheChildOnceItExists) {
+TEST(stream::ServerProcess, KillPostedWhileSpawningKillsTheChildOnceItExists) {
   TempDir dir;
   const fs::path exe = write_script(dir.path, "hang", "exec sleep 60");
-  ServerProcess p(command(exe), {});
-  const SteadyTime now = std::chrono::steady_clock::now();
+  stream::ServerProcess p(command(exe), {});
+  const stream::SteadyTime now = std::chrono::steady_clock::now();
   ASSERT_TRUE(p.spawn_if_due(now));
   p.kill("protocol violation before it even started");  // most likely before posix_spawn has returned
   EXPECT_FALSE(p.serving());
@@ -209,11 +209,11 @@ TEST(ServerProcess, KillPostedWhileSpawningKillsTheChildOnceItExists) {
   EXPECT_EQ(p.crashes(), 1u) << "a server we killed counts as a crash";
 }
 
-TEST(ServerProcess, SigkillFromOutsideIsNoCrash) {
+TEST(stream::ServerProcess, SigkillFromOutsideIsNoCrash) {
   TempDir dir;
   const fs::path exe = write_script(dir.path, "hang", "exec sleep 60");
-  ServerProcess p(command(exe), {});
-  const SteadyTime now = std::chrono::steady_clock::now();
+  stream::ServerProcess p(command(exe), {});
+  const stream::SteadyTime now = std::chrono::steady_clock::now();
   ASSERT_TRUE(p.spawn_if_due(now));
   const int pid = wait_pid(p);
   ASSERT_GT(pid, 0);
@@ -230,11 +230,11 @@ TEST(ServerProcess, SigkillFromOutsideIsNoCrash) {
 
 // PR_SET_PDEATHSIG fires when the thread that spawned the child exits. The spawner thread lives as long as
 // the ServerProcess, so a child must survive the end of the thread that called spawn_if_due.
-TEST(ServerProcess, ChildSurvivesTheThreadThatAskedForIt) {
+TEST(stream::ServerProcess, ChildSurvivesTheThreadThatAskedForIt) {
   TempDir dir;
   const fs::path exe = write_script(dir.path, "pdeathsig", "exec setpriv --pdeathsig KILL -- sleep 60");
-  ServerProcess p(command(exe), {});
-  const SteadyTime now = std::chrono::steady_clock::now();
+  stream::ServerProcess p(command(exe), {});
+  const stream::SteadyTime now = std::chrono::steady_clock::now();
   std::thread([&] { ASSERT_TRUE(p.spawn_if_due(now)); }).join();
   const int pid = wait_pid(p);
   ASSERT_GT(pid, 0);
@@ -243,13 +243,13 @@ TEST(ServerProcess, ChildSurvivesTheThreadThatAskedForIt) {
   EXPECT_TRUE(p.serving());
 }
 
-TEST(ServerProcess, WatchdogKillsAServerWhoseHeartbeatStallsWithWorkOutstanding) {
+TEST(stream::ServerProcess, WatchdogKillsAServerWhoseHeartbeatStallsWithWorkOutstanding) {
   TempDir dir;
   const fs::path exe = write_script(dir.path, "hang", "exec sleep 60");
-  RestartPolicy policy;
+  stream::RestartPolicy policy;
   policy.startup_grace = 1000ms;
-  ServerProcess p(command(exe), policy);
-  SteadyTime now = std::chrono::steady_clock::now();
+  stream::ServerProcess p(command(exe), policy);
+  stream::SteadyTime now = std::chrono::steady_clock::now();
   ASSERT_TRUE(p.spawn_if_due(now));
   const auto timeout = 100ms;
   // Not attached yet: the startup grace (1 s) applies instead of the 100 ms timeout.
@@ -270,14 +270,14 @@ TEST(ServerProcess, WatchdogKillsAServerWhoseHeartbeatStallsWithWorkOutstanding)
   EXPECT_NE(e->kill_reason.find("heartbeat stalled"), std::string::npos) << e->kill_reason;
 }
 
-TEST(ServerProcess, DestructorKillsAndReapsTheChild) {
+TEST(stream::ServerProcess, DestructorKillsAndReapsTheChild) {
   TempDir dir;
   const fs::path exe = write_script(dir.path, "ignore-term", "trap '' TERM\nwhile :; do sleep 0.05; done");
   int pid = -1;
   uint64_t start = 0;
   const auto t0 = std::chrono::steady_clock::now();
   {
-    ServerProcess p(command(exe), {});
+    stream::ServerProcess p(command(exe), {});
     ASSERT_TRUE(p.spawn_if_due(t0));
     pid = wait_pid(p);
     ASSERT_GT(pid, 0);
@@ -293,12 +293,12 @@ TEST(ServerProcess, DestructorKillsAndReapsTheChild) {
 TEST(ResolveServerExecutable, NamesThePathAndTheKey) {
   Config c;
   c.server.executable = "/nonexistent/dir/texstream-server";
-  auto r = resolve_server_executable(c);
+  auto r = stream::resolve_server_executable(c);
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.error().message.find("/nonexistent/dir/texstream-server"), std::string::npos);
   EXPECT_NE(r.error().message.find("server.executable"), std::string::npos);
   c.server.executable.clear();
-  r = resolve_server_executable(c);  // next to this test binary
+  r = stream::resolve_server_executable(c);  // next to this test binary
   if (!r.ok()) {
     EXPECT_NE(r.error().message.find("texstream-server"), std::string::npos);
     EXPECT_NE(r.error().message.find("next to"), std::string::npos) << r.error().message;
@@ -306,7 +306,7 @@ TEST(ResolveServerExecutable, NamesThePathAndTheKey) {
     EXPECT_EQ(r->filename(), "texstream-server");
   }
   c.server.executable = "/bin/sh";
-  r = resolve_server_executable(c);
+  r = stream::resolve_server_executable(c);
   ASSERT_TRUE(r.ok());
   EXPECT_EQ(*r, fs::path("/bin/sh"));
 }

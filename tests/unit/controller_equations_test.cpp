@@ -11,9 +11,9 @@
 namespace texstream {
 namespace {
 
-using C = AdaptiveController;
+using C = stream::AdaptiveController;
 
-AdaptiveController make(const ControllerParams& p = {}) {
+stream::AdaptiveController make(const stream::ControllerParams& p = {}) {
   auto c = C::create(p);
   EXPECT_TRUE(c.ok()) << (c.ok() ? "" : c.error().message);
   return std::move(*c);
@@ -84,7 +84,7 @@ TEST(ControllerEquations, BiasByHand) {
 //   b = 8·smoothstep(0.96·0.01598 = 0.0153408, 1.2·0.03406 = 0.040872, 0.020):
 //   t = 0.0046592 / 0.0255312 = 0.1824904, t^2 (3 - 2t) = 0.0333027 · 2.6350192 = 0.0877534 → b = 0.7020273.
 TEST(ControllerSequence, FourFramesByHand) {
-  AdaptiveController c = make();
+  stream::AdaptiveController c = make();
   EXPECT_EQ(c.load_size_bytes(), 65000.0);  // before any frame: l = 0 → s_min
   EXPECT_EQ(c.mip_bias(), 0.0);
 
@@ -126,7 +126,7 @@ TEST(ControllerSequence, FourFramesByHand) {
 // = 0.018736265625, Δl = P · 0.005 = 9.3681328125e-5 per frame: after 1000 frames l = 0.093681328125 and
 // s = l · 64e6 = 5995605 bytes. Streaming ramps up steadily while the frame latency stays low (Fig. 4 left).
 TEST(ControllerSequence, SteadyRampByHand) {
-  AdaptiveController c = make();
+  stream::AdaptiveController c = make();
   for (int i = 0; i < 1000; ++i) ASSERT_TRUE(c.on_frame(0.005));
   EXPECT_NEAR(c.load_factor(), 0.093681328125, 1e-12);
   EXPECT_NEAR(c.load_size_bytes(), 5995605.0, 1.0);
@@ -179,9 +179,9 @@ TEST(ControllerFigure4, BiasCurve) {
 }
 
 TEST(ControllerInput, RejectsBadInputWithoutChangingState) {
-  AdaptiveController c = make();
+  stream::AdaptiveController c = make();
   for (int i = 0; i < 50; ++i) ASSERT_TRUE(c.on_frame(0.004 + 0.001 * (i % 7)));
-  const AdaptiveController::State before = c.state();
+  const stream::AdaptiveController::State before = c.state();
   const double bad[] = {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(),
                         -std::numeric_limits<double>::infinity(), -1e-9, -10.0, 3600.0001, 1e300};
   for (double v : bad) {
@@ -200,7 +200,7 @@ TEST(ControllerInput, RejectsBadInputWithoutChangingState) {
 }
 
 TEST(ControllerInput, ZerosKeepEverythingFinite) {
-  AdaptiveController c = make();
+  stream::AdaptiveController c = make();
   for (int i = 0; i < 500; ++i) ASSERT_TRUE(c.on_frame(0.0));
   // t_w = 0 throughout: t_m = α/2 and x = -α/2, but Δl = P · Δt = 0, so l stays 0; the edges are all 0.
   EXPECT_EQ(c.state().t_w, 0.0);
@@ -210,9 +210,9 @@ TEST(ControllerInput, ZerosKeepEverythingFinite) {
 }
 
 TEST(ControllerModes, NoneAndFixed) {
-  ControllerParams none;
+  stream::ControllerParams none;
   none.mode = ControllerMode::kNone;
-  AdaptiveController n = make(none);
+  stream::AdaptiveController n = make(none);
   for (double dt : {0.005, 0.5, 0.005}) {
     ASSERT_TRUE(n.on_frame(dt));
     EXPECT_EQ(n.load_size_bytes(), 64e6);
@@ -220,11 +220,11 @@ TEST(ControllerModes, NoneAndFixed) {
   }
   EXPECT_NEAR(n.weighted_latency_s(), C::weighted_latency(0.5, 0.005), 1e-15);  // t_w still tracked
 
-  ControllerParams fixed;
+  stream::ControllerParams fixed;
   fixed.mode = ControllerMode::kFixed;
   fixed.fixed_load_bytes = 2e6;
   fixed.fixed_bias = 1.5;
-  AdaptiveController f = make(fixed);
+  stream::AdaptiveController f = make(fixed);
   ASSERT_TRUE(f.on_frame(0.2));
   EXPECT_EQ(f.load_size_bytes(), 2e6);
   EXPECT_EQ(f.load_bytes(), 2000000u);
@@ -233,14 +233,14 @@ TEST(ControllerModes, NoneAndFixed) {
 
 TEST(ControllerParamsTest, FromConfigConvertsUnits) {
   ControllerConfig cfg;  // Table 2 defaults
-  auto p = ControllerParams::from_config(cfg);
+  auto p = stream::ControllerParams::from_config(cfg);
   ASSERT_TRUE(p.ok()) << p.error().message;
   EXPECT_DOUBLE_EQ(p->alpha_s, 0.016);
   EXPECT_DOUBLE_EQ(p->s_min_bytes, 65000.0);
   EXPECT_DOUBLE_EQ(p->s_max_bytes, 64e6);
   EXPECT_EQ(p->mode, ControllerMode::kAdaptive);
   cfg.mode = ControllerMode::kNone;
-  EXPECT_EQ(ControllerParams::from_config(cfg)->mode, ControllerMode::kNone);
+  EXPECT_EQ(stream::ControllerParams::from_config(cfg)->mode, ControllerMode::kNone);
 }
 
 // An unknown controller.mode cannot reach from_config any more: the config parser refuses it naming the key
@@ -249,24 +249,24 @@ TEST(ControllerParamsTest, ErrorsNameTheKey) {
   ControllerConfig cfg;
   cfg.mode = ControllerMode::kFixed;
   cfg.fixed_load_mb = 100;  // above s_max = 64
-  auto p = ControllerParams::from_config(cfg);
+  auto p = stream::ControllerParams::from_config(cfg);
   ASSERT_FALSE(p.ok());
   EXPECT_NE(p.error().message.find("controller.fixed_load_mb"), std::string::npos);
 
   cfg = {};
   cfg.mode = ControllerMode::kFixed;
   cfg.fixed_bias = 9;  // above β = 8
-  p = ControllerParams::from_config(cfg);
+  p = stream::ControllerParams::from_config(cfg);
   ASSERT_FALSE(p.ok());
   EXPECT_NE(p.error().message.find("controller.fixed_bias"), std::string::npos);
 
   cfg = {};
   cfg.s_min_mb = 65;
-  p = ControllerParams::from_config(cfg);
+  p = stream::ControllerParams::from_config(cfg);
   ASSERT_FALSE(p.ok());
   EXPECT_NE(p.error().message.find("controller.s_min_mb"), std::string::npos);
 
-  ControllerParams bad;
+  stream::ControllerParams bad;
   bad.alpha_s = std::numeric_limits<double>::quiet_NaN();
   EXPECT_FALSE(C::create(bad).ok());
   bad = {};

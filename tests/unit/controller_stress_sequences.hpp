@@ -102,7 +102,7 @@ inline double from_bits(uint64_t bits) {
 
 // Step `i` of a sequence of family `f`.
 inline double sample(Family f, Rng& rng, size_t i, size_t n) {
-  constexpr double kMax = AdaptiveController::kMaxFrameLatencyS;
+  constexpr double kMax = stream::AdaptiveController::kMaxFrameLatencyS;
   const double normal = rng.uniform(0.002, 0.05);
   switch (f) {
     case Family::kRandomUniform: return rng.uniform(0.0, 0.1);
@@ -143,8 +143,8 @@ inline double sample(Family f, Rng& rng, size_t i, size_t n) {
   return 0.0;
 }
 
-inline ControllerParams stress_params(uint32_t which) {
-  ControllerParams p;  // Table 2
+inline stream::ControllerParams stress_params(uint32_t which) {
+  stream::ControllerParams p;  // Table 2
   switch (which % 5) {
     case 0: break;
     case 1: p.alpha_s = 1e-4; p.beta = 16; break;           // tiny target, largest β config allows
@@ -156,20 +156,20 @@ inline ControllerParams stress_params(uint32_t which) {
 }
 
 // A controller in a non-trivial state: fresh (warm = 0), after steady fast frames (l > 0), or after noisy ones.
-inline AdaptiveController warmed(const ControllerParams& p, uint32_t warm, uint64_t seed) {
-  auto c = AdaptiveController::create(p);
-  AdaptiveController ctl = std::move(*c);
+inline stream::AdaptiveController warmed(const stream::ControllerParams& p, uint32_t warm, uint64_t seed) {
+  auto c = stream::AdaptiveController::create(p);
+  stream::AdaptiveController ctl = std::move(*c);
   Rng rng(seed);
   for (int i = 0; i < 300 && warm != 0; ++i) ctl.on_frame(warm == 1 ? 0.004 : rng.uniform(0.003, 0.06));
   return ctl;
 }
 
 inline bool accepted_input(double dt) {
-  return std::isfinite(dt) && dt >= 0.0 && dt <= AdaptiveController::kMaxFrameLatencyS;
+  return std::isfinite(dt) && dt >= 0.0 && dt <= stream::AdaptiveController::kMaxFrameLatencyS;
 }
 
 // Empty when every promise holds after a step.
-inline std::string check_outputs(const AdaptiveController& c) {
+inline std::string check_outputs(const stream::AdaptiveController& c) {
   const auto& p = c.params();
   const auto& s = c.state();
   const double sz = c.load_size_bytes(), b = c.mip_bias();
@@ -191,14 +191,14 @@ inline StressResult run_stress(const StressOptions& o) {
   StressResult r;
   constexpr uint32_t kFamilies = static_cast<uint32_t>(Family::kCount);
   // Prepared starting points: 5 parameter sets × 3 warm-ups, copied for each sequence.
-  std::vector<AdaptiveController> bases;
+  std::vector<stream::AdaptiveController> bases;
   for (uint32_t ps = 0; ps < 5; ++ps) {
     for (uint32_t w = 0; w < 3; ++w) bases.push_back(warmed(stress_params(ps), w, o.seed + ps * 3 + w));
   }
   Rng rng(o.seed);
   for (uint64_t q = 0; q < o.sequences; ++q) {
     const auto fam = static_cast<Family>(q % kFamilies);
-    AdaptiveController c = bases[(q / kFamilies) % bases.size()];
+    stream::AdaptiveController c = bases[(q / kFamilies) % bases.size()];
     ++r.sequences;
     ++r.per_family[static_cast<uint32_t>(fam)];
     for (size_t i = 0; i < o.steps_per_sequence; ++i) {
@@ -208,7 +208,7 @@ inline StressResult run_stress(const StressOptions& o) {
       if (should) {
         if (!c.on_frame(dt)) what = "a valid input was rejected";
       } else {
-        const AdaptiveController::State before = c.state();
+        const stream::AdaptiveController::State before = c.state();
         const uint64_t rejected = c.frames_rejected();
         if (c.on_frame(dt)) {
           what = "an invalid input was accepted";
@@ -237,9 +237,9 @@ inline StressResult run_stress(const StressOptions& o) {
 
 inline DriftResult run_drift(uint64_t steps, uint64_t seed, uint64_t checkpoint_every = 9973) {
   DriftResult r;
-  auto created = AdaptiveController::create(ControllerParams{});
-  AdaptiveController c = std::move(*created);
-  constexpr size_t kN = AdaptiveController::kTwaSamples, kB = AdaptiveController::kTbSamples;
+  auto created = stream::AdaptiveController::create(stream::ControllerParams{});
+  stream::AdaptiveController c = std::move(*created);
+  constexpr size_t kN = stream::AdaptiveController::kTwaSamples, kB = stream::AdaptiveController::kTbSamples;
   std::vector<double> ring(kN, 0.0);  // the last 200 t_w outputs, as doubles
   size_t filled = 0;
   double naive_sum = 0.0;             // add the new, subtract the one leaving: what drifts

@@ -51,7 +51,7 @@ TEST(ControllerStress, GeneratorsProduceWhatTheyClaim) {
     nan += std::isnan(controller_stress::sample(Family::kNaN, rng, 0, 1));
     inf += std::isinf(controller_stress::sample(Family::kInfinities, rng, 0, 1));
     neg += std::signbit(controller_stress::sample(Family::kNegative, rng, 0, 1));
-    big += controller_stress::sample(Family::kAbsurd, rng, 0, 1) > AdaptiveController::kMaxFrameLatencyS;
+    big += controller_stress::sample(Family::kAbsurd, rng, 0, 1) > stream::AdaptiveController::kMaxFrameLatencyS;
     sub += std::fpclassify(controller_stress::sample(Family::kDenormals, rng, 0, 1)) == FP_SUBNORMAL;
   }
   EXPECT_GT(nan, 400);
@@ -60,7 +60,7 @@ TEST(ControllerStress, GeneratorsProduceWhatTheyClaim) {
   EXPECT_GT(big, 400);
   EXPECT_EQ(sub, 2000);
   EXPECT_FALSE(controller_stress::accepted_input(-0.1));
-  EXPECT_FALSE(controller_stress::accepted_input(std::nextafter(AdaptiveController::kMaxFrameLatencyS, 1e9)));
+  EXPECT_FALSE(controller_stress::accepted_input(std::nextafter(stream::AdaptiveController::kMaxFrameLatencyS, 1e9)));
   EXPECT_TRUE(controller_stress::accepted_input(0.0));
 }
 
@@ -78,14 +78,14 @@ TEST(ControllerDrift, WindowedAveragesMatchRecomputation) {
 // The window keeps an exact integer sum: pushing a 10 s sample and then 200 tiny ones leaves exactly the
 // tiny ones (a double running sum would keep a residue of the 10 s sample's rounding).
 TEST(ControllerDrift, WindowForgetsSpikesExactly) {
-  LatencyWindow<200> w;
+  stream::LatencyWindow<200> w;
   w.push(10.0);
   for (int i = 0; i < 200; ++i) w.push(1e-6);
   EXPECT_EQ(w.count(), 200u);
   EXPECT_TRUE(w.sum_fs() == static_cast<__int128>(200) * 1000000000);
   EXPECT_DOUBLE_EQ(w.mean_s(), 1e-6);
   EXPECT_EQ(w.newest_fs(0), 1000000000);
-  LatencyWindow<5> e;
+  stream::LatencyWindow<5> e;
   EXPECT_EQ(e.mean_s(), 0.0);
   e.push(0.001);
   e.push(0.003);

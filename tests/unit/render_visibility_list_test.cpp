@@ -94,12 +94,12 @@ TEST(VisibilityList, AgreesWithAPlainModelOnRandomLists) {
         it->second.first = std::min(it->second.first, e.mip_fixed);
         it->second.second += e.weight_fixed;
       }
-      std::vector<StreamCandidate> model;
+      std::vector<stream::StreamCandidate> model;
       for (const auto& [t, v] : model_sums) {
         model.push_back({TextureId(t), static_cast<float>(v.first) / static_cast<float>(gpu::kMipFixedScale),
                          static_cast<float>(static_cast<double>(v.second) / gpu::kWeightFixedScale)});
       }
-      std::sort(model.begin(), model.end(), [](const StreamCandidate& a, const StreamCandidate& b) {
+      std::sort(model.begin(), model.end(), [](const stream::StreamCandidate& a, const stream::StreamCandidate& b) {
         return a.weight != b.weight ? a.weight > b.weight : a.texture < b.texture;
       });
       uint64_t bad = 0;

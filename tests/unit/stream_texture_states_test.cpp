@@ -26,44 +26,44 @@ constexpr uint64_t kHuge = 1ull << 40;
 
 std::vector<TextureShape> table() { return {kBig, kBc1, kWide, kTiny, kNoMips}; }
 
-StreamCandidate cand(TextureId t, float desired, float weight = 1) { return {t, desired, weight}; }
+stream::StreamCandidate cand(TextureId t, float desired, float weight = 1) { return {t, desired, weight}; }
 
 // A sender that accepts everything and records it.
 struct Recorder {
-  std::vector<MipRequest> got;
-  TextureStates::Sender fn() {
-    return [this](const MipRequest& r) {
+  std::vector<stream::MipRequest> got;
+  stream::TextureStates::Sender fn() {
+    return [this](const stream::MipRequest& r) {
       got.push_back(r);
-      return SendResult::kSent;
+      return stream::SendResult::kSent;
     };
   }
 };
 
-std::vector<uint32_t> mips_of(const CycleResult& r) {
+std::vector<uint32_t> mips_of(const stream::CycleResult& r) {
   std::vector<uint32_t> m;
   for (const auto& q : r.sent) m.push_back(q.mip.value);
   return m;
 }
 
 TEST(InitialMipLevel, IsTheFourByFourLevel) {
-  EXPECT_EQ(initial_mip_level(kBig), 6u);   // 256 >> 6 = 4
-  EXPECT_EQ(initial_mip_level(kBc1), 8u);   // 1024 >> 8 = 4
-  EXPECT_EQ(initial_mip_level(kWide), 4u);  // larger side 64 >> 4 = 4 (the level is 4x1)
-  EXPECT_EQ(initial_mip_level({4, 4, 3, TexelFormat::kRgba8}), 0u);
-  EXPECT_EQ(initial_mip_level({8, 8, 4, TexelFormat::kRgba8}), 1u);
+  EXPECT_EQ(stream::initial_mip_level(kBig), 6u);   // 256 >> 6 = 4
+  EXPECT_EQ(stream::initial_mip_level(kBc1), 8u);   // 1024 >> 8 = 4
+  EXPECT_EQ(stream::initial_mip_level(kWide), 4u);  // larger side 64 >> 4 = 4 (the level is 4x1)
+  EXPECT_EQ(stream::initial_mip_level({4, 4, 3, TexelFormat::kRgba8}), 0u);
+  EXPECT_EQ(stream::initial_mip_level({8, 8, 4, TexelFormat::kRgba8}), 1u);
   // Non-power-of-two: the coarsest level whose larger side is still >= 4 (300 >> 6 = 4, 300 >> 7 = 2).
-  EXPECT_EQ(initial_mip_level({300, 200, 9, TexelFormat::kRgba8}), 6u);
-  EXPECT_EQ(initial_mip_level({7, 3, 3, TexelFormat::kRgba8}), 0u);  // 7 >> 1 = 3 < 4
+  EXPECT_EQ(stream::initial_mip_level({300, 200, 9, TexelFormat::kRgba8}), 6u);
+  EXPECT_EQ(stream::initial_mip_level({7, 3, 3, TexelFormat::kRgba8}), 0u);  // 7 >> 1 = 3 < 4
   // Smaller than 4x4: the base level.
-  EXPECT_EQ(initial_mip_level(kTiny), 0u);
-  EXPECT_EQ(initial_mip_level({1, 1, 1, TexelFormat::kBc1}), 0u);
+  EXPECT_EQ(stream::initial_mip_level(kTiny), 0u);
+  EXPECT_EQ(stream::initial_mip_level({1, 1, 1, TexelFormat::kBc1}), 0u);
   // A file that stores fewer levels: clamped to its coarsest stored level.
-  EXPECT_EQ(initial_mip_level({256, 256, 3, TexelFormat::kRgba8}), 2u);
+  EXPECT_EQ(stream::initial_mip_level({256, 256, 3, TexelFormat::kRgba8}), 2u);
 }
 
-TEST(TextureStates, StartsInitialAndShapesWithoutMipsAreBroken) {
-  TextureStates s(table());
-  EXPECT_EQ(s.view(T0).phase, TexturePhase::kInitial);
+TEST(stream::TextureStates, StartsInitialAndShapesWithoutMipsAreBroken) {
+  stream::TextureStates s(table());
+  EXPECT_EQ(s.view(T0).phase, stream::TexturePhase::kInitial);
   EXPECT_FALSE(s.view(T0).resident.has_value());
   EXPECT_FALSE(s.view(T0).pending.has_value());
   EXPECT_TRUE(s.view(T4).broken);
@@ -72,9 +72,9 @@ TEST(TextureStates, StartsInitialAndShapesWithoutMipsAreBroken) {
   EXPECT_EQ(c.broken, 1u);
 }
 
-TEST(TextureStates, CoarsestFirstThenOneMipPerCycleDownToBase) {
-  TextureStates s(table());
-  const std::vector<StreamCandidate> list{cand(T0, 0.0f, 7.0f)};
+TEST(stream::TextureStates, CoarsestFirstThenOneMipPerCycleDownToBase) {
+  stream::TextureStates s(table());
+  const std::vector<stream::StreamCandidate> list{cand(T0, 0.0f, 7.0f)};
   Recorder rec;
 
   // Cycle 1: Initial → the 4x4 level 6, Active.
@@ -83,7 +83,7 @@ TEST(TextureStates, CoarsestFirstThenOneMipPerCycleDownToBase) {
   EXPECT_EQ(r.sent[0].bytes, 64u);
   EXPECT_FLOAT_EQ(r.sent[0].priority, 7.0f);
   EXPECT_EQ(r.bytes, 64u);
-  EXPECT_EQ(s.view(T0).phase, TexturePhase::kActive);
+  EXPECT_EQ(s.view(T0).phase, stream::TexturePhase::kActive);
   EXPECT_EQ(s.view(T0).pending, 6u);
 
   // Cycle 2: still pending → nothing (one request per texture in flight).
@@ -98,7 +98,7 @@ TEST(TextureStates, CoarsestFirstThenOneMipPerCycleDownToBase) {
     r = s.run_cycle(list, kHuge, 0, rec.fn());
     ASSERT_EQ(mips_of(r), std::vector<uint32_t>{expect});
     EXPECT_EQ(r.sent[0].bytes, sizes[expect]);
-    EXPECT_EQ(s.view(T0).phase, TexturePhase::kActive);
+    EXPECT_EQ(s.view(T0).phase, stream::TexturePhase::kActive);
     // A second cycle before the commit sends nothing.
     EXPECT_TRUE(s.run_cycle(list, kHuge, 0, rec.fn()).sent.empty());
     ASSERT_TRUE(s.on_committed(T0, MipLevel(expect)));
@@ -106,18 +106,18 @@ TEST(TextureStates, CoarsestFirstThenOneMipPerCycleDownToBase) {
   r = s.run_cycle(list, kHuge, 0, rec.fn());
   ASSERT_EQ(mips_of(r), std::vector<uint32_t>{0});
   EXPECT_EQ(r.sent[0].bytes, 262144u);
-  EXPECT_EQ(s.view(T0).phase, TexturePhase::kFinal) << "Final as soon as the base level is requested";
+  EXPECT_EQ(s.view(T0).phase, stream::TexturePhase::kFinal) << "Final as soon as the base level is requested";
   ASSERT_TRUE(s.on_committed(T0, MipLevel(0)));
-  EXPECT_EQ(s.view(T0).phase, TexturePhase::kFinal);
+  EXPECT_EQ(s.view(T0).phase, stream::TexturePhase::kFinal);
   EXPECT_TRUE(s.run_cycle(list, kHuge, 0, rec.fn()).sent.empty()) << "Final textures request nothing";
   EXPECT_EQ(rec.got.size(), 7u);
 }
 
-TEST(TextureStates, RefinesOnlyWhileSampledPlusBiasIsBelowResident) {
-  TextureStates s(table());
+TEST(stream::TextureStates, RefinesOnlyWhileSampledPlusBiasIsBelowResident) {
+  stream::TextureStates s(table());
   Recorder rec;
   // Metadata asks for level 3: 6 → 5 → 4 → 3, then 3 + 0 < 3 is false and it stops.
-  std::vector<StreamCandidate> list{cand(T0, 3.0f)};
+  std::vector<stream::StreamCandidate> list{cand(T0, 3.0f)};
   uint32_t last = 99;
   for (int i = 0; i < 10; ++i) {
     auto r = s.run_cycle(list, kHuge, 0, rec.fn());
@@ -127,7 +127,7 @@ TEST(TextureStates, RefinesOnlyWhileSampledPlusBiasIsBelowResident) {
   }
   EXPECT_EQ(last, 3u);
   EXPECT_EQ(s.view(T0).resident, 3u);
-  EXPECT_EQ(s.view(T0).phase, TexturePhase::kActive);
+  EXPECT_EQ(s.view(T0).phase, stream::TexturePhase::kActive);
 
   // A fractional level between 2 and 3 asks for one more (2.5 < 3), and no further (2.5 < 2 is false).
   list[0].desired_mip = 2.5f;
@@ -142,10 +142,10 @@ TEST(TextureStates, RefinesOnlyWhileSampledPlusBiasIsBelowResident) {
   EXPECT_EQ(s.view(T0).resident, 2u);
 }
 
-TEST(TextureStates, BiasHoldsBackRefinementUntilItDrops) {
-  TextureStates s(table());
+TEST(stream::TextureStates, BiasHoldsBackRefinementUntilItDrops) {
+  stream::TextureStates s(table());
   Recorder rec;
-  const std::vector<StreamCandidate> list{cand(T0, 2.0f)};
+  const std::vector<stream::StreamCandidate> list{cand(T0, 2.0f)};
   // b = 1.5: refine while 3.5 < resident: 6 (initial) → 5 → 4 → 3, then 3.5 < 3 fails.
   std::vector<uint32_t> sent;
   for (int i = 0; i < 10; ++i) {
@@ -156,7 +156,7 @@ TEST(TextureStates, BiasHoldsBackRefinementUntilItDrops) {
   }
   EXPECT_EQ(sent, (std::vector<uint32_t>{6, 5, 4, 3}));
   // The initial level is loaded whatever the bias: b only gates the Active step.
-  TextureStates fresh(table());
+  stream::TextureStates fresh(table());
   EXPECT_EQ(mips_of(fresh.run_cycle(list, kHuge, 100.0f, rec.fn())), std::vector<uint32_t>{6});
   // Bias falls to 0: 2 < 3 → level 2 goes out, then 2 < 2 fails.
   EXPECT_EQ(mips_of(s.run_cycle(list, kHuge, 0.0f, rec.fn())), std::vector<uint32_t>{2});
@@ -164,18 +164,18 @@ TEST(TextureStates, BiasHoldsBackRefinementUntilItDrops) {
   EXPECT_TRUE(s.run_cycle(list, kHuge, 0.0f, rec.fn()).sent.empty());
 }
 
-TEST(TextureStates, LoadSizeStopsTheCycleAfterTheMipThatExceedsIt) {
+TEST(stream::TextureStates, LoadSizeStopsTheCycleAfterTheMipThatExceedsIt) {
   // Three Initial textures in weight order: T0 (64 B), T1 (8 B), T2 (16 B).
-  const std::vector<StreamCandidate> list{cand(T0, 0, 30), cand(T1, 0, 20), cand(T2, 0, 10)};
+  const std::vector<stream::StreamCandidate> list{cand(T0, 0, 30), cand(T1, 0, 20), cand(T2, 0, 10)};
   {
     // s = 50: 0 > 50 no → T0 (64 B); 64 > 50 → stop before T1.
-    TextureStates s(table());
+    stream::TextureStates s(table());
     Recorder rec;
     auto r = s.run_cycle(list, 50, 0, rec.fn());
     ASSERT_EQ(r.sent.size(), 1u);
     EXPECT_EQ(r.sent[0].texture, T0);
     EXPECT_TRUE(r.stopped_by_load_size);
-    EXPECT_EQ(s.view(T1).phase, TexturePhase::kInitial) << "the texture at the limit keeps its state";
+    EXPECT_EQ(s.view(T1).phase, stream::TexturePhase::kInitial) << "the texture at the limit keeps its state";
     EXPECT_FALSE(s.view(T1).pending.has_value());
     // Next cycle: T0 pending, so T1 and T2 fit: 0 → T1 (8), 8 > 50 no → T2 (16).
     r = s.run_cycle(list, 50, 0, rec.fn());
@@ -187,7 +187,7 @@ TEST(TextureStates, LoadSizeStopsTheCycleAfterTheMipThatExceedsIt) {
   }
   {
     // s = 64: T0 (64), 64 > 64 no → T1 (72 total), 72 > 64 → stop before T2.
-    TextureStates s(table());
+    stream::TextureStates s(table());
     Recorder rec;
     auto r = s.run_cycle(list, 64, 0, rec.fn());
     ASSERT_EQ(r.sent.size(), 2u);
@@ -196,7 +196,7 @@ TEST(TextureStates, LoadSizeStopsTheCycleAfterTheMipThatExceedsIt) {
   }
   {
     // s = 0: the first mip still goes (0 > 0 is false), then the cycle stops.
-    TextureStates s(table());
+    stream::TextureStates s(table());
     Recorder rec;
     auto r = s.run_cycle(list, 0, 0, rec.fn());
     ASSERT_EQ(r.sent.size(), 1u);
@@ -204,65 +204,65 @@ TEST(TextureStates, LoadSizeStopsTheCycleAfterTheMipThatExceedsIt) {
   }
 }
 
-TEST(TextureStates, MaxRequestsCapsTheCycle) {
-  TextureStates s(table());
+TEST(stream::TextureStates, MaxRequestsCapsTheCycle) {
+  stream::TextureStates s(table());
   Recorder rec;
-  const std::vector<StreamCandidate> list{cand(T0, 0), cand(T1, 0), cand(T2, 0)};
+  const std::vector<stream::StreamCandidate> list{cand(T0, 0), cand(T1, 0), cand(T2, 0)};
   auto r = s.run_cycle(list, kHuge, 0, rec.fn(), 2);
   ASSERT_EQ(r.sent.size(), 2u);
   EXPECT_TRUE(r.stopped_by_count);
   EXPECT_FALSE(r.stopped_by_load_size);
-  EXPECT_EQ(s.view(T2).phase, TexturePhase::kInitial);
+  EXPECT_EQ(s.view(T2).phase, stream::TexturePhase::kInitial);
   r = s.run_cycle(list, kHuge, 0, rec.fn(), 2);
   ASSERT_EQ(r.sent.size(), 1u);
   EXPECT_EQ(r.sent[0].texture, T2);
   EXPECT_FALSE(r.stopped_by_count);
 }
 
-TEST(TextureStates, TexturesWithNothingToLoadDoNotEndTheCycle) {
-  TextureStates s(table());
+TEST(stream::TextureStates, TexturesWithNothingToLoadDoNotEndTheCycle) {
+  stream::TextureStates s(table());
   Recorder rec;
   // T0 is pending after the first cycle; it must not stop T1 behind it even with s = 0.
-  ASSERT_EQ(s.run_cycle(std::vector<StreamCandidate>{cand(T0, 0)}, kHuge, 0, rec.fn()).sent.size(), 1u);
-  auto r = s.run_cycle(std::vector<StreamCandidate>{cand(T0, 0), cand(T1, 0)}, 0, 0, rec.fn());
+  ASSERT_EQ(s.run_cycle(std::vector<stream::StreamCandidate>{cand(T0, 0)}, kHuge, 0, rec.fn()).sent.size(), 1u);
+  auto r = s.run_cycle(std::vector<stream::StreamCandidate>{cand(T0, 0), cand(T1, 0)}, 0, 0, rec.fn());
   ASSERT_EQ(r.sent.size(), 1u);
   EXPECT_EQ(r.sent[0].texture, T1);
   EXPECT_EQ(r.sent[0].mip.value, 8u);
   EXPECT_EQ(r.sent[0].bytes, 8u) << "a BC1 4x4 level is one 8-byte block";
 }
 
-TEST(TextureStates, SmallerThanFourByFourGoesStraightToFinal) {
-  TextureStates s(table());
+TEST(stream::TextureStates, SmallerThanFourByFourGoesStraightToFinal) {
+  stream::TextureStates s(table());
   Recorder rec;
-  auto r = s.run_cycle(std::vector<StreamCandidate>{cand(T3, 0)}, kHuge, 0, rec.fn());
+  auto r = s.run_cycle(std::vector<stream::StreamCandidate>{cand(T3, 0)}, kHuge, 0, rec.fn());
   ASSERT_EQ(mips_of(r), std::vector<uint32_t>{0});
   EXPECT_EQ(r.sent[0].bytes, 16u);  // 2x2 RGBA8
-  EXPECT_EQ(s.view(T3).phase, TexturePhase::kFinal);
+  EXPECT_EQ(s.view(T3).phase, stream::TexturePhase::kFinal);
   // Its failure returns it to Initial (nothing is displayed), not Active.
   ASSERT_TRUE(s.on_failed(T3, MipLevel(0), CompletionStatus::kUnfilled));
-  EXPECT_EQ(s.view(T3).phase, TexturePhase::kInitial);
-  EXPECT_EQ(mips_of(s.run_cycle(std::vector<StreamCandidate>{cand(T3, 0)}, kHuge, 0, rec.fn())),
+  EXPECT_EQ(s.view(T3).phase, stream::TexturePhase::kInitial);
+  EXPECT_EQ(mips_of(s.run_cycle(std::vector<stream::StreamCandidate>{cand(T3, 0)}, kHuge, 0, rec.fn())),
             std::vector<uint32_t>{0});
   ASSERT_TRUE(s.on_committed(T3, MipLevel(0)));
-  EXPECT_EQ(s.view(T3).phase, TexturePhase::kFinal);
+  EXPECT_EQ(s.view(T3).phase, stream::TexturePhase::kFinal);
   EXPECT_EQ(s.view(T3).resident, 0u);
 }
 
-TEST(TextureStates, TransientFailuresRollBackAndRetry) {
-  TextureStates s(table());
+TEST(stream::TextureStates, TransientFailuresRollBackAndRetry) {
+  stream::TextureStates s(table());
   Recorder rec;
-  const std::vector<StreamCandidate> list{cand(T0, 0)};
+  const std::vector<stream::StreamCandidate> list{cand(T0, 0)};
   // The initial request fails: back to Initial, the same level is asked again.
   ASSERT_EQ(mips_of(s.run_cycle(list, kHuge, 0, rec.fn())), std::vector<uint32_t>{6});
   ASSERT_TRUE(s.on_failed(T0, MipLevel(6), CompletionStatus::kUnfilled));
-  EXPECT_EQ(s.view(T0).phase, TexturePhase::kInitial);
+  EXPECT_EQ(s.view(T0).phase, stream::TexturePhase::kInitial);
   EXPECT_FALSE(s.view(T0).pending.has_value());
   ASSERT_EQ(mips_of(s.run_cycle(list, kHuge, 0, rec.fn())), std::vector<uint32_t>{6});
   ASSERT_TRUE(s.on_committed(T0, MipLevel(6)));
   // A refinement fails: stays Active with level 6 resident, asks for 5 again.
   ASSERT_EQ(mips_of(s.run_cycle(list, kHuge, 0, rec.fn())), std::vector<uint32_t>{5});
   ASSERT_TRUE(s.on_failed(T0, MipLevel(5), CompletionStatus::kTimedOut));
-  EXPECT_EQ(s.view(T0).phase, TexturePhase::kActive);
+  EXPECT_EQ(s.view(T0).phase, stream::TexturePhase::kActive);
   EXPECT_EQ(s.view(T0).resident, 6u);
   ASSERT_EQ(mips_of(s.run_cycle(list, kHuge, 0, rec.fn())), std::vector<uint32_t>{5});
   // Lost with a dead server (kCancelled), many times: never counted, never broken.
@@ -277,18 +277,18 @@ TEST(TextureStates, TransientFailuresRollBackAndRetry) {
     ASSERT_TRUE(s.on_committed(T0, MipLevel(m)));
     ASSERT_EQ(mips_of(s.run_cycle(list, kHuge, 0, rec.fn())), std::vector<uint32_t>{m - 1});
   }
-  EXPECT_EQ(s.view(T0).phase, TexturePhase::kFinal);
+  EXPECT_EQ(s.view(T0).phase, stream::TexturePhase::kFinal);
   ASSERT_TRUE(s.on_failed(T0, MipLevel(0), CompletionStatus::kUnfilled));
-  EXPECT_EQ(s.view(T0).phase, TexturePhase::kActive);
+  EXPECT_EQ(s.view(T0).phase, stream::TexturePhase::kActive);
   EXPECT_EQ(s.view(T0).resident, 1u);
   EXPECT_EQ(mips_of(s.run_cycle(list, kHuge, 0, rec.fn())), std::vector<uint32_t>{0});
 }
 
-TEST(TextureStates, NotFoundAndCorruptBreakTheTextureForTheSession) {
+TEST(stream::TextureStates, NotFoundAndCorruptBreakTheTextureForTheSession) {
   for (CompletionStatus st : {CompletionStatus::kNotFound, CompletionStatus::kCorrupt}) {
-    TextureStates s(table());
+    stream::TextureStates s(table());
     Recorder rec;
-    const std::vector<StreamCandidate> list{cand(T0, 0), cand(T1, 0)};
+    const std::vector<stream::StreamCandidate> list{cand(T0, 0), cand(T1, 0)};
     ASSERT_EQ(s.run_cycle(list, kHuge, 0, rec.fn()).sent.size(), 2u);
     ASSERT_TRUE(s.on_failed(T0, MipLevel(6), st));
     EXPECT_TRUE(s.view(T0).broken) << to_string(st);
@@ -305,20 +305,20 @@ TEST(TextureStates, NotFoundAndCorruptBreakTheTextureForTheSession) {
   }
 }
 
-TEST(TextureStates, RepeatedIoErrorsOrRejectsBreakTheTextureButACommitResetsTheCount) {
-  TextureStates s(table());
+TEST(stream::TextureStates, RepeatedIoErrorsOrRejectsBreakTheTextureButACommitResetsTheCount) {
+  stream::TextureStates s(table());
   Recorder rec;
-  const std::vector<StreamCandidate> list{cand(T0, 0)};
-  for (uint32_t i = 0; i + 1 < TextureStates::kMaxCountedFailures; ++i) {
+  const std::vector<stream::StreamCandidate> list{cand(T0, 0)};
+  for (uint32_t i = 0; i + 1 < stream::TextureStates::kMaxCountedFailures; ++i) {
     ASSERT_EQ(s.run_cycle(list, kHuge, 0, rec.fn()).sent.size(), 1u);
     ASSERT_TRUE(i % 2 ? s.on_rejected(T0, MipLevel(6)) : s.on_failed(T0, MipLevel(6), CompletionStatus::kIoError));
     EXPECT_FALSE(s.view(T0).broken);
   }
-  EXPECT_EQ(s.view(T0).failures, TextureStates::kMaxCountedFailures - 1);
+  EXPECT_EQ(s.view(T0).failures, stream::TextureStates::kMaxCountedFailures - 1);
   ASSERT_EQ(s.run_cycle(list, kHuge, 0, rec.fn()).sent.size(), 1u);
   ASSERT_TRUE(s.on_committed(T0, MipLevel(6)));
   EXPECT_EQ(s.view(T0).failures, 0u);
-  for (uint32_t i = 0; i < TextureStates::kMaxCountedFailures; ++i) {
+  for (uint32_t i = 0; i < stream::TextureStates::kMaxCountedFailures; ++i) {
     ASSERT_EQ(mips_of(s.run_cycle(list, kHuge, 0, rec.fn())), std::vector<uint32_t>{5});
     ASSERT_TRUE(s.on_rejected(T0, MipLevel(5)));
   }
@@ -327,15 +327,15 @@ TEST(TextureStates, RepeatedIoErrorsOrRejectsBreakTheTextureButACommitResetsTheC
   EXPECT_EQ(s.view(T0).resident, 6u) << "what is resident stays displayable";
 }
 
-TEST(TextureStates, EvictionResetsToInitialAndRefusesTheLateAnswer) {
-  TextureStates s(table());
+TEST(stream::TextureStates, EvictionResetsToInitialAndRefusesTheLateAnswer) {
+  stream::TextureStates s(table());
   Recorder rec;
-  const std::vector<StreamCandidate> list{cand(T0, 0)};
+  const std::vector<stream::StreamCandidate> list{cand(T0, 0)};
   ASSERT_EQ(mips_of(s.run_cycle(list, kHuge, 0, rec.fn())), std::vector<uint32_t>{6});
   ASSERT_TRUE(s.on_committed(T0, MipLevel(6)));
   ASSERT_EQ(mips_of(s.run_cycle(list, kHuge, 0, rec.fn())), std::vector<uint32_t>{5});
   s.invalidate(T0);  // its cache layer was reused while level 5 was in flight
-  EXPECT_EQ(s.view(T0).phase, TexturePhase::kInitial);
+  EXPECT_EQ(s.view(T0).phase, stream::TexturePhase::kInitial);
   EXPECT_FALSE(s.view(T0).resident.has_value());
   EXPECT_FALSE(s.view(T0).pending.has_value());
   EXPECT_FALSE(s.on_committed(T0, MipLevel(5))) << "the old request's answer must not count as resident";
@@ -344,87 +344,87 @@ TEST(TextureStates, EvictionResetsToInitialAndRefusesTheLateAnswer) {
   // Streaming starts over from the 4x4 level.
   EXPECT_EQ(mips_of(s.run_cycle(list, kHuge, 0, rec.fn())), std::vector<uint32_t>{6});
   // A Final texture is evicted too.
-  TextureStates f(table());
-  ASSERT_EQ(mips_of(f.run_cycle(std::vector<StreamCandidate>{cand(T3, 0)}, kHuge, 0, rec.fn())),
+  stream::TextureStates f(table());
+  ASSERT_EQ(mips_of(f.run_cycle(std::vector<stream::StreamCandidate>{cand(T3, 0)}, kHuge, 0, rec.fn())),
             std::vector<uint32_t>{0});
   ASSERT_TRUE(f.on_committed(T3, MipLevel(0)));
   f.invalidate(T3);
-  EXPECT_EQ(f.view(T3).phase, TexturePhase::kInitial);
-  EXPECT_EQ(mips_of(f.run_cycle(std::vector<StreamCandidate>{cand(T3, 0)}, kHuge, 0, rec.fn())),
+  EXPECT_EQ(f.view(T3).phase, stream::TexturePhase::kInitial);
+  EXPECT_EQ(mips_of(f.run_cycle(std::vector<stream::StreamCandidate>{cand(T3, 0)}, kHuge, 0, rec.fn())),
             std::vector<uint32_t>{0});
 }
 
 // The frame loop hands the cache's events over in one list (TextureCache::take_events): the same states as
 // the calls one by one, in the same order.
-TEST(TextureStates, ApplyingEventsEqualsTheCallsInOrder) {
-  TextureStates direct(table()), applied(table());
+TEST(stream::TextureStates, ApplyingEventsEqualsTheCallsInOrder) {
+  stream::TextureStates direct(table()), applied(table());
   Recorder rec;
-  const std::vector<StreamCandidate> list{cand(T0, 0), cand(T1, 0), cand(T2, 0)};
+  const std::vector<stream::StreamCandidate> list{cand(T0, 0), cand(T1, 0), cand(T2, 0)};
   ASSERT_EQ(mips_of(direct.run_cycle(list, kHuge, 0, rec.fn())), mips_of(applied.run_cycle(list, kHuge, 0, rec.fn())));
   direct.on_committed(T0, MipLevel(6));
   direct.on_failed(T1, MipLevel(8), CompletionStatus::kIoError);
   direct.on_rejected(T2, MipLevel(4));
   direct.invalidate(T0);
   direct.on_committed(T0, MipLevel(6));  // a late answer, refused after the invalidate
-  using K = TextureEvent::Kind;
-  applied.apply(std::vector<TextureEvent>{{K::kCommitted, T0, MipLevel(6)},
+  using K = stream::TextureEvent::Kind;
+  applied.apply(std::vector<stream::TextureEvent>{{K::kCommitted, T0, MipLevel(6)},
                                           {K::kFailed, T1, MipLevel(8), CompletionStatus::kIoError},
                                           {K::kRejected, T2, MipLevel(4)},
                                           {K::kInvalidated, T0},
                                           {K::kCommitted, T0, MipLevel(6)}});
   for (TextureId t : {T0, T1, T2}) {
-    const TextureStateView a = direct.view(t), b = applied.view(t);
+    const stream::TextureStateView a = direct.view(t), b = applied.view(t);
     EXPECT_EQ(a.phase, b.phase) << t.value;
     EXPECT_EQ(a.resident, b.resident) << t.value;
     EXPECT_EQ(a.pending, b.pending) << t.value;
     EXPECT_EQ(a.failures, b.failures) << t.value;
   }
-  EXPECT_EQ(applied.view(T0).phase, TexturePhase::kInitial);
+  EXPECT_EQ(applied.view(T0).phase, stream::TexturePhase::kInitial);
   EXPECT_EQ(applied.view(T1).failures, 1u);
   EXPECT_EQ(applied.view(T2).failures, 1u);
 }
 
-TEST(TextureStates, SenderSkipLeavesTheTextureAloneAndStopEndsTheCycle) {
-  TextureStates s(table());
-  const std::vector<StreamCandidate> list{cand(T0, 0), cand(T1, 0), cand(T2, 0)};
+TEST(stream::TextureStates, SenderSkipLeavesTheTextureAloneAndStopEndsTheCycle) {
+  stream::TextureStates s(table());
+  const std::vector<stream::StreamCandidate> list{cand(T0, 0), cand(T1, 0), cand(T2, 0)};
   std::vector<uint32_t> offered;
-  auto r = s.run_cycle(list, kHuge, 0, [&](const MipRequest& q) {
+  auto r = s.run_cycle(list, kHuge, 0, [&](const stream::MipRequest& q) {
     offered.push_back(q.texture.value);
-    if (q.texture == T0) return SendResult::kSkip;
-    if (q.texture == T2) return SendResult::kStop;
-    return SendResult::kSent;
+    if (q.texture == T0) return stream::SendResult::kSkip;
+    if (q.texture == T2) return stream::SendResult::kStop;
+    return stream::SendResult::kSent;
   });
   EXPECT_EQ(offered, (std::vector<uint32_t>{0, 1, 2}));
   ASSERT_EQ(r.sent.size(), 1u);
   EXPECT_EQ(r.sent[0].texture, T1);
   EXPECT_TRUE(r.stopped_by_sender);
-  EXPECT_EQ(s.view(T0).phase, TexturePhase::kInitial);
-  EXPECT_EQ(s.view(T2).phase, TexturePhase::kInitial);
-  EXPECT_EQ(s.view(T1).phase, TexturePhase::kActive);
+  EXPECT_EQ(s.view(T0).phase, stream::TexturePhase::kInitial);
+  EXPECT_EQ(s.view(T2).phase, stream::TexturePhase::kInitial);
+  EXPECT_EQ(s.view(T1).phase, stream::TexturePhase::kActive);
 }
 
-TEST(TextureStates, DuplicateEntriesUnknownIdsAndNaNAreHarmless) {
-  TextureStates s(table());
+TEST(stream::TextureStates, DuplicateEntriesUnknownIdsAndNaNAreHarmless) {
+  stream::TextureStates s(table());
   Recorder rec;
   const float nan = std::numeric_limits<float>::quiet_NaN();
-  const std::vector<StreamCandidate> list{cand(T0, 0, 9), cand(TextureId(77), 0, 8), cand(T0, 0, 7),
+  const std::vector<stream::StreamCandidate> list{cand(T0, 0, 9), cand(TextureId(77), 0, 8), cand(T0, 0, 7),
                                           cand(TextureId(0xffffffffu), 0, 6)};
   auto r = s.run_cycle(list, kHuge, 0, rec.fn());
   ASSERT_EQ(r.sent.size(), 1u) << "one request per texture per cycle";
   EXPECT_FLOAT_EQ(r.sent[0].priority, 9.0f) << "the heaviest entry decides the priority";
   EXPECT_EQ(r.unknown_textures, 2u);
   ASSERT_TRUE(s.on_committed(T0, MipLevel(6)));
-  EXPECT_TRUE(s.run_cycle(std::vector<StreamCandidate>{cand(T0, nan)}, kHuge, 0, rec.fn()).sent.empty())
+  EXPECT_TRUE(s.run_cycle(std::vector<stream::StreamCandidate>{cand(T0, nan)}, kHuge, 0, rec.fn()).sent.empty())
       << "a NaN level from the metadata refines nothing";
   EXPECT_FALSE(s.on_committed(TextureId(77), MipLevel(0)));
   s.invalidate(TextureId(77));  // ignored
 }
 
-TEST(TextureStates, EventsForMipsThatAreNotPendingAreRefused) {
-  TextureStates s(table());
+TEST(stream::TextureStates, EventsForMipsThatAreNotPendingAreRefused) {
+  stream::TextureStates s(table());
   Recorder rec;
   EXPECT_FALSE(s.on_committed(T0, MipLevel(6))) << "nothing was asked";
-  ASSERT_EQ(s.run_cycle(std::vector<StreamCandidate>{cand(T0, 0)}, kHuge, 0, rec.fn()).sent.size(), 1u);
+  ASSERT_EQ(s.run_cycle(std::vector<stream::StreamCandidate>{cand(T0, 0)}, kHuge, 0, rec.fn()).sent.size(), 1u);
   EXPECT_FALSE(s.on_committed(T0, MipLevel(5)));
   EXPECT_FALSE(s.on_failed(T0, MipLevel(4), CompletionStatus::kCorrupt));
   EXPECT_FALSE(s.on_rejected(T0, MipLevel(3)));
@@ -434,10 +434,10 @@ TEST(TextureStates, EventsForMipsThatAreNotPendingAreRefused) {
   EXPECT_FALSE(s.on_committed(T0, MipLevel(6))) << "a second commit of the same mip";
 }
 
-TEST(TextureStates, CountsFollowThePhases) {
-  TextureStates s(table());
+TEST(stream::TextureStates, CountsFollowThePhases) {
+  stream::TextureStates s(table());
   Recorder rec;
-  (void)s.run_cycle(std::vector<StreamCandidate>{cand(T0, 0), cand(T3, 0)}, kHuge, 0, rec.fn());
+  (void)s.run_cycle(std::vector<stream::StreamCandidate>{cand(T0, 0), cand(T3, 0)}, kHuge, 0, rec.fn());
   const auto c = s.counts();
   EXPECT_EQ(c.initial, 2u);  // T1, T2
   EXPECT_EQ(c.active, 1u);   // T0

@@ -134,7 +134,7 @@ class Plant {
     for (uint32_t i = 0; i < o.visible; ++i) place(i, make_texture(seed_, next_id_++));
   }
 
-  RunStats run(AdaptiveController ctl, double load_time_s, const std::string& name) {
+  RunStats run(stream::AdaptiveController ctl, double load_time_s, const std::string& name) {
     RunStats st;
     st.name = name;
     double t = 0, replace_debt = 0;
@@ -252,8 +252,8 @@ class Plant {
   double last_dt_s_ = 0.005;
 };
 
-AdaptiveController make_controller(ControllerParams p) {
-  auto c = AdaptiveController::create(p);
+stream::AdaptiveController make_controller(stream::ControllerParams p) {
+  auto c = stream::AdaptiveController::create(p);
   if (!c) {
     std::fprintf(stderr, "controller: %s\n", c.error().message.c_str());
     std::exit(2);
@@ -360,13 +360,13 @@ int run_controller(const ControllerArgs& args) {
               po.duration_s, po.visible, static_cast<unsigned long long>(seed), load_time_s * 1e3);
   std::printf("%-12s %7s %8s %8s %9s %9s %8s %6s %9s %9s\n", "run", "frames", "med ms", "avg ms", "max ms", "max tw",
               "avg s MB", "avg b", "MB/s", "mips/s");
-  ControllerParams none;
+  stream::ControllerParams none;
   none.mode = ControllerMode::kNone;
   const RunStats base = Plant(po, seed).run(make_controller(none), load_time_s, "baseline");
   print_row(base);
   RunStats at16;
   for (double alpha_ms : {12.0, 14.0, 16.0, 18.0}) {
-    ControllerParams p;
+    stream::ControllerParams p;
     p.alpha_s = alpha_ms / 1e3;
     char name[32];
     std::snprintf(name, sizeof name, "alpha=%.0fms", alpha_ms);
@@ -384,7 +384,7 @@ int run_controller(const ControllerArgs& args) {
     std::printf("\nsensitivity (alpha=16ms vs baseline):\n");
     for (uint64_t sd = seed + 1; sd <= seed + 4; ++sd) {
       const Comparison c = compare(Plant(po, sd).run(make_controller(none), load_time_s, "baseline"),
-                                   Plant(po, sd).run(make_controller(ControllerParams{}), load_time_s, "alpha=16ms"));
+                                   Plant(po, sd).run(make_controller(stream::ControllerParams{}), load_time_s, "alpha=16ms"));
       std::printf("  seed %-3llu            max %7.1f -> %6.1f ms  reduction %5.1f %%  MB/s ratio %.2f\n",
                   static_cast<unsigned long long>(sd), c.base_max_ms, c.max_ms, 100 * c.reduction, c.ratio);
     }
@@ -393,7 +393,7 @@ int run_controller(const ControllerArgs& args) {
     cheap.bind_batch_pages = 100;
     cheap.bind_resident_pages = 1e9;
     const Comparison c = compare(Plant(cheap, seed).run(make_controller(none), load_time_s, "baseline"),
-                                 Plant(cheap, seed).run(make_controller(ControllerParams{}), load_time_s, "alpha=16ms"));
+                                 Plant(cheap, seed).run(make_controller(stream::ControllerParams{}), load_time_s, "alpha=16ms"));
     std::printf("  cheap-bind plant    max %7.1f -> %6.1f ms  reduction %5.1f %%  MB/s ratio %.2f\n", c.base_max_ms,
                 c.max_ms, 100 * c.reduction, c.ratio);
   }

@@ -66,7 +66,7 @@ Result<Renderer::Clock::duration> Renderer::take_completions() {
   return waited;
 }
 
-std::vector<StreamCandidate> Renderer::read_candidates() {
+std::vector<stream::StreamCandidate> Renderer::read_candidates() {
   uint64_t skipped = 0;
   const auto candidates = build_candidates(stack_->scene_gpu().read_back_entries(), scene_.mesh_records().size(),
                                            scene_.texture_records().size(), &skipped);
@@ -86,10 +86,10 @@ void Renderer::start_cycle() {
   // Algorithm 1: the cycle stops at load size s and refines a texture only while desired + b < resident.
   load_bytes_ = controller_->load_bytes();
   const auto bias = static_cast<float>(controller_->mip_bias());
-  const auto result = states_->run_cycle(candidates, load_bytes_, bias, [&](const MipRequest& r) {
-    if (sent >= max_mips) return SendResult::kStop;
-    const SendResult s = send(r);
-    if (s == SendResult::kSent) ++sent;
+  const auto result = states_->run_cycle(candidates, load_bytes_, bias, [&](const stream::MipRequest& r) {
+    if (sent >= max_mips) return stream::SendResult::kStop;
+    const stream::SendResult s = send(r);
+    if (s == stream::SendResult::kSent) ++sent;
     return s;
   });
   last_cycle_sent_ = result.sent.size();
@@ -103,12 +103,12 @@ Status Renderer::upload_now() {
   return stack_->submit(s);
 }
 
-Status Renderer::load_fully(std::vector<StreamCandidate> wanted, bool no_evictions) {
+Status Renderer::load_fully(std::vector<stream::StreamCandidate> wanted, bool no_evictions) {
   TextureCache& cache = stack_->cache();
   // Desired level 0 and no bias: Algorithm 1 then refines each texture one level per round, coarsest first,
   // until its base level is resident (Final). Each round waits for every answer before the next, so the
   // state machine sees the previous level published first.
-  for (StreamCandidate& c : wanted) c.desired_mip = 0.0f;
+  for (stream::StreamCandidate& c : wanted) c.desired_mip = 0.0f;
   const uint64_t evictions_before = cache.stats().evictions;
   uint32_t fruitless = 0;
   auto idle_since = Clock::now();
@@ -122,10 +122,10 @@ Status Renderer::load_fully(std::vector<StreamCandidate> wanted, bool no_evictio
     const uint64_t round_cap = static_cast<uint64_t>(cfg_.render.staging_bytes) / 2;
     uint64_t round_bytes = 0;
     auto client_send = client_->sender();
-    auto send = [&](const MipRequest& r) {
-      if (round_bytes > 0 && round_bytes + r.bytes > round_cap) return SendResult::kStop;
-      const SendResult sr = client_send(r);
-      if (sr == SendResult::kSent) round_bytes += r.bytes;
+    auto send = [&](const stream::MipRequest& r) {
+      if (round_bytes > 0 && round_bytes + r.bytes > round_cap) return stream::SendResult::kStop;
+      const stream::SendResult sr = client_send(r);
+      if (sr == stream::SendResult::kSent) round_bytes += r.bytes;
       return sr;
     };
     const auto result = states_->run_cycle(wanted, std::numeric_limits<uint64_t>::max(), 0.0f, send,
@@ -133,8 +133,8 @@ Status Renderer::load_fully(std::vector<StreamCandidate> wanted, bool no_evictio
     if (result.sent.empty() && client_->stats().in_flight == 0) {
       // Nothing to send: either every wanted texture is complete (or broken), or the server takes no
       // requests right now (starting, restarting after a crash): then wait for it, within the timeout.
-      const auto incomplete = std::count_if(wanted.begin(), wanted.end(), [&](const StreamCandidate& c) {
-        const TextureStateView v = states_->view(c.texture);
+      const auto incomplete = std::count_if(wanted.begin(), wanted.end(), [&](const stream::StreamCandidate& c) {
+        const stream::TextureStateView v = states_->view(c.texture);
         return !v.broken && v.resident != 0u;
       });
       if (incomplete == 0) return ok_status();

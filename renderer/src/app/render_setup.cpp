@@ -78,13 +78,13 @@ Status Renderer::set_up() {
     interactive_->configure(options->vulkan);
   }
   // Load size s and mip bias b: controller.mode adaptive (Eq. 4-7), none (s = s_max, b = 0) or fixed.
-  auto controller_params = ControllerParams::from_config(cfg_.controller);
+  auto controller_params = stream::ControllerParams::from_config(cfg_.controller);
   if (!controller_params) return controller_params.error();
-  auto controller = AdaptiveController::create(*controller_params);
+  auto controller = stream::AdaptiveController::create(*controller_params);
   if (!controller) return controller.error();
-  controller_ = std::make_unique<AdaptiveController>(std::move(*controller));
+  controller_ = std::make_unique<stream::AdaptiveController>(std::move(*controller));
   load_bytes_ = controller_->load_bytes();
-  states_ = std::make_unique<TextureStates>(scene_.shapes());
+  states_ = std::make_unique<stream::TextureStates>(scene_.shapes());
 
   auto stack = RenderStack::create(scene_, *options);
   if (!stack) return stack.error();
@@ -103,9 +103,9 @@ Status Renderer::set_up() {
 }
 
 Status Renderer::start_stream_client() {
-  StreamClientOptions so;
+  stream::StreamClientOptions so;
   so.spawn_server = !run_.in_process_server && cfg_.server.spawn;
-  auto client = StreamClient::start(cfg_, scene_.shapes(), scene_.dir, run_.config_file, run_.overrides, so);
+  auto client = stream::StreamClient::start(cfg_, scene_.shapes(), scene_.dir, run_.config_file, run_.overrides, so);
   if (!client) return client.error();
   client_ = std::move(*client);
   if (run_.in_process_server) {
@@ -119,7 +119,7 @@ Status Renderer::start_stream_client() {
 
 Status Renderer::preload_all() {
   // Every texture, its whole chain: the reference frames and the all-resident baseline.
-  std::vector<StreamCandidate> all;
+  std::vector<stream::StreamCandidate> all;
   std::vector<uint32_t> ids;
   all.reserve(scene_.texture_records().size());
   ids.reserve(scene_.texture_records().size());

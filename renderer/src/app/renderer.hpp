@@ -71,12 +71,12 @@ class Renderer {
   Result<Clock::duration> take_completions();
   // A streaming cycle (Algorithm 1, LoadTextures) over the compacted list the frame read back.
   void start_cycle();
-  std::vector<StreamCandidate> read_candidates();
+  std::vector<stream::StreamCandidate> read_candidates();
   // Loads the whole mip chain (down to level 0) of every texture in `wanted`, waiting for the server and
   // uploading as it goes: render.preload_all before frame 0 and render.blocking_loads each frame. With
   // `no_evictions`, an eviction on the way is an error (the preload must fit the cache); otherwise the load
   // stops at the first eviction (a visible set larger than the cache cannot be made fully resident).
-  Status load_fully(std::vector<StreamCandidate> wanted, bool no_evictions);
+  Status load_fully(std::vector<stream::StreamCandidate> wanted, bool no_evictions);
   // A submission that only carries the mips committed so far (no drawing, no geometry).
   Status upload_now();
   // Hands what the cache learnt (published, rejected, failed mips; evictions) to the texture states, which
@@ -101,10 +101,10 @@ class Renderer {
   std::unique_ptr<CameraPath> path_;
   CameraLens lens_{};
   std::unique_ptr<RenderStack> stack_;
-  std::unique_ptr<TextureStates> states_;
+  std::unique_ptr<stream::TextureStates> states_;
   // Seed 000 §3.4: s and b for each cycle from the measured frame latencies (docs/controller.md).
-  std::unique_ptr<AdaptiveController> controller_;
-  std::unique_ptr<StreamClient> client_;
+  std::unique_ptr<stream::AdaptiveController> controller_;
+  std::unique_ptr<stream::StreamClient> client_;
   // After client_: destroyed first, so the in-process server's thread is gone before the segment.
   std::unique_ptr<InProcessServer> in_process_;
   std::unique_ptr<InteractiveSession> interactive_;  // render.window = true only

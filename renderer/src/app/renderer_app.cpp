@@ -179,7 +179,7 @@ void Renderer::first_frame_stage(const char* name) {
 
 FrameCounters Renderer::counters() const {
   const TextureCache& cache = stack_->cache();
-  const StreamStats ss = client_->stats();
+  const stream::StreamStats ss = client_->stats();
   FrameCounters c;
   c.mips_uploaded = cache.stats().mips_uploaded;
   c.bytes_uploaded = cache.stats().bytes_uploaded;
@@ -200,7 +200,7 @@ Result<RunSummary> Renderer::finish() {
   TS_TRY(server_not_refusing(1));  // the run ended with no server since the last refusal
 
   const TextureCache& cache = stack_->cache();
-  const StreamStats ss = client_->stats();
+  const stream::StreamStats ss = client_->stats();
   RunSummary s;
   s.device = stack_->context().device_name();
   s.output_dir = fs::absolute(output_dir_);

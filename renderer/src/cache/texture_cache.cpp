@@ -150,11 +150,11 @@ void TextureCache::reject(TextureId texture, MipLevel mip, std::span<std::byte> 
     release_staging(it->second);
     reserved_.erase(it);
   }
-  events_.push_back({TextureEvent::Kind::kRejected, texture, mip});
+  events_.push_back({stream::TextureEvent::Kind::kRejected, texture, mip});
 }
 
 void TextureCache::failed(TextureId texture, MipLevel mip, CompletionStatus status) {
-  events_.push_back({TextureEvent::Kind::kFailed, texture, mip, status});
+  events_.push_back({stream::TextureEvent::Kind::kFailed, texture, mip, status});
 }
 
 void TextureCache::evict(TextureId texture) {
@@ -180,7 +180,7 @@ void TextureCache::evict(TextureId texture) {
   };
   std::erase_if(queued_, drop);
   std::erase_if(ready_, drop);
-  events_.push_back({TextureEvent::Kind::kInvalidated, texture});
+  events_.push_back({stream::TextureEvent::Kind::kInvalidated, texture});
 }
 
 void TextureCache::evict_all(const std::vector<TextureId>& textures) {
@@ -203,7 +203,7 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
       unplaceable_logged_[texture.value] = true;
     }
     release_staging(alloc);
-    events_.push_back({TextureEvent::Kind::kFailed, texture, mip, CompletionStatus::kNotFound});
+    events_.push_back({stream::TextureEvent::Kind::kFailed, texture, mip, CompletionStatus::kNotFound});
     return;
   }
   const scene::TextureRecord& rec = scene_.texture_records()[texture.value];
@@ -224,7 +224,7 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
       }
       release_staging(alloc);
       // Not the file's fault, but it can never be shown: kNotFound marks it broken, so it is not asked again.
-      events_.push_back({TextureEvent::Kind::kFailed, texture, mip, CompletionStatus::kNotFound});
+      events_.push_back({stream::TextureEvent::Kind::kFailed, texture, mip, CompletionStatus::kNotFound});
       return;
     }
     region = *placed;
@@ -238,7 +238,7 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
   if ((region->extent >> mip.value) < block_size(options_.format)) {
     // A BC1 level smaller than a block in a shared layer: writing it would overwrite a neighbour's texels.
     release_staging(alloc);
-    events_.push_back({TextureEvent::Kind::kRejected, texture, mip});
+    events_.push_back({stream::TextureEvent::Kind::kRejected, texture, mip});
     return;
   }
   queued_.push_back(Copy{texture, mip.value, alloc, residency_[texture.value].epoch, 0});
@@ -306,7 +306,7 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
       spdlog::error("texture cache: {}", st.error().message);
       for (const Copy& c : ready_) {
         release_staging(c.staging);
-        events_.push_back({TextureEvent::Kind::kRejected, c.texture, MipLevel(c.mip)});
+        events_.push_back({stream::TextureEvent::Kind::kRejected, c.texture, MipLevel(c.mip)});
       }
       ready_.clear();
     }
@@ -403,7 +403,7 @@ void TextureCache::on_submission_complete(uint64_t serial) {
     publish(c.texture);
     ++stats_.mips_uploaded;
     stats_.bytes_uploaded += c.staging.size;
-    events_.push_back({TextureEvent::Kind::kCommitted, c.texture, MipLevel(c.mip)});
+    events_.push_back({stream::TextureEvent::Kind::kCommitted, c.texture, MipLevel(c.mip)});
   }
 }
 

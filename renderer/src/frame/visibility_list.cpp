@@ -31,7 +31,7 @@ void sort_list(It first, It last, Less less) {
 
 }  // namespace
 
-std::vector<StreamCandidate> build_candidates(std::span<const gpu::CompactEntry> entries, size_t mesh_count,
+std::vector<stream::StreamCandidate> build_candidates(std::span<const gpu::CompactEntry> entries, size_t mesh_count,
                                               size_t texture_count, uint64_t* skipped) {
   // Meshes sharing a texture merge by sorting on the texture id and combining neighbours: no hash table and no
   // allocation per entry (this runs on the frame thread every streaming cycle). Weights are summed in the GPU's
@@ -48,7 +48,7 @@ std::vector<StreamCandidate> build_candidates(std::span<const gpu::CompactEntry>
     sums.push_back(TextureSum{e.texture_id, e.mip_fixed, e.weight_fixed});
   }
   sort_list(sums.begin(), sums.end(), [](const TextureSum& a, const TextureSum& b) { return a.texture < b.texture; });
-  std::vector<StreamCandidate> out;
+  std::vector<stream::StreamCandidate> out;
   out.reserve(sums.size());
   for (size_t i = 0; i < sums.size();) {
     TextureSum t = sums[i];
@@ -56,13 +56,13 @@ std::vector<StreamCandidate> build_candidates(std::span<const gpu::CompactEntry>
       t.mip_fixed = std::min(t.mip_fixed, sums[i].mip_fixed);
       t.weight_fixed += sums[i].weight_fixed;
     }
-    out.push_back(StreamCandidate{TextureId(t.texture),
+    out.push_back(stream::StreamCandidate{TextureId(t.texture),
                                   static_cast<float>(t.mip_fixed) / static_cast<float>(gpu::kMipFixedScale),
                                   static_cast<float>(static_cast<double>(t.weight_fixed) / gpu::kWeightFixedScale)});
   }
   // Descending weight (seed 000 §3.3), parallel for long lists. The order is total (ties by texture id, ids are
   // unique after the merge), so the result does not depend on the threads.
-  sort_list(out.begin(), out.end(), [](const StreamCandidate& a, const StreamCandidate& b) {
+  sort_list(out.begin(), out.end(), [](const stream::StreamCandidate& a, const stream::StreamCandidate& b) {
     return a.weight != b.weight ? a.weight > b.weight : a.texture < b.texture;
   });
   if (skipped) *skipped = bad;

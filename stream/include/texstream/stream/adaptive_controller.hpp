@@ -29,7 +29,7 @@
 #include "texstream/common/config.hpp"
 #include "texstream/common/result.hpp"
 
-namespace texstream {
+namespace texstream::stream {
 
 // ControllerMode (adaptive, none, fixed) is the controller.mode key's enum, in config.hpp with its names.
 const char* to_string(ControllerMode mode);
@@ -162,4 +162,4 @@ class AdaptiveController {
   uint64_t rejected_ = 0;
 };
 
-}  // namespace texstream
+}  // namespace texstream::stream

@@ -20,7 +20,7 @@
 #include "texstream/protocol/segment_layout.hpp"
 #include "texstream/stream/mip_sink.hpp"
 
-namespace texstream {
+namespace texstream::stream {
 
 class CrashQuarantine {
  public:
@@ -59,4 +59,4 @@ class CrashQuarantine {
   std::unordered_set<uint64_t> refused_set_;         // the same keys: each failed once per poll
 };
 
-}  // namespace texstream
+}  // namespace texstream::stream

@@ -8,7 +8,7 @@
 #include "texstream/common/ids.hpp"
 #include "texstream/protocol/records.hpp"
 
-namespace texstream {
+namespace texstream::stream {
 
 class MipSink {
  public:
@@ -28,4 +28,4 @@ class MipSink {
   virtual void failed(TextureId texture, MipLevel mip, CompletionStatus status) = 0;
 };
 
-}  // namespace texstream
+}  // namespace texstream::stream

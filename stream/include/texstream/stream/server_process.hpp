@@ -30,7 +30,7 @@
 #include "texstream/common/config.hpp"
 #include "texstream/common/result.hpp"
 
-namespace texstream {
+namespace texstream::stream {
 
 using SteadyTime = std::chrono::steady_clock::time_point;
 
@@ -184,4 +184,4 @@ class ServerProcess {
   std::thread spawner_;  // last: started once every member above exists
 };
 
-}  // namespace texstream
+}  // namespace texstream::stream

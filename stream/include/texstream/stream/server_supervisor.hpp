@@ -13,7 +13,7 @@
 #include "texstream/protocol/segment.hpp"
 #include "texstream/stream/server_process.hpp"
 
-namespace texstream {
+namespace texstream::stream {
 
 class ServerSupervisor {
  public:
@@ -89,4 +89,4 @@ class ServerSupervisor {
   bool external_unserved_told_ = false;
 };
 
-}  // namespace texstream
+}  // namespace texstream::stream

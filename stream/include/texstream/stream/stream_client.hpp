@@ -49,7 +49,7 @@
 #include "texstream/stream/stream_stats.hpp"
 #include "texstream/stream/texture_states.hpp"
 
-namespace texstream {
+namespace texstream::stream {
 
 // Why a request was or was not sent.
 enum class RequestOutcome : uint8_t {
@@ -207,4 +207,4 @@ class StreamClient {
   SteadyTime next_expiry_scan_{};
 };
 
-}  // namespace texstream
+}  // namespace texstream::stream

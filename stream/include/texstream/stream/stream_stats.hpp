@@ -8,7 +8,7 @@
 #include "texstream/common/latency_histogram.hpp"
 #include "texstream/protocol/records.hpp"
 
-namespace texstream {
+namespace texstream::stream {
 
 enum class StreamServerState : uint8_t {
   kExternal,      // spawn_server = false: someone else serves the segment
@@ -83,4 +83,4 @@ struct StreamStats {
 // `key value` lines: every StreamStats counter and the IPC-time quantiles.
 std::string format_stream_stats(const StreamStats& s, const IpcTimeHistogram& ipc_time);
 
-}  // namespace texstream
+}  // namespace texstream::stream

@@ -30,7 +30,7 @@
 #include "texstream/common/ids.hpp"
 #include "texstream/protocol/records.hpp"
 
-namespace texstream {
+namespace texstream::stream {
 
 enum class TexturePhase : uint8_t {
   kInitial,  // nothing loaded or asked for: the next cycle that sees it requests its initial mip
@@ -166,4 +166,4 @@ class TextureStates {
   std::vector<State> states_;
 };
 
-}  // namespace texstream
+}  // namespace texstream::stream

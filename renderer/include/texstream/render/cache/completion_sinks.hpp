@@ -13,10 +13,10 @@ namespace texstream::render {
 // the frame; what a frame still spends on loading is taking completions (check, copy into staging, checksum,
 // queue the copy). Once a frame has spent controller.load_time_ms on that, reserve() answers "no room now":
 // the client keeps the completion and offers it first next frame. The first mip of a frame always passes.
-class LoadTimeSink final : public MipSink {
+class LoadTimeSink final : public stream::MipSink {
  public:
   using Clock = std::chrono::steady_clock;
-  LoadTimeSink(MipSink& inner, Clock::time_point deadline) : inner_(inner), deadline_(deadline) {}
+  LoadTimeSink(stream::MipSink& inner, Clock::time_point deadline) : inner_(inner), deadline_(deadline) {}
   std::span<std::byte> reserve(TextureId texture, MipLevel mip, uint64_t bytes) override;
   void commit(TextureId texture, MipLevel mip, std::span<std::byte> data) override { inner_.commit(texture, mip, data); }
   void reject(TextureId texture, MipLevel mip, std::span<std::byte> reserved) override {
@@ -27,7 +27,7 @@ class LoadTimeSink final : public MipSink {
   bool no_room() const { return no_room_; }  // the staging ring was full: the rest waits for the next frame
 
  private:
-  MipSink& inner_;
+  stream::MipSink& inner_;
   Clock::time_point deadline_;
   uint64_t taken_ = 0;
   bool limited_ = false;
@@ -37,9 +37,9 @@ class LoadTimeSink final : public MipSink {
 // Lock-step: commits (which place textures in cache regions) are applied in (texture, mip) order instead of
 // the server's completion order, which its worker threads make nondeterministic; otherwise a texture's region,
 // and so the last bit of some filtered texels, would differ between two runs of the same path.
-class OrderedCommitSink final : public MipSink {
+class OrderedCommitSink final : public stream::MipSink {
  public:
-  explicit OrderedCommitSink(MipSink& inner) : inner_(inner) {}
+  explicit OrderedCommitSink(stream::MipSink& inner) : inner_(inner) {}
   std::span<std::byte> reserve(TextureId texture, MipLevel mip, uint64_t bytes) override {
     return inner_.reserve(texture, mip, bytes);
   }
@@ -59,7 +59,7 @@ class OrderedCommitSink final : public MipSink {
     MipLevel mip;
     std::span<std::byte> data;
   };
-  MipSink& inner_;
+  stream::MipSink& inner_;
   std::vector<Pending> pending_;
 };
 

@@ -85,7 +85,7 @@ struct UploadTraceFrame {
 };
 inline constexpr size_t kTraceEntries = size_t{1} << 16;
 
-class TextureCache final : public MipSink {
+class TextureCache final : public stream::MipSink {
  public:
   static Result<std::unique_ptr<TextureCache>> create(const VulkanContext& ctx, const TextureCacheOptions& options,
                                                       const SceneData& scene);
@@ -115,7 +115,7 @@ class TextureCache final : public MipSink {
   // Submission `serial` (and every earlier one) has completed: publish what it copied.
   void on_submission_complete(uint64_t serial);
   // What the texture state machine must hear since the last call, oldest first (TextureStates::apply).
-  std::vector<TextureEvent> take_events() { return std::exchange(events_, {}); }
+  std::vector<stream::TextureEvent> take_events() { return std::exchange(events_, {}); }
 
   VkImageView image_view() const { return sparse_->view(); }
   VkBuffer texture_table() const { return table_.handle(); }
@@ -162,7 +162,7 @@ class TextureCache final : public MipSink {
 
   TextureCacheOptions options_;
   const SceneData& scene_;
-  std::vector<TextureEvent> events_;  // for the texture state machine, oldest first (take_events)
+  std::vector<stream::TextureEvent> events_;  // for the texture state machine, oldest first (take_events)
   uint32_t mip_levels_ = 1;
   std::unique_ptr<SparseMemory> sparse_;
   std::unique_ptr<SparsePageTable> pages_;

@@ -2,16 +2,8 @@
 // Payloads below CacheArena::kMinBlock (the coarse mips: 1x1 to 32x16 RGBA8, 4x4 to 64x64 BC1) carved out of
 // slabs of one reserved mapping that is faulted in ahead of use, instead of from the heap.
 //
-// Why: a coarse-tail read brings ~5 such mips per texture. On the heap they were the dispatcher's largest
-// cost after the reads themselves: texstream-bench server's misses (perf, the dispatcher during the miss
-// stream) spent ~20 % of their time growing the thread's malloc heap — an mprotect per 4 KiB of growth and a
-// first-touch page fault per page, ~4 µs each on this machine (cache_arena.hpp). From the pool a small
-// payload is a free-list pop: the first kWarmBytes are faulted in when the pool is made, the rest by the cache
-// arena's pre-fault thread once the arena is warm (warm_step()), and a slab taken before that with one
-// madvise (MADV_POPULATE_WRITE) for its 16 pages.
-// Not from the cache's arena: slabs there took blocks the large mips needed, and the buddy allocator then
-// evicted more (texstream-bench server's trace, "level with the buddy arena" at 30 MB: hit rate 0.572 with
-// small payloads on the heap, 0.537 with them in arena slabs).
+// Why (a free-list pop instead of a heap allocation that faulted pages in on the dispatcher; not from the
+// cache's arena, which the large mips need): measured in docs/design/small_payload_pool.md.
 //
 // Size classes: the powers of two from kMinClass (16 B) to CacheArena::kMinBlock (4 KiB); a payload takes the
 // smallest class that holds it (mip sizes are powers of two times 4 or 8 bytes, so nearly all fill their
