@@ -91,8 +91,8 @@ Result<CameraPath> CameraPath::parse(const std::string& text, const std::string&
                                                            std::string(fields[f]) + "' is not a finite number");
     if (v[0] < 0.0) return make_error(ErrorCode::kInvalidArgument, where + "time_s is negative");
     if (!keys.empty() && v[0] < keys.back().time_s)
-      return make_error(ErrorCode::kInvalidArgument, where + "time_s goes backwards (" + std::string(fields[0]) +
-                                                         " after a later keyframe)");
+      return make_error(ErrorCode::kInvalidArgument,
+                        where + "time_s goes backwards (" + std::string(fields[0]) + " after a later keyframe)");
     if (v[5] < -90.0 || v[5] > 90.0)
       return make_error(ErrorCode::kInvalidArgument, where + "pitch_deg must lie in [-90, 90]");
     keys.push_back(CameraKey{v[0], CameraPose{{v[1], v[2], v[3]}, v[4], v[5]}});
@@ -104,8 +104,8 @@ Result<CameraPath> CameraPath::parse(const std::string& text, const std::string&
 std::string CameraPath::to_text() const {
   std::string out = "# time_s x y z yaw_deg pitch_deg   (map coordinates in metres; equal times = cut)\n";
   for (const CameraKey& k : keys_) {
-    const double v[6] = {k.time_s, k.pose.position[0], k.pose.position[1], k.pose.position[2], k.pose.yaw_deg,
-                         k.pose.pitch_deg};
+    const double v[6] = {k.time_s,           k.pose.position[0], k.pose.position[1],
+                         k.pose.position[2], k.pose.yaw_deg,     k.pose.pitch_deg};
     for (int f = 0; f < 6; ++f) {
       if (f != 0) out += ' ';
       append_double(out, v[f]);
@@ -119,8 +119,8 @@ CameraPose CameraPath::sample(double time_s) const {
   TS_ASSERT(!keys_.empty(), "CameraPath::sample on an empty path");
   // The first key strictly after t; the key before it is the latest one at or before t. At a cut (two keys
   // with the same time) this picks the later of the pair, so the new view holds from the cut time on.
-  const auto next = std::upper_bound(keys_.begin(), keys_.end(), time_s,
-                                     [](double t, const CameraKey& k) { return t < k.time_s; });
+  const auto next =
+      std::upper_bound(keys_.begin(), keys_.end(), time_s, [](double t, const CameraKey& k) { return t < k.time_s; });
   if (next == keys_.begin()) return keys_.front().pose;
   if (next == keys_.end()) return keys_.back().pose;
   const CameraKey& a = *(next - 1);

@@ -1,13 +1,13 @@
 #include "texstream/common/config.hpp"
 
+#include <toml++/toml.h>
 #include <charconv>
-#include <cstdio>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <map>
 #include <set>
 #include <sstream>
-#include <toml++/toml.h>
 #include <variant>
 
 namespace texstream {
@@ -24,87 +24,174 @@ constexpr Range kAny{-1e300, 1e300};
 // a ConfigChoice enum, `doc` is a lead-in and its table's names and docs follow it (key_doc).
 template <class V>
 void visit_keys(Config& c, V&& v) {
-  v("scene", "dir", c.scene.dir, "path", "Scene folder written by texstream-gen (relative paths are from the working directory)", kAny);
+  v("scene", "dir", c.scene.dir, "path",
+    "Scene folder written by texstream-gen (relative paths are from the working directory)", kAny);
 
-  v("protocol", "segment_name", c.protocol.segment_name, "name", "POSIX shared-memory name (a file in /dev/shm: no '/', at most 255 bytes); empty: texstream-<renderer pid>", kAny);
-  v("protocol", "request_ring_capacity", c.protocol.request_ring_capacity, "records", "Request ring size (power of two)", Range{4, 65536});
-  v("protocol", "completion_ring_capacity", c.protocol.completion_ring_capacity, "records", "Completion ring size (power of two)", Range{4, 65536});
-  v("protocol", "staging_slot_count", c.protocol.staging_slot_count, "slots", "Staging slots: bound the mips in flight between the processes", Range{1, 16384});
-  v("protocol", "staging_slot_bytes", c.protocol.staging_slot_bytes, "bytes", "Bytes per staging slot; must hold the largest mip", Range{4096, 64 << 20});
-  v("protocol", "heartbeat_timeout_ms", c.protocol.heartbeat_timeout_ms, "ms", "A peer whose progress heartbeat stalls this long is treated as hung", Range{10, 600000});
+  v("protocol", "segment_name", c.protocol.segment_name, "name",
+    "POSIX shared-memory name (a file in /dev/shm: no '/', at most 255 bytes); empty: texstream-<renderer pid>", kAny);
+  v("protocol", "request_ring_capacity", c.protocol.request_ring_capacity, "records",
+    "Request ring size (power of two)", Range{4, 65536});
+  v("protocol", "completion_ring_capacity", c.protocol.completion_ring_capacity, "records",
+    "Completion ring size (power of two)", Range{4, 65536});
+  v("protocol", "staging_slot_count", c.protocol.staging_slot_count, "slots",
+    "Staging slots: bound the mips in flight between the processes", Range{1, 16384});
+  v("protocol", "staging_slot_bytes", c.protocol.staging_slot_bytes, "bytes",
+    "Bytes per staging slot; must hold the largest mip", Range{4096, 64 << 20});
+  v("protocol", "heartbeat_timeout_ms", c.protocol.heartbeat_timeout_ms, "ms",
+    "A peer whose progress heartbeat stalls this long is treated as hung", Range{10, 600000});
 
-  v("server", "spawn", c.server.spawn, "bool", "Start texstream-server as a child; false: a standalone one (texstream-server --segment NAME) serves protocol.segment_name, and is not restarted by the renderer", kAny);
-  v("server", "executable", c.server.executable, "path", "texstream-server binary; empty: next to texstream-render", kAny);
-  v("server", "worker_threads", c.server.worker_threads, "threads", "Read/decode workers (default fits a 2-core machine)", Range{1, 64});
-  v("server", "ram_cache_bytes", c.server.ram_cache_bytes, "bytes", "Byte budget of the server's RAM cache of mips, pre-faulted at start. With the staging pool and 64 MiB it must fit physical memory and any memory cgroup limit (else an error at start); more than is free now, less a reserve, is lowered with a warning", Range{0, 1ll << 40});
-  v("server", "idle_wait_ms", c.server.idle_wait_ms, "ms", "Longest futex wait for new requests when idle", Range{0.1, 1000});
+  v("server", "spawn", c.server.spawn, "bool",
+    "Start texstream-server as a child; false: a standalone one (texstream-server --segment NAME) serves "
+    "protocol.segment_name, and is not restarted by the renderer",
+    kAny);
+  v("server", "executable", c.server.executable, "path", "texstream-server binary; empty: next to texstream-render",
+    kAny);
+  v("server", "worker_threads", c.server.worker_threads, "threads",
+    "Read/decode workers (default fits a 2-core machine)", Range{1, 64});
+  v("server", "ram_cache_bytes", c.server.ram_cache_bytes, "bytes",
+    "Byte budget of the server's RAM cache of mips, pre-faulted at start. With the staging pool and 64 MiB it must fit "
+    "physical memory and any memory cgroup limit (else an error at start); more than is free now, less a reserve, is "
+    "lowered with a warning",
+    Range{0, 1ll << 40});
+  v("server", "idle_wait_ms", c.server.idle_wait_ms, "ms", "Longest futex wait for new requests when idle",
+    Range{0.1, 1000});
   v("server", "log_level", c.server.log_level, "level", "Log level of texstream-server:", kAny);
   v("server", "cache_policy", c.server.cache_policy, "name", "RAM cache eviction:", kAny);
-  v("server", "rate_limit_mb_s", c.server.rate_limit_mb_s, "MB/s", "Cap on storage reads (0: unlimited), seed 002 §3.3", Range{0, 1e6});
-  v("server", "remote_fetches_in_flight", c.server.remote_fetches_in_flight, "fetches", "Concurrent fetches from a remote or slow origin (threads; one connection each); RAM and disk-cache hits are served meanwhile. Seed 002 used 1; texstream-bench storage measured mips/s over a 20-30 ms origin rising from 1 to 8 (4: most of the gain, few threads and slots)", Range{1, 16});
+  v("server", "rate_limit_mb_s", c.server.rate_limit_mb_s, "MB/s", "Cap on storage reads (0: unlimited), seed 002 §3.3",
+    Range{0, 1e6});
+  v("server", "remote_fetches_in_flight", c.server.remote_fetches_in_flight, "fetches",
+    "Concurrent fetches from a remote or slow origin (threads; one connection each); RAM and disk-cache hits are "
+    "served meanwhile. Seed 002 used 1; texstream-bench storage measured mips/s over a 20-30 ms origin rising from 1 "
+    "to 8 (4: most of the gain, few threads and slots)",
+    Range{1, 16});
 
-  v("render", "device", c.render.device, "name", "Substring of the Vulkan device name to use; empty: the first device", kAny);
+  v("render", "device", c.render.device, "name", "Substring of the Vulkan device name to use; empty: the first device",
+    kAny);
   v("render", "validation", c.render.validation, "bool", "Enable the Khronos validation layer", kAny);
   v("render", "window", c.render.window, "bool", "Open a GLFW window instead of rendering headless", kAny);
   v("render", "width_px", c.render.width_px, "px", "Framebuffer width", Range{16, 16384});
   v("render", "height_px", c.render.height_px, "px", "Framebuffer height", Range{16, 16384});
-  v("render", "frames", c.render.frames, "frames", "Headless: frames to render; 0 = the whole camera path", Range{0, 1e9});
-  v("render", "frame_time_ms", c.render.frame_time_ms, "ms", "Virtual time per frame along the camera path", Range{0.01, 10000});
-  v("render", "lockstep", c.render.lockstep, "bool", "Each frame first takes every answer to the previous streaming cycle, so a run depends on the frame index only; a server death after the preload ends the run with an error (false: real time, never waits)", kAny);
-  v("render", "pace_frames", c.render.pace_frames, "bool", "Real time: frame N starts no earlier than N x frame_time_ms after frame 0, like a display at 1000/frame_time_ms Hz, so a fast device does not fly the camera path faster than its speed (ignored in lock-step and window mode)", kAny);
+  v("render", "frames", c.render.frames, "frames", "Headless: frames to render; 0 = the whole camera path",
+    Range{0, 1e9});
+  v("render", "frame_time_ms", c.render.frame_time_ms, "ms", "Virtual time per frame along the camera path",
+    Range{0.01, 10000});
+  v("render", "lockstep", c.render.lockstep, "bool",
+    "Each frame first takes every answer to the previous streaming cycle, so a run depends on the frame index only; a "
+    "server death after the preload ends the run with an error (false: real time, never waits)",
+    kAny);
+  v("render", "pace_frames", c.render.pace_frames, "bool",
+    "Real time: frame N starts no earlier than N x frame_time_ms after frame 0, like a display at 1000/frame_time_ms "
+    "Hz, so a fast device does not fly the camera path faster than its speed (ignored in lock-step and window mode)",
+    kAny);
   v("render", "camera_path", c.render.camera_path, "path", "Camera path file; empty: <scene>/camera_path.txt", kAny);
   v("render", "output_dir", c.render.output_dir, "path", "Folder for frames and the run summary", kAny);
-  v("render", "write_every_frames", c.render.write_every_frames, "frames", "Write every Nth frame as PNG (0: only the last)", Range{0, 1e9});
+  v("render", "write_every_frames", c.render.write_every_frames, "frames",
+    "Write every Nth frame as PNG (0: only the last)", Range{0, 1e9});
   v("render", "fov_y_deg", c.render.fov_y_deg, "deg", "Vertical field of view of the viewport", Range{1, 170});
-  v("render", "offscreen_fov_y_deg", c.render.offscreen_fov_y_deg, "deg", "Wider off-screen FOV whose meshes are requested at W = 1 (seed 000 §3.2)", Range{1, 170});
+  v("render", "offscreen_fov_y_deg", c.render.offscreen_fov_y_deg, "deg",
+    "Wider off-screen FOV whose meshes are requested at W = 1 (seed 000 §3.2)", Range{1, 170});
   v("render", "near_m", c.render.near_m, "m", "Near plane", Range{1e-3, 1e6});
   v("render", "far_m", c.render.far_m, "m", "Far plane", Range{1e-2, 1e8});
-  v("render", "headlight_ambient", c.render.headlight_ambient, "fraction", "Headlight: camera-facing surfaces keep all their colour, edge-on ones this fraction (1 = unlit)", Range{0, 1});
+  v("render", "headlight_ambient", c.render.headlight_ambient, "fraction",
+    "Headlight: camera-facing surfaces keep all their colour, edge-on ones this fraction (1 = unlit)", Range{0, 1});
   v("render", "debug_view", c.render.debug_view, "name", "What the frame shows instead of the textures:", kAny);
-  v("render", "feedback", c.render.feedback, "bool", "Visibility metadata pass and compaction (off only to measure their cost)", kAny);
-  v("render", "feedback_pairs", c.render.feedback_pairs, "bool", "Measurement of what feedback costs: each frame is drawn twice from the same pose, once as usual and once without feedback (the order alternates; new meshes' geometry is uploaded first, timed in neither; the twin uploads no mips and changes nothing the run shows), and the twin's latency goes to frames.csv's latency_off_ms (texstream-bench visibility; not with a window)", kAny);
-  v("render", "preload_all", c.render.preload_all, "bool", "Before frame 0, load every mip of every texture through the server and wait (the cache must hold the scene): reference frames and the all-resident baseline", kAny);
-  v("render", "blocking_loads", c.render.blocking_loads, "bool", "Blocking baseline (seed 002 §2): each frame loads the full mip chain of every texture the last visibility list named before drawing", kAny);
-  v("render", "reference_dir", c.render.reference_dir, "path", "Output folder of a preload_all run of the same path and size; non-empty: each frame's MSE, PSNR and SSIM against its frames/frame_NNNNN.png go to frames.csv", kAny);
-  v("render", "staging_bytes", c.render.staging_bytes, "bytes", "Host-visible staging ring for uploads into the cache", Range{1 << 20, 1ll << 34});
+  v("render", "feedback", c.render.feedback, "bool",
+    "Visibility metadata pass and compaction (off only to measure their cost)", kAny);
+  v("render", "feedback_pairs", c.render.feedback_pairs, "bool",
+    "Measurement of what feedback costs: each frame is drawn twice from the same pose, once as usual and once without "
+    "feedback (the order alternates; new meshes' geometry is uploaded first, timed in neither; the twin uploads no "
+    "mips and changes nothing the run shows), and the twin's latency goes to frames.csv's latency_off_ms "
+    "(texstream-bench visibility; not with a window)",
+    kAny);
+  v("render", "preload_all", c.render.preload_all, "bool",
+    "Before frame 0, load every mip of every texture through the server and wait (the cache must hold the scene): "
+    "reference frames and the all-resident baseline",
+    kAny);
+  v("render", "blocking_loads", c.render.blocking_loads, "bool",
+    "Blocking baseline (seed 002 §2): each frame loads the full mip chain of every texture the last visibility list "
+    "named before drawing",
+    kAny);
+  v("render", "reference_dir", c.render.reference_dir, "path",
+    "Output folder of a preload_all run of the same path and size; non-empty: each frame's MSE, PSNR and SSIM against "
+    "its frames/frame_NNNNN.png go to frames.csv",
+    kAny);
+  v("render", "staging_bytes", c.render.staging_bytes, "bytes", "Host-visible staging ring for uploads into the cache",
+    Range{1 << 20, 1ll << 34});
 
-  v("stream", "tau", c.stream.tau, "weight", "Mesh weight cutoff τ for compaction (seed 000 §3.3, Table 2)", Range{0, 1e12});
-  v("stream", "max_anisotropy", c.stream.max_anisotropy, "ratio", "A_m for the mip-level metadata; sampling uses A_m/2 (seed 000 §3.2)", Range{1, 16});
-  v("stream", "max_requests_in_flight", c.stream.max_requests_in_flight, "requests", "Requests outstanding at the server at once (pre-queue depth)", Range{1, 65536});
-  v("stream", "max_mips_per_cycle", c.stream.max_mips_per_cycle, "mips", "Most mips requested in one streaming cycle", Range{1, 1e7});
-  v("stream", "colormap_blend", c.stream.colormap_blend, "bool", "Blend sampled colour with the City Colormap by Eq. 8 (false: sample directly)", kAny);
-  v("stream", "foreground_distance_m", c.stream.foreground_distance_m, "m", "Eq. 2 distance weight: w_d = (1 - min(depth / this, 1))^4 (the seed's c_w normalised to metres)", Range{1e-3, 1e7});
+  v("stream", "tau", c.stream.tau, "weight", "Mesh weight cutoff τ for compaction (seed 000 §3.3, Table 2)",
+    Range{0, 1e12});
+  v("stream", "max_anisotropy", c.stream.max_anisotropy, "ratio",
+    "A_m for the mip-level metadata; sampling uses A_m/2 (seed 000 §3.2)", Range{1, 16});
+  v("stream", "max_requests_in_flight", c.stream.max_requests_in_flight, "requests",
+    "Requests outstanding at the server at once (pre-queue depth)", Range{1, 65536});
+  v("stream", "max_mips_per_cycle", c.stream.max_mips_per_cycle, "mips", "Most mips requested in one streaming cycle",
+    Range{1, 1e7});
+  v("stream", "colormap_blend", c.stream.colormap_blend, "bool",
+    "Blend sampled colour with the City Colormap by Eq. 8 (false: sample directly)", kAny);
+  v("stream", "foreground_distance_m", c.stream.foreground_distance_m, "m",
+    "Eq. 2 distance weight: w_d = (1 - min(depth / this, 1))^4 (the seed's c_w normalised to metres)",
+    Range{1e-3, 1e7});
 
   v("controller", "mode", c.controller.mode, "name", "Load size s and mip bias b:", kAny);
-  v("controller", "alpha_ms", c.controller.alpha_ms, "ms", "α: target maximum frame latency (seed 000 Table 2)", Range{0.1, 10000});
+  v("controller", "alpha_ms", c.controller.alpha_ms, "ms", "α: target maximum frame latency (seed 000 Table 2)",
+    Range{0.1, 10000});
   v("controller", "beta", c.controller.beta, "levels", "β: maximum mip bias (Table 2)", Range{0, 16});
-  v("controller", "s_min_mb", c.controller.s_min_mb, "MB", "Minimum load size s_min (Table 2: one 64 KiB sparse block)", Range{0.001, 1e5});
+  v("controller", "s_min_mb", c.controller.s_min_mb, "MB", "Minimum load size s_min (Table 2: one 64 KiB sparse block)",
+    Range{0.001, 1e5});
   v("controller", "s_max_mb", c.controller.s_max_mb, "MB", "Maximum load size s_max (Table 2)", Range{0.001, 1e5});
-  v("controller", "load_time_ms", c.controller.load_time_ms, "ms", "Longest time one streaming cycle may spend loading (Table 2)", Range{0.1, 1e6});
+  v("controller", "load_time_ms", c.controller.load_time_ms, "ms",
+    "Longest time one streaming cycle may spend loading (Table 2)", Range{0.1, 1e6});
   v("controller", "fixed_load_mb", c.controller.fixed_load_mb, "MB", "mode = fixed: load size s", Range{0.001, 1e5});
   v("controller", "fixed_bias", c.controller.fixed_bias, "levels", "mode = fixed: mip bias b", Range{0, 16});
   v("cache", "format", c.cache.format, "name", "Texel format of the GPU cache:", kAny);
-  v("cache", "layer_extent_px", c.cache.layer_extent_px, "px", "Side of one cache layer = the largest texture extent it holds (power of two)", Range{4, 16384});
-  v("cache", "layers", c.cache.layers, "layers", "Array layers of the sparse cache image; they cost address space only (lavapipe: 2 GiB, ~1.4 MB per 512² RGBA8 layer), cache.memory_bytes bounds memory. Too few layers recycle textures long before memory is full", Range{1, 2048});
-  v("cache", "memory_bytes", c.cache.memory_bytes, "bytes", "GPU memory for the cache's bound sparse pages (and mip tail); the oldest layer is evicted when full", Range{1 << 20, 1ll << 40});
-  v("storage", "origin", c.storage.origin, "path/URL", "Where texture files come from: empty = scene.dir; a folder; or an http(s):// base URL (textures/... fetched with range requests)", kAny);
-  v("storage", "disk_cache_dir", c.storage.disk_cache_dir, "path", "Disk cache of fetched ranges for a remote or slow origin (empty: none); one server per folder (flock)", kAny);
-  v("storage", "disk_cache_bytes", c.storage.disk_cache_bytes, "bytes", "Disk space budget of the disk cache: each entry counts its file in whole blocks of the file system; lowered with a warning to what the file system can hold", Range{1 << 20, 1ll << 44});
+  v("cache", "layer_extent_px", c.cache.layer_extent_px, "px",
+    "Side of one cache layer = the largest texture extent it holds (power of two)", Range{4, 16384});
+  v("cache", "layers", c.cache.layers, "layers",
+    "Array layers of the sparse cache image; they cost address space only (lavapipe: 2 GiB, ~1.4 MB per 512² RGBA8 "
+    "layer), cache.memory_bytes bounds memory. Too few layers recycle textures long before memory is full",
+    Range{1, 2048});
+  v("cache", "memory_bytes", c.cache.memory_bytes, "bytes",
+    "GPU memory for the cache's bound sparse pages (and mip tail); the oldest layer is evicted when full",
+    Range{1 << 20, 1ll << 40});
+  v("storage", "origin", c.storage.origin, "path/URL",
+    "Where texture files come from: empty = scene.dir; a folder; or an http(s):// base URL (textures/... fetched with "
+    "range requests)",
+    kAny);
+  v("storage", "disk_cache_dir", c.storage.disk_cache_dir, "path",
+    "Disk cache of fetched ranges for a remote or slow origin (empty: none); one server per folder (flock)", kAny);
+  v("storage", "disk_cache_bytes", c.storage.disk_cache_bytes, "bytes",
+    "Disk space budget of the disk cache: each entry counts its file in whole blocks of the file system; lowered with "
+    "a warning to what the file system can hold",
+    Range{1 << 20, 1ll << 44});
   v("storage", "disk_cache_policy", c.storage.disk_cache_policy, "name", "Disk cache eviction:", kAny);
-  v("storage", "connect_timeout_ms", c.storage.connect_timeout_ms, "ms", "http origin: connect timeout", Range{1, 600000});
-  v("storage", "request_timeout_ms", c.storage.request_timeout_ms, "ms", "http origin: longest time for one range request", Range{1, 3600000});
-  v("storage", "low_speed_bytes_s", c.storage.low_speed_bytes_s, "bytes/s", "http origin: a transfer slower than this for low_speed_time_s is aborted (slowloris stall); 0: off", Range{0, 1e12});
-  v("storage", "low_speed_time_s", c.storage.low_speed_time_s, "s", "http origin: see low_speed_bytes_s", Range{1, 3600});
-  v("storage", "retries", c.storage.retries, "attempts", "http origin: extra attempts after a transient failure (connect error, 5xx, timeout)", Range{0, 10});
-  v("storage", "retry_backoff_ms", c.storage.retry_backoff_ms, "ms", "http origin: back-off before the first retry, doubled for each next one", Range{0, 60000});
-  v("storage", "slow_enabled", c.storage.slow_enabled, "bool", "Wrap the origin in the slow-storage emulation (tests, benchmarks)", kAny);
-  v("storage", "slow_latency_ms", c.storage.slow_latency_ms, "ms", "Slow storage: added latency per read", Range{0, 60000});
-  v("storage", "slow_jitter_ms", c.storage.slow_jitter_ms, "ms", "Slow storage: uniform extra latency in [0, this) per read", Range{0, 60000});
-  v("storage", "slow_bandwidth_mb_s", c.storage.slow_bandwidth_mb_s, "MB/s", "Slow storage: bandwidth cap shared by all reads (0: unlimited)", Range{0, 1e6});
-  v("storage", "slow_stall_probability", c.storage.slow_stall_probability, "probability", "Slow storage: chance that a read stalls for slow_stall_ms", Range{0, 1});
+  v("storage", "connect_timeout_ms", c.storage.connect_timeout_ms, "ms", "http origin: connect timeout",
+    Range{1, 600000});
+  v("storage", "request_timeout_ms", c.storage.request_timeout_ms, "ms",
+    "http origin: longest time for one range request", Range{1, 3600000});
+  v("storage", "low_speed_bytes_s", c.storage.low_speed_bytes_s, "bytes/s",
+    "http origin: a transfer slower than this for low_speed_time_s is aborted (slowloris stall); 0: off",
+    Range{0, 1e12});
+  v("storage", "low_speed_time_s", c.storage.low_speed_time_s, "s", "http origin: see low_speed_bytes_s",
+    Range{1, 3600});
+  v("storage", "retries", c.storage.retries, "attempts",
+    "http origin: extra attempts after a transient failure (connect error, 5xx, timeout)", Range{0, 10});
+  v("storage", "retry_backoff_ms", c.storage.retry_backoff_ms, "ms",
+    "http origin: back-off before the first retry, doubled for each next one", Range{0, 60000});
+  v("storage", "slow_enabled", c.storage.slow_enabled, "bool",
+    "Wrap the origin in the slow-storage emulation (tests, benchmarks)", kAny);
+  v("storage", "slow_latency_ms", c.storage.slow_latency_ms, "ms", "Slow storage: added latency per read",
+    Range{0, 60000});
+  v("storage", "slow_jitter_ms", c.storage.slow_jitter_ms, "ms",
+    "Slow storage: uniform extra latency in [0, this) per read", Range{0, 60000});
+  v("storage", "slow_bandwidth_mb_s", c.storage.slow_bandwidth_mb_s, "MB/s",
+    "Slow storage: bandwidth cap shared by all reads (0: unlimited)", Range{0, 1e6});
+  v("storage", "slow_stall_probability", c.storage.slow_stall_probability, "probability",
+    "Slow storage: chance that a read stalls for slow_stall_ms", Range{0, 1});
   v("storage", "slow_stall_ms", c.storage.slow_stall_ms, "ms", "Slow storage: length of a stall", Range{0, 600000});
-  v("storage", "slow_failure_rate", c.storage.slow_failure_rate, "probability", "Slow storage: chance that a read fails with an I/O error", Range{0, 1});
-  v("storage", "slow_seed", c.storage.slow_seed, "seed", "Slow storage: seed of its random draws (same seed, same reads: same delays and failures)", Range{0, 9e15});
+  v("storage", "slow_failure_rate", c.storage.slow_failure_rate, "probability",
+    "Slow storage: chance that a read fails with an I/O error", Range{0, 1});
+  v("storage", "slow_seed", c.storage.slow_seed, "seed",
+    "Slow storage: seed of its random draws (same seed, same reads: same delays and failures)", Range{0, 9e15});
 }
 
 using Value = std::variant<bool, int64_t, double, std::string>;
@@ -165,8 +252,8 @@ Result<toml::table> parse_toml(const std::string& text, const std::string& what)
   try {
     return toml::parse(text, what);
   } catch (const toml::parse_error& e) {
-    return make_error(ErrorCode::kInvalidArgument, what + ":" + std::to_string(e.source().begin.line) + ": " +
-                                                       std::string(e.description()));
+    return make_error(ErrorCode::kInvalidArgument,
+                      what + ":" + std::to_string(e.source().begin.line) + ": " + std::string(e.description()));
   }
 }
 
@@ -185,17 +272,22 @@ Status assign_from_node(T& field, const toml::node& node, const std::string& wha
     auto v = node.value_exact<int64_t>();
     if (!v) return key_error(what, key, "expected an integer");
     if (static_cast<double>(*v) < r.min || static_cast<double>(*v) > r.max) {
-      return key_error(what, key, "value " + std::to_string(*v) + " outside [" + format_value(static_cast<int64_t>(r.min)) +
-                                      ", " + format_value(static_cast<int64_t>(r.max)) + "]");
+      return key_error(what, key,
+                       "value " + std::to_string(*v) + " outside [" + format_value(static_cast<int64_t>(r.min)) + ", " +
+                           format_value(static_cast<int64_t>(r.max)) + "]");
     }
     field = *v;
   } else if constexpr (std::is_same_v<T, double>) {
     std::optional<double> v;
-    if (node.is_floating_point()) v = node.value_exact<double>();
-    else if (node.is_integer()) v = static_cast<double>(*node.value_exact<int64_t>());
+    if (node.is_floating_point())
+      v = node.value_exact<double>();
+    else if (node.is_integer())
+      v = static_cast<double>(*node.value_exact<int64_t>());
     if (!v) return key_error(what, key, "expected a number");
     if (!std::isfinite(*v) || *v < r.min || *v > r.max) {
-      return key_error(what, key, "value " + format_value(*v) + " outside [" + format_value(r.min) + ", " + format_value(r.max) + "]");
+      return key_error(
+          what, key,
+          "value " + format_value(*v) + " outside [" + format_value(r.min) + ", " + format_value(r.max) + "]");
     }
     field = *v;
   } else if constexpr (ConfigChoice<T>) {
@@ -273,7 +365,8 @@ Status Config::validate() const {
     return make_error(ErrorCode::kInvalidArgument, "config: key '" + key + "': " + msg);
   };
   if (!is_pow2(protocol.request_ring_capacity)) return bad("protocol.request_ring_capacity", "must be a power of two");
-  if (!is_pow2(protocol.completion_ring_capacity)) return bad("protocol.completion_ring_capacity", "must be a power of two");
+  if (!is_pow2(protocol.completion_ring_capacity))
+    return bad("protocol.completion_ring_capacity", "must be a power of two");
   if (!is_pow2(cache.layer_extent_px)) return bad("cache.layer_extent_px", "must be a power of two");
   if (render.staging_bytes < protocol.staging_slot_bytes) {
     return bad("render.staging_bytes", "must hold at least one staging slot (protocol.staging_slot_bytes)");
@@ -291,7 +384,8 @@ Status Config::validate() const {
     }
   });
   TS_TRY(choices);
-  if (controller.s_min_mb > controller.s_max_mb) return bad("controller.s_min_mb", "must not exceed controller.s_max_mb");
+  if (controller.s_min_mb > controller.s_max_mb)
+    return bad("controller.s_min_mb", "must not exceed controller.s_max_mb");
   if (render.near_m >= render.far_m) return bad("render.near_m", "must be less than render.far_m");
   if (render.offscreen_fov_y_deg < render.fov_y_deg) {
     return bad("render.offscreen_fov_y_deg", "must be at least render.fov_y_deg");
@@ -299,9 +393,9 @@ Status Config::validate() const {
   // The largest mip a layer can hold must fit one staging slot (4 bytes per texel is the worst case).
   const int64_t largest_mip = cache.layer_extent_px * cache.layer_extent_px * 4;
   if (protocol.staging_slot_bytes < largest_mip) {
-    return bad("protocol.staging_slot_bytes", std::to_string(protocol.staging_slot_bytes) + " cannot hold a " +
-                                                  std::to_string(cache.layer_extent_px) + "² RGBA8 mip (" +
-                                                  std::to_string(largest_mip) + " bytes); raise it or lower cache.layer_extent_px");
+    return bad("protocol.staging_slot_bytes",
+               std::to_string(protocol.staging_slot_bytes) + " cannot hold a " + std::to_string(cache.layer_extent_px) +
+                   "² RGBA8 mip (" + std::to_string(largest_mip) + " bytes); raise it or lower cache.layer_extent_px");
   }
   if (stream.max_requests_in_flight > protocol.request_ring_capacity) {
     return bad("stream.max_requests_in_flight", "must not exceed protocol.request_ring_capacity");
@@ -315,7 +409,8 @@ Status Config::validate() const {
     return bad("server.spawn", "false needs protocol.segment_name: the name the standalone texstream-server serves");
   }
   if (protocol.completion_ring_capacity < protocol.request_ring_capacity) {
-    return bad("protocol.completion_ring_capacity", "must be at least protocol.request_ring_capacity (every request is answered)");
+    return bad("protocol.completion_ring_capacity",
+               "must be at least protocol.request_ring_capacity (every request is answered)");
   }
   if (render.window && render.feedback_pairs) {
     return bad("render.feedback_pairs", "a measurement of headless runs; it cannot be used with render.window");
@@ -331,13 +426,15 @@ std::optional<std::string> segment_name_problem(std::string_view name) {
   if (name.size() > 255) {
     return "is " + std::to_string(name.size()) + " bytes long; a shared-memory name has at most 255 (NAME_MAX)";
   }
-  if (name.find('/') != std::string_view::npos) return "'" + std::string(name) + "' contains '/'; a shared-memory name cannot";
+  if (name.find('/') != std::string_view::npos)
+    return "'" + std::string(name) + "' contains '/'; a shared-memory name cannot";
   if (name.find('\0') != std::string_view::npos) return "contains a NUL byte";
   if (name == "." || name == "..") return "cannot be '" + std::string(name) + "'";
   return std::nullopt;
 }
 
-Result<Config> parse_config(const std::string& toml_text, const std::string& what, const std::vector<std::string>& overrides) {
+Result<Config> parse_config(const std::string& toml_text, const std::string& what,
+                            const std::vector<std::string>& overrides) {
   Config c;
   auto parsed = parse_toml(toml_text, what);
   if (!parsed.ok()) return parsed.error();
@@ -380,15 +477,16 @@ std::string config_reference_markdown() {
     std::string range = "—";
     using T = std::decay_t<decltype(field)>;
     if constexpr (std::is_same_v<T, int64_t>) {
-      if (r.min > -1e299) range = std::to_string(static_cast<int64_t>(r.min)) + " … " + std::to_string(static_cast<int64_t>(r.max));
+      if (r.min > -1e299)
+        range = std::to_string(static_cast<int64_t>(r.min)) + " … " + std::to_string(static_cast<int64_t>(r.max));
     } else if constexpr (std::is_same_v<T, double>) {
       if (r.min > -1e299) range = format_value(r.min) + " … " + format_value(r.max);
     } else if constexpr (ConfigChoice<T>) {
       range = choice_names<T>();
     }
     std::string def = format_value(field);
-    out += "| `" + std::string(part) + "." + key + "` | " + type_name(field) + " | " + unit + " | `" + def + "` | " + range +
-           " | " + key_doc(field, doc) + " |\n";
+    out += "| `" + std::string(part) + "." + key + "` | " + type_name(field) + " | " + unit + " | `" + def + "` | " +
+           range + " | " + key_doc(field, doc) + " |\n";
   });
   return out;
 }

@@ -21,18 +21,30 @@ void contract_failed(const char* file, int line, const char* condition, const ch
 
 const char* to_string(ErrorCode code) {
   switch (code) {
-    case ErrorCode::kInvalidArgument: return "invalid argument";
-    case ErrorCode::kNotFound: return "not found";
-    case ErrorCode::kIo: return "i/o error";
-    case ErrorCode::kCorrupt: return "corrupt";
-    case ErrorCode::kUnsupported: return "unsupported";
-    case ErrorCode::kProtocol: return "protocol violation";
-    case ErrorCode::kPeerDead: return "peer dead";
-    case ErrorCode::kTimeout: return "timeout";
-    case ErrorCode::kUnavailable: return "unavailable";
-    case ErrorCode::kVulkan: return "vulkan error";
-    case ErrorCode::kResourceExhausted: return "resource exhausted";
-    case ErrorCode::kNotAFile: return "not a file";
+    case ErrorCode::kInvalidArgument:
+      return "invalid argument";
+    case ErrorCode::kNotFound:
+      return "not found";
+    case ErrorCode::kIo:
+      return "i/o error";
+    case ErrorCode::kCorrupt:
+      return "corrupt";
+    case ErrorCode::kUnsupported:
+      return "unsupported";
+    case ErrorCode::kProtocol:
+      return "protocol violation";
+    case ErrorCode::kPeerDead:
+      return "peer dead";
+    case ErrorCode::kTimeout:
+      return "timeout";
+    case ErrorCode::kUnavailable:
+      return "unavailable";
+    case ErrorCode::kVulkan:
+      return "vulkan error";
+    case ErrorCode::kResourceExhausted:
+      return "resource exhausted";
+    case ErrorCode::kNotAFile:
+      return "not a file";
   }
   return "unknown";
 }

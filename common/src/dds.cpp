@@ -18,8 +18,8 @@ constexpr uint32_t kDdpfAlphaPixels = 0x1u, kDdpfFourCC = 0x4u, kDdpfRgb = 0x40u
 constexpr uint32_t kDdsCapsComplex = 0x8u, kDdsCapsTexture = 0x1000u, kDdsCapsMipMap = 0x400000u;
 constexpr uint32_t kCaps2Cubemap = 0x200u;
 constexpr uint32_t kCaps2Volume = 0x200000u;
-constexpr uint32_t kFourCCDxt1 = 0x31545844u;   // "DXT1"
-constexpr uint32_t kFourCCDx10 = 0x30315844u;   // "DX10"
+constexpr uint32_t kFourCCDxt1 = 0x31545844u;  // "DXT1"
+constexpr uint32_t kFourCCDx10 = 0x30315844u;  // "DX10"
 constexpr uint32_t kDxgiR8G8B8A8Unorm = 28, kDxgiR8G8B8A8UnormSrgb = 29;
 constexpr uint32_t kDxgiBc1Unorm = 71, kDxgiBc1UnormSrgb = 72;
 constexpr uint32_t kDx10Texture2D = 3;
@@ -125,9 +125,9 @@ Result<DdsLayout> parse_dds_layout(std::span<const std::byte> bytes, const std::
     }
     l.data_offset = kDdsMaxHeaderBytes;
     const uint32_t dxgi = word(bytes, kDx10Format);
-    l.encoding = dxgi == kDxgiBc1Unorm || dxgi == kDxgiBc1UnormSrgb                ? DdsEncoding::kBc1
+    l.encoding = dxgi == kDxgiBc1Unorm || dxgi == kDxgiBc1UnormSrgb             ? DdsEncoding::kBc1
                  : dxgi == kDxgiR8G8B8A8Unorm || dxgi == kDxgiR8G8B8A8UnormSrgb ? DdsEncoding::kRgba8
-                                                                                  : DdsEncoding::kOther;
+                                                                                : DdsEncoding::kOther;
   } else if ((pf_flags & kDdpfFourCC) != 0) {
     l.encoding = fourcc == kFourCCDxt1 ? DdsEncoding::kBc1 : DdsEncoding::kOther;
   } else if ((pf_flags & kDdpfRgb) != 0 && word(bytes, kPfBitCount) == 32 && word(bytes, kPfRMask) == 0x000000ffu &&

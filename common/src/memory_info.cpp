@@ -161,8 +161,8 @@ uint64_t server_cache_budget(uint64_t configured, const MemoryInfo& memory, std:
   if (configured <= usable) return configured;
   if (why) {
     *why = "server.ram_cache_bytes = " + std::to_string(configured) + " lowered to " + std::to_string(usable) +
-           " bytes: " + std::to_string(memory.available) + " bytes are free now (" + memory.limit_source +
-           " allows " + std::to_string(memory.limit) + "), less a reserve of " + std::to_string(reserve) +
+           " bytes: " + std::to_string(memory.available) + " bytes are free now (" + memory.limit_source + " allows " +
+           std::to_string(memory.limit) + "), less a reserve of " + std::to_string(reserve) +
            " for the renderer and everything else";
   }
   return usable;

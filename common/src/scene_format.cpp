@@ -125,7 +125,8 @@ void write_array(OutputFile& out, std::span<const T> items) {
 // Checks magic and version of a binary header; `T` has magic and version fields.
 template <class T>
 Status check_magic_version(const T& h, uint64_t magic, const std::string& what) {
-  if (h.magic != magic) return make_error(ErrorCode::kCorrupt, what + ": bad magic (not a texstream file of this kind)");
+  if (h.magic != magic)
+    return make_error(ErrorCode::kCorrupt, what + ": bad magic (not a texstream file of this kind)");
   if (h.version != kSceneFormatVersion)
     return make_error(ErrorCode::kUnsupported, what + ": version " + std::to_string(h.version) + ", expected " +
                                                    std::to_string(kSceneFormatVersion));
@@ -155,8 +156,8 @@ Status validate_mesh(const MeshArrays& d, size_t i, const std::string& what) {
                                                std::to_string(m.index_count) + ") exceeds " +
                                                std::to_string(d.indices.size()) + " indices");
   if (m.index_count % 3 != 0)
-    return make_error(ErrorCode::kCorrupt, rec() + "index_count " + std::to_string(m.index_count) +
-                                               " is not a whole number of triangles");
+    return make_error(ErrorCode::kCorrupt,
+                      rec() + "index_count " + std::to_string(m.index_count) + " is not a whole number of triangles");
   if (!finite3(m.origin) || !finite3(m.bounds_min) || !finite3(m.bounds_max))
     return make_error(ErrorCode::kCorrupt, rec() + "origin or bounds not finite");
   for (int a = 0; a < 3; ++a)
@@ -183,8 +184,8 @@ Status check_mesh_header(const MeshFileHeader& h, uint64_t size, const std::stri
   if (h.mesh_count > body / sizeof(MeshRecord) || h.vertex_count > body / sizeof(Vertex) ||
       h.index_count > body / sizeof(uint32_t))
     return make_error(ErrorCode::kCorrupt, what + ": counts exceed the file size");
-  const uint64_t expected = sizeof h + h.mesh_count * sizeof(MeshRecord) + h.vertex_count * sizeof(Vertex) +
-                            h.index_count * sizeof(uint32_t);
+  const uint64_t expected =
+      sizeof h + h.mesh_count * sizeof(MeshRecord) + h.vertex_count * sizeof(Vertex) + h.index_count * sizeof(uint32_t);
   if (expected != size)
     return make_error(ErrorCode::kCorrupt, what + ": size " + std::to_string(size) + " bytes, header says " +
                                                std::to_string(expected) + " (truncated or trailing data)");
@@ -375,8 +376,8 @@ Result<MeshData> read_meshes(const fs::path& dir) {
 Status write_meshes(const fs::path& dir, const MeshData& data) {
   auto out = OutputFile::create(dir / kMeshFile);
   if (!out) return out.error();
-  const MeshFileHeader h{kMeshMagic, kSceneFormatVersion, 0, data.meshes.size(), data.vertices.size(),
-                         data.indices.size()};
+  const MeshFileHeader h{kMeshMagic,         kSceneFormatVersion,  0,
+                         data.meshes.size(), data.vertices.size(), data.indices.size()};
   out->write(&h, sizeof h);
   write_array(*out, std::span<const MeshRecord>(data.meshes));
   write_array(*out, std::span<const Vertex>(data.vertices));
@@ -594,16 +595,17 @@ MeshIndex build_mesh_index(std::span<const MeshRecord> meshes) {
     const double mx = 0.5 * (p.rect[0] + p.rect[2]);
     const double my = 0.5 * (p.rect[1] + p.rect[3]);
     uint32_t* base = order.data();
-    uint32_t* split_y = std::stable_partition(base + begin, base + end, [&](uint32_t id) { return centre[id][1] < my; });
+    uint32_t* split_y =
+        std::stable_partition(base + begin, base + end, [&](uint32_t id) { return centre[id][1] < my; });
     uint32_t* split_x0 = std::stable_partition(base + begin, split_y, [&](uint32_t id) { return centre[id][0] < mx; });
     uint32_t* split_x1 = std::stable_partition(split_y, base + end, [&](uint32_t id) { return centre[id][0] < mx; });
     const std::array<uint32_t, 5> cut{begin, static_cast<uint32_t>(split_x0 - base),
                                       static_cast<uint32_t>(split_y - base), static_cast<uint32_t>(split_x1 - base),
                                       end};
     const std::array<std::array<double, 4>, 4> rects{{{p.rect[0], p.rect[1], mx, my},
-                                                       {mx, p.rect[1], p.rect[2], my},
-                                                       {p.rect[0], my, mx, p.rect[3]},
-                                                       {mx, my, p.rect[2], p.rect[3]}}};
+                                                      {mx, p.rect[1], p.rect[2], my},
+                                                      {p.rect[0], my, mx, p.rect[3]},
+                                                      {mx, my, p.rect[2], p.rect[3]}}};
     const auto first_child = static_cast<uint32_t>(nodes.size());
     uint32_t count = 0;
     for (uint32_t k = 0; k < 4; ++k) {
@@ -633,7 +635,8 @@ Status meshes_stamp(const fs::path& dir, uint64_t& bytes, uint64_t& fingerprint)
   mix(all.first(std::min<size_t>(all.size(), sizeof(MeshFileHeader))));
   MeshFileHeader mh{};
   if (all.size() >= sizeof mh) std::memcpy(&mh, all.data(), sizeof mh);
-  const uint64_t records = std::min<uint64_t>(mh.mesh_count, (all.size() - std::min(all.size(), sizeof mh)) / sizeof(MeshRecord));
+  const uint64_t records =
+      std::min<uint64_t>(mh.mesh_count, (all.size() - std::min(all.size(), sizeof mh)) / sizeof(MeshRecord));
   const uint64_t samples = std::min(records, kMeshIndexFingerprintSamples);
   for (uint64_t k = 0; k < samples; ++k) {
     // Evenly spread, first and last record included.
@@ -702,9 +705,9 @@ Result<MappedMeshIndex> map_mesh_index(const fs::path& dir, uint64_t mesh_count)
     const MeshIndexNode& n = nodes[i];
     const auto rec = [&] { return m.file.what() + ": node " + std::to_string(i) + ": "; };  // on failure only
     if (n.begin >= n.end || n.end > h.mesh_count || (i == 0 && (n.begin != 0 || n.end != h.mesh_count)))
-      return make_error(ErrorCode::kCorrupt, rec() + "range [" + std::to_string(n.begin) + ", " + std::to_string(n.end) +
-                                                 ") is empty or outside the " + std::to_string(h.mesh_count) +
-                                                 " meshes");
+      return make_error(ErrorCode::kCorrupt, rec() + "range [" + std::to_string(n.begin) + ", " +
+                                                 std::to_string(n.end) + ") is empty or outside the " +
+                                                 std::to_string(h.mesh_count) + " meshes");
     if (!finite_box(n)) return make_error(ErrorCode::kCorrupt, rec() + "box not finite");
     if (n.child_count == 0) continue;
     // Children come after their parent (so no cycle), are at most four, and cut its range in order.
@@ -721,13 +724,14 @@ Result<MappedMeshIndex> map_mesh_index(const fs::path& dir, uint64_t mesh_count)
     if (at != n.end) return make_error(ErrorCode::kCorrupt, rec() + "children do not cover its range");
   }
   for (size_t i = 1; i < nodes.size(); ++i)
-    if (parents[i] != 1) return make_error(ErrorCode::kCorrupt, m.file.what() + ": node " + std::to_string(i) + " has no parent");
+    if (parents[i] != 1)
+      return make_error(ErrorCode::kCorrupt, m.file.what() + ": node " + std::to_string(i) + " has no parent");
   std::vector<bool> seen(h.mesh_count, false);
   for (size_t i = 0; i < m.view.order.size(); ++i) {
     const uint32_t id = m.view.order[i];
     if (id >= h.mesh_count || seen[id])
-      return make_error(ErrorCode::kCorrupt, m.file.what() + ": order[" + std::to_string(i) + "] = " +
-                                                 std::to_string(id) + " is out of range or repeated");
+      return make_error(ErrorCode::kCorrupt, m.file.what() + ": order[" + std::to_string(i) +
+                                                 "] = " + std::to_string(id) + " is out of range or repeated");
     seen[id] = true;
   }
   return m;

@@ -25,7 +25,8 @@ Result<CheckedCompletion> check_completion(const CompletionRecord& r, uint32_t s
     return bad("field 'slot' = " + std::to_string(r.slot) + " >= slot count " + std::to_string(slot_count));
   }
   if (r.byte_size == 0 || r.byte_size > slot_bytes) {
-    return bad("field 'byte_size' = " + std::to_string(r.byte_size) + " outside (0, " + std::to_string(slot_bytes) + "]");
+    return bad("field 'byte_size' = " + std::to_string(r.byte_size) + " outside (0, " + std::to_string(slot_bytes) +
+               "]");
   }
   const auto format = texel_format_from_raw(r.format);
   if (!format) return bad("field 'format' = " + std::to_string(r.format));
@@ -41,8 +42,8 @@ Result<CheckedCompletion> check_completion(const CompletionRecord& r, uint32_t s
 
 Status check_against_texture(const CheckedCompletion& c, const TextureShape& shape) {
   if (c.mip.value >= shape.mip_count) {
-    return bad("field 'mip_level' = " + std::to_string(c.mip.value) + " but texture " + std::to_string(c.texture.value) +
-               " has " + std::to_string(shape.mip_count) + " mips");
+    return bad("field 'mip_level' = " + std::to_string(c.mip.value) + " but texture " +
+               std::to_string(c.texture.value) + " has " + std::to_string(shape.mip_count) + " mips");
   }
   if (c.format != shape.format) {
     return bad(std::string("field 'format' = ") + std::string(to_string(c.format)) + " but texture is " +
@@ -63,13 +64,20 @@ Status check_against_texture(const CheckedCompletion& c, const TextureShape& sha
 
 const char* to_string(CompletionStatus status) {
   switch (status) {
-    case CompletionStatus::kOk: return "ok";
-    case CompletionStatus::kNotFound: return "not found";
-    case CompletionStatus::kCorrupt: return "corrupt";
-    case CompletionStatus::kTimedOut: return "timed out";
-    case CompletionStatus::kCancelled: return "cancelled";
-    case CompletionStatus::kIoError: return "i/o error";
-    case CompletionStatus::kUnfilled: return "unfilled";
+    case CompletionStatus::kOk:
+      return "ok";
+    case CompletionStatus::kNotFound:
+      return "not found";
+    case CompletionStatus::kCorrupt:
+      return "corrupt";
+    case CompletionStatus::kTimedOut:
+      return "timed out";
+    case CompletionStatus::kCancelled:
+      return "cancelled";
+    case CompletionStatus::kIoError:
+      return "i/o error";
+    case CompletionStatus::kUnfilled:
+      return "unfilled";
   }
   return "unknown";
 }

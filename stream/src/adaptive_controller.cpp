@@ -37,10 +37,6 @@ Error bad(const std::string& key, const std::string& why) {
 
 }  // namespace
 
-const char* to_string(ControllerMode mode) {
-  return choice_name(mode).data();  // the table's names are string literals: NUL-terminated
-}
-
 // ---- parameters ----
 
 Result<ControllerParams> ControllerParams::from_config(const ControllerConfig& c) {
@@ -57,7 +53,8 @@ Result<ControllerParams> ControllerParams::from_config(const ControllerConfig& c
 }
 
 Status ControllerParams::validate() const {
-  if (!(std::isfinite(alpha_s) && alpha_s > 0)) return bad("alpha_ms", "must be a positive number, not " + num(alpha_s * 1e3));
+  if (!(std::isfinite(alpha_s) && alpha_s > 0))
+    return bad("alpha_ms", "must be a positive number, not " + num(alpha_s * 1e3));
   if (!finite_non_negative(beta)) return bad("beta", "must be a non-negative number, not " + num(beta));
   if (!(std::isfinite(s_min_bytes) && s_min_bytes >= 1)) {
     return bad("s_min_mb", "must be at least one byte, not " + num(s_min_bytes / 1e6) + " MB");
@@ -69,7 +66,8 @@ Status ControllerParams::validate() const {
   if (mode == ControllerMode::kFixed) {
     // The fixed mode is held to the same output ranges as the others rather than silently clamped.
     if (!(fixed_load_bytes >= s_min_bytes && fixed_load_bytes <= s_max_bytes)) {
-      return bad("fixed_load_mb", num(fixed_load_bytes / 1e6) + " MB is outside [controller.s_min_mb, controller.s_max_mb] = [" +
+      return bad("fixed_load_mb", num(fixed_load_bytes / 1e6) +
+                                      " MB is outside [controller.s_min_mb, controller.s_max_mb] = [" +
                                       num(s_min_bytes / 1e6) + ", " + num(s_max_bytes / 1e6) + "] MB");
     }
     if (!(fixed_bias >= 0 && fixed_bias <= beta)) {
@@ -206,9 +204,12 @@ bool AdaptiveController::on_frame(double dt) {
 
 double AdaptiveController::load_size_bytes() const {
   switch (params_.mode) {
-    case ControllerMode::kAdaptive: return state_.s_bytes;
-    case ControllerMode::kNone: return params_.s_max_bytes;
-    case ControllerMode::kFixed: return params_.fixed_load_bytes;
+    case ControllerMode::kAdaptive:
+      return state_.s_bytes;
+    case ControllerMode::kNone:
+      return params_.s_max_bytes;
+    case ControllerMode::kFixed:
+      return params_.fixed_load_bytes;
   }
   return params_.s_min_bytes;
 }
@@ -217,9 +218,12 @@ uint64_t AdaptiveController::load_bytes() const { return static_cast<uint64_t>(l
 
 double AdaptiveController::mip_bias() const {
   switch (params_.mode) {
-    case ControllerMode::kAdaptive: return state_.b;
-    case ControllerMode::kNone: return 0.0;
-    case ControllerMode::kFixed: return params_.fixed_bias;
+    case ControllerMode::kAdaptive:
+      return state_.b;
+    case ControllerMode::kNone:
+      return 0.0;
+    case ControllerMode::kFixed:
+      return params_.fixed_bias;
   }
   return 0.0;
 }

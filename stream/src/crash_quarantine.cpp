@@ -8,8 +8,7 @@ namespace texstream::stream {
 
 bool CrashQuarantine::charge_crash(int signal, const ServerBlock& block) {
   // Signals a process raises on itself when its own code fails; SIGKILL (and SIGTERM) come from outside.
-  const bool crash = signal == SIGSEGV || signal == SIGBUS || signal == SIGABRT || signal == SIGFPE ||
-                     signal == SIGILL;
+  const bool crash = signal == SIGSEGV || signal == SIGBUS || signal == SIGABRT || signal == SIGFPE || signal == SIGILL;
   if (!crash) return false;
   charge_loading(block, "died by signal " + std::to_string(signal));
   return true;
@@ -35,9 +34,10 @@ void CrashQuarantine::charge_loading(const ServerBlock& block, const std::string
       continue;
     }
     quarantined_.insert(texture);
-    spdlog::warn("texture {} quarantined: texstream-server crashed or hung {} times while loading it (last: {}); "
-                 "it is not requested again and stays on its colormap",
-                 texture, n, how);
+    spdlog::warn(
+        "texture {} quarantined: texstream-server crashed or hung {} times while loading it (last: {}); "
+        "it is not requested again and stays on its colormap",
+        texture, n, how);
   }
 }
 

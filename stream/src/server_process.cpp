@@ -5,10 +5,10 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <spdlog/spdlog.h>
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
-#include <spdlog/spdlog.h>
 #include <system_error>
 #include <utility>
 
@@ -81,10 +81,14 @@ Result<std::filesystem::path> resolve_server_executable(const Config& config) {
 
 const char* to_string(ServerState state) {
   switch (state) {
-    case ServerState::kStopped: return "stopped";
-    case ServerState::kRunning: return "running";
-    case ServerState::kBackingOff: return "backing off";
-    case ServerState::kColormapOnly: return "colormap only";
+    case ServerState::kStopped:
+      return "stopped";
+    case ServerState::kRunning:
+      return "running";
+    case ServerState::kBackingOff:
+      return "backing off";
+    case ServerState::kColormapOnly:
+      return "colormap only";
   }
   return "?";
 }

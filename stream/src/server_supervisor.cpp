@@ -45,9 +45,10 @@ void ServerSupervisor::supervise(SteadyTime t, bool ring_broken, bool work_waiti
       // Our child found the segment held by another server (a standalone texstream-server on this
       // protocol.segment_name) and left. A reset would pull the rings from under that server: it serves this
       // renderer from now on, as with server.spawn = false, and no child is started again.
-      spdlog::warn("segment '{}' is served by a standalone texstream-server (pid {}): using it, as with "
-                   "server.spawn = false; child pid {} {}",
-                   segment_.name(), holder, exit->pid, exit->how);
+      spdlog::warn(
+          "segment '{}' is served by a standalone texstream-server (pid {}): using it, as with "
+          "server.spawn = false; child pid {} {}",
+          segment_.name(), holder, exit->pid, exit->how);
       process_.reset();
       return;
     }
@@ -74,8 +75,8 @@ void ServerSupervisor::supervise(SteadyTime t, bool ring_broken, bool work_waiti
     } else {
       const ServerBlock& sb = segment_.server_block();
       process_->watch_heartbeat(sb.heartbeat.v.load(std::memory_order_relaxed),
-                                sb.attached.v.load(std::memory_order_relaxed) == 1, work_waiting,
-                                heartbeat_timeout_, t);
+                                sb.attached.v.load(std::memory_order_relaxed) == 1, work_waiting, heartbeat_timeout_,
+                                t);
     }
   }
   if (!process_->has_child()) spawn_if_due(t);
@@ -114,10 +115,11 @@ void ServerSupervisor::watch_external_server(SteadyTime t, Client& client) {
     // Nobody serves the segment yet: say so once after a while (a preload would otherwise wait silently).
     if (external_unserved_since_ == SteadyTime{}) external_unserved_since_ = t;
     if (!external_unserved_told_ && t - external_unserved_since_ >= kExternalUnservedWarning) {
-      spdlog::warn("no texstream-server has attached to segment '{}' for {} s (server.spawn = false): start one "
-                   "with texstream-server --segment {} --scene DIR",
-                   segment_.name(), std::chrono::duration_cast<std::chrono::seconds>(kExternalUnservedWarning).count(),
-                   segment_.name());
+      spdlog::warn(
+          "no texstream-server has attached to segment '{}' for {} s (server.spawn = false): start one "
+          "with texstream-server --segment {} --scene DIR",
+          segment_.name(), std::chrono::duration_cast<std::chrono::seconds>(kExternalUnservedWarning).count(),
+          segment_.name());
       external_unserved_told_ = true;
     }
   } else {

@@ -3,6 +3,7 @@
 #include <signal.h>
 #include <unistd.h>
 
+#include <spdlog/spdlog.h>
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -10,14 +11,13 @@
 #include <cstring>
 #include <fstream>
 #include <sstream>
-#include <spdlog/spdlog.h>
 #include <utility>
 
 #include "texstream/common/contract.hpp"
 #include "texstream/common/memory_info.hpp"
+#include "texstream/common/texel_format.hpp"
 #include "texstream/protocol/checksum.hpp"
 #include "texstream/protocol/liveness.hpp"
-#include "texstream/common/texel_format.hpp"
 
 namespace texstream::stream {
 
@@ -94,14 +94,22 @@ class StreamClient::IpcScope {
 
 const char* to_string(RequestOutcome outcome) {
   switch (outcome) {
-    case RequestOutcome::kSent: return "sent";
-    case RequestOutcome::kAlreadyInFlight: return "already in flight";
-    case RequestOutcome::kInFlightLimit: return "in-flight limit reached";
-    case RequestOutcome::kRingFull: return "request ring full";
-    case RequestOutcome::kNoServer: return "no server";
-    case RequestOutcome::kUnknownTexture: return "unknown texture";
-    case RequestOutcome::kBadMip: return "mip level out of range";
-    case RequestOutcome::kQuarantined: return "texture quarantined (it crashed the server twice)";
+    case RequestOutcome::kSent:
+      return "sent";
+    case RequestOutcome::kAlreadyInFlight:
+      return "already in flight";
+    case RequestOutcome::kInFlightLimit:
+      return "in-flight limit reached";
+    case RequestOutcome::kRingFull:
+      return "request ring full";
+    case RequestOutcome::kNoServer:
+      return "no server";
+    case RequestOutcome::kUnknownTexture:
+      return "unknown texture";
+    case RequestOutcome::kBadMip:
+      return "mip level out of range";
+    case RequestOutcome::kQuarantined:
+      return "texture quarantined (it crashed the server twice)";
   }
   return "?";
 }
@@ -111,22 +119,25 @@ SendResult to_send_result(RequestOutcome outcome) {
     case RequestOutcome::kSent:
     // Answered at once: its kCorrupt comes with the next poll. kSent, so the texture states hold the mip
     // pending and take that failure (kSkip would leave the texture wanted, and asked for, forever).
-    case RequestOutcome::kQuarantined: return SendResult::kSent;
+    case RequestOutcome::kQuarantined:
+      return SendResult::kSent;
     case RequestOutcome::kAlreadyInFlight:
     case RequestOutcome::kUnknownTexture:
-    case RequestOutcome::kBadMip: return SendResult::kSkip;
+    case RequestOutcome::kBadMip:
+      return SendResult::kSkip;
     case RequestOutcome::kInFlightLimit:
     case RequestOutcome::kRingFull:
-    case RequestOutcome::kNoServer: return SendResult::kStop;
+    case RequestOutcome::kNoServer:
+      return SendResult::kStop;
   }
   return SendResult::kStop;
 }
 
 Result<std::unique_ptr<StreamClient>> StreamClient::start(const Config& config, std::vector<TextureShape> shapes,
-                                                           const std::filesystem::path& scene_dir,
-                                                           const std::filesystem::path& config_file,
-                                                           const std::vector<std::string>& overrides,
-                                                           StreamClientOptions options) {
+                                                          const std::filesystem::path& scene_dir,
+                                                          const std::filesystem::path& config_file,
+                                                          const std::vector<std::string>& overrides,
+                                                          StreamClientOptions options) {
   TS_TRY(config.validate());
   std::unique_ptr<StreamClient> c(new StreamClient());
   c->config_ = config;
@@ -146,8 +157,8 @@ Result<std::unique_ptr<StreamClient>> StreamClient::start(const Config& config, 
   if (const int removed = Segment::remove_stale("texstream-"); removed > 0) {
     spdlog::info("removed {} stale shared segment(s) of dead renderers", removed);
   }
-  const std::string name = config.protocol.segment_name.empty() ? "texstream-" + std::to_string(::getpid())
-                                                                 : config.protocol.segment_name;
+  const std::string name =
+      config.protocol.segment_name.empty() ? "texstream-" + std::to_string(::getpid()) : config.protocol.segment_name;
   // A chosen name (for a standalone server) left behind by a renderer that was killed would block every
   // later one with "exists"; the sweep above only covers the "texstream-" names.
   if (!config.protocol.segment_name.empty() && Segment::remove_if_stale(name)) {
@@ -181,8 +192,7 @@ Result<std::unique_ptr<StreamClient>> StreamClient::start(const Config& config, 
     ServerCommand cmd{executable, name, scene_dir, config_file, overrides};
     process = std::make_unique<ServerProcess>(std::move(cmd), c->options_.restart);
   }
-  const auto heartbeat_timeout =
-      std::chrono::milliseconds(static_cast<int64_t>(config.protocol.heartbeat_timeout_ms));
+  const auto heartbeat_timeout = std::chrono::milliseconds(static_cast<int64_t>(config.protocol.heartbeat_timeout_ms));
   c->supervisor_ = std::make_unique<ServerSupervisor>(*c->segment_, std::move(process), heartbeat_timeout);
   c->supervisor_->start(c->now());
   spdlog::info("stream client: segment '{}' ({} slots x {} bytes), {} textures, server {}", name,
@@ -204,13 +214,9 @@ StreamClient::~StreamClient() {
   segment_.reset();
 }
 
-SteadyTime StreamClient::now() const {
-  return options_.clock ? options_.clock() : std::chrono::steady_clock::now();
-}
+SteadyTime StreamClient::now() const { return options_.clock ? options_.clock() : std::chrono::steady_clock::now(); }
 
-void StreamClient::attach_rings() {
-  endpoint_ = RendererEndpoint(*segment_);
-}
+void StreamClient::attach_rings() { endpoint_ = RendererEndpoint(*segment_); }
 
 void StreamClient::begin_cycle() {
   IpcScope scope(*this);
@@ -219,9 +225,7 @@ void StreamClient::begin_cycle() {
   segment_->renderer_block().generation.v.store(generation_.value, std::memory_order_release);
 }
 
-std::optional<uint64_t> StreamClient::server_read_position() const {
-  return endpoint_.server_read_position();
-}
+std::optional<uint64_t> StreamClient::server_read_position() const { return endpoint_.server_read_position(); }
 
 bool StreamClient::slot_in_transit(uint32_t slot) {
   if (release_pos_[slot] == kNoPosition) return false;
@@ -276,7 +280,7 @@ void StreamClient::release_slot(SlotIndex slot) {
 void StreamClient::flush_releases() {
   // Full (or a ring error, handled by poll): the rest wait for the next call.
   stats_.releases_sent += endpoint_.flush_releases(generation_, [this](SlotIndex slot, uint64_t position) {
-    slot_held_[slot.value] = 0;         // the server owns it once it has read the record
+    slot_held_[slot.value] = 0;  // the server owns it once it has read the record
     release_pos_[slot.value] = position;
   });
   endpoint_.ring();
@@ -576,9 +580,15 @@ StreamStats StreamClient::stats() const {
     s.server_restarts = supervisor_->server_restarts();
     switch (process->state()) {
       case ServerState::kStopped:
-      case ServerState::kBackingOff: s.server_state = StreamServerState::kBackingOff; break;
-      case ServerState::kRunning: s.server_state = StreamServerState::kRunning; break;
-      case ServerState::kColormapOnly: s.server_state = StreamServerState::kColormapOnly; break;
+      case ServerState::kBackingOff:
+        s.server_state = StreamServerState::kBackingOff;
+        break;
+      case ServerState::kRunning:
+        s.server_state = StreamServerState::kRunning;
+        break;
+      case ServerState::kColormapOnly:
+        s.server_state = StreamServerState::kColormapOnly;
+        break;
     }
   } else {
     s.server_state = supervisor_->broken() ? StreamServerState::kBroken : StreamServerState::kExternal;

@@ -8,11 +8,16 @@ namespace texstream::stream {
 
 const char* to_string(StreamServerState state) {
   switch (state) {
-    case StreamServerState::kExternal: return "external";
-    case StreamServerState::kRunning: return "running";
-    case StreamServerState::kBackingOff: return "backing off";
-    case StreamServerState::kColormapOnly: return "colormap only";
-    case StreamServerState::kBroken: return "broken";
+    case StreamServerState::kExternal:
+      return "external";
+    case StreamServerState::kRunning:
+      return "running";
+    case StreamServerState::kBackingOff:
+      return "backing off";
+    case StreamServerState::kColormapOnly:
+      return "colormap only";
+    case StreamServerState::kBroken:
+      return "broken";
   }
   return "?";
 }

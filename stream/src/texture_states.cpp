@@ -10,9 +10,12 @@ namespace texstream::stream {
 
 const char* to_string(TexturePhase phase) {
   switch (phase) {
-    case TexturePhase::kInitial: return "initial";
-    case TexturePhase::kActive: return "active";
-    case TexturePhase::kFinal: return "final";
+    case TexturePhase::kInitial:
+      return "initial";
+    case TexturePhase::kActive:
+      return "active";
+    case TexturePhase::kFinal:
+      return "final";
   }
   return "?";
 }
@@ -54,7 +57,8 @@ void TextureStates::roll_back(State& s) {
   s.pending = kNone;
   // Nothing displayed: the texture is as if never loaded (the Initial request failed, or the base mip of a
   // tiny texture whose initial level is 0). Otherwise it stays Active and refines again from `resident`.
-  s.phase = s.resident == kNone ? TexturePhase::kInitial : (s.resident == 0 ? TexturePhase::kFinal : TexturePhase::kActive);
+  s.phase =
+      s.resident == kNone ? TexturePhase::kInitial : (s.resident == 0 ? TexturePhase::kFinal : TexturePhase::kActive);
 }
 
 CycleResult TextureStates::run_cycle(std::span<const StreamCandidate> candidates, uint64_t load_bytes, float bias,
@@ -79,7 +83,8 @@ CycleResult TextureStates::run_cycle(std::span<const StreamCandidate> candidates
       out.stopped_by_count = true;
       break;
     }
-    const MipRequest request{c.texture, MipLevel(*mip), c.weight, mip_bytes(shape.format, shape.width, shape.height, *mip)};
+    const MipRequest request{c.texture, MipLevel(*mip), c.weight,
+                             mip_bytes(shape.format, shape.width, shape.height, *mip)};
     const SendResult r = send(request);
     if (r == SendResult::kStop) {
       out.stopped_by_sender = true;
@@ -166,9 +171,15 @@ TextureStateCounts TextureStates::counts() const {
     }
     if (s.pending != kNone) ++c.pending;
     switch (s.phase) {
-      case TexturePhase::kInitial: ++c.initial; break;
-      case TexturePhase::kActive: ++c.active; break;
-      case TexturePhase::kFinal: ++c.final; break;
+      case TexturePhase::kInitial:
+        ++c.initial;
+        break;
+      case TexturePhase::kActive:
+        ++c.active;
+        break;
+      case TexturePhase::kFinal:
+        ++c.final;
+        break;
     }
   }
   return c;
@@ -177,10 +188,18 @@ TextureStateCounts TextureStates::counts() const {
 void TextureStates::apply(std::span<const TextureEvent> events) {
   for (const TextureEvent& e : events) {
     switch (e.kind) {
-      case TextureEvent::Kind::kCommitted: on_committed(e.texture, e.mip); break;
-      case TextureEvent::Kind::kFailed: on_failed(e.texture, e.mip, e.status); break;
-      case TextureEvent::Kind::kRejected: on_rejected(e.texture, e.mip); break;
-      case TextureEvent::Kind::kInvalidated: invalidate(e.texture); break;
+      case TextureEvent::Kind::kCommitted:
+        on_committed(e.texture, e.mip);
+        break;
+      case TextureEvent::Kind::kFailed:
+        on_failed(e.texture, e.mip, e.status);
+        break;
+      case TextureEvent::Kind::kRejected:
+        on_rejected(e.texture, e.mip);
+        break;
+      case TextureEvent::Kind::kInvalidated:
+        invalidate(e.texture);
+        break;
     }
   }
 }

@@ -9,8 +9,8 @@
 #include <memory>
 #include <span>
 
-#include "texstream/common/scene_format.hpp"
 #include "texstream/common/dds.hpp"
+#include "texstream/common/scene_format.hpp"
 #include "texstream/server/cache/eviction_policy.hpp"
 #include "texstream/server/cache/mip_cache.hpp"
 #include "texstream/server/load/mip_loader.hpp"

@@ -55,7 +55,8 @@ struct Rig {
     o.spawn_server = false;
     auto started = stream::StreamClient::start(c, shapes(), "/nonexistent", "", {}, o);
     if (!started) {  // a harness bug, not a finding: say why before stopping
-      std::fprintf(stderr, "fuzz_stream_client: stream::StreamClient::start failed: %s\n", started.error().message.c_str());
+      std::fprintf(stderr, "fuzz_stream_client: stream::StreamClient::start failed: %s\n",
+                   started.error().message.c_str());
       __builtin_trap();
     }
     client = std::move(*started);

@@ -1,9 +1,9 @@
 // The sparse cache in texstream-render (issue 6), with the real server, lavapipe and the validation layer.
 #include <gtest/gtest.h>
 
-#include "process_test_support.hpp"
 #include <sys/wait.h>
 #include <unistd.h>
+#include "process_test_support.hpp"
 
 #include <cmath>
 #include <cstdlib>
@@ -41,8 +41,9 @@ fs::path make_scene(const fs::path& dir, const std::string& format, int textures
 }
 
 std::string render_cmd(const fs::path& scene, const fs::path& out, const std::string& sets) {
-  return (kBin / "texstream-render").string() + " --config " + (fs::path(TEXSTREAM_SOURCE_DIR) / "config/test.toml").string() +
-         " --set scene.dir=" + scene.string() + " --set render.output_dir=" + out.string() + " " + sets;
+  return (kBin / "texstream-render").string() + " --config " +
+         (fs::path(TEXSTREAM_SOURCE_DIR) / "config/test.toml").string() + " --set scene.dir=" + scene.string() +
+         " --set render.output_dir=" + out.string() + " " + sets;
 }
 
 class CacheThrash : public ::testing::TestWithParam<std::string> {};
@@ -57,8 +58,9 @@ TEST_P(CacheThrash, BoundPagesNeverExceedTheBudget) {
   const fs::path scene = make_scene(dir, format, 600);
   const fs::path out = dir / "out";
   const uint64_t budget = 4ull << 20;
-  const int rc = run(render_cmd(scene, out, "--set cache.memory_bytes=" + std::to_string(budget) +
-                                                " --set render.frames=40 --set render.write_every_frames=0"),
+  const int rc = run(render_cmd(scene, out,
+                                "--set cache.memory_bytes=" + std::to_string(budget) +
+                                    " --set render.frames=40 --set render.write_every_frames=0"),
                      dir / "render.log");
   const std::string log = slurp(dir / "render.log");
   ASSERT_EQ(rc, 0) << log;
@@ -85,8 +87,8 @@ TEST(CacheBudget, TooSmallForOneLayerTextureIsANamedError) {
   const fs::path dir = fresh_dir("small");
   const fs::path scene = make_scene(dir, "rgba8", 20);
   // 1 MiB = 16 pages; a 512 texture needs 16 + 4 + 8 x 1 = 28 pages with every level.
-  const int rc = run(render_cmd(scene, dir / "out", "--set cache.memory_bytes=1048576 --set render.frames=2"),
-                     dir / "render.log");
+  const int rc =
+      run(render_cmd(scene, dir / "out", "--set cache.memory_bytes=1048576 --set render.frames=2"), dir / "render.log");
   const std::string log = slurp(dir / "render.log");
   EXPECT_NE(rc, 0);
   EXPECT_NE(log.find("cache.memory_bytes"), std::string::npos) << log;
@@ -124,7 +126,8 @@ TEST(CacheConvergence, StaticViewConvergesToTheLongRun) {
                 dir / "a.log"),
             0)
       << slurp(dir / "a.log");
-  ASSERT_EQ(run(render_cmd(scene, dir / "b", common + " --set render.frames=48"), dir / "b.log"), 0) << slurp(dir / "b.log");
+  ASSERT_EQ(run(render_cmd(scene, dir / "b", common + " --set render.frames=48"), dir / "b.log"), 0)
+      << slurp(dir / "b.log");
   int w0, h0, w1, h1, w2, h2;
   const auto first = load_rgb(dir / "a/frames/frame_00000.png", w0, h0);
   const auto a = load_rgb(dir / "a/frames/frame_00015.png", w1, h1);

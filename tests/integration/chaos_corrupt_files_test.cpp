@@ -11,9 +11,9 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <cstdio>
 #include <fstream>
 #include <map>
 #include <set>
@@ -121,9 +121,8 @@ TEST(ChaosCorruptFiles, TheRealServerRefusesEveryDamagedMipByNameAndKeepsServing
   if (!corpus->skipped.empty()) std::printf("corpus: skipped %s\n", corpus->skipped.c_str());
   ASSERT_GE(corpus->cases.size(), 200u);
   ASSERT_GE(corpus->intact.size(), 50u);
-  const auto other = std::count_if(corpus->cases.begin(), corpus->cases.end(), [](const chaos::CorruptCase& c) {
-    return c.other_format;
-  });
+  const auto other = std::count_if(corpus->cases.begin(), corpus->cases.end(),
+                                   [](const chaos::CorruptCase& c) { return c.other_format; });
   // 2 RGBA8 shapes x 3 containers (TIFF, OpenEXR, JPEG as .tif) x 7 cuts (cycled again in a long run).
   if (long_run) {
     ASSERT_GE(other, 42) << "truncated TIFF / OpenEXR / JPEG files missing from the corpus";
@@ -174,9 +173,10 @@ TEST(ChaosCorruptFiles, TheRealServerRefusesEveryDamagedMipByNameAndKeepsServing
   }
   size_t total = 0;
   for (const auto& t : source.textures) total += t.mip_count;
-  std::printf("corrupt corpus: %zu damaged files, %zu intact; %zu of %zu requests answered in %.2f s; server deaths %llu\n",
-              corpus->cases.size(), corpus->intact.size(), answers.size(), total,
-              std::chrono::duration<double>(took).count(), static_cast<unsigned long long>(st.server_deaths));
+  std::printf(
+      "corrupt corpus: %zu damaged files, %zu intact; %zu of %zu requests answered in %.2f s; server deaths %llu\n",
+      corpus->cases.size(), corpus->intact.size(), answers.size(), total, std::chrono::duration<double>(took).count(),
+      static_cast<unsigned long long>(st.server_deaths));
   EXPECT_EQ(st.server_deaths, 0u) << "a damaged file crashed the server";
   EXPECT_EQ(st.protocol_errors, 0u);
 
@@ -194,7 +194,8 @@ TEST(ChaosCorruptFiles, TheRealServerRefusesEveryDamagedMipByNameAndKeepsServing
   for (const chaos::CorruptCase& c : corpus->cases) {
     const auto& tex = source.textures[c.texture];
     const auto f = static_cast<TexelFormat>(tex.format);
-    const std::vector<std::byte> file = fs::is_regular_file(c.file) && !c.unreadable ? read_file(c.file) : std::vector<std::byte>{};
+    const std::vector<std::byte> file =
+        fs::is_regular_file(c.file) && !c.unreadable ? read_file(c.file) : std::vector<std::byte>{};
     bool refused_any = false;
     for (uint32_t m = 0; m < tex.mip_count; ++m) {
       const auto it = answers.find({c.texture, m});

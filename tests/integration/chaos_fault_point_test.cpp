@@ -31,8 +31,8 @@ TEST(FaultPlan, ParsesPointsAndPasses) {
   EXPECT_EQ(p->die_on_pass[static_cast<int>(FaultPoint::kSlotWrite)], 1u);
   EXPECT_EQ(p->die_on_pass[static_cast<int>(FaultPoint::kEviction)], 7u);
   EXPECT_EQ(p->die_on_pass[static_cast<int>(FaultPoint::kBeforeCompletion)], 0u);
-  for (const char* bad : {"", "slot_writes", "eviction@0", "eviction@", "eviction@-3", "eviction@5x", "after_ring_push,",
-                          "slot_write,,eviction"}) {
+  for (const char* bad : {"", "slot_writes", "eviction@0", "eviction@", "eviction@-3", "eviction@5x",
+                          "after_ring_push,", "slot_write,,eviction"}) {
     const auto r = parse_fault_plan(bad);
     ASSERT_FALSE(r.ok()) << bad;
     EXPECT_NE(r.error().message.find("TEXSTREAM_FAULT"), std::string::npos) << r.error().message;

@@ -116,18 +116,45 @@ class HostileServer {
       const int attack = static_cast<int>(rng_() % 14);
       ++attacks[attack];
       switch (attack) {
-        case 0: case 1: case 2: break;  // correct (the scribbler may still spoil it)
-        case 3: for (auto* p = reinterpret_cast<uint8_t*>(&c); p < reinterpret_cast<uint8_t*>(&c + 1); ++p) *p = static_cast<uint8_t>(rng_()); break;
-        case 4: c.slot = slots + static_cast<uint32_t>(rng_() % 1000); break;
-        case 5: c.slot = kNoSlot; break;
-        case 6: c.byte_size = seg_->slot_bytes() + 1 + rng_() % 4096; break;
-        case 7: c.byte_size = ~0ull - rng_() % 16; break;
-        case 8: c.width += 1; c.byte_size = bytes; break;
-        case 9: c.format ^= 1u; break;
-        case 10: c.generation += 1 + rng_() % 5; break;
-        case 11: c.texture_id = static_cast<uint32_t>(rng_()); break;
-        case 12: c.status = 1000 + static_cast<uint32_t>(rng_() % 100); break;
-        case 13: std::this_thread::sleep_for(std::chrono::milliseconds(rng_() % 150)); break;  // a stall
+        case 0:
+        case 1:
+        case 2:
+          break;  // correct (the scribbler may still spoil it)
+        case 3:
+          for (auto* p = reinterpret_cast<uint8_t*>(&c); p < reinterpret_cast<uint8_t*>(&c + 1); ++p)
+            *p = static_cast<uint8_t>(rng_());
+          break;
+        case 4:
+          c.slot = slots + static_cast<uint32_t>(rng_() % 1000);
+          break;
+        case 5:
+          c.slot = kNoSlot;
+          break;
+        case 6:
+          c.byte_size = seg_->slot_bytes() + 1 + rng_() % 4096;
+          break;
+        case 7:
+          c.byte_size = ~0ull - rng_() % 16;
+          break;
+        case 8:
+          c.width += 1;
+          c.byte_size = bytes;
+          break;
+        case 9:
+          c.format ^= 1u;
+          break;
+        case 10:
+          c.generation += 1 + rng_() % 5;
+          break;
+        case 11:
+          c.texture_id = static_cast<uint32_t>(rng_());
+          break;
+        case 12:
+          c.status = 1000 + static_cast<uint32_t>(rng_() % 100);
+          break;
+        case 13:
+          std::this_thread::sleep_for(std::chrono::milliseconds(rng_() % 150));
+          break;  // a stall
       }
       (void)completions_.try_push(c);
       if (rng_() % 8 == 0) (void)completions_.try_push(c);  // a duplicate
@@ -205,12 +232,13 @@ TEST(ChaosHostileServer, EveryLieIsRefusedAndOnlyExactPayloadsAreCommitted) {
   scribbler.join();
 
   const stream::StreamStats st = client->stats();
-  std::printf("hostile: %llu good commits, %llu rejects, %llu failures, %llu protocol errors, %llu checksum "
-              "failures, %llu scribbles, longest poll %.3f ms, IPC p99.99 %.1f us\n",
-              static_cast<unsigned long long>(sink.good_commits), static_cast<unsigned long long>(sink.rejects),
-              static_cast<unsigned long long>(sink.failures), static_cast<unsigned long long>(st.protocol_errors),
-              static_cast<unsigned long long>(st.payload_checksum_failures), static_cast<unsigned long long>(flips),
-              std::chrono::duration<double, std::milli>(longest_poll).count(), client->ipc_time().quantile_us(0.9999));
+  std::printf(
+      "hostile: %llu good commits, %llu rejects, %llu failures, %llu protocol errors, %llu checksum "
+      "failures, %llu scribbles, longest poll %.3f ms, IPC p99.99 %.1f us\n",
+      static_cast<unsigned long long>(sink.good_commits), static_cast<unsigned long long>(sink.rejects),
+      static_cast<unsigned long long>(sink.failures), static_cast<unsigned long long>(st.protocol_errors),
+      static_cast<unsigned long long>(st.payload_checksum_failures), static_cast<unsigned long long>(flips),
+      std::chrono::duration<double, std::milli>(longest_poll).count(), client->ipc_time().quantile_us(0.9999));
   EXPECT_EQ(sink.bad_commits, 0u) << "a payload that is not exactly the mip was committed";
   EXPECT_GT(sink.good_commits, 0u) << "correct answers must still get through";
   EXPECT_GT(st.protocol_errors, 100u);

@@ -8,8 +8,8 @@
 #include <unistd.h>
 
 #include <chrono>
-#include <cstdlib>
 #include <cstdio>
+#include <cstdlib>
 #include <functional>
 #include <thread>
 
@@ -161,8 +161,8 @@ TEST(ChaosRecovery, AStoppedServerIsKilledByTheWatchdogWithinTheHeartbeatTimeout
   ASSERT_EQ(rig.client->stats().server_deaths, 1u);
   // The watchdog fires once the heartbeat has not moved for the timeout; one poll (1 ms here) and the
   // reap follow. kWatchdogSlack covers the server's heartbeat period (server.idle_wait_ms = 20 ms) and scheduling.
-  EXPECT_LT(told, std::chrono::milliseconds(static_cast<int64_t>(Config{}.protocol.heartbeat_timeout_ms)) +
-                      kWatchdogSlack);
+  EXPECT_LT(told,
+            std::chrono::milliseconds(static_cast<int64_t>(Config{}.protocol.heartbeat_timeout_ms)) + kWatchdogSlack);
   EXPECT_GT(told, std::chrono::milliseconds(static_cast<int64_t>(Config{}.protocol.heartbeat_timeout_ms)) - 100ms)
       << "killed before the heartbeat timeout";
   EXPECT_EQ(rig.client->stats().server_crashes, 1u) << "a hung server is a crash";
@@ -179,14 +179,16 @@ TEST(ChaosRecovery, ARestartStormEndsInNormalStreaming) {
   const int kKills = env != nullptr && std::atoi(env) > 0 ? std::atoi(env) : 100;
   const auto storm_start = Clock::now();
   for (int k = 0; k < kKills; ++k) {
-    ASSERT_LT(rig.pump([&] { return rig.client->server_pid() > 0 && rig.attached(); }, kHangAfter), kHangAfter) << "kill " << k;
+    ASSERT_LT(rig.pump([&] { return rig.client->server_pid() > 0 && rig.attached(); }, kHangAfter), kHangAfter)
+        << "kill " << k;
     rig.client->begin_cycle();
     (void)rig.request_all_mips(static_cast<uint32_t>(k % 8));
     ASSERT_EQ(::kill(rig.client->server_pid(), SIGKILL), 0);
     rig.pump([&] { return rig.client->stats().server_deaths == static_cast<uint64_t>(k + 1); }, kHangAfter);
   }
   const auto after_storm = Clock::now();
-  std::printf("storm: %d SIGKILLs in %.1f s\n", kKills, std::chrono::duration<double>(after_storm - storm_start).count());
+  std::printf("storm: %d SIGKILLs in %.1f s\n", kKills,
+              std::chrono::duration<double>(after_storm - storm_start).count());
   EXPECT_LT(after_storm - storm_start, promptly(150ms) * kKills);
   const int before = rig.sink.commits;
   auto streaming = [&] {

@@ -12,8 +12,8 @@
 #include <vector>
 
 #include "texstream/common/scene_format.hpp"
-#include "texstream/protocol/completion_check.hpp"
 #include "texstream/common/texel_format.hpp"
+#include "texstream/protocol/completion_check.hpp"
 
 namespace texstream::chaos_test {
 
@@ -27,8 +27,8 @@ inline std::string unique(const char* what) {
 // $TEXSTREAM_SERVER, else this build's bin/, else the main build's.
 inline fs::path find_server() {
   if (const char* env = std::getenv("TEXSTREAM_SERVER"); env && *env) return env;
-  for (const fs::path& p :
-       {fs::path(TEXSTREAM_BIN_DIR) / "texstream-server", fs::path(TEXSTREAM_SOURCE_DIR) / "build/bin/texstream-server"}) {
+  for (const fs::path& p : {fs::path(TEXSTREAM_BIN_DIR) / "texstream-server",
+                            fs::path(TEXSTREAM_SOURCE_DIR) / "build/bin/texstream-server"}) {
     if (::access(p.c_str(), X_OK) == 0) return p;
   }
   return {};
@@ -63,7 +63,8 @@ struct SmallScene {
       const auto header = scene::make_dds_header(f, t.width, t.height, t.mip_count);
       std::vector<std::byte> bytes(header.begin(), header.end());
       const uint64_t total = scene::dds_file_bytes(f, t.width, t.height, t.mip_count);
-      for (uint64_t i = bytes.size(); i < total; ++i) bytes.push_back(static_cast<std::byte>((i * 7 + id * 101) & 0xff));
+      for (uint64_t i = bytes.size(); i < total; ++i)
+        bytes.push_back(static_cast<std::byte>((i * 7 + id * 101) & 0xff));
       const fs::path path = scene::texture_path(dir, TextureId(id));
       fs::create_directories(path.parent_path());
       std::ofstream(path, std::ios::binary)

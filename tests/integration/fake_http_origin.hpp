@@ -106,8 +106,12 @@ class FakeHttpOrigin {
     if (!send_all(fd, h.data(), h.size())) return;
     const char* body = file.data() + first;
     switch (mode_) {
-      case Mode::kTruncatedBody: send_all(fd, body, n / 2); break;
-      case Mode::kWrongContentRange: send_all(fd, body, n); break;
+      case Mode::kTruncatedBody:
+        send_all(fd, body, n / 2);
+        break;
+      case Mode::kWrongContentRange:
+        send_all(fd, body, n);
+        break;
       case Mode::kSlowloris:
         for (uint64_t i = 0; i < n && !stop_; ++i) {
           if (!send_all(fd, body + i, 1)) break;

@@ -164,7 +164,8 @@ class NginxOrigin {
     return false;
   }
   static void replace(std::string& s, const std::string& from, const std::string& to) {
-    for (size_t at = s.find(from); at != std::string::npos; at = s.find(from, at + to.size())) s.replace(at, from.size(), to);
+    for (size_t at = s.find(from); at != std::string::npos; at = s.find(from, at + to.size()))
+      s.replace(at, from.size(), to);
   }
   pid_t pid_ = 0;
   uint16_t port_ = 0;

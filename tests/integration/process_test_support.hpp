@@ -15,8 +15,7 @@ namespace texstream::test {
 
 // <tmp>/<prefix><name>_<pid>, emptied.
 inline std::filesystem::path fresh_dir(const std::string& prefix, const std::string& name) {
-  std::filesystem::path d =
-      std::filesystem::temp_directory_path() / (prefix + name + "_" + std::to_string(::getpid()));
+  std::filesystem::path d = std::filesystem::temp_directory_path() / (prefix + name + "_" + std::to_string(::getpid()));
   std::filesystem::remove_all(d);
   std::filesystem::create_directories(d);
   return d;

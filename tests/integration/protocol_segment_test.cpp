@@ -235,7 +235,7 @@ TEST(Segment, ProducerKilledMidStreamLeavesOnlyWholeRecords) {
     auto seg = Segment::open(name);
     if (!seg.ok()) _exit(2);
     SpscRingProducer<RequestRecord> p = seg.value()->request_producer();
-    for (uint32_t i = 0;; ) {
+    for (uint32_t i = 0;;) {
       RequestRecord rec{};
       rec.kind = static_cast<uint32_t>(RequestKind::kLoad);
       rec.texture_id = i;

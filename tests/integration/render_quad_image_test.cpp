@@ -7,9 +7,9 @@
 // written next to the test output and their paths printed.
 #include <gtest/gtest.h>
 
-#include "process_test_support.hpp"
 #include <sys/wait.h>
 #include <unistd.h>
+#include "process_test_support.hpp"
 
 #include <cmath>
 #include <cstdlib>
@@ -34,11 +34,11 @@ namespace {
 const fs::path kBin = TEXSTREAM_BIN_DIR;
 using texstream::test::slurp;
 int run(const std::string& cmd, const fs::path& log) { return texstream::test::run_logged(cmd, log); }
-constexpr uint32_t kTex = 256;        // texture side
+constexpr uint32_t kTex = 256;  // texture side
 constexpr int kWidth = 960, kHeight = 540;
 constexpr double kFovY = 60.0;
-constexpr double kDistance = 100.0;   // camera to quad, metres
-constexpr double kRectPx = 256.0;     // the quad's side on screen: one pixel per texel
+constexpr double kDistance = 100.0;                                  // camera to quad, metres
+constexpr double kRectPx = 256.0;                                    // the quad's side on screen: one pixel per texel
 constexpr double kCamX = 392000.0, kCamY = 5820000.0, kCamZ = 50.0;  // map coordinates: large offsets on purpose
 
 struct Rgba {
@@ -159,13 +159,12 @@ TEST(RenderQuadImage, FinestMipMatchesTheTextureOnScreen) {
   if (HasFatalFailure()) return;
 
   const fs::path out = dir / "out";
-  const std::string cmd = (kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
-                          " --set render.validation=true --set render.lockstep=true --set controller.mode=none" +
-                          " --set render.frames=60 --set render.write_every_frames=0" +
-                          " --set render.width_px=" + std::to_string(kWidth) +
-                          " --set render.height_px=" + std::to_string(kHeight) +
-                          " --set render.fov_y_deg=" + std::to_string(kFovY) +
-                          " --set cache.format=rgba8 --set render.output_dir=" + out.string();
+  const std::string cmd =
+      (kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
+      " --set render.validation=true --set render.lockstep=true --set controller.mode=none" +
+      " --set render.frames=60 --set render.write_every_frames=0" + " --set render.width_px=" + std::to_string(kWidth) +
+      " --set render.height_px=" + std::to_string(kHeight) + " --set render.fov_y_deg=" + std::to_string(kFovY) +
+      " --set cache.format=rgba8 --set render.output_dir=" + out.string();
   const int rc = run(cmd, dir / "render.log");
   const std::string log = slurp(dir / "render.log");
   ASSERT_EQ(rc, 0) << log;
@@ -223,7 +222,8 @@ TEST(RenderQuadImage, FinestMipMatchesTheTextureOnScreen) {
     stbi_write_png(e.c_str(), rw, rh, 4, expected.data(), rw * 4);
     stbi_write_png(d.c_str(), rw, rh, 4, diff.data(), rw * 4);
     ADD_FAILURE() << "quad pixels differ from the texture: MAE " << mae << "/255, PSNR " << psnr << " dB\n"
-                  << "  actual:   " << a << "\n  expected: " << e << "\n  diff x8:  " << d << "\n" << log;
+                  << "  actual:   " << a << "\n  expected: " << e << "\n  diff x8:  " << d << "\n"
+                  << log;
     return;  // keep the folder for inspection
   }
   fs::remove_all(dir);

@@ -3,12 +3,12 @@
 // the command line.
 #include <gtest/gtest.h>
 
-#include "process_test_support.hpp"
-#include "texstream/common/memory_info.hpp"
-#include "texstream/render/measure/frame_log.hpp"
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
+#include "process_test_support.hpp"
+#include "texstream/common/memory_info.hpp"
+#include "texstream/render/measure/frame_log.hpp"
 
 #include <chrono>
 #include <cmath>
@@ -141,9 +141,7 @@ TEST(RenderCli, AServerThatCannotStartEndsPreloadLockstepAndStreamingRunsWithIts
   const fs::path dir = fresh_dir("badserver");
   ASSERT_TRUE(generate_lockstep_city(dir));
   const fs::path fake = dir / "refusing-server.sh";
-  {
-    std::ofstream(fake) << "#!/bin/sh\necho 'refusing-server: unknown option' >&2\nexit 2\n";
-  }
+  { std::ofstream(fake) << "#!/bin/sh\necho 'refusing-server: unknown option' >&2\nexit 2\n"; }
   fs::permissions(fake, fs::perms::owner_all);
   struct Case {
     std::string sets;
@@ -159,15 +157,17 @@ TEST(RenderCli, AServerThatCannotStartEndsPreloadLockstepAndStreamingRunsWithIts
       // end; a run shorter than that ends with the refusals it saw (1 on a quiet machine; a slower one may see
       // a second before its 5 frames are drawn).
       {"render.lockstep=false --set render.frames=20000",
-       {"texstream-server refused to start, 3 times in a row", "[server] and [storage] keys"}, 60},
+       {"texstream-server refused to start, 3 times in a row", "[server] and [storage] keys"},
+       60},
       {"render.lockstep=false", {"texstream-server refused to start, ", "in a row"}, 60}};
   for (const auto& [mode, messages, within_s] : runs) {
     const auto t0 = std::chrono::steady_clock::now();
-    const int rc = run("timeout 120 " + (kBin / "texstream-render").string() + " --set scene.dir=" +
-                           (dir / "scene").string() + " --set render.frames=5 --set render.width_px=160" +
-                           " --set render.height_px=90 --set render.output_dir=" + (dir / "out").string() +
-                           " --set server.executable=" + fake.string() + " --set " + mode,
-                       dir / "render.log");
+    const int rc =
+        run("timeout 120 " + (kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
+                " --set render.frames=5 --set render.width_px=160" +
+                " --set render.height_px=90 --set render.output_dir=" + (dir / "out").string() +
+                " --set server.executable=" + fake.string() + " --set " + mode,
+            dir / "render.log");
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const std::string log = slurp(dir / "render.log");
     EXPECT_EQ(rc, 1) << mode << "\n" << log;
@@ -195,17 +195,18 @@ TEST(RenderCli, AFullOutputDiskEndsTheRunAndLeavesNoTruncatedFrame) {
   // Run inside the namespace by a script, which also checks the PNGs there (the mount is gone outside it):
   // a PNG is whole if it ends with the IEND chunk's CRC (ae 42 60 82).
   const fs::path script = dir / "fulldisk.sh";
-  std::ofstream(script) << "#!/bin/sh\n"
-                        << "mount -t tmpfs -o size=64k tmpfs '" << mnt.string() << "' || exit 77\n"
-                        << "timeout 120 " << render << "\n"
-                        << "echo render_rc=$?\n"
-                        << "n=0\n"
-                        << "for f in '" << (mnt / "out" / "frames").string() << "'/*.png; do\n"
-                        << "  [ -e \"$f\" ] || continue\n"
-                        << "  tail -c 4 \"$f\" | od -An -tx1 | tr -d ' \\n' | grep -q '^ae426082$' || echo \"TRUNCATED $f\"\n"
-                        << "  n=$((n+1))\n"
-                        << "done\n"
-                        << "echo whole $n\n";
+  std::ofstream(script)
+      << "#!/bin/sh\n"
+      << "mount -t tmpfs -o size=64k tmpfs '" << mnt.string() << "' || exit 77\n"
+      << "timeout 120 " << render << "\n"
+      << "echo render_rc=$?\n"
+      << "n=0\n"
+      << "for f in '" << (mnt / "out" / "frames").string() << "'/*.png; do\n"
+      << "  [ -e \"$f\" ] || continue\n"
+      << "  tail -c 4 \"$f\" | od -An -tx1 | tr -d ' \\n' | grep -q '^ae426082$' || echo \"TRUNCATED $f\"\n"
+      << "  n=$((n+1))\n"
+      << "done\n"
+      << "echo whole $n\n";
   fs::permissions(script, fs::perms::owner_all);
   const int rc = run("unshare -m " + script.string(), dir / "render.log");
   const std::string log = slurp(dir / "render.log");
@@ -231,12 +232,12 @@ TEST(RenderCli, AStandaloneServerServesRenderersOnItsSegmentName) {
   ASSERT_GT(server, 0);
   for (const std::string spawn : {"false", "true"}) {
     const fs::path out = dir / ("out-" + spawn);
-    const int rc = run("timeout 120 " + (kBin / "texstream-render").string() + " --set scene.dir=" +
-                           (dir / "scene").string() + " --set render.frames=5 --set render.width_px=160" +
-                           " --set render.height_px=90 --set render.output_dir=" + out.string() +
-                           " --set render.preload_all=true --set protocol.segment_name=" + name +
-                           " --set server.spawn=" + spawn,
-                       dir / ("render-" + spawn + ".log"));
+    const int rc =
+        run("timeout 120 " + (kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
+                " --set render.frames=5 --set render.width_px=160" +
+                " --set render.height_px=90 --set render.output_dir=" + out.string() +
+                " --set render.preload_all=true --set protocol.segment_name=" + name + " --set server.spawn=" + spawn,
+            dir / ("render-" + spawn + ".log"));
     const std::string log = slurp(dir / ("render-" + spawn + ".log"));
     EXPECT_EQ(rc, 0) << "server.spawn=" << spawn << "\n" << log;
     const nlohmann::json summary = nlohmann::json::parse(slurp(out / "summary.json"), nullptr, false);
@@ -277,12 +278,12 @@ TEST(RenderCli, AStandaloneServerOfAnotherSceneEndsTheRunNamingIt) {
   const pid_t server = start_standalone_server(name, dir / "other", dir / "server.log");
   ASSERT_GT(server, 0);
   const auto t0 = std::chrono::steady_clock::now();
-  const int rc = run("timeout 120 " + (kBin / "texstream-render").string() + " --set scene.dir=" +
-                         (dir / "scene").string() + " --set render.frames=5 --set render.width_px=160" +
-                         " --set render.height_px=90 --set render.output_dir=" + (dir / "out").string() +
-                         " --set render.preload_all=true --set protocol.segment_name=" + name +
-                         " --set server.spawn=false",
-                     dir / "render.log");
+  const int rc =
+      run("timeout 120 " + (kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
+              " --set render.frames=5 --set render.width_px=160" +
+              " --set render.height_px=90 --set render.output_dir=" + (dir / "out").string() +
+              " --set render.preload_all=true --set protocol.segment_name=" + name + " --set server.spawn=false",
+          dir / "render.log");
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const std::string log = slurp(dir / "render.log");
   EXPECT_EQ(rc, 1) << log;
@@ -310,10 +311,11 @@ TEST(RenderCli, ARamCacheLargerThanTheMachineIsRefusedNamingTheKey) {
   ASSERT_TRUE(generate_lockstep_city(dir));
   const std::string huge = " --set server.ram_cache_bytes=1099511627776";
   const auto t0 = std::chrono::steady_clock::now();
-  const int rc = run("timeout 120 " + (kBin / "texstream-render").string() + " --set scene.dir=" +
-                         (dir / "scene").string() + " --set render.frames=5 --set render.width_px=160" +
-                         " --set render.height_px=90 --set render.output_dir=" + (dir / "out").string() + huge,
-                     dir / "render.log");
+  const int rc =
+      run("timeout 120 " + (kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
+              " --set render.frames=5 --set render.width_px=160" +
+              " --set render.height_px=90 --set render.output_dir=" + (dir / "out").string() + huge,
+          dir / "render.log");
   const std::string log = slurp(dir / "render.log");
   EXPECT_NE(rc, 0) << log;
   EXPECT_NE(rc, 124) << "timed out:\n" << log;
@@ -342,9 +344,9 @@ TEST(RenderLockstep, TwoRunsGiveIdenticalFrames) {
   ASSERT_TRUE(generate_lockstep_city(dir));
   std::vector<nlohmann::json> summaries;
   for (int i = 0; i < 2; ++i) {
-    summaries.push_back(render_lockstep_city(dir, dir / ("out" + std::to_string(i)),
-                                             " --set render.lockstep=" + lockstep +
-                                                 " --set render.frames=24 --set render.write_every_frames=4"));
+    summaries.push_back(render_lockstep_city(
+        dir, dir / ("out" + std::to_string(i)),
+        " --set render.lockstep=" + lockstep + " --set render.frames=24 --set render.write_every_frames=4"));
   }
   EXPECT_GT(summaries[0]["mips_streamed"].get<int>(), 0);
   EXPECT_EQ(summaries[0]["mips_streamed"], summaries[1]["mips_streamed"]);

@@ -8,19 +8,19 @@
 //   - the window mode under Xvfb renders the asked frames and exits 0.
 #include <gtest/gtest.h>
 
-#include "process_test_support.hpp"
 #include <sys/wait.h>
 #include <unistd.h>
+#include "process_test_support.hpp"
 
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <nlohmann/json.hpp>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <set>
-#include <vector>
 #include <sstream>
+#include <vector>
 
 #include "texstream/common/config.hpp"
 #include "texstream/render/frame/view_renderer.hpp"
@@ -35,7 +35,7 @@ const fs::path kBin = TEXSTREAM_BIN_DIR;
 using texstream::test::slurp;
 int run(const std::string& cmd, const fs::path& log) { return texstream::test::run_logged(cmd, log); }
 constexpr double kX = 392000.0, kY = 5820000.0, kZ = 40.0;  // map coordinates on purpose
-constexpr uint32_t kTex = 512;                               // texture side: mip_max = 9
+constexpr uint32_t kTex = 512;                              // texture side: mip_max = 9
 constexpr int kW = 480, kH = 270;
 constexpr double kFov = 60.0;
 
@@ -147,7 +147,7 @@ TEST(RenderVisibility, CameraFacingPlaneMipEqualsTheAnalyticLevel) {
     ASSERT_EQ(v.entries.size(), 1u) << "lod " << lod;
     const double mip = v.entries[0].mip_fixed / static_cast<double>(gpu::kMipFixedScale);
     EXPECT_NEAR(mip, lod, 0.02) << "distance " << distance;  // fixed point is 1/256 of a level
-    EXPECT_EQ(std::floor(mip), std::floor(lod));                 // the same level: ±0
+    EXPECT_EQ(std::floor(mip), std::floor(lod));             // the same level: ±0
     EXPECT_GT(v.entries[0].weight_fixed, 0u);
   }
 }
@@ -243,7 +243,7 @@ TEST(RenderVisibility, OnlyMeshesOutsideTheViewportGetTheOffScreenWeight) {
   const double side = 10.0;
   SceneData scene = plane_scene(40.0, side, 0);
   scene::MeshRecord ahead = scene.meshes.meshes[0];
-  ahead.bounds_min[1] = ahead.bounds_max[1] = 0.0f;  // the quads are flat: a box 10 m deep would reach the viewport
+  ahead.bounds_min[1] = ahead.bounds_max[1] = 0.0f;   // the quads are flat: a box 10 m deep would reach the viewport
   scene::MeshRecord across = ahead, outside = ahead;  // the same vertices, moved
   across.origin[0] = kX - 31.0;
   across.origin[1] = kY + 30.0;
@@ -258,7 +258,8 @@ TEST(RenderVisibility, OnlyMeshesOutsideTheViewportGetTheOffScreenWeight) {
   const int width = 960, height = 540;  // the wide pass at 240x135: the off-screen quad is ~22 of its pixels wide
   Config wide = base_config(width, height);
   wide.render.offscreen_fov_y_deg = 75.0;
-  const auto narrow_meta = by_mesh(render_one(base_config(width, height), scene));  // wide FOV = viewport: no off-screen mesh
+  const auto narrow_meta =
+      by_mesh(render_one(base_config(width, height), scene));  // wide FOV = viewport: no off-screen mesh
   const auto wide_meta = by_mesh(render_one(wide, scene));
   ASSERT_EQ(narrow_meta.size(), 2u);
   ASSERT_EQ(wide_meta.size(), 3u);
@@ -394,7 +395,8 @@ TEST(RenderWindow, RunsFramesUnderXvfbAndExitsZero) {
                           " --set scene.dir=" + (dir / "scene").string() +
                           " --set render.window=true --set render.validation=true --set render.frames=6"
                           " --set render.width_px=320 --set render.height_px=180 --set render.write_every_frames=0"
-                          " --set render.output_dir=" + out.string();
+                          " --set render.output_dir=" +
+                          out.string();
   const int rc = run(cmd, dir / "render.log");
   const std::string log = slurp(dir / "render.log");
   ASSERT_EQ(rc, 0) << log;
@@ -402,6 +404,6 @@ TEST(RenderWindow, RunsFramesUnderXvfbAndExitsZero) {
   EXPECT_EQ(summary["frames"].get<int>(), 6) << log;
   EXPECT_EQ(summary["validation_errors"].get<int>(), 0) << log;
   EXPECT_TRUE(fs::exists(out / "frames" / "frame_00005.png")) << log;  // the last frame is always written
-  EXPECT_NE(log.find("latency"), std::string::npos) << log;           // the readout
+  EXPECT_NE(log.find("latency"), std::string::npos) << log;            // the readout
   fs::remove_all(dir);
 }

@@ -9,10 +9,10 @@
 #include <memory>
 #include <vector>
 
+#include "texstream/render/frame/scene_passes.hpp"
 #include "texstream/render/scene/broad_phase.hpp"
 #include "texstream/render/scene/scene_data.hpp"
 #include "texstream/render/scene/scene_gpu.hpp"
-#include "texstream/render/frame/scene_passes.hpp"
 #include "texstream/render/vulkan/vulkan_context.hpp"
 
 using namespace texstream;
@@ -113,8 +113,11 @@ TEST(SceneDraws, AdjacentMeshesMergePerPartInIndexOrderAndInstancesDrawAlone) {
   // The main pass's list (6 7 0 1) in id order: 0 and 1 (indices 0-5) adjacent, one draw; 6 (18-20); 7
   // (12-14), the owner, not adjacent to 20. The wide pass's list (3 4): 3 (9-11); 4 (12-14), the instance,
   // alone with firstInstance 4 + 1, so 3 cannot extend into it.
-  const std::vector<Draw> want{{0, 6, 0}, {18, 3, 0}, {12, 3, 0},  // main
-                               {9, 3, 0}, {12, 3, 5}};             // wide
+  const std::vector<Draw> want{{0, 6, 0},
+                               {18, 3, 0},
+                               {12, 3, 0},  // main
+                               {9, 3, 0},
+                               {12, 3, 5}};  // wide
   EXPECT_EQ(draws_of(g->scene, rec.draw_count), want);
   EXPECT_EQ(rec.main_count, 3u);
   EXPECT_EQ(rec.wide_first, 3u);

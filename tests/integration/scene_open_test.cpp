@@ -68,8 +68,7 @@ class SceneOpen : public ::testing::Test {
     return render_poses(cfg, std::move(scene), poses_, backwards, staged, drop_unsampled);
   }
   static std::vector<ViewResult> render_poses(const Config& cfg, SceneData scene, const std::vector<CameraPose>& poses,
-                                              bool backwards = false, bool staged = false,
-                                              bool drop_unsampled = true) {
+                                              bool backwards = false, bool staged = false, bool drop_unsampled = true) {
     std::vector<ViewResult> out;
     ViewRendererOptions o;
     o.stage_geometry = staged;

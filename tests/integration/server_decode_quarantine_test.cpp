@@ -15,16 +15,16 @@
 
 #include <algorithm>
 #include <array>
-#include <condition_variable>
-#include <mutex>
-#include <set>
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <mutex>
+#include <set>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -36,9 +36,9 @@
 #include "texstream/common/scene_format.hpp"
 #include "texstream/common/texel_format.hpp"
 #include "texstream/server/decode/decode_helper_pool.hpp"
-#include "texstream/server/storage/posix_storage.hpp"
-#include "texstream/server/load/texture_file_index.hpp"
 #include "texstream/server/dispatch/worker_pool.hpp"
+#include "texstream/server/load/texture_file_index.hpp"
+#include "texstream/server/storage/posix_storage.hpp"
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
@@ -314,7 +314,8 @@ TEST(ServerDecodeQuarantineTest, AServerAnswersACrashingTextureWithErrorsAndServ
   // of it were already under way and crashed too (seen under ASan: "3 times").
   bool count_named = false;
   for (uint32_t n = 2; n <= kWorkers + 1; ++n) {
-    count_named = count_named || contains(text, fmt::format("quarantined after crashing the decode helper {} times", n));
+    count_named =
+        count_named || contains(text, fmt::format("quarantined after crashing the decode helper {} times", n));
   }
   EXPECT_TRUE(count_named) << text;
   EXPECT_FALSE(contains(text, good.string())) << text;

@@ -25,9 +25,9 @@
 #include "texstream/protocol/doorbell.hpp"
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
-#include "texstream/server/storage/posix_storage.hpp"
 #include "texstream/server/dispatch/server.hpp"
 #include "texstream/server/load/texture_file_index.hpp"
+#include "texstream/server/storage/posix_storage.hpp"
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
@@ -43,12 +43,12 @@ enum Tex : uint32_t {
   kTiffMismatch = 4,  // table 128x128, file 64x32
   kTiffTruncated = 5,
   kExrTruncated = 6,
-  kMissing = 7,       // no file at all
-  kBc1FromTiff = 8,   // table says bc1, file is .tx: the server never encodes BC1
-  kGarbageTif = 9,    // random bytes named .tif
-  kDdsTruncated = 10, // DX10 BC1 cut inside mip 0
-  kGreyTiff = 11,     // 16x16 one-channel .tif (maketx)
-  kScanlineCut = 12,  // 64x64 RGB scanline (untiled, uncompressed) .tif cut in half: OIIO 2.4 reads "ok"
+  kMissing = 7,        // no file at all
+  kBc1FromTiff = 8,    // table says bc1, file is .tx: the server never encodes BC1
+  kGarbageTif = 9,     // random bytes named .tif
+  kDdsTruncated = 10,  // DX10 BC1 cut inside mip 0
+  kGreyTiff = 11,      // 16x16 one-channel .tif (maketx)
+  kScanlineCut = 12,   // 64x64 RGB scanline (untiled, uncompressed) .tif cut in half: OIIO 2.4 reads "ok"
   kCount = 13,
 };
 
@@ -155,12 +155,18 @@ class ServerFormatsTest : public ::testing::Test {
     fs::create_directories(dir_);
     const auto rgba = uint32_t(TexelFormat::kRgba8), bc1 = uint32_t(TexelFormat::kBc1);
     table_ = {
-        {64, 32, full_mip_count(64, 32), rgba},   {32, 32, full_mip_count(32, 32), rgba},
-        {16, 16, 5, bc1},                         {8, 8, 4, rgba},
-        {128, 128, full_mip_count(128, 128), rgba}, {64, 32, full_mip_count(64, 32), rgba},
-        {32, 32, full_mip_count(32, 32), rgba},   {8, 8, 4, rgba},
-        {64, 32, full_mip_count(64, 32), bc1},    {16, 16, 5, rgba},
-        {16, 16, 5, bc1},                         {16, 16, 5, rgba},
+        {64, 32, full_mip_count(64, 32), rgba},
+        {32, 32, full_mip_count(32, 32), rgba},
+        {16, 16, 5, bc1},
+        {8, 8, 4, rgba},
+        {128, 128, full_mip_count(128, 128), rgba},
+        {64, 32, full_mip_count(64, 32), rgba},
+        {32, 32, full_mip_count(32, 32), rgba},
+        {8, 8, 4, rgba},
+        {64, 32, full_mip_count(64, 32), bc1},
+        {16, 16, 5, rgba},
+        {16, 16, 5, bc1},
+        {16, 16, 5, rgba},
         {64, 64, full_mip_count(64, 64), rgba},
     };
     ASSERT_EQ(table_.size(), size_t{kCount});
@@ -415,10 +421,10 @@ TEST_F(ServerFormatsTest, ErrorsInEveryFormatAreCompletionsAndServingGoesOn) {
   EXPECT_EQ(status_of(kMissing, 0), CompletionStatus::kNotFound);
   EXPECT_EQ(status_of(kBc1FromTiff, 0), CompletionStatus::kCorrupt);
   EXPECT_EQ(status_of(kGarbageTif, 0), CompletionStatus::kCorrupt);
-  EXPECT_EQ(status_of(kDdsTruncated, 0), CompletionStatus::kCorrupt);   // 128 bytes of mip 0, 64 in the file
-  EXPECT_EQ(status_of(kScanlineCut, 0), CompletionStatus::kCorrupt);    // read_image says true; has_error() not
-  EXPECT_EQ(status_of(kScanlineCut, 1), CompletionStatus::kCorrupt);    // a plain TIFF has no mip 1
-  EXPECT_EQ(status_of(kDx10Bc1, 0), CompletionStatus::kOk);  // the others are still served
+  EXPECT_EQ(status_of(kDdsTruncated, 0), CompletionStatus::kCorrupt);  // 128 bytes of mip 0, 64 in the file
+  EXPECT_EQ(status_of(kScanlineCut, 0), CompletionStatus::kCorrupt);   // read_image says true; has_error() not
+  EXPECT_EQ(status_of(kScanlineCut, 1), CompletionStatus::kCorrupt);   // a plain TIFF has no mip 1
+  EXPECT_EQ(status_of(kDx10Bc1, 0), CompletionStatus::kOk);            // the others are still served
   EXPECT_EQ(server_->stats().corrupt.load(), 6u);
   EXPECT_EQ(server_->stats().not_found.load(), 1u);
 }

@@ -10,8 +10,8 @@
 #include <filesystem>
 #include <memory>
 #include <optional>
-#include <string>
 #include <span>
+#include <string>
 #include <thread>
 #include <unordered_map>
 #include <vector>
@@ -28,15 +28,15 @@ class ServerHarness {
  public:
   // 32 slots of 1 MiB: the protocol defaults (config.hpp).
   static std::unique_ptr<ServerHarness> start(const std::filesystem::path& scene, const ServerConfig& config,
-                                              server::Storage& storage, std::string& error,
-                                              uint32_t slot_count = 32, uint64_t slot_bytes = 1u << 20) {
+                                              server::Storage& storage, std::string& error, uint32_t slot_count = 32,
+                                              uint64_t slot_bytes = 1u << 20) {
     static std::atomic<int> counter{0};
     auto h = std::unique_ptr<ServerHarness>(new ServerHarness());
     SegmentParams params;
     params.slot_count = slot_count;
     params.slot_bytes = slot_bytes;
-    auto seg = Segment::create("texstream-storage-" + std::to_string(::getpid()) + "-" + std::to_string(counter++),
-                               params);
+    auto seg =
+        Segment::create("texstream-storage-" + std::to_string(::getpid()) + "-" + std::to_string(counter++), params);
     if (!seg.ok()) {
       error = seg.error().message;
       return nullptr;
@@ -62,8 +62,7 @@ class ServerHarness {
     SegmentParams params;
     params.slot_count = slot_count;
     params.slot_bytes = slot_bytes;
-    auto seg = Segment::create("texstream-storage-proc-" + std::to_string(::getpid()) + "-" +
-                                   std::to_string(counter++),
+    auto seg = Segment::create("texstream-storage-proc-" + std::to_string(::getpid()) + "-" + std::to_string(counter++),
                                params);
     if (!seg.ok()) {
       error = seg.error().message;
@@ -133,14 +132,14 @@ struct WantedMip {
 
 struct DriveResult {
   uint64_t ok = 0;
-  uint64_t bytes = 0;        // kOk payload bytes
-  uint64_t errors = 0;       // final non-kOk answers
-  uint64_t unfilled = 0;     // kUnfilled answers (asked again)
+  uint64_t bytes = 0;     // kOk payload bytes
+  uint64_t errors = 0;    // final non-kOk answers
+  uint64_t unfilled = 0;  // kUnfilled answers (asked again)
   uint64_t cycles = 0;
-  double first_ok_s = -1;    // time to the first kOk
-  double seconds = 0;        // until every mip had a final answer, or the deadline
-  bool complete = false;     // every mip had a final answer
-  std::vector<uint32_t> status;  // per wanted mip: its final CompletionStatus, or kUnfilled if none came
+  double first_ok_s = -1;          // time to the first kOk
+  double seconds = 0;              // until every mip had a final answer, or the deadline
+  bool complete = false;           // every mip had a final answer
+  std::vector<uint32_t> status;    // per wanted mip: its final CompletionStatus, or kUnfilled if none came
   std::vector<uint64_t> checksum;  // per wanted mip: kOk's checksum
 };
 

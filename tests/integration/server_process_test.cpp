@@ -141,7 +141,8 @@ class ServerProcessTest : public ::testing::Test {
     Doorbell(seg).ring();
     std::optional<CompletionRecord> c;
     const auto deadline = std::chrono::steady_clock::now() + kHangAfter;
-    while (!(c = completions.try_pop()) && std::chrono::steady_clock::now() < deadline) std::this_thread::sleep_for(1ms);
+    while (!(c = completions.try_pop()) && std::chrono::steady_clock::now() < deadline)
+      std::this_thread::sleep_for(1ms);
     ASSERT_TRUE(c) << "no completion within " << kHangAfter.count() << " s";
     ASSERT_EQ(c->status, uint32_t(CompletionStatus::kOk));
     ASSERT_EQ(c->byte_size, 16u * 16u * 4u);
@@ -241,8 +242,8 @@ TEST_F(ServerProcessTest, HeaderMismatchExitsWithCode3NamingTheField) {
   auto seg = Segment::create(name_, {});
   ASSERT_TRUE(seg.ok()) << seg.error().message;
   // As if the renderer were built from another layout version: the header sits just before the RendererBlock.
-  auto* header = reinterpret_cast<SegmentHeader*>(reinterpret_cast<std::byte*>(&(*seg)->renderer_block()) -
-                                                  kSegmentHeaderBytes);
+  auto* header =
+      reinterpret_cast<SegmentHeader*>(reinterpret_cast<std::byte*>(&(*seg)->renderer_block()) - kSegmentHeaderBytes);
   header->layout_version = kLayoutVersion + 1;
   const fs::path log = dir_ / "stderr.txt";
   const pid_t pid = spawn_server(server_args(), log);
@@ -309,7 +310,8 @@ TEST_F(ServerProcessTest, AServerReadingAnotherSceneRefusesTheSegmentNamingBoth)
       texture_table_step(kTextureTableSeed, 32, 32, full_mip_count(32, 32), uint32_t(TexelFormat::kRgba8));
   auto seg2 = Segment::create(name_, same);
   ASSERT_TRUE(seg2.ok()) << seg2.error().message;
-  ASSERT_TRUE(wait_attached(**seg2, 1)) << "the waiting server never attached to the next renderer's segment:\n" << read_text(log);
+  ASSERT_TRUE(wait_attached(**seg2, 1)) << "the waiting server never attached to the next renderer's segment:\n"
+                                        << read_text(log);
   EXPECT_EQ((*seg2)->server_block().pid.v.load(), static_cast<uint32_t>(pid));
   stream_one_mip(**seg2);
   kill(pid, SIGTERM);

@@ -19,14 +19,14 @@
 #include <vector>
 
 #include "../support/patience.hpp"
+#include "texstream/common/dds.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texstream/protocol/checksum.hpp"
 #include "texstream/protocol/doorbell.hpp"
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
-#include "texstream/server/storage/posix_storage.hpp"
-#include "texstream/common/dds.hpp"
 #include "texstream/server/dispatch/server.hpp"
+#include "texstream/server/storage/posix_storage.hpp"
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
@@ -105,8 +105,7 @@ class ServerStreamingTest : public ::testing::Test {
       const scene::TextureRecord& r = table_[t];
       const auto format = static_cast<TexelFormat>(r.format);
       const uint32_t header_w = t == kMismatch ? 32 : r.width, header_h = t == kMismatch ? 32 : r.height;
-      const auto header =
-          scene::make_dds_header(format, header_w, header_h, full_mip_count(header_w, header_h));
+      const auto header = scene::make_dds_header(format, header_w, header_h, full_mip_count(header_w, header_h));
       std::vector<std::byte> payload(scene::dds_file_bytes(format, r.width, r.height, r.mip_count) -
                                      scene::kDdsHeaderBytes);
       for (uint64_t i = 0; i < payload.size(); ++i) payload[i] = pattern(t, i);
@@ -252,7 +251,8 @@ TEST_F(ServerStreamingTest, StreamsEveryMipOfRgbaAndBc1Exactly) {
   // Only headers + exact mip ranges were read: each texture's header once (the file index remembers the
   // layout) and the two full chains. Each texture's first load reads its whole chain from mip 0, so its
   // 128-byte legacy header comes along in the same read (MipLoader's guessed layout, confirmed by it).
-  const uint64_t chains = mip_chain_offset(TexelFormat::kRgba8, 64, 64, 7) + mip_chain_offset(TexelFormat::kBc1, 32, 16, 6);
+  const uint64_t chains =
+      mip_chain_offset(TexelFormat::kRgba8, 64, 64, 7) + mip_chain_offset(TexelFormat::kBc1, 32, 16, 6);
   EXPECT_EQ(stats().bytes_read.v.load(), 2 * scene::kDdsHeaderBytes + chains);
   EXPECT_GT(stats().heartbeat.v.load(), 0u);
 }
@@ -383,8 +383,8 @@ TEST_F(ServerStreamingTest, DuplicateInOneBatchIsAnsweredOnce) {
 TEST_F(ServerStreamingTest, BadFilesGiveErrorCompletionsAndOthersAreStillServed) {
   start_server();
   load(kMissing, 0);
-  load(kTruncated, 3);   // lies past the cut
-  load(kTruncated, 0);   // lies before it
+  load(kTruncated, 3);  // lies past the cut
+  load(kTruncated, 0);  // lies before it
   load(kMismatch, 0);
   load(kRgbaA, 2);
   const auto K = [](uint32_t t, uint32_t m) { return std::pair<uint32_t, uint32_t>(t, m); };
@@ -495,10 +495,10 @@ TEST_F(ServerStreamingTest, InvalidRecordsAreDroppedAndServingGoesOn) {
   RequestRecord bad{};
   bad.kind = 99;
   push(bad);
-  release(1);                       // the renderer does not own slot 1
-  release(100000);                  // no such slot
-  load(1000, 0);                    // texture id out of range
-  load(kRgbaA, 40);                 // mip out of range
+  release(1);        // the renderer does not own slot 1
+  release(100000);   // no such slot
+  load(1000, 0);     // texture id out of range
+  load(kRgbaA, 40);  // mip out of range
   RequestRecord nan_priority{};
   nan_priority.kind = static_cast<uint32_t>(RequestKind::kLoad);
   nan_priority.texture_id = kRgbaA;

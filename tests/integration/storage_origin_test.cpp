@@ -6,9 +6,9 @@
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
-#include <sys/wait.h>
 #include <spdlog/sinks/ostream_sink.h>
 #include <spdlog/spdlog.h>
+#include <sys/wait.h>
 
 #include <chrono>
 #include <filesystem>
@@ -123,8 +123,8 @@ class StorageOriginTest : public ::testing::Test {
     ASSERT_TRUE(r.complete) << "no final answer within " << kHangAfter.count() << " s";
     EXPECT_EQ(r.status[0], static_cast<uint32_t>(expected))
         << "got " << to_string(static_cast<CompletionStatus>(r.status[0]));
-    EXPECT_LT(took, deadline + promptly(100ms)) << "the error came after "
-                              << std::chrono::duration_cast<std::chrono::milliseconds>(took).count() << " ms";
+    EXPECT_LT(took, deadline + promptly(100ms))
+        << "the error came after " << std::chrono::duration_cast<std::chrono::milliseconds>(took).count() << " ms";
     EXPECT_NE(log_text().find(url_part), std::string::npos) << "the log does not name " << url_part << ":\n"
                                                             << log_text();
     // Still serving: another texture's request is answered too (by the same failing origin: an error).
@@ -274,8 +274,14 @@ TEST_F(StorageOriginTest, TheServerProcessReadsThroughNginxAndASecondOneOnItsCac
   ASSERT_NE(h, nullptr) << error;
   const std::string exe = std::string(TEXSTREAM_BIN_DIR) + "/texstream-server";
   const fs::path cache = root_ / "cache_process";
-  const std::vector<std::string> args{exe, "--segment", h->segment_name(), "--scene", scene_.string(), "--set",
-                                      "storage.origin=" + nginx_->url("unlimited"), "--set",
+  const std::vector<std::string> args{exe,
+                                      "--segment",
+                                      h->segment_name(),
+                                      "--scene",
+                                      scene_.string(),
+                                      "--set",
+                                      "storage.origin=" + nginx_->url("unlimited"),
+                                      "--set",
                                       "storage.disk_cache_dir=" + cache.string()};
   const std::string log = (root_ / "server_process.log").string();
   std::vector<char*> argv;
@@ -386,7 +392,8 @@ TEST_F(StorageOriginTest, AnOriginThatComesBackIsReadAgain) {
   // The warnings left out during the outage are counted in one line once the rate limit's period has passed,
   // although no load times out any more (the count used to wait for the next timeout, so was never printed).
   const auto deadline = std::chrono::steady_clock::now() + server::MipLoader::kTimedOutLogPeriod + kHangAfter;
-  while (log_text().find("more load(s) timed out") == std::string::npos && std::chrono::steady_clock::now() < deadline) {
+  while (log_text().find("more load(s) timed out") == std::string::npos &&
+         std::chrono::steady_clock::now() < deadline) {
     std::this_thread::sleep_for(20ms);
   }
   const std::string text = log_text();

@@ -208,7 +208,8 @@ class RecordingSink : public stream::MipSink {
   }
 
   size_t count(Event::Kind k) const {
-    return static_cast<size_t>(std::count_if(events.begin(), events.end(), [k](const Event& e) { return e.kind == k; }));
+    return static_cast<size_t>(
+        std::count_if(events.begin(), events.end(), [k](const Event& e) { return e.kind == k; }));
   }
   bool payload_ok(uint32_t t, uint32_t m) const {
     const auto it = committed.find({t, m});
@@ -242,7 +243,7 @@ std::unique_ptr<stream::StreamClient> start_external(const Config& config) {
 // A chosen protocol.segment_name (not a "texstream-" one, which the start-up sweep covers) left behind by a
 // SIGKILLed renderer: the next renderer takes the name over. Before, it failed with "File exists" until
 // someone removed /dev/shm/<name> by hand.
-TEST(stream::StreamClient, TakesOverAChosenSegmentNameLeftByAKilledRenderer) {
+TEST(StreamClient, TakesOverAChosenSegmentNameLeftByAKilledRenderer) {
   const std::string name = "ts-test-chosen-" + std::to_string(::getpid());
   const pid_t child = test::fork_sleeper([&] {
     auto seg = Segment::create(name, {16, 16, 2, 4096});
@@ -264,7 +265,7 @@ TEST(stream::StreamClient, TakesOverAChosenSegmentNameLeftByAKilledRenderer) {
 // none (server.spawn = false and no standalone server yet) they fail as timed out, and no protocol error is
 // counted: before, a renderer waiting for its standalone server reported "texstream-server broke the
 // protocol" once per expiry, of a server that did not exist.
-TEST(stream::StreamClient, RequestsUnansweredWithNoServerAttachedAreNoProtocolError) {
+TEST(StreamClient, RequestsUnansweredWithNoServerAttachedAreNoProtocolError) {
   const Config config = small_config(unique_name("noserver"));
   stream::StreamClientOptions o = external();
   o.request_timeout = std::chrono::milliseconds(50);
@@ -300,7 +301,7 @@ TEST(stream::StreamClient, RequestsUnansweredWithNoServerAttachedAreNoProtocolEr
   EXPECT_EQ(client.stats().protocol_errors, 1u);
 }
 
-TEST(stream::StreamClient, StreamsMipsAndHandsEverySlotBack) {
+TEST(StreamClient, StreamsMipsAndHandsEverySlotBack) {
   const Config config = small_config(unique_name("happy"));
   auto client = start_external(config);
   ASSERT_TRUE(client);
@@ -352,7 +353,7 @@ TEST(stream::StreamClient, StreamsMipsAndHandsEverySlotBack) {
   EXPECT_TRUE(client->request(TextureId(1), MipLevel(5), 1.0f));
 }
 
-TEST(stream::StreamClient, NoRoomInTheSinkKeepsTheCompletionAndItsSlot) {
+TEST(StreamClient, NoRoomInTheSinkKeepsTheCompletionAndItsSlot) {
   const Config config = small_config(unique_name("noroom"));
   auto client = start_external(config);
   ASSERT_TRUE(client);
@@ -389,7 +390,7 @@ TEST(stream::StreamClient, NoRoomInTheSinkKeepsTheCompletionAndItsSlot) {
   EXPECT_EQ(server.bad_releases, 0);
 }
 
-TEST(stream::StreamClient, RingLimitsAndQueuedReleases) {
+TEST(StreamClient, RingLimitsAndQueuedReleases) {
   Config config = small_config(unique_name("limits"));
   config.protocol.request_ring_capacity = 4;  // 1 record kept for releases (capacity / 4)
   config.protocol.completion_ring_capacity = 4;
@@ -439,7 +440,7 @@ TEST(stream::StreamClient, RingLimitsAndQueuedReleases) {
   EXPECT_EQ(server.owned_count(), 4u);
 }
 
-TEST(stream::StreamClient, DoorbellWakesASleepingServer) {
+TEST(StreamClient, DoorbellWakesASleepingServer) {
   const Config config = small_config(unique_name("doorbell"));
   auto client = start_external(config);
   ASSERT_TRUE(client);
@@ -481,11 +482,12 @@ struct BadCase {
   bool slot_goes_back;  // the client should return the slot the record hands over
 };
 
-TEST(stream::StreamClient, RefusesEveryBadRecordAndKeepsWorking) {
+TEST(StreamClient, RefusesEveryBadRecordAndKeepsWorking) {
   const std::vector<BadCase> cases = {
       {"slot out of range", [](CompletionRecord& c, const Segment& s) { c.slot = s.slot_count(); }, false},
       {"slot far out of range", [](CompletionRecord& c, const Segment&) { c.slot = 0x7fffffffu; }, false},
-      {"byte size beyond the slot", [](CompletionRecord& c, const Segment& s) { c.byte_size = s.slot_bytes() + 1; }, true},
+      {"byte size beyond the slot", [](CompletionRecord& c, const Segment& s) { c.byte_size = s.slot_bytes() + 1; },
+       true},
       {"byte size huge", [](CompletionRecord& c, const Segment&) { c.byte_size = ~0ull - 7; }, true},
       {"byte size zero", [](CompletionRecord& c, const Segment&) { c.byte_size = 0; }, true},
       {"byte size wrong for the mip", [](CompletionRecord& c, const Segment&) { c.byte_size += 4; }, true},
@@ -500,8 +502,9 @@ TEST(stream::StreamClient, RefusesEveryBadRecordAndKeepsWorking) {
       {"texture outside the table", [](CompletionRecord& c, const Segment&) { c.texture_id = 1000; }, true},
       {"texture not asked for", [](CompletionRecord& c, const Segment&) { c.texture_id = 1; }, true},
       {"generation not the request's", [](CompletionRecord& c, const Segment&) { c.generation += 5; }, true},
-      {"error status naming a slot", [](CompletionRecord& c, const Segment&) {
-         c.status = static_cast<uint32_t>(CompletionStatus::kNotFound); }, false},
+      {"error status naming a slot",
+       [](CompletionRecord& c, const Segment&) { c.status = static_cast<uint32_t>(CompletionStatus::kNotFound); },
+       false},
   };
   for (const BadCase& bc : cases) {
     SCOPED_TRACE(bc.what);
@@ -514,7 +517,8 @@ TEST(stream::StreamClient, RefusesEveryBadRecordAndKeepsWorking) {
     ASSERT_TRUE(client->request(TextureId(0), MipLevel(2), 1));  // 16x16 RGBA8 = 1 KiB
     const auto loads = server.drain();
     ASSERT_EQ(loads.size(), 1u);
-    const CompletionRecord sent = server.answer(loads[0], shapes()[0], [&](CompletionRecord& c) { bc.edit(c, server.segment()); });
+    const CompletionRecord sent =
+        server.answer(loads[0], shapes()[0], [&](CompletionRecord& c) { bc.edit(c, server.segment()); });
     client->poll(sink, 16);
 
     const stream::StreamStats st = client->stats();
@@ -546,7 +550,7 @@ TEST(stream::StreamClient, RefusesEveryBadRecordAndKeepsWorking) {
   }
 }
 
-TEST(stream::StreamClient, WrongChecksumHandsTheReservedRoomBack) {
+TEST(StreamClient, WrongChecksumHandsTheReservedRoomBack) {
   const Config config = small_config(unique_name("cksum"));
   auto client = start_external(config);
   ASSERT_TRUE(client);
@@ -562,7 +566,7 @@ TEST(stream::StreamClient, WrongChecksumHandsTheReservedRoomBack) {
   EXPECT_EQ(client->stats().completions_rejected, 1u);
 }
 
-TEST(stream::StreamClient, APayloadChangedAfterPublishingIsRefused) {
+TEST(StreamClient, APayloadChangedAfterPublishingIsRefused) {
   // The server rewrites the slot after publishing the completion (and its checksum). The sink's reserve(),
   // which runs just before the client's one copy, spoils the slot: the copy no longer matches the checksum.
   const Config config = small_config(unique_name("copy"));
@@ -585,7 +589,7 @@ TEST(stream::StreamClient, APayloadChangedAfterPublishingIsRefused) {
   EXPECT_EQ(sink.count(Event::kCommit), 0u);
 }
 
-TEST(stream::StreamClient, ASlotNotYetBackWithTheServerIsNeverAcceptedOrReleasedTwice) {
+TEST(StreamClient, ASlotNotYetBackWithTheServerIsNeverAcceptedOrReleasedTwice) {
   const Config config = small_config(unique_name("twice"));
   auto client = start_external(config);
   ASSERT_TRUE(client);
@@ -615,7 +619,7 @@ TEST(stream::StreamClient, ASlotNotYetBackWithTheServerIsNeverAcceptedOrReleased
   EXPECT_EQ(server.bad_releases, 0);
 }
 
-TEST(stream::StreamClient, UnsolicitedAnswersAreRefusedAndTheirSlotReturned) {
+TEST(StreamClient, UnsolicitedAnswersAreRefusedAndTheirSlotReturned) {
   const Config config = small_config(unique_name("unsolicited"));
   auto client = start_external(config);
   ASSERT_TRUE(client);
@@ -648,7 +652,7 @@ TEST(stream::StreamClient, UnsolicitedAnswersAreRefusedAndTheirSlotReturned) {
   EXPECT_EQ(server.bad_releases, 0);
 }
 
-TEST(stream::StreamClient, AFloodOfGarbageIsBoundedPerPoll) {
+TEST(StreamClient, AFloodOfGarbageIsBoundedPerPoll) {
   Config config = small_config(unique_name("flood"));
   auto client = start_external(config);
   ASSERT_TRUE(client);
@@ -667,7 +671,7 @@ TEST(stream::StreamClient, AFloodOfGarbageIsBoundedPerPoll) {
   EXPECT_TRUE(sink.events.empty());
 }
 
-TEST(stream::StreamClient, APositionThatJumpsBreaksTheExternalServerUntilReset) {
+TEST(StreamClient, APositionThatJumpsBreaksTheExternalServerUntilReset) {
   const Config config = small_config(unique_name("jump"));
   auto client = start_external(config);
   ASSERT_TRUE(client);
@@ -710,7 +714,7 @@ TEST(stream::StreamClient, APositionThatJumpsBreaksTheExternalServerUntilReset) 
 
 // ---- the fake server in its own thread, against a frame loop ----
 
-TEST(stream::StreamClient, ConcurrentFakeServerStreamsEveryMipOfEveryTexture) {
+TEST(StreamClient, ConcurrentFakeServerStreamsEveryMipOfEveryTexture) {
   const Config config = small_config(unique_name("thread"));
   auto client = start_external(config);
   ASSERT_TRUE(client);
@@ -770,7 +774,8 @@ TEST(stream::StreamClient, ConcurrentFakeServerStreamsEveryMipOfEveryTexture) {
   server_thread.join();
   for (uint32_t t = 0; t < 3; ++t) {
     EXPECT_EQ(states.view(TextureId(t)).resident, 0u);
-    for (uint32_t m = 0; m <= stream::initial_mip_level(shapes()[t]); ++m) EXPECT_TRUE(sink.payload_ok(t, m)) << t << "/" << m;
+    for (uint32_t m = 0; m <= stream::initial_mip_level(shapes()[t]); ++m)
+      EXPECT_TRUE(sink.payload_ok(t, m)) << t << "/" << m;
   }
   const stream::StreamStats st = client->stats();
   EXPECT_EQ(st.protocol_errors, 0u);
@@ -933,7 +938,8 @@ TEST(StreamClientRestart, ACorruptRingPositionKillsAndRestartsTheSpawnedServer) 
   client->begin_cycle();
   ASSERT_TRUE(client->request(TextureId(0), MipLevel(4), 1));
   client->segment().completion_control()->write_pos.v.store(12345, std::memory_order_release);
-  ASSERT_TRUE(poll_until(*client, sink, [&] { return client->stats().server_deaths == 1 && client->server_pid() > 0; }));
+  ASSERT_TRUE(
+      poll_until(*client, sink, [&] { return client->stats().server_deaths == 1 && client->server_pid() > 0; }));
   EXPECT_NE(client->server_pid(), pid);
   EXPECT_EQ(client->stats().requests_lost, 1u);
   EXPECT_GE(client->stats().protocol_errors, 1u);

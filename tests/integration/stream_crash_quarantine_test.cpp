@@ -91,7 +91,8 @@ struct Fixture {
 // Asks for mip 0 of every texture without a final answer (and not in flight), then polls, until `done` or
 // the deadline.
 template <class Done>
-bool drive(stream::StreamClient& client, RecordingSink& sink, uint32_t textures, std::chrono::seconds deadline, Done done) {
+bool drive(stream::StreamClient& client, RecordingSink& sink, uint32_t textures, std::chrono::seconds deadline,
+           Done done) {
   const auto end = Clock::now() + deadline;
   while (Clock::now() < end) {
     client.begin_cycle();

@@ -60,11 +60,12 @@ struct TinyScene {
       const auto header = scene::make_dds_header(f, t.width, t.height, t.mip_count);
       std::vector<std::byte> bytes(header.begin(), header.end());
       const uint64_t total = scene::dds_file_bytes(f, t.width, t.height, t.mip_count);
-      for (uint64_t i = bytes.size(); i < total; ++i) bytes.push_back(static_cast<std::byte>((i * 7 + id * 101) & 0xff));
+      for (uint64_t i = bytes.size(); i < total; ++i)
+        bytes.push_back(static_cast<std::byte>((i * 7 + id * 101) & 0xff));
       const fs::path path = scene::texture_path(dir, TextureId(id));
       fs::create_directories(path.parent_path());
-      std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(bytes.data()),
-                                                  static_cast<std::streamsize>(bytes.size()));
+      std::ofstream(path, std::ios::binary)
+          .write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
       files[id] = std::move(bytes);
     }
   }
@@ -130,7 +131,8 @@ TEST(StreamRealServer, StreamsEveryMipOfATinySceneEndToEnd) {
   config.server.worker_threads = 1;
   config.scene.dir = scene.dir.string();
   std::vector<TextureShape> shapes;
-  for (const auto& t : scene.textures) shapes.push_back({t.width, t.height, t.mip_count, static_cast<TexelFormat>(t.format)});
+  for (const auto& t : scene.textures)
+    shapes.push_back({t.width, t.height, t.mip_count, static_cast<TexelFormat>(t.format)});
   // The server reads its own configuration: pass what differs from the defaults as overrides.
   const std::vector<std::string> overrides{"protocol.staging_slot_count=4", "server.worker_threads=1",
                                            "server.log_level=warn"};

@@ -28,7 +28,8 @@ struct TempDir {
   fs::path path;
   TempDir() {
     static int n = 0;
-    path = fs::temp_directory_path() / ("texstream-test-proc-" + std::to_string(::getpid()) + "-" + std::to_string(n++));
+    path =
+        fs::temp_directory_path() / ("texstream-test-proc-" + std::to_string(::getpid()) + "-" + std::to_string(n++));
     fs::create_directories(path);
   }
   ~TempDir() {
@@ -68,20 +69,23 @@ int wait_pid(const stream::ServerProcess& p) {
   return -1;
 }
 
-TEST(stream::ServerCommand, ArgvFollowsTheServerCommandLine) {
-  stream::ServerCommand c{"/opt/bin/texstream-server", "texstream-42", "/data/city", "/etc/ts.toml",
-                  {"server.worker_threads=1", "protocol.heartbeat_timeout_ms=500"}};
-  EXPECT_EQ(c.argv(), (std::vector<std::string>{"/opt/bin/texstream-server", "--segment", "texstream-42", "--scene",
-                                                 "/data/city", "--config", "/etc/ts.toml", "--set",
-                                                 "server.worker_threads=1", "--set",
-                                                 "protocol.heartbeat_timeout_ms=500", "--spawned"}));
+TEST(ServerCommand, ArgvFollowsTheServerCommandLine) {
+  stream::ServerCommand c{"/opt/bin/texstream-server",
+                          "texstream-42",
+                          "/data/city",
+                          "/etc/ts.toml",
+                          {"server.worker_threads=1", "protocol.heartbeat_timeout_ms=500"}};
+  EXPECT_EQ(c.argv(),
+            (std::vector<std::string>{"/opt/bin/texstream-server", "--segment", "texstream-42", "--scene", "/data/city",
+                                      "--config", "/etc/ts.toml", "--set", "server.worker_threads=1", "--set",
+                                      "protocol.heartbeat_timeout_ms=500", "--spawned"}));
   c.config_file.clear();
   c.overrides.clear();
   EXPECT_EQ(c.argv(), (std::vector<std::string>{"/opt/bin/texstream-server", "--segment", "texstream-42", "--scene",
-                                                 "/data/city", "--spawned"}));
+                                                "/data/city", "--spawned"}));
 }
 
-TEST(stream::ServerProcess, PassesTheCommandLineToTheChild) {
+TEST(ServerProcess, PassesTheCommandLineToTheChild) {
   TempDir dir;
   const fs::path out = dir.path / "args.txt";
   const fs::path exe = write_script(dir.path, "record-args", "printf '%s\\n' \"$@\" > '" + out.string() + "'");
@@ -96,11 +100,12 @@ TEST(stream::ServerProcess, PassesTheCommandLineToTheChild) {
   std::ifstream in(out);
   std::stringstream ss;
   ss << in.rdbuf();
-  EXPECT_EQ(ss.str(), "--segment\ntexstream-seg\n--scene\n/scenes/tiny\n--config\n/etc/cfg.toml\n--set\n"
-                      "server.log_level=debug\n--spawned\n");
+  EXPECT_EQ(ss.str(),
+            "--segment\ntexstream-seg\n--scene\n/scenes/tiny\n--config\n/etc/cfg.toml\n--set\n"
+            "server.log_level=debug\n--spawned\n");
 }
 
-TEST(stream::ServerProcess, BacksOffExponentiallyThenGoesColormapOnly) {
+TEST(ServerProcess, BacksOffExponentiallyThenGoesColormapOnly) {
   TempDir dir;
   const fs::path exe = write_script(dir.path, "crash", "exit 3");
   stream::ServerProcess p(command(exe), stream::RestartPolicy{});  // 50 ms doubling, 5 crashes in 30 s, slow retry 30 s
@@ -131,7 +136,7 @@ TEST(stream::ServerProcess, BacksOffExponentiallyThenGoesColormapOnly) {
   EXPECT_EQ(p.deaths(), 6u);
 }
 
-TEST(stream::ServerProcess, OldCrashesAgeOutOfTheWindow) {
+TEST(ServerProcess, OldCrashesAgeOutOfTheWindow) {
   TempDir dir;
   const fs::path exe = write_script(dir.path, "crash", "exit 1");
   stream::ServerProcess p(command(exe), stream::RestartPolicy{});
@@ -148,7 +153,7 @@ TEST(stream::ServerProcess, OldCrashesAgeOutOfTheWindow) {
   EXPECT_EQ(p.next_spawn_at(), now + 50ms) << "back to the first delay";
 }
 
-TEST(stream::ServerProcess, ColormapOnlyEndsAfterAServerRunsAWholeWindow) {
+TEST(ServerProcess, ColormapOnlyEndsAfterAServerRunsAWholeWindow) {
   TempDir dir;
   const fs::path flag = dir.path / "stay";
   // Crashes until the flag file exists, then stays up.
@@ -175,11 +180,12 @@ TEST(stream::ServerProcess, ColormapOnlyEndsAfterAServerRunsAWholeWindow) {
   EXPECT_EQ(p.state(), stream::ServerState::kBackingOff) << "one crash after a stable run is an ordinary restart";
 }
 
-TEST(stream::ServerProcess, SpawnFailureCountsAsACrash) {
+TEST(ServerProcess, SpawnFailureCountsAsACrash) {
   TempDir dir;
   // Exists and is executable for access(), but exec fails: not a valid program.
   const fs::path exe = dir.path / "not-a-program";
-  std::ofstream(exe) << "\x7f" "ELF garbage";
+  std::ofstream(exe) << "\x7f"
+                        "ELF garbage";
   fs::permissions(exe, fs::perms::owner_all);
   stream::ServerProcess p(command(exe), {});
   const stream::SteadyTime now = std::chrono::steady_clock::now();
@@ -193,7 +199,7 @@ TEST(stream::ServerProcess, SpawnFailureCountsAsACrash) {
   EXPECT_EQ(p.crashes(), 1u);
 }
 
-TEST(stream::ServerProcess, KillPostedWhileSpawningKillsTheChildOnceItExists) {
+TEST(ServerProcess, KillPostedWhileSpawningKillsTheChildOnceItExists) {
   TempDir dir;
   const fs::path exe = write_script(dir.path, "hang", "exec sleep 60");
   stream::ServerProcess p(command(exe), {});
@@ -209,7 +215,7 @@ TEST(stream::ServerProcess, KillPostedWhileSpawningKillsTheChildOnceItExists) {
   EXPECT_EQ(p.crashes(), 1u) << "a server we killed counts as a crash";
 }
 
-TEST(stream::ServerProcess, SigkillFromOutsideIsNoCrash) {
+TEST(ServerProcess, SigkillFromOutsideIsNoCrash) {
   TempDir dir;
   const fs::path exe = write_script(dir.path, "hang", "exec sleep 60");
   stream::ServerProcess p(command(exe), {});
@@ -230,7 +236,7 @@ TEST(stream::ServerProcess, SigkillFromOutsideIsNoCrash) {
 
 // PR_SET_PDEATHSIG fires when the thread that spawned the child exits. The spawner thread lives as long as
 // the ServerProcess, so a child must survive the end of the thread that called spawn_if_due.
-TEST(stream::ServerProcess, ChildSurvivesTheThreadThatAskedForIt) {
+TEST(ServerProcess, ChildSurvivesTheThreadThatAskedForIt) {
   TempDir dir;
   const fs::path exe = write_script(dir.path, "pdeathsig", "exec setpriv --pdeathsig KILL -- sleep 60");
   stream::ServerProcess p(command(exe), {});
@@ -243,7 +249,7 @@ TEST(stream::ServerProcess, ChildSurvivesTheThreadThatAskedForIt) {
   EXPECT_TRUE(p.serving());
 }
 
-TEST(stream::ServerProcess, WatchdogKillsAServerWhoseHeartbeatStallsWithWorkOutstanding) {
+TEST(ServerProcess, WatchdogKillsAServerWhoseHeartbeatStallsWithWorkOutstanding) {
   TempDir dir;
   const fs::path exe = write_script(dir.path, "hang", "exec sleep 60");
   stream::RestartPolicy policy;
@@ -270,7 +276,7 @@ TEST(stream::ServerProcess, WatchdogKillsAServerWhoseHeartbeatStallsWithWorkOuts
   EXPECT_NE(e->kill_reason.find("heartbeat stalled"), std::string::npos) << e->kill_reason;
 }
 
-TEST(stream::ServerProcess, DestructorKillsAndReapsTheChild) {
+TEST(ServerProcess, DestructorKillsAndReapsTheChild) {
   TempDir dir;
   const fs::path exe = write_script(dir.path, "ignore-term", "trap '' TERM\nwhile :; do sleep 0.05; done");
   int pid = -1;

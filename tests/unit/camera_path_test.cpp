@@ -101,7 +101,7 @@ TEST(CameraPath, YawTakesTheShorterArc) {
 TEST(CameraPath, EqualTimesCutAndRepeatedKeysPause) {
   const CameraPath p = parse_ok(
       "0 0 0 0 0 0\n"
-      "2 100 0 0 0 0\n"   // pause: the same pose at t = 2 and t = 4
+      "2 100 0 0 0 0\n"  // pause: the same pose at t = 2 and t = 4
       "4 100 0 0 0 0\n"
       "4 5000 0 0 90 0\n"  // cut at t = 4 to a new view
       "6 5100 0 0 90 0\n");

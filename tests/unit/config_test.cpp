@@ -23,7 +23,8 @@ TEST(Config, DefaultsValidate) {
 }
 
 TEST(Config, ParsesEveryKindOfValue) {
-  auto c = parse_config("[render]\nwidth_px = 320\nvalidation = true\nfov_y_deg = 45\n[scene]\ndir = \"x/y\"\n", "t", {});
+  auto c =
+      parse_config("[render]\nwidth_px = 320\nvalidation = true\nfov_y_deg = 45\n[scene]\ndir = \"x/y\"\n", "t", {});
   ASSERT_TRUE(c.ok()) << c.error().message;
   EXPECT_EQ(c->render.width_px, 320);
   EXPECT_TRUE(c->render.validation);
@@ -51,7 +52,8 @@ TEST(Config, RelationsBetweenKeysAreValidated) {
             std::string::npos);
   EXPECT_NE(error_of("[cache]\nformat = \"dxt5\"\n").find("'cache.format'"), std::string::npos);
   EXPECT_NE(error_of("[render]\nnear_m = 100.0\nfar_m = 10.0\n").find("'render.near_m'"), std::string::npos);
-  EXPECT_NE(error_of("[protocol]\nstaging_slot_bytes = 4096\n").find("'protocol.staging_slot_bytes'"), std::string::npos);
+  EXPECT_NE(error_of("[protocol]\nstaging_slot_bytes = 4096\n").find("'protocol.staging_slot_bytes'"),
+            std::string::npos);
   // A standalone server serves a name: server.spawn = false needs protocol.segment_name.
   EXPECT_NE(error_of("[server]\nspawn = false\n").find("'server.spawn'"), std::string::npos);
   EXPECT_TRUE(parse_config("[server]\nspawn = false\n[protocol]\nsegment_name = \"ts-city\"\n", "t", {}).ok());
@@ -157,8 +159,9 @@ TEST(Config, MalformedTomlNamesFileAndLine) {
 }
 
 TEST(Config, OverridesApplyInOrderAndAreChecked) {
-  auto c = parse_config("[render]\nframes = 5\n", "t", {"render.frames=7", "render.frames=9", "scene.dir=abc/def",
-                                                         "render.validation=true", "protocol.segment_name=1234"});
+  auto c = parse_config("[render]\nframes = 5\n", "t",
+                        {"render.frames=7", "render.frames=9", "scene.dir=abc/def", "render.validation=true",
+                         "protocol.segment_name=1234"});
   ASSERT_TRUE(c.ok()) << c.error().message;
   EXPECT_EQ(c->render.frames, 9);
   EXPECT_EQ(c->scene.dir, "abc/def");

@@ -58,7 +58,7 @@ TEST(ControllerEquations, BiasByHand) {
   EXPECT_NEAR(C::mip_bias(8, 0.010, 0.010, 0.010), 16.0 / 27.0, 1e-12);
   EXPECT_EQ(C::mip_bias(8, 0.010, 0.010, 0.005), 0.0);  // below 0.96 t_bl
   EXPECT_EQ(C::mip_bias(8, 0.010, 0.010, 0.013), 8.0);  // above 1.2 t_bu
-  EXPECT_EQ(C::smoothstep(0.0, 0.0, 0.0), 0.0);          // degenerate edges (all t_w = 0): no bias
+  EXPECT_EQ(C::smoothstep(0.0, 0.0, 0.0), 0.0);         // degenerate edges (all t_w = 0): no bias
   EXPECT_EQ(C::smoothstep(1.0, 0.5, 2.0), 0.0);
 }
 
@@ -182,8 +182,13 @@ TEST(ControllerInput, RejectsBadInputWithoutChangingState) {
   stream::AdaptiveController c = make();
   for (int i = 0; i < 50; ++i) ASSERT_TRUE(c.on_frame(0.004 + 0.001 * (i % 7)));
   const stream::AdaptiveController::State before = c.state();
-  const double bad[] = {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(),
-                        -std::numeric_limits<double>::infinity(), -1e-9, -10.0, 3600.0001, 1e300};
+  const double bad[] = {std::numeric_limits<double>::quiet_NaN(),
+                        std::numeric_limits<double>::infinity(),
+                        -std::numeric_limits<double>::infinity(),
+                        -1e-9,
+                        -10.0,
+                        3600.0001,
+                        1e300};
   for (double v : bad) {
     EXPECT_FALSE(c.on_frame(v)) << v;
     EXPECT_TRUE(c.state() == before) << v;

@@ -44,19 +44,19 @@ class Rng {
 };
 
 enum class Family : uint32_t {
-  kRandomUniform,       // 0..100 ms
-  kLogUniform,          // 1 ns .. 10 s
+  kRandomUniform,  // 0..100 ms
+  kLogUniform,     // 1 ns .. 10 s
   kZeros,
-  kDenormals,           // subnormal doubles
-  kMicrosecond,         // 1 µs frames (l climbs as fast as Eq. 4 lets it)
-  kTenSecondSpikes,     // 16 ms frames with 10 s spikes
-  kAlternatingExtremes, // 0 / 10 s / 1 µs / 3600 s (the largest accepted) alternating
-  kSlowDrift,           // 1 ms drifting to 1 s and back
-  kNaN,                 // quiet and signalling NaNs among normal frames
-  kInfinities,          // ±inf among normal frames
-  kNegative,            // negative values (and -0.0) among normal frames
-  kAbsurd,              // just above the accepted maximum, 1e300, DBL_MAX
-  kRandomBits,          // any 64-bit pattern reinterpreted as a double
+  kDenormals,            // subnormal doubles
+  kMicrosecond,          // 1 µs frames (l climbs as fast as Eq. 4 lets it)
+  kTenSecondSpikes,      // 16 ms frames with 10 s spikes
+  kAlternatingExtremes,  // 0 / 10 s / 1 µs / 3600 s (the largest accepted) alternating
+  kSlowDrift,            // 1 ms drifting to 1 s and back
+  kNaN,                  // quiet and signalling NaNs among normal frames
+  kInfinities,           // ±inf among normal frames
+  kNegative,             // negative values (and -0.0) among normal frames
+  kAbsurd,               // just above the accepted maximum, 1e300, DBL_MAX
+  kRandomBits,           // any 64-bit pattern reinterpreted as a double
   kCount
 };
 const char* family_name(Family f);
@@ -71,15 +71,15 @@ struct StressResult {
   uint64_t sequences = 0;
   uint64_t steps = 0;
   uint64_t inputs_rejected = 0;
-  uint64_t bad_outputs = 0;     // steps where any promise above was broken
-  std::string first_failure;    // what broke first (empty when none)
+  uint64_t bad_outputs = 0;   // steps where any promise above was broken
+  std::string first_failure;  // what broke first (empty when none)
   uint64_t per_family[static_cast<uint32_t>(Family::kCount)] = {};
 };
 
 struct DriftResult {
   uint64_t steps = 0;
   uint64_t checkpoints = 0;
-  double max_twa_error_s = 0;    // |controller t_wa window mean - recomputation|, worst checkpoint
+  double max_twa_error_s = 0;  // |controller t_wa window mean - recomputation|, worst checkpoint
   double max_tb_error_s = 0;
   double max_naive_twa_error_s = 0;  // the same for a plain double running sum
 };
@@ -87,9 +87,9 @@ struct DriftResult {
 // ---- implementation ----
 
 inline const char* family_name(Family f) {
-  static const char* names[] = {"random_uniform", "log_uniform",  "zeros",     "denormals", "microsecond",
-                                "10s_spikes",     "alternating",  "slow_drift", "nan",       "infinities",
-                                "negative",       "absurd",       "random_bits"};
+  static const char* names[] = {"random_uniform", "log_uniform", "zeros",      "denormals", "microsecond",
+                                "10s_spikes",     "alternating", "slow_drift", "nan",       "infinities",
+                                "negative",       "absurd",      "random_bits"};
   const auto i = static_cast<uint32_t>(f);
   return i < static_cast<uint32_t>(Family::kCount) ? names[i] : "?";
 }
@@ -105,12 +105,18 @@ inline double sample(Family f, Rng& rng, size_t i, size_t n) {
   constexpr double kMax = stream::AdaptiveController::kMaxFrameLatencyS;
   const double normal = rng.uniform(0.002, 0.05);
   switch (f) {
-    case Family::kRandomUniform: return rng.uniform(0.0, 0.1);
-    case Family::kLogUniform: return rng.log_uniform(1e-9, 10.0);
-    case Family::kZeros: return rng.chance(0.9) ? 0.0 : normal;
-    case Family::kDenormals: return from_bits(1 + (rng.next() & ((1ull << 52) - 1)));  // positive subnormals
-    case Family::kMicrosecond: return 1e-6;
-    case Family::kTenSecondSpikes: return rng.chance(0.1) ? 10.0 : 0.016;
+    case Family::kRandomUniform:
+      return rng.uniform(0.0, 0.1);
+    case Family::kLogUniform:
+      return rng.log_uniform(1e-9, 10.0);
+    case Family::kZeros:
+      return rng.chance(0.9) ? 0.0 : normal;
+    case Family::kDenormals:
+      return from_bits(1 + (rng.next() & ((1ull << 52) - 1)));  // positive subnormals
+    case Family::kMicrosecond:
+      return 1e-6;
+    case Family::kTenSecondSpikes:
+      return rng.chance(0.1) ? 10.0 : 0.016;
     case Family::kAlternatingExtremes: {
       static constexpr double kPattern[] = {0.0, 10.0, 1e-6, kMax, 4.9e-324, kMax, 0.0};
       return kPattern[(i + rng.next() % 2) % (sizeof kPattern / sizeof kPattern[0])];
@@ -137,8 +143,10 @@ inline double sample(Family f, Rng& rng, size_t i, size_t n) {
       static const double kBig[] = {std::nextafter(kMax, 1e300), kMax * 2, 1e300, std::numeric_limits<double>::max()};
       return kBig[rng.next() % (sizeof kBig / sizeof kBig[0])];
     }
-    case Family::kRandomBits: return from_bits(rng.next());
-    case Family::kCount: break;
+    case Family::kRandomBits:
+      return from_bits(rng.next());
+    case Family::kCount:
+      break;
   }
   return 0.0;
 }
@@ -146,11 +154,25 @@ inline double sample(Family f, Rng& rng, size_t i, size_t n) {
 inline stream::ControllerParams stress_params(uint32_t which) {
   stream::ControllerParams p;  // Table 2
   switch (which % 5) {
-    case 0: break;
-    case 1: p.alpha_s = 1e-4; p.beta = 16; break;           // tiny target, largest β config allows
-    case 2: p.alpha_s = 10.0; p.beta = 0; break;            // huge target, no bias
-    case 3: p.s_min_bytes = p.s_max_bytes = 0.065e6; break; // s pinned
-    case 4: p.alpha_s = 0.030; p.beta = 4; p.s_min_bytes = 1; p.s_max_bytes = 1e5 * 1e6; break;  // config extremes
+    case 0:
+      break;
+    case 1:
+      p.alpha_s = 1e-4;
+      p.beta = 16;
+      break;  // tiny target, largest β config allows
+    case 2:
+      p.alpha_s = 10.0;
+      p.beta = 0;
+      break;  // huge target, no bias
+    case 3:
+      p.s_min_bytes = p.s_max_bytes = 0.065e6;
+      break;  // s pinned
+    case 4:
+      p.alpha_s = 0.030;
+      p.beta = 4;
+      p.s_min_bytes = 1;
+      p.s_max_bytes = 1e5 * 1e6;
+      break;  // config extremes
   }
   return p;
 }
@@ -242,7 +264,7 @@ inline DriftResult run_drift(uint64_t steps, uint64_t seed, uint64_t checkpoint_
   constexpr size_t kN = stream::AdaptiveController::kTwaSamples, kB = stream::AdaptiveController::kTbSamples;
   std::vector<double> ring(kN, 0.0);  // the last 200 t_w outputs, as doubles
   size_t filled = 0;
-  double naive_sum = 0.0;             // add the new, subtract the one leaving: what drifts
+  double naive_sum = 0.0;  // add the new, subtract the one leaving: what drifts
   Rng rng(seed);
   auto check = [&] {
     const size_t n = std::min(filled, kN), nb = std::min(filled, kB);

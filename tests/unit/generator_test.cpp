@@ -57,10 +57,18 @@ std::array<int, 3> decode_bc1_texel0(const uint8_t* b) {
   std::array<int, 3> out{};
   for (size_t ch = 0; ch < 3; ++ch) {
     switch (index) {
-      case 0: out[ch] = e0[ch]; break;
-      case 1: out[ch] = e1[ch]; break;
-      case 2: out[ch] = c0 > c1 ? (2 * e0[ch] + e1[ch]) / 3 : (e0[ch] + e1[ch]) / 2; break;
-      default: out[ch] = c0 > c1 ? (e0[ch] + 2 * e1[ch]) / 3 : 0; break;
+      case 0:
+        out[ch] = e0[ch];
+        break;
+      case 1:
+        out[ch] = e1[ch];
+        break;
+      case 2:
+        out[ch] = c0 > c1 ? (2 * e0[ch] + e1[ch]) / 3 : (e0[ch] + e1[ch]) / 2;
+        break;
+      default:
+        out[ch] = c0 > c1 ? (e0[ch] + 2 * e1[ch]) / 3 : 0;
+        break;
     }
   }
   return out;
@@ -262,7 +270,8 @@ TEST_F(GeneratorTest, Bc1FilesMatchTableAndColormap) {
     const auto decoded = decode_bc1_texel0(block);
     const uint32_t ref = (*colormap)[id];
     for (int ch = 0; ch < 3; ++ch)
-      EXPECT_NEAR(decoded[static_cast<size_t>(ch)], static_cast<int>((ref >> (8 * ch)) & 0xff), 6) << p << " channel " << ch;
+      EXPECT_NEAR(decoded[static_cast<size_t>(ch)], static_cast<int>((ref >> (8 * ch)) & 0xff), 6)
+          << p << " channel " << ch;
   }
 }
 

@@ -53,11 +53,11 @@ TEST(Camera, ReversedZMapsNearToOneAndFarToZero) {
 
 TEST(BroadPhase, KeepsMeshesInFrontAndDropsThoseBehindOrAside) {
   std::vector<scene::MeshRecord> meshes;
-  meshes.push_back(mesh_at(kX, kY + 50, 0));        // 0: ahead
-  meshes.push_back(mesh_at(kX, kY - 50, 0));        // 1: behind
-  meshes.push_back(mesh_at(kX + 500, kY + 10, 0));  // 2: far to the right
-  meshes.push_back(mesh_at(kX + 5, kY + 300, 0));   // 3: ahead, slightly right
-  meshes.push_back(mesh_at(kX, kY + 30000, 0));     // 4: beyond the far plane
+  meshes.push_back(mesh_at(kX, kY + 50, 0));                                             // 0: ahead
+  meshes.push_back(mesh_at(kX, kY - 50, 0));                                             // 1: behind
+  meshes.push_back(mesh_at(kX + 500, kY + 10, 0));                                       // 2: far to the right
+  meshes.push_back(mesh_at(kX + 5, kY + 300, 0));                                        // 3: ahead, slightly right
+  meshes.push_back(mesh_at(kX, kY + 30000, 0));                                          // 4: beyond the far plane
   for (int i = 0; i < 200; ++i) meshes.push_back(mesh_at(kX - 2000 - i, kY - 2000, 0));  // cells far away
   BroadPhase bp(meshes);
   CameraPose pose{{kX, kY, 0}, 0, 0};
@@ -78,8 +78,8 @@ TEST(BroadPhase, MeshContainingTheCameraIsKept) {
 }
 
 // The wide query's survivors split by the viewport's frustum: touching it, inside or straddling (main pass),
-// then outside but in the wide frustum (wide pass): a straddling mesh is in the viewport, not outside it. Main FOV 60 deg vertical at 16:9 is about 45.7 deg
-// to each side; the wide one (75 deg) about 53.8 deg.
+// then outside but in the wide frustum (wide pass): a straddling mesh is in the viewport, not outside it. Main FOV 60
+// deg vertical at 16:9 is about 45.7 deg to each side; the wide one (75 deg) about 53.8 deg.
 TEST(BroadPhase, SplitByViewportPutsStraddlingMeshesWithTheInsideOnes) {
   auto at_angle = [](double deg, double dist) {
     const double r = deg * M_PI / 180.0;
@@ -156,8 +156,8 @@ TEST(BroadPhase, QuadtreeEqualsBruteForceFromManyViews) {
   EXPECT_LE(bp.depth(), BroadPhase::kMaxDepth);
   EXPECT_EQ(bp.mesh_count(), meshes.size());
   for (int view = 0; view < 12; ++view) {
-    const CameraPose pose{{kX - 3000 + 500.0 * view, kY - 2000 + 300.0 * view, 20.0 + 10 * view}, 30.0 * view,
-                          -5.0 * (view % 4)};
+    const CameraPose pose{
+        {kX - 3000 + 500.0 * view, kY - 2000 + 300.0 * view, 20.0 + 10 * view}, 30.0 * view, -5.0 * (view % 4)};
     const Camera cam = make_camera(pose, CameraLens{60, 75, 16.0 / 9.0, 1, 4000});
     const Frustum f = Frustum::from_matrix(cam.wide_proj * cam.view);
     std::vector<uint32_t> serial, parallel;

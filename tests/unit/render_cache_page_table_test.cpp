@@ -16,7 +16,8 @@ namespace {
 PageGeometry rgba8_512(uint32_t layers = 4) { return PageGeometry{512, 10, layers, 128, 128, 10}; }
 
 size_t count(const std::vector<PageBindOp>& ops, bool bind) {
-  return static_cast<size_t>(std::count_if(ops.begin(), ops.end(), [&](const PageBindOp& o) { return o.bind == bind; }));
+  return static_cast<size_t>(
+      std::count_if(ops.begin(), ops.end(), [&](const PageBindOp& o) { return o.bind == bind; }));
 }
 
 }  // namespace
@@ -26,7 +27,7 @@ TEST(SparsePageTable, PagesOfARegionShrinkWithTheLevelButNeverBelowOne) {
   EXPECT_EQ(SparsePageTable::pages_of_region(g, 0, 0, 512, 0), 16u);  // 4 x 4 pages
   EXPECT_EQ(SparsePageTable::pages_of_region(g, 0, 0, 512, 1), 4u);
   EXPECT_EQ(SparsePageTable::pages_of_region(g, 0, 0, 512, 2), 1u);
-  EXPECT_EQ(SparsePageTable::pages_of_region(g, 0, 0, 512, 9), 1u);   // 1 x 1 level: a page of its own
+  EXPECT_EQ(SparsePageTable::pages_of_region(g, 0, 0, 512, 9), 1u);  // 1 x 1 level: a page of its own
   EXPECT_EQ(SparsePageTable::pages_of_region(g, 256, 256, 256, 0), 4u);
   EXPECT_EQ(SparsePageTable::pages_of_region(g, 64, 0, 64, 0), 1u);
   // BC1 pages (512 x 256 texels) are not square.
@@ -124,10 +125,15 @@ TEST(SparsePageTable, RandomWorkloadNeverExceedsTheSlots) {
   // slot comes back when everything is released.
   const PageGeometry g = rgba8_512(8);
   SparsePageTable t(g, 40);
-  struct Held { uint32_t layer, x, y, extent, mip; };
+  struct Held {
+    uint32_t layer, x, y, extent, mip;
+  };
   std::vector<Held> held;
   uint64_t state = 12345, serial = 0;
-  auto next = [&] { state = state * 6364136223846793005ull + 1442695040888963407ull; return static_cast<uint32_t>(state >> 33); };
+  auto next = [&] {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    return static_cast<uint32_t>(state >> 33);
+  };
   for (int step = 0; step < 5000; ++step) {
     if (held.empty() || next() % 3 != 0) {
       const uint32_t extent = 32u << (next() % 5);  // 32 .. 512

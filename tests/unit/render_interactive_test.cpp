@@ -7,12 +7,12 @@
 #include <filesystem>
 #include <set>
 
-#include "texstream/render/window/camera_recorder.hpp"
-#include "texstream/render/window/fly_camera.hpp"
-#include "texstream/render/scene/gpu_structs.hpp"
-#include "texstream/render/window/interactive_session.hpp"
 #include "texstream/render/frame/mip_math.hpp"
 #include "texstream/render/frame/view_renderer.hpp"
+#include "texstream/render/scene/gpu_structs.hpp"
+#include "texstream/render/window/camera_recorder.hpp"
+#include "texstream/render/window/fly_camera.hpp"
+#include "texstream/render/window/interactive_session.hpp"
 
 using namespace texstream;
 using namespace texstream::render;
@@ -52,8 +52,8 @@ TEST(FlyCamera, MouseTurnsAndPitchStopsShortOfVertical) {
 }
 
 TEST(CameraRecorder, WritesAPathThatLoadsBack) {
-  const auto file = std::filesystem::temp_directory_path() /
-                    ("texstream_rec_" + std::to_string(::getpid()) + "/path.txt");
+  const auto file =
+      std::filesystem::temp_directory_path() / ("texstream_rec_" + std::to_string(::getpid()) + "/path.txt");
   CameraRecorder r(file);
   r.add(0.0, CameraPose{{1, 2, 3}, 0, 0});  // not recording: ignored
   r.start();

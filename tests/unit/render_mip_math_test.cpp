@@ -60,5 +60,5 @@ TEST(MipMath, FragmentWeightEq1And3) {
   EXPECT_FLOAT_EQ(fragment_weight(0.0f, 0.0f, 8.0f), 1.0f);   // far away, finest mip shown
   EXPECT_FLOAT_EQ(fragment_weight(1.0f, 8.0f, 8.0f), 17.0f);  // at the camera, coarsest shown
   EXPECT_FLOAT_EQ(fragment_weight(0.5f, 2.0f, 8.0f), 1.0f + 4.0f + 2.0f);
-  EXPECT_FLOAT_EQ(fragment_weight(0.0f, 3.0f, 0.0f), 1.0f);   // a 1x1 texture has no coarser level
+  EXPECT_FLOAT_EQ(fragment_weight(0.0f, 3.0f, 0.0f), 1.0f);  // a 1x1 texture has no coarser level
 }

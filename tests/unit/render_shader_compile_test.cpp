@@ -22,9 +22,7 @@ fs::path temp_dir(const std::string& name) {
   return d;
 }
 
-void write(const fs::path& p, const std::string& text) {
-  std::ofstream(p) << text;
-}
+void write(const fs::path& p, const std::string& text) { std::ofstream(p) << text; }
 
 }  // namespace
 
@@ -34,10 +32,14 @@ TEST(ShaderCompile, EveryShaderInTheFolderCompiles) {
   for (const auto& entry : fs::directory_iterator(compiler.source_dir())) {
     const std::string ext = entry.path().extension().string();
     ShaderStage stage;
-    if (ext == ".vert") stage = ShaderStage::kVertex;
-    else if (ext == ".frag") stage = ShaderStage::kFragment;
-    else if (ext == ".comp") stage = ShaderStage::kCompute;
-    else continue;
+    if (ext == ".vert")
+      stage = ShaderStage::kVertex;
+    else if (ext == ".frag")
+      stage = ShaderStage::kFragment;
+    else if (ext == ".comp")
+      stage = ShaderStage::kCompute;
+    else
+      continue;
     const std::string name = entry.path().filename().string();
     auto spirv = compiler.compile({name, stage, {}});
     ASSERT_TRUE(spirv.ok()) << spirv.error().message;

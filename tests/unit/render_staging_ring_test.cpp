@@ -12,7 +12,7 @@ TEST(StagingRing, AllocatesAlignedAndWraps) {
   auto b = r.allocate(100, 16);
   ASSERT_TRUE(a && b);
   EXPECT_EQ(a->offset, 0u);
-  EXPECT_EQ(b->offset, 112u);  // 100 rounded up to 16
+  EXPECT_EQ(b->offset, 112u);    // 100 rounded up to 16
   auto c = r.allocate(900, 16);  // does not fit in what is left, nor after a wrap while a and b are live
   EXPECT_FALSE(c.has_value());
   r.release(a->id);

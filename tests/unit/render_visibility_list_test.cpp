@@ -21,9 +21,9 @@ TEST(VisibilityList, MergesMeshesOfOneTextureAndSortsByWeight) {
       {0, 3 * gpu::kMipFixedScale, 100 * gpu::kWeightFixedScale, 7},
       {1, 2 * gpu::kMipFixedScale + gpu::kMipFixedScale / 2, 500 * gpu::kWeightFixedScale, 3},
       {2, 1 * gpu::kMipFixedScale, 450 * gpu::kWeightFixedScale, 7},
-      {3, 0, 8, 1},       // weight 0.5
-      {99, 0, 1000, 1},   // bad mesh id from the GPU: skipped
-      {3, 0, 1000, 8},    // bad texture id from the GPU (the scene has 8 textures): skipped
+      {3, 0, 8, 1},      // weight 0.5
+      {99, 0, 1000, 1},  // bad mesh id from the GPU: skipped
+      {3, 0, 1000, 8},   // bad texture id from the GPU (the scene has 8 textures): skipped
   };
   uint64_t skipped = 0;
   const auto c = build_candidates(entries, meshes.size(), 8, &skipped);
@@ -43,12 +43,15 @@ TEST(VisibilityList, MergesMeshesOfOneTextureAndSortsByWeight) {
 // the fixed-point sum is exact either way, and ties with texture 1's single 2^24 + 2.
 TEST(VisibilityList, MergedWeightsDoNotDependOnEntryOrder) {
   std::vector<scene::MeshRecord> meshes(6);
-  for (uint32_t i = 0; i < 3; ++i) meshes[i].texture_id = 0;      // texture 0: one big and two tiny meshes
-  for (uint32_t i = 3; i < 6; ++i) meshes[i].texture_id = 1;      // texture 1: the same sum in one mesh
-  const uint32_t one = gpu::kWeightFixedScale;  // weight 1.0 in fixed point
-  const uint32_t big = (1u << 24) * one;         // weight 2^24
+  for (uint32_t i = 0; i < 3; ++i) meshes[i].texture_id = 0;  // texture 0: one big and two tiny meshes
+  for (uint32_t i = 3; i < 6; ++i) meshes[i].texture_id = 1;  // texture 1: the same sum in one mesh
+  const uint32_t one = gpu::kWeightFixedScale;                // weight 1.0 in fixed point
+  const uint32_t big = (1u << 24) * one;                      // weight 2^24
   const std::vector<gpu::CompactEntry> entries{
-      {0, 0, big, 0}, {1, 0, one, 0}, {2, 0, one, 0}, {3, 0, big + 2 * one, 1},
+      {0, 0, big, 0},
+      {1, 0, one, 0},
+      {2, 0, one, 0},
+      {3, 0, big + 2 * one, 1},
   };
   const auto first = build_candidates(entries, meshes.size(), 2);
   const std::vector<gpu::CompactEntry> reversed(entries.rbegin(), entries.rend());

@@ -2,8 +2,8 @@
 // names the file (and the record). The DDS files we write must be readable by OpenImageIO.
 #include <gtest/gtest.h>
 
-#include <cstdio>
 #include <unistd.h>
+#include <cstdio>
 
 #include <OpenImageIO/imageio.h>
 #include <cstring>
@@ -160,8 +160,8 @@ TEST_F(SceneFormatTest, ManifestRejectsMissingWrongAndUnknown) {
 TEST_F(SceneFormatTest, MeshesRoundTrip) {
   const MeshData d = two_quads();
   ASSERT_TRUE(write_meshes(dir_, d).ok());
-  EXPECT_EQ(fs::file_size(dir_ / "meshes.bin"), sizeof(MeshFileHeader) + 2 * sizeof(MeshRecord) +
-                                                     8 * sizeof(Vertex) + 12 * sizeof(uint32_t));
+  EXPECT_EQ(fs::file_size(dir_ / "meshes.bin"),
+            sizeof(MeshFileHeader) + 2 * sizeof(MeshRecord) + 8 * sizeof(Vertex) + 12 * sizeof(uint32_t));
   auto r = read_meshes(dir_);
   ASSERT_TRUE(r.ok()) << r.error().message;
   ASSERT_EQ(r->meshes.size(), 2u);
@@ -217,8 +217,7 @@ TEST_F(SceneFormatTest, MeshesRejectCorruptHeaderAndRecords) {
   expect_fails(read_meshes(dir_), "triangles");
 
   write_fresh();  // an index beyond the mesh's own vertices
-  patch(p, sizeof(MeshFileHeader) + 2 * sizeof(MeshRecord) + 8 * sizeof(Vertex) + 7 * sizeof(uint32_t),
-        uint32_t{4});
+  patch(p, sizeof(MeshFileHeader) + 2 * sizeof(MeshRecord) + 8 * sizeof(Vertex) + 7 * sizeof(uint32_t), uint32_t{4});
   expect_fails(read_meshes(dir_), "mesh 1");
 
   write_fresh();
@@ -321,10 +320,10 @@ TEST(DdsHeader, RejectsWhatWeCannotServe) {
   };
   EXPECT_FALSE(parse_dds_layout(std::span(good).first(127), "a.dds").ok());
   expect_fails(parse_dds_layout(with_word(0, 0x12345678), "a.dds"), "a.dds");
-  EXPECT_FALSE(parse_dds_layout(with_word(1, 100), "a.dds").ok());     // header size
-  EXPECT_FALSE(parse_dds_layout(with_word(3, 0), "a.dds").ok());       // height 0
-  EXPECT_FALSE(parse_dds_layout(with_word(4, 40000), "a.dds").ok());   // width > 32768
-  EXPECT_FALSE(parse_dds_layout(with_word(7, 8), "a.dds").ok());       // 8 mips for 64x32
+  EXPECT_FALSE(parse_dds_layout(with_word(1, 100), "a.dds").ok());          // header size
+  EXPECT_FALSE(parse_dds_layout(with_word(3, 0), "a.dds").ok());            // height 0
+  EXPECT_FALSE(parse_dds_layout(with_word(4, 40000), "a.dds").ok());        // width > 32768
+  EXPECT_FALSE(parse_dds_layout(with_word(7, 8), "a.dds").ok());            // 8 mips for 64x32
   const auto bgra = parse_dds_layout(with_word(23, 0x00ff0000u), "a.dds");  // BGRA masks
   ASSERT_TRUE(bgra.ok()) << bgra.error().message;
   EXPECT_EQ(bgra->encoding, DdsEncoding::kOther);
@@ -399,7 +398,8 @@ TEST_F(SceneFormatTest, OpenImageIoReadsOurBc1Dds) {
     ASSERT_EQ(in->spec().width, static_cast<int>(e.width));
     ASSERT_EQ(in->spec().height, static_cast<int>(e.height));
     std::vector<uint8_t> px(size_t{e.width} * e.height * static_cast<size_t>(in->spec().nchannels));
-    ASSERT_TRUE(in->read_image(0, static_cast<int>(l), 0, in->spec().nchannels, OIIO::TypeDesc::UINT8, px.data())) << in->geterror();
+    ASSERT_TRUE(in->read_image(0, static_cast<int>(l), 0, in->spec().nchannels, OIIO::TypeDesc::UINT8, px.data()))
+        << in->geterror();
     EXPECT_EQ(px[0], 255);
     EXPECT_EQ(px[1], 0);
     EXPECT_EQ(px[2], 0);

@@ -294,12 +294,12 @@ TEST(DropUnsampled, KeepsExactlyTheMeshesThatCanCoverAPixelCentre) {
     return m;
   };
   std::vector<MeshRecord> meshes = {
-      quad(0.0, 0.0, 100, 1.0f),      // 0: ndc 0 +- 0.01: between the centres at +-0.25 -> dropped
-      quad(25.0, 25.0, 100, 1.0f),    // 1: ndc (0.25, 0.25) +- 0.01: on a centre -> kept
-      quad(0.0, 0.0, 100, 30.0f),     // 2: ndc +-0.3: holds the centres at +-0.25 -> kept
-      quad(50.0, 0.0, 100, 1.0f),     // 3: ndc x 0.5: between 0.25 and 0.75 -> dropped
-      quad(0.0, 0.0, 0.05, 1.0f),     // 4: reaches behind the camera plane -> kept
-      quad(14.1, 25.0, 100, 0.9f),    // 5: pixel x [2.264, 2.300]: 0.2 px short of the centre 2.5 -> dropped
+      quad(0.0, 0.0, 100, 1.0f),    // 0: ndc 0 +- 0.01: between the centres at +-0.25 -> dropped
+      quad(25.0, 25.0, 100, 1.0f),  // 1: ndc (0.25, 0.25) +- 0.01: on a centre -> kept
+      quad(0.0, 0.0, 100, 30.0f),   // 2: ndc +-0.3: holds the centres at +-0.25 -> kept
+      quad(50.0, 0.0, 100, 1.0f),   // 3: ndc x 0.5: between 0.25 and 0.75 -> dropped
+      quad(0.0, 0.0, 0.05, 1.0f),   // 4: reaches behind the camera plane -> kept
+      quad(14.1, 25.0, 100, 0.9f),  // 5: pixel x [2.264, 2.300]: 0.2 px short of the centre 2.5 -> dropped
   };
   const render::BroadPhase bp(meshes);
   std::vector<uint32_t> ids = {0, 1, 2, 3, 4, 5};

@@ -7,10 +7,10 @@
 #include <limits>
 #include <vector>
 
-#include "texstream/common/scene_format.hpp"
 #include "texstream/common/dds.hpp"
-#include "texstream/server/load/server_stats.hpp"
+#include "texstream/common/scene_format.hpp"
 #include "texstream/server/decode/texel_conversion.hpp"
+#include "texstream/server/load/server_stats.hpp"
 #include "texstream/server/load/texture_file_index.hpp"
 
 namespace texstream::server {
@@ -118,8 +118,8 @@ TEST(TexelConversionTest, ChannelCountsExpandToRgba8) {
 TEST(TexelConversionTest, LinearFloatIsSrgbEncodedAndAlphaStaysLinear) {
   EXPECT_EQ(linear_to_srgb8(0.0f), 0);
   EXPECT_EQ(linear_to_srgb8(1.0f), 255);
-  EXPECT_EQ(linear_to_srgb8(0.5f), 188);   // sRGB(0.5) = 0.7354
-  EXPECT_EQ(linear_to_srgb8(0.001f), 3);   // linear segment: 12.92 * 0.001 * 255 = 3.3
+  EXPECT_EQ(linear_to_srgb8(0.5f), 188);  // sRGB(0.5) = 0.7354
+  EXPECT_EQ(linear_to_srgb8(0.001f), 3);  // linear segment: 12.92 * 0.001 * 255 = 3.3
   EXPECT_EQ(linear_to_srgb8(-1.0f), 0);
   EXPECT_EQ(linear_to_srgb8(7.0f), 255);
   const float px[] = {0.5f, 0.5f, 0.5f, 0.5f, std::numeric_limits<float>::quiet_NaN(), 0, 0, 1};
@@ -130,8 +130,8 @@ TEST(TexelConversionTest, LinearFloatIsSrgbEncodedAndAlphaStaysLinear) {
   EXPECT_EQ(std::to_integer<int>(out[4]), 0);    // NaN
 }
 
-// texture_file_path() / texture_file_path_text() build their text by hand (no path appends): it must name exactly the file
-// scene::texture_path() names, with the kind's suffix, for any scene folder spelling and any id.
+// texture_file_path() / texture_file_path_text() build their text by hand (no path appends): it must name exactly the
+// file scene::texture_path() names, with the kind's suffix, for any scene folder spelling and any id.
 TEST(TextureFileIndexTest, FilePathIsTheSceneTexturePathWithTheKindsSuffix) {
   for (const char* dir : {"", "/s", "/s/", "rel/dir", ".", "/a b/c.d", "//x//"}) {
     for (uint32_t id : {0u, 1u, 0xfffu, 0x1000u, 0x1234u, 0xabcdefu, 0x7fffffffu, 0xffffffffu}) {

@@ -252,44 +252,44 @@ TEST(MipCacheTableTest, AgreesWithAReferenceMapUnderRandomInsertsAndErases) {
   // 301 x 4 make it grow several times. A table sized up front (as MipCache sizes it for its budget) must
   // behave the same without growing.
   for (const size_t expected : {size_t{0}, size_t{2000}})
-  for (const uint32_t textures : {8u, 301u}) {
-    MipCacheTable table(expected);
-    std::unordered_map<uint64_t, uint64_t> reference;  // key value -> size
-    std::mt19937 rng(11);
-    // Few keys: keys come back after being erased, and runs of colliding homes form.
-    std::uniform_int_distribution<uint32_t> texture(0, textures - 1), mip(0, 3), action(0, 2);
-    for (int step = 0; step < 20000; ++step) {
-      const MipKey k = key(texture(rng), mip(rng));
-      const bool present = reference.count(k.value) != 0;
-      if (action(rng) != 0 && !present) {
-        MipCacheSlot slot;
-        slot.key = k;
-        slot.size = static_cast<uint64_t>(step) + 1;
-        slot.mip = mip_of(1, 1);
-        MipCacheSlot* placed = table.insert(std::move(slot));
-        ASSERT_EQ(placed->key, k);
-        reference[k.value] = static_cast<uint64_t>(step) + 1;
-      } else {
-        std::shared_ptr<const CachedMip> out;
-        ASSERT_EQ(table.erase(k, out), present) << "step " << step;
-        EXPECT_EQ(out != nullptr, present);
-        reference.erase(k.value);
-      }
-      ASSERT_EQ(table.size(), reference.size());
-      if (textures < 100 || step % 97 == 0) {
-        for (uint32_t t = 0; t < textures; ++t) {
-          for (uint32_t m = 0; m <= 3; ++m) {
-            const MipCacheSlot* e = table.find(key(t, m));
-            auto it = reference.find(key(t, m).value);
-            ASSERT_EQ(e != nullptr, it != reference.end()) << "step " << step << " texture " << t << " mip " << m;
-            if (e) {
-              EXPECT_EQ(e->size, it->second);
+    for (const uint32_t textures : {8u, 301u}) {
+      MipCacheTable table(expected);
+      std::unordered_map<uint64_t, uint64_t> reference;  // key value -> size
+      std::mt19937 rng(11);
+      // Few keys: keys come back after being erased, and runs of colliding homes form.
+      std::uniform_int_distribution<uint32_t> texture(0, textures - 1), mip(0, 3), action(0, 2);
+      for (int step = 0; step < 20000; ++step) {
+        const MipKey k = key(texture(rng), mip(rng));
+        const bool present = reference.count(k.value) != 0;
+        if (action(rng) != 0 && !present) {
+          MipCacheSlot slot;
+          slot.key = k;
+          slot.size = static_cast<uint64_t>(step) + 1;
+          slot.mip = mip_of(1, 1);
+          MipCacheSlot* placed = table.insert(std::move(slot));
+          ASSERT_EQ(placed->key, k);
+          reference[k.value] = static_cast<uint64_t>(step) + 1;
+        } else {
+          std::shared_ptr<const CachedMip> out;
+          ASSERT_EQ(table.erase(k, out), present) << "step " << step;
+          EXPECT_EQ(out != nullptr, present);
+          reference.erase(k.value);
+        }
+        ASSERT_EQ(table.size(), reference.size());
+        if (textures < 100 || step % 97 == 0) {
+          for (uint32_t t = 0; t < textures; ++t) {
+            for (uint32_t m = 0; m <= 3; ++m) {
+              const MipCacheSlot* e = table.find(key(t, m));
+              auto it = reference.find(key(t, m).value);
+              ASSERT_EQ(e != nullptr, it != reference.end()) << "step " << step << " texture " << t << " mip " << m;
+              if (e) {
+                EXPECT_EQ(e->size, it->second);
+              }
             }
           }
         }
       }
     }
-  }
 }
 
 TEST(MipCacheTest, CopyIntoServesTheEntryStillPresentAfterOthersAreEvicted) {

@@ -33,7 +33,7 @@ TEST(NodePoolTest, ReservedBlocksAreHandedOutWithoutGrowingAndReused) {
   EXPECT_EQ(pool.allocate(), blocks[42]);  // the freed block first
   pool.reserve(50);                        // less than held: nothing changes
   EXPECT_EQ(pool.capacity(), 100u);
-  void* more = pool.allocate();            // beyond the reserve: a new chunk
+  void* more = pool.allocate();  // beyond the reserve: a new chunk
   EXPECT_EQ(pool.capacity(), 100u + NodePool::kChunkBlocks);
   EXPECT_EQ(seen.count(more), 0u);
   pool.deallocate(more);
@@ -66,11 +66,11 @@ void check_insert_new(Policy& p) {
   EXPECT_EQ(p.pick_victim(all), key(1));  // least recently used first
   p.touch(a);
   EXPECT_EQ(p.pick_victim(all), key(2));
-  p.on_erase(key(2));                     // not in the key index: a no-op
+  p.on_erase(key(2));  // not in the key index: a no-op
   EXPECT_EQ(p.pick_victim(all), key(2));
   p.erase(b);
   EXPECT_EQ(p.pick_victim(all), key(3));
-  p.on_erase(key(3));                     // key-tracked: gone
+  p.on_erase(key(3));  // key-tracked: gone
   EXPECT_EQ(p.pick_victim(all), key(1));
   p.erase(a);
   EXPECT_FALSE(p.pick_victim(all).has_value());

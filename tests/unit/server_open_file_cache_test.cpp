@@ -18,9 +18,7 @@ class CountedFile final : public StorageFile {
   int* live_;
 };
 
-OpenTextureFile make(int* live, const char* name) {
-  return OpenTextureFile{name, std::make_unique<CountedFile>(live)};
-}
+OpenTextureFile make(int* live, const char* name) { return OpenTextureFile{name, std::make_unique<CountedFile>(live)}; }
 
 TEST(OpenFileCache, TakeReturnsWhatWasHandedBackOnce) {
   int live = 0;

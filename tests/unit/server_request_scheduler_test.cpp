@@ -52,7 +52,7 @@ TEST(RequestSchedulerTest, DuplicateWithLowerPriorityKeepsTheHigherOne) {
 TEST(RequestSchedulerTest, NewerGenerationSupersedesWhatWasNotAskedAgain) {
   RequestScheduler s;
   for (uint32_t t = 0; t < 5; ++t) ASSERT_FALSE(s.add(req(t, 0, 1, static_cast<float>(t))));
-  ASSERT_TRUE(s.add(req(3, 0, 2, 1)));  // re-asked in cycle 2
+  ASSERT_TRUE(s.add(req(3, 0, 2, 1)));   // re-asked in cycle 2
   ASSERT_FALSE(s.add(req(9, 0, 2, 1)));  // new in cycle 2
   std::vector<LoadRequest> cancelled;
   s.supersede_older_than(s.newest_generation(), cancelled);
@@ -101,7 +101,7 @@ TEST(RequestSchedulerTest, AMipAskedAgainAfterBeingSupersededTakesItsNewPriority
   ASSERT_FALSE(s.add(req(2, 0, 2, 5)));
   s.supersede_older_than(Generation(2), cancelled);  // removes (1, 0); its node stays in the heap
   ASSERT_EQ(cancelled.size(), 1u);
-  ASSERT_FALSE(s.add(req(1, 0, 2, 1)));  // asked again, now the least urgent
+  ASSERT_FALSE(s.add(req(1, 0, 2, 1)));   // asked again, now the least urgent
   EXPECT_EQ(s.pop()->texture.value, 2u);  // not (1, 0) at its old priority 9
   EXPECT_EQ(s.pop()->texture.value, 1u);
   EXPECT_TRUE(s.empty());

@@ -25,15 +25,15 @@ TEST(SlotPoolTest, OwnershipFollowsTheRings) {
 
 TEST(SlotPoolTest, UntrustedReleasesAreRefused) {
   SlotPool pool(4);
-  EXPECT_FALSE(pool.release_from_renderer(0));          // the server owns it
-  EXPECT_FALSE(pool.release_from_renderer(4));          // out of range
+  EXPECT_FALSE(pool.release_from_renderer(0));  // the server owns it
+  EXPECT_FALSE(pool.release_from_renderer(4));  // out of range
   EXPECT_FALSE(pool.release_from_renderer(0xffffffffu));
   const auto s = pool.acquire();
   ASSERT_TRUE(s);
-  EXPECT_FALSE(pool.release_from_renderer(*s));         // loading, not the renderer's
+  EXPECT_FALSE(pool.release_from_renderer(*s));  // loading, not the renderer's
   pool.hand_to_renderer(*s);
   EXPECT_TRUE(pool.release_from_renderer(*s));
-  EXPECT_FALSE(pool.release_from_renderer(*s));         // a double release
+  EXPECT_FALSE(pool.release_from_renderer(*s));  // a double release
   EXPECT_EQ(pool.free_count(), 4u);
 }
 

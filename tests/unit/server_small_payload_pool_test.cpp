@@ -26,15 +26,15 @@ TEST(SmallPayloadPoolTest, ServesOnlySizesBelowAnArenaBlock) {
 TEST(SmallPayloadPoolTest, SizesRoundUpToTheirClassAndFreedPayloadsAreReused) {
   SmallPayloadPool pool(4 * kSlab);
   ASSERT_EQ(pool.capacity(), 4 * kSlab);
-  std::byte* a = pool.allocate(4);    // 1x1 RGBA8: the 16-byte class
-  std::byte* b = pool.allocate(16);   // 2x2 RGBA8: the same class, the next block
+  std::byte* a = pool.allocate(4);   // 1x1 RGBA8: the 16-byte class
+  std::byte* b = pool.allocate(16);  // 2x2 RGBA8: the same class, the next block
   ASSERT_NE(a, nullptr);
   ASSERT_NE(b, nullptr);
   EXPECT_TRUE(pool.owns(a));
   EXPECT_EQ(b - a, 16);
   EXPECT_EQ(pool.bytes_in_use(), 32u);
   EXPECT_EQ(pool.slab_bytes(), kSlab);  // one slab for the class so far
-  std::byte* c = pool.allocate(1000);  // the 1 KiB class: a slab of its own
+  std::byte* c = pool.allocate(1000);   // the 1 KiB class: a slab of its own
   ASSERT_NE(c, nullptr);
   EXPECT_EQ(pool.slab_bytes(), 2 * kSlab);
   EXPECT_EQ(reinterpret_cast<uintptr_t>(c) % 1024, 0u);  // aligned to its class
@@ -103,7 +103,7 @@ TEST(SmallPayloadPoolTest, TheAllocatorUsesThePoolUntilItIsFullThenTheHeap) {
   for (int i = 0; i < 2000; ++i) mips.push_back(std::allocate_shared<CachedMip>(SmallPoolAllocator<CachedMip>(pool)));
   EXPECT_GT(pool->bytes_in_use(), 0u);
   EXPECT_LE(pool->bytes_in_use(), kSlab);
-  pool.reset();                 // the control blocks keep the pool alive
+  pool.reset();  // the control blocks keep the pool alive
   EXPECT_FALSE(weak.expired());
   mips.clear();
   EXPECT_TRUE(weak.expired());  // and let it go with the last one

@@ -15,15 +15,15 @@
 #include <string>
 #include <vector>
 
+#include "texstream/common/dds.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texstream/protocol/checksum.hpp"
 #include "texstream/protocol/segment_layout.hpp"
-#include "texstream/common/dds.hpp"
 #include "texstream/server/cache/lru_eviction_policy.hpp"
 #include "texstream/server/cache/mip_cache.hpp"
 #include "texstream/server/load/mip_loader.hpp"
-#include "texstream/server/storage/posix_storage.hpp"
 #include "texstream/server/load/server_stats.hpp"
+#include "texstream/server/storage/posix_storage.hpp"
 
 namespace texstream::server {
 namespace {
@@ -97,8 +97,8 @@ std::span<const std::byte> mip_of(const std::vector<std::byte>& file, const scen
 class TailRead : public ::testing::Test {
  protected:
   void add_texture(uint32_t width, uint32_t height) {
-    record_ = scene::TextureRecord{width, height, full_mip_count(width, height),
-                                   static_cast<uint32_t>(TexelFormat::kRgba8)};
+    record_ =
+        scene::TextureRecord{width, height, full_mip_count(width, height), static_cast<uint32_t>(TexelFormat::kRgba8)};
     file_ = make_dds(width, height, record_.mip_count);
     storage_.files[texture_file_path(kScene, TextureId(0), TextureFileKind::kDds).string()] = file_;
   }
@@ -146,11 +146,12 @@ TEST_F(TailRead, TheCoarsestMipBringsEverySmallMipInOneRead) {
   EXPECT_EQ(cache_.stats().prefetched_bytes, chain - m6.size());
   EXPECT_EQ(cache_.stats().prefetch_hit_bytes, 0u);
   const std::string report = format_stats(stats_, cache_.stats());
-  EXPECT_NE(report.find(fmt::format("6 mips ({} bytes) not used (yet, or before their eviction)", chain - m6.size())), std::string::npos)
+  EXPECT_NE(report.find(fmt::format("6 mips ({} bytes) not used (yet, or before their eviction)", chain - m6.size())),
+            std::string::npos)
       << report;
-  EXPECT_NE(report.find(fmt::format("({:.4f} without the read-ahead not used)",
-                                    static_cast<double>(scene::kDdsHeaderBytes + m6.size()) /
-                                        static_cast<double>(m6.size()))),
+  EXPECT_NE(report.find(
+                fmt::format("({:.4f} without the read-ahead not used)",
+                            static_cast<double>(scene::kDdsHeaderBytes + m6.size()) / static_cast<double>(m6.size()))),
             std::string::npos)
       << report;
   for (uint32_t l = 6; l-- > 0;) expect_hit(l);
@@ -185,7 +186,8 @@ TEST_F(TailRead, AHeldReadServesItsLevelsWithoutTheCacheThenInsertsThemTogether)
     ASSERT_NO_FATAL_FAILURE(expect_delivered(loader_.serve_held(request(l), record_, 0, slot_), l));
   }
   EXPECT_EQ(block_.ram_cache_hits.v.load(), 2u);
-  EXPECT_EQ(stats_.bytes_loaded.load(), m6.size() + mip_of(file_, record_, 5).size() + mip_of(file_, record_, 3).size());
+  EXPECT_EQ(stats_.bytes_loaded.load(),
+            m6.size() + mip_of(file_, record_, 5).size() + mip_of(file_, record_, 3).size());
   // A level served once (or the asked one) is not served from the held read again: the held read goes into
   // the cache and the caller asks the cache, which then has it.
   EXPECT_EQ(loader_.serve_held(request(6), record_, 0, slot_).status, 0u);
@@ -222,7 +224,7 @@ TEST_F(TailRead, ANewHeldReadReleasesThePreviousOneFirst) {
   EXPECT_EQ(stats_.bytes_read.load(), scene::kDdsHeaderBytes + mip_chain_offset(TexelFormat::kRgba8, 64, 64, 7) +
                                           mip_of(file_, record_, 0).size());
   loader_.release_held();
-  loader_.release_held();  // nothing held: a no-op
+  loader_.release_held();                    // nothing held: a no-op
   EXPECT_EQ(cache_.stats().insertions, 7u);  // mip 0's second copy found its key cached (as a raced load)
 }
 
@@ -276,7 +278,7 @@ TEST_F(TailRead, AWrongLayoutGuessIsReadAgainTheOrdinaryWay) {
   put(128, 28);  // DXGI_FORMAT_R8G8B8A8_UNORM
   put(132, 3);   // texture 2D
   put(136, 0);
-  put(140, 1);   // array size
+  put(140, 1);  // array size
   put(144, 0);
   dx10.insert(dx10.end(), file_.begin() + scene::kDdsHeaderBytes, file_.end());
   storage_.files.begin()->second = dx10;

@@ -9,8 +9,8 @@ namespace {
 constexpr uint64_t kMs = 1'000'000;  // ns
 
 TEST(TokenBucketTest, BurstGoesAtOnceThenTheRateHolds) {
-  TokenBucket b(1e6, 100'000);  // 1 MB/s, 100 kB burst
-  EXPECT_EQ(b.take(100'000, 0), 0u);             // the burst
+  TokenBucket b(1e6, 100'000);                    // 1 MB/s, 100 kB burst
+  EXPECT_EQ(b.take(100'000, 0), 0u);              // the burst
   EXPECT_EQ(b.take(50'000, 0), 50 * kMs);         // 50 kB at 1 MB/s: wait 50 ms
   EXPECT_EQ(b.take(50'000, 50 * kMs), 50 * kMs);  // the debt was paid at 50 ms; this one waits another 50
 }

@@ -100,8 +100,10 @@ TEST(SpscRing, TwoThreadStressDeliversEveryRecordInOrder) {
     for (uint32_t i = 0; i < kCount;) {
       RequestRecord r = load(i);
       r.generation = uint64_t{i} * 3 + 1;  // a second field: a torn record would show a mismatch
-      if (p.try_push(r)) ++i;
-      else std::this_thread::yield();
+      if (p.try_push(r))
+        ++i;
+      else
+        std::this_thread::yield();
     }
   });
   uint32_t expected = 0;

@@ -15,11 +15,11 @@
 namespace texstream {
 namespace {
 
-constexpr TextureShape kBig{256, 256, 9, TexelFormat::kRgba8};      // id 0
-constexpr TextureShape kBc1{1024, 1024, 11, TexelFormat::kBc1};     // id 1
-constexpr TextureShape kWide{64, 16, 7, TexelFormat::kRgba8};       // id 2
-constexpr TextureShape kTiny{2, 2, 2, TexelFormat::kRgba8};         // id 3
-constexpr TextureShape kNoMips{256, 256, 0, TexelFormat::kRgba8};   // id 4
+constexpr TextureShape kBig{256, 256, 9, TexelFormat::kRgba8};     // id 0
+constexpr TextureShape kBc1{1024, 1024, 11, TexelFormat::kBc1};    // id 1
+constexpr TextureShape kWide{64, 16, 7, TexelFormat::kRgba8};      // id 2
+constexpr TextureShape kTiny{2, 2, 2, TexelFormat::kRgba8};        // id 3
+constexpr TextureShape kNoMips{256, 256, 0, TexelFormat::kRgba8};  // id 4
 
 constexpr TextureId T0{0}, T1{1}, T2{2}, T3{3}, T4{4};
 constexpr uint64_t kHuge = 1ull << 40;
@@ -61,7 +61,7 @@ TEST(InitialMipLevel, IsTheFourByFourLevel) {
   EXPECT_EQ(stream::initial_mip_level({256, 256, 3, TexelFormat::kRgba8}), 2u);
 }
 
-TEST(stream::TextureStates, StartsInitialAndShapesWithoutMipsAreBroken) {
+TEST(TextureStates, StartsInitialAndShapesWithoutMipsAreBroken) {
   stream::TextureStates s(table());
   EXPECT_EQ(s.view(T0).phase, stream::TexturePhase::kInitial);
   EXPECT_FALSE(s.view(T0).resident.has_value());
@@ -72,7 +72,7 @@ TEST(stream::TextureStates, StartsInitialAndShapesWithoutMipsAreBroken) {
   EXPECT_EQ(c.broken, 1u);
 }
 
-TEST(stream::TextureStates, CoarsestFirstThenOneMipPerCycleDownToBase) {
+TEST(TextureStates, CoarsestFirstThenOneMipPerCycleDownToBase) {
   stream::TextureStates s(table());
   const std::vector<stream::StreamCandidate> list{cand(T0, 0.0f, 7.0f)};
   Recorder rec;
@@ -113,7 +113,7 @@ TEST(stream::TextureStates, CoarsestFirstThenOneMipPerCycleDownToBase) {
   EXPECT_EQ(rec.got.size(), 7u);
 }
 
-TEST(stream::TextureStates, RefinesOnlyWhileSampledPlusBiasIsBelowResident) {
+TEST(TextureStates, RefinesOnlyWhileSampledPlusBiasIsBelowResident) {
   stream::TextureStates s(table());
   Recorder rec;
   // Metadata asks for level 3: 6 → 5 → 4 → 3, then 3 + 0 < 3 is false and it stops.
@@ -142,7 +142,7 @@ TEST(stream::TextureStates, RefinesOnlyWhileSampledPlusBiasIsBelowResident) {
   EXPECT_EQ(s.view(T0).resident, 2u);
 }
 
-TEST(stream::TextureStates, BiasHoldsBackRefinementUntilItDrops) {
+TEST(TextureStates, BiasHoldsBackRefinementUntilItDrops) {
   stream::TextureStates s(table());
   Recorder rec;
   const std::vector<stream::StreamCandidate> list{cand(T0, 2.0f)};
@@ -164,7 +164,7 @@ TEST(stream::TextureStates, BiasHoldsBackRefinementUntilItDrops) {
   EXPECT_TRUE(s.run_cycle(list, kHuge, 0.0f, rec.fn()).sent.empty());
 }
 
-TEST(stream::TextureStates, LoadSizeStopsTheCycleAfterTheMipThatExceedsIt) {
+TEST(TextureStates, LoadSizeStopsTheCycleAfterTheMipThatExceedsIt) {
   // Three Initial textures in weight order: T0 (64 B), T1 (8 B), T2 (16 B).
   const std::vector<stream::StreamCandidate> list{cand(T0, 0, 30), cand(T1, 0, 20), cand(T2, 0, 10)};
   {
@@ -204,7 +204,7 @@ TEST(stream::TextureStates, LoadSizeStopsTheCycleAfterTheMipThatExceedsIt) {
   }
 }
 
-TEST(stream::TextureStates, MaxRequestsCapsTheCycle) {
+TEST(TextureStates, MaxRequestsCapsTheCycle) {
   stream::TextureStates s(table());
   Recorder rec;
   const std::vector<stream::StreamCandidate> list{cand(T0, 0), cand(T1, 0), cand(T2, 0)};
@@ -219,7 +219,7 @@ TEST(stream::TextureStates, MaxRequestsCapsTheCycle) {
   EXPECT_FALSE(r.stopped_by_count);
 }
 
-TEST(stream::TextureStates, TexturesWithNothingToLoadDoNotEndTheCycle) {
+TEST(TextureStates, TexturesWithNothingToLoadDoNotEndTheCycle) {
   stream::TextureStates s(table());
   Recorder rec;
   // T0 is pending after the first cycle; it must not stop T1 behind it even with s = 0.
@@ -231,7 +231,7 @@ TEST(stream::TextureStates, TexturesWithNothingToLoadDoNotEndTheCycle) {
   EXPECT_EQ(r.sent[0].bytes, 8u) << "a BC1 4x4 level is one 8-byte block";
 }
 
-TEST(stream::TextureStates, SmallerThanFourByFourGoesStraightToFinal) {
+TEST(TextureStates, SmallerThanFourByFourGoesStraightToFinal) {
   stream::TextureStates s(table());
   Recorder rec;
   auto r = s.run_cycle(std::vector<stream::StreamCandidate>{cand(T3, 0)}, kHuge, 0, rec.fn());
@@ -248,7 +248,7 @@ TEST(stream::TextureStates, SmallerThanFourByFourGoesStraightToFinal) {
   EXPECT_EQ(s.view(T3).resident, 0u);
 }
 
-TEST(stream::TextureStates, TransientFailuresRollBackAndRetry) {
+TEST(TextureStates, TransientFailuresRollBackAndRetry) {
   stream::TextureStates s(table());
   Recorder rec;
   const std::vector<stream::StreamCandidate> list{cand(T0, 0)};
@@ -284,7 +284,7 @@ TEST(stream::TextureStates, TransientFailuresRollBackAndRetry) {
   EXPECT_EQ(mips_of(s.run_cycle(list, kHuge, 0, rec.fn())), std::vector<uint32_t>{0});
 }
 
-TEST(stream::TextureStates, NotFoundAndCorruptBreakTheTextureForTheSession) {
+TEST(TextureStates, NotFoundAndCorruptBreakTheTextureForTheSession) {
   for (CompletionStatus st : {CompletionStatus::kNotFound, CompletionStatus::kCorrupt}) {
     stream::TextureStates s(table());
     Recorder rec;
@@ -305,7 +305,7 @@ TEST(stream::TextureStates, NotFoundAndCorruptBreakTheTextureForTheSession) {
   }
 }
 
-TEST(stream::TextureStates, RepeatedIoErrorsOrRejectsBreakTheTextureButACommitResetsTheCount) {
+TEST(TextureStates, RepeatedIoErrorsOrRejectsBreakTheTextureButACommitResetsTheCount) {
   stream::TextureStates s(table());
   Recorder rec;
   const std::vector<stream::StreamCandidate> list{cand(T0, 0)};
@@ -327,7 +327,7 @@ TEST(stream::TextureStates, RepeatedIoErrorsOrRejectsBreakTheTextureButACommitRe
   EXPECT_EQ(s.view(T0).resident, 6u) << "what is resident stays displayable";
 }
 
-TEST(stream::TextureStates, EvictionResetsToInitialAndRefusesTheLateAnswer) {
+TEST(TextureStates, EvictionResetsToInitialAndRefusesTheLateAnswer) {
   stream::TextureStates s(table());
   Recorder rec;
   const std::vector<stream::StreamCandidate> list{cand(T0, 0)};
@@ -356,7 +356,7 @@ TEST(stream::TextureStates, EvictionResetsToInitialAndRefusesTheLateAnswer) {
 
 // The frame loop hands the cache's events over in one list (TextureCache::take_events): the same states as
 // the calls one by one, in the same order.
-TEST(stream::TextureStates, ApplyingEventsEqualsTheCallsInOrder) {
+TEST(TextureStates, ApplyingEventsEqualsTheCallsInOrder) {
   stream::TextureStates direct(table()), applied(table());
   Recorder rec;
   const std::vector<stream::StreamCandidate> list{cand(T0, 0), cand(T1, 0), cand(T2, 0)};
@@ -368,10 +368,10 @@ TEST(stream::TextureStates, ApplyingEventsEqualsTheCallsInOrder) {
   direct.on_committed(T0, MipLevel(6));  // a late answer, refused after the invalidate
   using K = stream::TextureEvent::Kind;
   applied.apply(std::vector<stream::TextureEvent>{{K::kCommitted, T0, MipLevel(6)},
-                                          {K::kFailed, T1, MipLevel(8), CompletionStatus::kIoError},
-                                          {K::kRejected, T2, MipLevel(4)},
-                                          {K::kInvalidated, T0},
-                                          {K::kCommitted, T0, MipLevel(6)}});
+                                                  {K::kFailed, T1, MipLevel(8), CompletionStatus::kIoError},
+                                                  {K::kRejected, T2, MipLevel(4)},
+                                                  {K::kInvalidated, T0},
+                                                  {K::kCommitted, T0, MipLevel(6)}});
   for (TextureId t : {T0, T1, T2}) {
     const stream::TextureStateView a = direct.view(t), b = applied.view(t);
     EXPECT_EQ(a.phase, b.phase) << t.value;
@@ -384,7 +384,7 @@ TEST(stream::TextureStates, ApplyingEventsEqualsTheCallsInOrder) {
   EXPECT_EQ(applied.view(T2).failures, 1u);
 }
 
-TEST(stream::TextureStates, SenderSkipLeavesTheTextureAloneAndStopEndsTheCycle) {
+TEST(TextureStates, SenderSkipLeavesTheTextureAloneAndStopEndsTheCycle) {
   stream::TextureStates s(table());
   const std::vector<stream::StreamCandidate> list{cand(T0, 0), cand(T1, 0), cand(T2, 0)};
   std::vector<uint32_t> offered;
@@ -403,12 +403,12 @@ TEST(stream::TextureStates, SenderSkipLeavesTheTextureAloneAndStopEndsTheCycle) 
   EXPECT_EQ(s.view(T1).phase, stream::TexturePhase::kActive);
 }
 
-TEST(stream::TextureStates, DuplicateEntriesUnknownIdsAndNaNAreHarmless) {
+TEST(TextureStates, DuplicateEntriesUnknownIdsAndNaNAreHarmless) {
   stream::TextureStates s(table());
   Recorder rec;
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const std::vector<stream::StreamCandidate> list{cand(T0, 0, 9), cand(TextureId(77), 0, 8), cand(T0, 0, 7),
-                                          cand(TextureId(0xffffffffu), 0, 6)};
+                                                  cand(TextureId(0xffffffffu), 0, 6)};
   auto r = s.run_cycle(list, kHuge, 0, rec.fn());
   ASSERT_EQ(r.sent.size(), 1u) << "one request per texture per cycle";
   EXPECT_FLOAT_EQ(r.sent[0].priority, 9.0f) << "the heaviest entry decides the priority";
@@ -420,7 +420,7 @@ TEST(stream::TextureStates, DuplicateEntriesUnknownIdsAndNaNAreHarmless) {
   s.invalidate(TextureId(77));  // ignored
 }
 
-TEST(stream::TextureStates, EventsForMipsThatAreNotPendingAreRefused) {
+TEST(TextureStates, EventsForMipsThatAreNotPendingAreRefused) {
   stream::TextureStates s(table());
   Recorder rec;
   EXPECT_FALSE(s.on_committed(T0, MipLevel(6))) << "nothing was asked";
@@ -434,7 +434,7 @@ TEST(stream::TextureStates, EventsForMipsThatAreNotPendingAreRefused) {
   EXPECT_FALSE(s.on_committed(T0, MipLevel(6))) << "a second commit of the same mip";
 }
 
-TEST(stream::TextureStates, CountsFollowThePhases) {
+TEST(TextureStates, CountsFollowThePhases) {
   stream::TextureStates s(table());
   Recorder rec;
   (void)s.run_cycle(std::vector<stream::StreamCandidate>{cand(T0, 0), cand(T3, 0)}, kHuge, 0, rec.fn());
@@ -443,7 +443,7 @@ TEST(stream::TextureStates, CountsFollowThePhases) {
   EXPECT_EQ(c.active, 1u);   // T0
   EXPECT_EQ(c.final, 1u);    // T3
   EXPECT_EQ(c.pending, 2u);
-  EXPECT_EQ(c.broken, 1u);   // T4
+  EXPECT_EQ(c.broken, 1u);  // T4
 }
 
 }  // namespace

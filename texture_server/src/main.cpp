@@ -17,9 +17,9 @@
 #include <sys/prctl.h>
 #include <unistd.h>
 
-#include <CLI/CLI.hpp>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
+#include <CLI/CLI.hpp>
 
 #include <atomic>
 #include <chrono>
@@ -224,11 +224,12 @@ int main(int argc, char** argv) {
       spdlog::error("{}", server.error().message);
       return kExitBadArguments;
     }
-    spdlog::info("serving segment '{}' (epoch {:016x}) from scene '{}' ({} workers, RAM cache {} bytes, {} policy, "
-                 "rate limit {} MB/s)",
-                 segment_name, current->header().epoch, config->scene.dir, config->server.worker_threads,
-                 server_config.ram_cache_bytes, texstream::choice_name(config->server.cache_policy),
-                 config->server.rate_limit_mb_s);
+    spdlog::info(
+        "serving segment '{}' (epoch {:016x}) from scene '{}' ({} workers, RAM cache {} bytes, {} policy, "
+        "rate limit {} MB/s)",
+        segment_name, current->header().epoch, config->scene.dir, config->server.worker_threads,
+        server_config.ram_cache_bytes, texstream::choice_name(config->server.cache_policy),
+        config->server.rate_limit_mb_s);
     texstream::server::RunOutcome outcome = (*server)->run(g_stop, &g_print_stats);
     if (outcome == texstream::server::RunOutcome::kSegmentBusy) {
       // Another server holds the segment (run() touched nothing). Spawned, this one is not needed. Standalone,
@@ -240,8 +241,7 @@ int main(int argc, char** argv) {
         spdlog::error("segment '{}' is already served by texstream-server pid {}", segment_name, holder);
         return kExitSegment;
       }
-      spdlog::warn("segment '{}' is served by texstream-server pid {}; waiting until it is free", segment_name,
-                   holder);
+      spdlog::warn("segment '{}' is served by texstream-server pid {}; waiting until it is free", segment_name, holder);
       const std::optional<texstream::server::RunOutcome> ended = wait_until_free(*current);
       if (!ended) continue;
       outcome = *ended;

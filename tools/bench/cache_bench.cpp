@@ -24,6 +24,7 @@
 #include <stb_image.h>
 #include <vulkan/vulkan.h>
 
+#include <unistd.h>
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -34,7 +35,6 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
-#include <unistd.h>
 #include <vector>
 
 #include "bench_registry.hpp"
@@ -110,7 +110,8 @@ Status derive_texture_subset(const fs::path& src, const fs::path& dst, uint32_t 
   auto colours = scene::read_colormap(src, table->size());
   if (!colours) return colours.error();
   if (table->size() < textures)
-    return make_error(ErrorCode::kInvalidArgument, src.string() + ": fewer than " + std::to_string(textures) + " textures");
+    return make_error(ErrorCode::kInvalidArgument,
+                      src.string() + ": fewer than " + std::to_string(textures) + " textures");
   std::error_code ec;
   fs::remove_all(dst, ec);
   fs::create_directories(dst, ec);
@@ -236,7 +237,8 @@ double raw_bind_seconds_per_op(const Ctx& c, const std::vector<uint32_t>& sizes,
     VkSparseImageMemoryBind b{};
     const uint32_t layer = (i / per_layer) % 64, p = i % per_layer, cols = 512 / g.granularity_w;
     b.subresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, layer};
-    b.offset = {static_cast<int32_t>((p % cols) * g.granularity_w), static_cast<int32_t>((p / cols) * g.granularity_h), 0};
+    b.offset = {static_cast<int32_t>((p % cols) * g.granularity_w), static_cast<int32_t>((p / cols) * g.granularity_h),
+                0};
     b.extent = {g.granularity_w, g.granularity_h, 1};
     if (bind) {
       b.memory = mem;
@@ -325,7 +327,7 @@ ReplayResult raw_replay_seconds_per_op(const Ctx& c, const nlohmann::json& cache
     std::fprintf(stderr, "cache bench: %s\n", ctx.error().message.c_str());
     return out;
   }
-  auto sm = SparseMemory::create(**ctx, info);  // the image only: its memory blocks stay unallocated
+  auto sm = SparseMemory::create(**ctx, info);    // the image only: its memory blocks stay unallocated
   auto ours = SparseMemory::create(**ctx, info);  // a second image, bound through SparseMemory::submit
   if (!sm || !ours) {
     std::fprintf(stderr, "cache bench: %s\n", (!sm ? sm : ours).error().message.c_str());
@@ -349,7 +351,8 @@ ReplayResult raw_replay_seconds_per_op(const Ctx& c, const nlohmann::json& cache
   uint64_t largest = 4;
   for (const auto& frame : trace)
     for (const auto& cp : frame.value("copies", nlohmann::json::array()))
-      if (cp.is_array() && cp.size() == 6) largest = std::max(largest, cp[4].get<uint64_t>() * cp[5].get<uint64_t>() * 4);
+      if (cp.is_array() && cp.size() == 6)
+        largest = std::max(largest, cp[4].get<uint64_t>() * cp[5].get<uint64_t>() * 4);
   VkBufferCreateInfo bci{};
   bci.sType = VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO;
   bci.size = largest;
@@ -443,12 +446,14 @@ ReplayResult raw_replay_seconds_per_op(const Ctx& c, const nlohmann::json& cache
       const auto slot = op[4].get<int64_t>();
       if (layer >= info.layers || mip >= info.mip_levels) continue;
       if (slot >= 0 && static_cast<uint64_t>(slot) >= (*ours)->slot_count()) continue;
-      our_ops.push_back(PageBindOp{PageLocation{layer, mip, x, y}, slot >= 0, slot >= 0 ? static_cast<uint32_t>(slot) : 0u});
+      our_ops.push_back(
+          PageBindOp{PageLocation{layer, mip, x, y}, slot >= 0, slot >= 0 ? static_cast<uint32_t>(slot) : 0u});
       const uint32_t level = std::max(info.extent >> mip, 1u);
       VkSparseImageMemoryBind b{};
       b.subresource = {VK_IMAGE_ASPECT_COLOR_BIT, mip, layer};
       b.offset = {static_cast<int32_t>(x * g.granularity_w), static_cast<int32_t>(y * g.granularity_h), 0};
-      b.extent = {std::min(g.granularity_w, level - x * g.granularity_w), std::min(g.granularity_h, level - y * g.granularity_h), 1};
+      b.extent = {std::min(g.granularity_w, level - x * g.granularity_w),
+                  std::min(g.granularity_h, level - y * g.granularity_h), 1};
       if (slot >= 0) {
         const auto s = static_cast<uint64_t>(slot);
         if (s / per_block >= blocks.size()) continue;
@@ -583,11 +588,12 @@ int run_cache(const CacheArgs& args) {
     settled_psnr = psnr(mse(a, b));
   }
   const auto conv_sum = read_json(conv_out / "summary.json");
-  std::printf("convergence: streamed frame %llu vs the preload_all reference frame (every mip of every texture "
-              "resident) of the same static view: PSNR %.2f dB (%s of %s textures resident when streamed)\n",
-              static_cast<unsigned long long>(n_conv - 1), converged_psnr,
-              conv_sum.value("textures_resident", nlohmann::json(0)).dump().c_str(),
-              conv_sum.value("texture_count", nlohmann::json(0)).dump().c_str());
+  std::printf(
+      "convergence: streamed frame %llu vs the preload_all reference frame (every mip of every texture "
+      "resident) of the same static view: PSNR %.2f dB (%s of %s textures resident when streamed)\n",
+      static_cast<unsigned long long>(n_conv - 1), converged_psnr,
+      conv_sum.value("textures_resident", nlohmann::json(0)).dump().c_str(),
+      conv_sum.value("texture_count", nlohmann::json(0)).dump().c_str());
   std::printf("convergence: streamed frame %llu vs streamed frame %llu of the same run settings: PSNR %.2f dB\n",
               static_cast<unsigned long long>(n_conv - 1), static_cast<unsigned long long>(3 * n_conv - 1),
               settled_psnr);
@@ -596,30 +602,34 @@ int run_cache(const CacheArgs& args) {
   // 64 pages (4 MiB) beyond the device's mip tail: far below the view's working set.
   const uint64_t tail = mip_tail_bytes(c, 64);
   const uint64_t budget = (4ull << 20) + tail;
-  if (tail > 0) std::printf("bounds: this device's mip tail for 64 layers: %llu B (added to the budget)\n", (unsigned long long)tail);
+  if (tail > 0)
+    std::printf("bounds: this device's mip tail for 64 layers: %llu B (added to the budget)\n",
+                (unsigned long long)tail);
   const fs::path thrash_out = c.work / "thrash";
   const bool validate = validation_layer_installed();
   if (!validate) std::printf("bounds: VK_LAYER_KHRONOS_validation is not installed here: run without validation\n");
   auto thrash_sets = with({"cache.memory_bytes=" + std::to_string(budget), "cache.layers=64",
-                           std::string("render.validation=") + (validate ? "true" : "false"), "render.frames=" + std::to_string(quick ? 60 : 200),
-                           "render.write_every_frames=0"});
+                           std::string("render.validation=") + (validate ? "true" : "false"),
+                           "render.frames=" + std::to_string(quick ? 60 : 200), "render.write_every_frames=0"});
   const int thrash_rc = render(c, scene, thrash_out, thrash_sets);
   const auto tj = read_json(thrash_out / "cache.json");
   const auto ts = read_json(thrash_out / "summary.json");
   const uint64_t exceeded = tj.value("budget_exceeded_frames", uint64_t{999999});
   const uint64_t max_bound = tj.value("max_bound_bytes", uint64_t{0});
   const uint64_t validation = ts.value("validation_errors", uint64_t{999999});
-  std::printf("bounds: budget %llu B, max bound %llu B over %llu frames, budget_exceeded_frames=%llu, allocated %llu B, "
-              "validation errors %llu, exit %d\n",
-              (unsigned long long)budget, (unsigned long long)max_bound, (unsigned long long)tj.value("frames", 0ull),
-              (unsigned long long)exceeded, (unsigned long long)tj.value("allocated_bytes", 0ull),
-              (unsigned long long)validation, thrash_rc);
-  std::printf("bounds: thrash rate %.3f (%llu of %llu texture loads were reloads after eviction), %llu layers "
-              "evicted for the budget, %llu pages bound, %llu unbound, %llu shared acquisitions\n",
-              tj.value("thrash_rate", 0.0), (unsigned long long)tj.value("texture_reloads", 0ull),
-              (unsigned long long)tj.value("texture_loads", 0ull), (unsigned long long)tj.value("budget_evicted_layers", 0ull),
-              (unsigned long long)tj.value("pages_bound", 0ull), (unsigned long long)tj.value("pages_unbound", 0ull),
-              (unsigned long long)tj.value("pages_shared", 0ull));
+  std::printf(
+      "bounds: budget %llu B, max bound %llu B over %llu frames, budget_exceeded_frames=%llu, allocated %llu B, "
+      "validation errors %llu, exit %d\n",
+      (unsigned long long)budget, (unsigned long long)max_bound, (unsigned long long)tj.value("frames", 0ull),
+      (unsigned long long)exceeded, (unsigned long long)tj.value("allocated_bytes", 0ull),
+      (unsigned long long)validation, thrash_rc);
+  std::printf(
+      "bounds: thrash rate %.3f (%llu of %llu texture loads were reloads after eviction), %llu layers "
+      "evicted for the budget, %llu pages bound, %llu unbound, %llu shared acquisitions\n",
+      tj.value("thrash_rate", 0.0), (unsigned long long)tj.value("texture_reloads", 0ull),
+      (unsigned long long)tj.value("texture_loads", 0ull), (unsigned long long)tj.value("budget_evicted_layers", 0ull),
+      (unsigned long long)tj.value("pages_bound", 0ull), (unsigned long long)tj.value("pages_unbound", 0ull),
+      (unsigned long long)tj.value("pages_shared", 0ull));
 
   // ---- bind cost: the thrash run again without the validation layer (it checks every bind) ----
   const fs::path bind_out = c.work / "bindcost";
@@ -639,15 +649,19 @@ int run_cache(const CacheArgs& args) {
   const double ratio_in_run = ours > 0 && replay.seconds_per_op > 0 ? ours / replay.seconds_per_op : -1;
   std::printf("bind cost: ours %.2f us/page over %zu calls (%llu ops; the calls and waits alone %.2f us/page)\n",
               ours * 1e6, sizes.size(), (unsigned long long)bj.value("bind_ops", 0ull), ours_call * 1e6);
-  std::printf("bind cost: replay of the run's first %zu calls (%llu ops, the run's copies written between calls), "
-              "interleaved: SparseMemory::submit %.2f us/page, bare vkQueueBindSparse %.2f us/page: ratio %.3f\n",
-              replay.calls, (unsigned long long)replay.ops, replay.ours_seconds_per_op * 1e6,
-              replay.seconds_per_op * 1e6, ratio);
-  std::printf("bind cost: the renderer's own figure over the replay's bare one (other process, other moment on a "
-              "shared machine): %.3f\n", ratio_in_run);
-  std::printf("bind cost: raw level-0 pages never written, same batch sizes %.2f us/page (ratio against it %.3f; "
-              "not the same operation: see raw_replay_seconds_per_op)\n",
-              raw_sizes * 1e6, ours > 0 && raw_sizes > 0 ? ours / raw_sizes : -1.0);
+  std::printf(
+      "bind cost: replay of the run's first %zu calls (%llu ops, the run's copies written between calls), "
+      "interleaved: SparseMemory::submit %.2f us/page, bare vkQueueBindSparse %.2f us/page: ratio %.3f\n",
+      replay.calls, (unsigned long long)replay.ops, replay.ours_seconds_per_op * 1e6, replay.seconds_per_op * 1e6,
+      ratio);
+  std::printf(
+      "bind cost: the renderer's own figure over the replay's bare one (other process, other moment on a "
+      "shared machine): %.3f\n",
+      ratio_in_run);
+  std::printf(
+      "bind cost: raw level-0 pages never written, same batch sizes %.2f us/page (ratio against it %.3f; "
+      "not the same operation: see raw_replay_seconds_per_op)\n",
+      raw_sizes * 1e6, ours > 0 && raw_sizes > 0 ? ours / raw_sizes : -1.0);
 
   // ---- pop-in (seed 000 Fig. 7) ----
   const uint64_t n_pop = quick ? 12 : 16;
@@ -671,7 +685,8 @@ int run_cache(const CacheArgs& args) {
     std::printf("\n");
   }
   std::printf("pop-in: max MSE between consecutive frames over %llu frames: direct %.2f, Eq. 8 blend %.2f (%.1f %%)\n",
-              (unsigned long long)n_pop, popin[0], popin[1], popin[0] > 0 ? 100.0 * (popin[1] - popin[0]) / popin[0] : 0.0);
+              (unsigned long long)n_pop, popin[0], popin[1],
+              popin[0] > 0 ? 100.0 * (popin[1] - popin[0]) / popin[0] : 0.0);
 
   // ---- startup: 1 K vs 1 M textures, same view ----
   // Two comparisons, both from the 1 M scene's first keyframe. (a) Same view: the 1 M city with only 1 K
@@ -692,8 +707,8 @@ int run_cache(const CacheArgs& args) {
       std::fprintf(stderr, "cache bench: %s\n", st.error().message.c_str());
       return 1;
     }
-    const std::array<std::pair<const char*, fs::path>, 3> scenes{{
-        {"1m", scale1m}, {"1m_geometry_1k_textures", same_view_1k}, {"1k_city", scene1k}}};
+    const std::array<std::pair<const char*, fs::path>, 3> scenes{
+        {{"1m", scale1m}, {"1m_geometry_1k_textures", same_view_1k}, {"1k_city", scene1k}}};
     std::array<double, 3> best{1e30, 1e30, 1e30};
     bool ok = true;
     for (int run = -1; run < kStartupRuns && ok; ++run) {
@@ -704,12 +719,14 @@ int run_cache(const CacheArgs& args) {
       }
     }
     if (ok && best[1] > 0) startup_ratio = best[0] / best[1];
-    std::printf("startup (a) same view: start to first frame (process wall time, frames = 1, fastest of %d): "
-                "1 M city with 1 K textures %.3f s, with its 1 M textures %.3f s, ratio %.2f\n",
-                kStartupRuns, best[1], best[0], startup_ratio);
-    std::printf("startup (b) two cities, same pose: 1 K-texture city %.3f s, 1 M-texture city %.3f s, ratio %.2f "
-                "(the 1 M city shows far more meshes from that pose)\n",
-                best[2], best[0], best[2] > 0 ? best[0] / best[2] : -1.0);
+    std::printf(
+        "startup (a) same view: start to first frame (process wall time, frames = 1, fastest of %d): "
+        "1 M city with 1 K textures %.3f s, with its 1 M textures %.3f s, ratio %.2f\n",
+        kStartupRuns, best[1], best[0], startup_ratio);
+    std::printf(
+        "startup (b) two cities, same pose: 1 K-texture city %.3f s, 1 M-texture city %.3f s, ratio %.2f "
+        "(the 1 M city shows far more meshes from that pose)\n",
+        best[2], best[0], best[2] > 0 ? best[0] / best[2] : -1.0);
     // Stage by stage (the renderer's summary.json of the last timed run): which stages grow.
     std::array<nlohmann::json, 3> st;
     std::array<double, 3> first{};

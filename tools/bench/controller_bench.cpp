@@ -39,12 +39,12 @@ namespace {
 using controller_stress::Rng;
 
 struct PlantOptions {
-  double duration_s = 68.6;          // seed 000 §4.1: the Berlin fly-through lasts 68.6 s
-  size_t visible = 20000;            // textures in view at once (a bird's-eye view of a city)
-  double replace_per_s = 2000;       // textures leaving/entering the view per second while the camera moves
-  double pauses_s[4] = {6, 20, 35, 50};      // §4.1: "the camera will pause for 2 s" at four points
+  double duration_s = 68.6;              // seed 000 §4.1: the Berlin fly-through lasts 68.6 s
+  size_t visible = 20000;                // textures in view at once (a bird's-eye view of a city)
+  double replace_per_s = 2000;           // textures leaving/entering the view per second while the camera moves
+  double pauses_s[4] = {6, 20, 35, 50};  // §4.1: "the camera will pause for 2 s" at four points
   double pause_length_s = 2.0;
-  double switches_s[4] = {13, 28, 43, 58};   // §4.1: "immediately switch to a new view" at four points
+  double switches_s[4] = {13, 28, 43, 58};  // §4.1: "immediately switch to a new view" at four points
   // Frame cost without streaming: Table 3's median frame latency is 4.5-6.8 ms on the seed's system.
   double base_ms = 5.0;
   double density_swing_ms = 1.0;     // dense vs sparse city areas: a slow ±1 ms swing (period 23 s)
@@ -60,15 +60,15 @@ struct PlantOptions {
   // 6.8 ms, max 471 ms, stutter "after about 5 s" as the cache fills); the adaptive runs are not tuned for.
   double bind_ms_per_page = 0.05;
   double bind_batch_pages = 50;
-  double bind_resident_pages = 4096; // per-page cost × (1 + pages in the cache / this)
-  double cache_pages = 32768;        // the sparse cache: 2 GiB of 64 KiB blocks; full, blocks are recycled
+  double bind_resident_pages = 4096;  // per-page cost × (1 + pages in the cache / this)
+  double cache_pages = 32768;         // the sparse cache: 2 GiB of 64 KiB blocks; full, blocks are recycled
   // Sparse block size (Table 2's s_min). Pages are counted as bytes / 64 KiB: textures share a layer's
   // blocks, and mips below a block live in the layer's mip tail, bound once.
   double page_bytes = 65536;
   // Loading inside the cycle (reads + staging): per-mip overhead plus bandwidth, cut at the load time.
   double load_us_per_mip = 8;
   double load_gb_per_s = 1.0;
-  double tau_px2 = 150;              // Table 2 τ: meshes below this weight (≈ pixels) are not streamed
+  double tau_px2 = 150;  // Table 2 τ: meshes below this weight (≈ pixels) are not streamed
 };
 
 // BC1 bytes of mip `level` of a 2^e x 2^e texture: 8 bytes per 4x4 block, at least one block.
@@ -85,12 +85,12 @@ uint64_t hash64(uint64_t a, uint64_t b) {
 double hash_unit(uint64_t a, uint64_t b) { return static_cast<double>(hash64(a, b) >> 11) * 0x1.0p-53; }
 
 struct Texture {
-  int e = 7;             // extent 2^e
-  float desired = 0;     // mipLevelSampled (fractional)
-  float weight = 0;      // ≈ fragment count
-  int resident = -1;     // finest loaded level, -1: Initial
+  int e = 7;          // extent 2^e
+  float desired = 0;  // mipLevelSampled (fractional)
+  float weight = 0;   // ≈ fragment count
+  int resident = -1;  // finest loaded level, -1: Initial
   bool final = false;
-  uint32_t bucket = 0;   // priority bucket and position in it (see Plant)
+  uint32_t bucket = 0;  // priority bucket and position in it (see Plant)
   uint32_t pos = 0;
 };
 
@@ -289,15 +289,21 @@ bool set_plant_option(PlantOptions& po, const std::string& kv) {
     double* value;
   };
   double visible = static_cast<double>(po.visible);
-  const Field fields[] = {
-      {"replace_per_s", &po.replace_per_s},       {"base_ms", &po.base_ms},
-      {"density_swing_ms", &po.density_swing_ms}, {"noise_ms", &po.noise_ms},
-      {"stutter_per_frame", &po.stutter_per_frame}, {"stutter_max_ms", &po.stutter_max_ms},
-      {"upload_ms_per_mb", &po.upload_ms_per_mb}, {"bind_ms_per_page", &po.bind_ms_per_page},
-      {"bind_batch_pages", &po.bind_batch_pages}, {"bind_resident_pages", &po.bind_resident_pages},
-      {"cache_pages", &po.cache_pages},
-      {"load_us_per_mip", &po.load_us_per_mip},   {"load_gb_per_s", &po.load_gb_per_s},
-      {"duration_s", &po.duration_s},             {"visible", &visible}};
+  const Field fields[] = {{"replace_per_s", &po.replace_per_s},
+                          {"base_ms", &po.base_ms},
+                          {"density_swing_ms", &po.density_swing_ms},
+                          {"noise_ms", &po.noise_ms},
+                          {"stutter_per_frame", &po.stutter_per_frame},
+                          {"stutter_max_ms", &po.stutter_max_ms},
+                          {"upload_ms_per_mb", &po.upload_ms_per_mb},
+                          {"bind_ms_per_page", &po.bind_ms_per_page},
+                          {"bind_batch_pages", &po.bind_batch_pages},
+                          {"bind_resident_pages", &po.bind_resident_pages},
+                          {"cache_pages", &po.cache_pages},
+                          {"load_us_per_mip", &po.load_us_per_mip},
+                          {"load_gb_per_s", &po.load_gb_per_s},
+                          {"duration_s", &po.duration_s},
+                          {"visible", &visible}};
   const size_t eq = kv.find('=');
   const std::string key = kv.substr(0, eq);
   char* end = nullptr;
@@ -340,18 +346,21 @@ int run_controller(const ControllerArgs& args) {
   so.seed = seed;
   Stopwatch sw;
   const auto stress = controller_stress::run_stress(so);
-  std::printf("stress: %llu sequences, %llu steps (%llu inputs rejected as NaN/inf/negative/absurd), %llu bad outputs, %.1f s\n",
-              static_cast<unsigned long long>(stress.sequences), static_cast<unsigned long long>(stress.steps),
-              static_cast<unsigned long long>(stress.inputs_rejected),
-              static_cast<unsigned long long>(stress.bad_outputs), sw.seconds());
+  std::printf(
+      "stress: %llu sequences, %llu steps (%llu inputs rejected as NaN/inf/negative/absurd), %llu bad outputs, %.1f "
+      "s\n",
+      static_cast<unsigned long long>(stress.sequences), static_cast<unsigned long long>(stress.steps),
+      static_cast<unsigned long long>(stress.inputs_rejected), static_cast<unsigned long long>(stress.bad_outputs),
+      sw.seconds());
   if (!stress.first_failure.empty()) std::printf("  first failure: %s\n", stress.first_failure.c_str());
   const uint64_t drift_steps = skip_stress ? 0 : quick ? 10000000ull : 100000000ull;
   sw.reset();
   const auto drift = controller_stress::run_drift(drift_steps, seed);
-  std::printf("drift: %llu steps, %llu checkpoints: max |t_wa - exact| = %.3g s, max |t_b - exact| = %.3g s "
-              "(a double running sum: %.3g s), %.1f s\n",
-              static_cast<unsigned long long>(drift.steps), static_cast<unsigned long long>(drift.checkpoints),
-              drift.max_twa_error_s, drift.max_tb_error_s, drift.max_naive_twa_error_s, sw.seconds());
+  std::printf(
+      "drift: %llu steps, %llu checkpoints: max |t_wa - exact| = %.3g s, max |t_b - exact| = %.3g s "
+      "(a double running sum: %.3g s), %.1f s\n",
+      static_cast<unsigned long long>(drift.steps), static_cast<unsigned long long>(drift.checkpoints),
+      drift.max_twa_error_s, drift.max_tb_error_s, drift.max_naive_twa_error_s, sw.seconds());
   const bool drift_ok = drift.max_twa_error_s <= 1e-12 && drift.max_tb_error_s <= 1e-12;
 
   // (b) closed loop
@@ -375,16 +384,18 @@ int run_controller(const ControllerArgs& args) {
     if (alpha_ms == 16.0) at16 = std::move(r);
   }
   const Comparison c16 = compare(base, at16);
-  std::printf("\nalpha=16ms vs baseline: max frame latency %.1f -> %.1f ms (reduction %.1f %%, goal >= 80 %%), "
-              "MB/s ratio %.2f (goal >= 0.5)\n",
-              c16.base_max_ms, c16.max_ms, 100 * c16.reduction, c16.ratio);
+  std::printf(
+      "\nalpha=16ms vs baseline: max frame latency %.1f -> %.1f ms (reduction %.1f %%, goal >= 80 %%), "
+      "MB/s ratio %.2f (goal >= 0.5)\n",
+      c16.base_max_ms, c16.max_ms, 100 * c16.reduction, c16.ratio);
 
   if (!quick) {
     // How much the figures depend on the seed (the maximum is one frame) and on the plant.
     std::printf("\nsensitivity (alpha=16ms vs baseline):\n");
     for (uint64_t sd = seed + 1; sd <= seed + 4; ++sd) {
-      const Comparison c = compare(Plant(po, sd).run(make_controller(none), load_time_s, "baseline"),
-                                   Plant(po, sd).run(make_controller(stream::ControllerParams{}), load_time_s, "alpha=16ms"));
+      const Comparison c =
+          compare(Plant(po, sd).run(make_controller(none), load_time_s, "baseline"),
+                  Plant(po, sd).run(make_controller(stream::ControllerParams{}), load_time_s, "alpha=16ms"));
       std::printf("  seed %-3llu            max %7.1f -> %6.1f ms  reduction %5.1f %%  MB/s ratio %.2f\n",
                   static_cast<unsigned long long>(sd), c.base_max_ms, c.max_ms, 100 * c.reduction, c.ratio);
     }
@@ -392,8 +403,9 @@ int run_controller(const ControllerArgs& args) {
     cheap.bind_ms_per_page = 0.1;
     cheap.bind_batch_pages = 100;
     cheap.bind_resident_pages = 1e9;
-    const Comparison c = compare(Plant(cheap, seed).run(make_controller(none), load_time_s, "baseline"),
-                                 Plant(cheap, seed).run(make_controller(stream::ControllerParams{}), load_time_s, "alpha=16ms"));
+    const Comparison c =
+        compare(Plant(cheap, seed).run(make_controller(none), load_time_s, "baseline"),
+                Plant(cheap, seed).run(make_controller(stream::ControllerParams{}), load_time_s, "alpha=16ms"));
     std::printf("  cheap-bind plant    max %7.1f -> %6.1f ms  reduction %5.1f %%  MB/s ratio %.2f\n", c.base_max_ms,
                 c.max_ms, 100 * c.reduction, c.ratio);
   }

@@ -36,7 +36,7 @@ struct Recovery {
   double settled_psnr_db = 0;
   double seconds = 0;
 };
-inline constexpr double kRecoveryToleranceDb = 1.0;   // issue 8: "within 1 dB of the settled PSNR"
+inline constexpr double kRecoveryToleranceDb = 1.0;  // issue 8: "within 1 dB of the settled PSNR"
 inline constexpr double kSettleWindowS = 0.5;
 Recovery recovery_after_cut(const std::vector<render::FrameRecord>& frames, double cut_s, double segment_end_s,
                             double tolerance_db = kRecoveryToleranceDb, double settle_window_s = kSettleWindowS);
@@ -59,10 +59,10 @@ struct RunAnalysis {
   uint64_t frames = 0;
   Stat3 latency_ms, tw_ms, load_size_mb, mip_bias, mips_per_s, mb_per_s, bound_pages, server_hit_rate;
   Stat3 mse, psnr_db, ssim;
-  double integrated_mse = 0;        // Σ MSE · Δt over the run (MSE · s, Δt = virtual frame time)
-  double integrated_dssim = 0;      // Σ (1 - SSIM) · Δt (s)
-  double max_popin_mse = 0;         // largest frame-to-frame MSE while the camera is still
-  uint64_t popin_frames = 0;        // frames where pop-in was measured (camera still)
+  double integrated_mse = 0;         // Σ MSE · Δt over the run (MSE · s, Δt = virtual frame time)
+  double integrated_dssim = 0;       // Σ (1 - SSIM) · Δt (s)
+  double max_popin_mse = 0;          // largest frame-to-frame MSE while the camera is still
+  uint64_t popin_frames = 0;         // frames where pop-in was measured (camera still)
   std::vector<Recovery> recoveries;  // one per cut inside the run
   double p95_latency_ms = 0;
 };

@@ -157,8 +157,7 @@ int run_path(const PathArgs& args) {
     return 2;
   }
   plan.scene = fs::absolute(plan.scene);
-  const fs::path source_path = args.path.empty() ? scene->dir / scene->manifest.camera_path
-                                                                  : fs::path(args.path);
+  const fs::path source_path = args.path.empty() ? scene->dir / scene->manifest.camera_path : fs::path(args.path);
   auto path = CameraPath::load(source_path);
   if (!path || path->keys().empty()) {
     std::fprintf(stderr, "path bench: --path %s: %s\n", source_path.c_str(),
@@ -211,8 +210,10 @@ int run_path(const PathArgs& args) {
   std::vector<ConfigRun>& runs = res.runs;
   runs.push_back(make("reference", "reference", "reference (all resident, lock-step)", reference_sets()));
   runs.back().measured = false;
-  runs.push_back(make("ours", "baseline", "ours (as configured: α = " + fmt_num(alpha_ms) + " ms, β = " +
-                                              fmt_num(base_config->controller.beta) + ", Eq. 8 blend)", {}));
+  runs.push_back(make("ours", "baseline",
+                      "ours (as configured: α = " + fmt_num(alpha_ms) +
+                          " ms, β = " + fmt_num(base_config->controller.beta) + ", Eq. 8 blend)",
+                      {}));
   // Ratios are taken between neighbours in run order (ours, in-process, resident, baseline), so slow drifts
   // of a shared machine's load affect both sides alike.
   runs.push_back(make("inprocess", "baseline", "ours, server in a thread (no process boundary)", {}, true));
@@ -225,8 +226,8 @@ int run_path(const PathArgs& args) {
                       {"render.preload_all=true", "stream.colormap_blend=false"}));
   runs.push_back(make("baseline", "baseline", "seed baseline (no adaptive streaming, no colour blending)",
                       {"controller.mode=none", "stream.colormap_blend=false"}));
-  runs.push_back(make("blocking", "baseline", "blocking loads (whole chains before drawing)",
-                      {"render.blocking_loads=true"}));
+  runs.push_back(
+      make("blocking", "baseline", "blocking loads (whole chains before drawing)", {"render.blocking_loads=true"}));
   // Seed 000 Table 3 sweeps α = 12, 14, 16, 18 ms around its chosen 16 ms: the same ratios around the
   // configured α (0.75, 0.875, [1], 1.125), since a sensible α depends on the device (§4.3).
   std::vector<double> alphas;
@@ -244,8 +245,10 @@ int run_path(const PathArgs& args) {
   const std::vector<std::string> lockstep{"render.lockstep=true", "controller.mode=fixed",
                                           "controller.fixed_load_mb=" + fmt_num(kLockstepLoadMb),
                                           "controller.fixed_bias=0"};
-  runs.push_back(make("lockstep_a", "lockstep", "lock-step, s = " + fmt_num(kLockstepLoadMb) + " MB (run 1)", lockstep));
-  runs.push_back(make("lockstep_b", "lockstep", "lock-step, s = " + fmt_num(kLockstepLoadMb) + " MB (run 2)", lockstep));
+  runs.push_back(
+      make("lockstep_a", "lockstep", "lock-step, s = " + fmt_num(kLockstepLoadMb) + " MB (run 1)", lockstep));
+  runs.push_back(
+      make("lockstep_b", "lockstep", "lock-step, s = " + fmt_num(kLockstepLoadMb) + " MB (run 2)", lockstep));
   if (!res.quick) {
     runs.push_back(make("lockstep_baseline", "lockstep", "lock-step seed baseline (s = s_max, no blending)",
                         {"render.lockstep=true", "controller.mode=none", "stream.colormap_blend=false"}));
@@ -338,6 +341,7 @@ std::function<int()> define_path(CLI::App& app) {
   return [a] { return run_path(*a); };
 }
 
-TEXSTREAM_BENCH_COMMAND(path, "run time against image error on a camera path: seed tables, baselines, report", define_path);
+TEXSTREAM_BENCH_COMMAND(path, "run time against image error on a camera path: seed tables, baselines, report",
+                        define_path);
 
 }  // namespace texstream::bench

@@ -29,7 +29,7 @@ Status ThreadServer::start(const std::string& segment_name) {
 void ThreadServer::stop() {
   stop_.store(true, std::memory_order_relaxed);  // run() polls it at least every server.idle_wait_ms
   if (thread_.joinable()) thread_.join();
-  server_.reset();   // before the segment it serves
+  server_.reset();  // before the segment it serves
   segment_.reset();
 }
 

@@ -10,8 +10,8 @@
 #include "texstream/common/config.hpp"
 #include "texstream/protocol/segment.hpp"
 #include "texstream/render/app/in_process_server.hpp"
-#include "texstream/server/storage/posix_storage.hpp"
 #include "texstream/server/dispatch/server.hpp"
+#include "texstream/server/storage/posix_storage.hpp"
 
 namespace texstream::bench {
 

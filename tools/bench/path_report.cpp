@@ -68,9 +68,9 @@ std::string error_table(const std::vector<ConfigRun>& runs) {
     const RunAnalysis& a = r.analysis;
     std::string rec;
     for (const Recovery& v : a.recoveries) {
-      rec += (rec.empty() ? "" : ", ") +
-             fmt::format("{} ({} dB)", std::isnan(v.seconds) ? std::string("never") : cell(v.seconds, 2),
-                         cell(v.settled_psnr_db, 1));
+      rec += (rec.empty() ? "" : ", ") + fmt::format("{} ({} dB)",
+                                                     std::isnan(v.seconds) ? std::string("never") : cell(v.seconds, 2),
+                                                     cell(v.settled_psnr_db, 1));
     }
     if (rec.empty()) rec = "no cut";
     t += fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} |\n", r.label, cell(a.p95_latency_ms),
@@ -166,40 +166,47 @@ Status write_report(const BenchResults& r, const std::filesystem::path& file, bo
       r.cuts_s.empty() ? "" : fmt::format(" at {}", fmt::join(r.cuts_s, " s, ")) + " s", r.width, r.height,
       r.frame_time_s * 1e3, r.device, r.quick ? ", **--quick** (a section of the path, fewer configurations)" : "",
       r.bench_wall_s);
-  m += fmt::format("Configuration: `{}` plus the bench's overrides (runs/<configuration>/command.txt has each "
-                   "command line).\n\n",
-                   r.config_file.empty() ? std::string("built-in defaults") : r.config_file.string());
-  m += fmt::format("Machine: {} cores, 1-minute load average {} before and {} after the bench. Real-time latencies on "
-                   "a loaded machine are noisy; lock-step figures are not.\n\n",
-                   r.cores, r.load_before, r.load_after);
+  m += fmt::format(
+      "Configuration: `{}` plus the bench's overrides (runs/<configuration>/command.txt has each "
+      "command line).\n\n",
+      r.config_file.empty() ? std::string("built-in defaults") : r.config_file.string());
+  m += fmt::format(
+      "Machine: {} cores, 1-minute load average {} before and {} after the bench. Real-time latencies on "
+      "a loaded machine are noisy; lock-step figures are not.\n\n",
+      r.cores, r.load_before, r.load_after);
   m += "Every streamed frame is compared with the reference frame of the same pose: the scene rendered with every "
        "texture's whole mip chain resident (`render.preload_all`, loaded through the server before frame 0), sampled "
        "at the mip the hardware picks (no streaming clamp, no bias), without Eq. 8 colormap blending: a plain "
        "mipmapped texture path. Eq. 8 mixes the colormap in by the displayed level even when every mip is resident, "
-       "so configurations that blend keep an error floor of their own, shown by the all-resident run with blending. MSE and PSNR are over R, G, B (0–255); SSIM is "
+       "so configurations that blend keep an error floor of their own, shown by the all-resident run with blending. "
+       "MSE and PSNR are over R, G, B (0–255); SSIM is "
        "Wang et al. 2004 on BT.601 luma (11×11 Gaussian window, σ = 1.5, K1 = 0.01, K2 = 0.03), mean over the "
        "whole frame. ∫MSE dt sums MSE × frame time over the run. Pop-in is the largest MSE between two consecutive "
        "frames while the camera is still (a pause): then every change is refinement (seed 000 Fig. 7). Recovery "
        "after a cut is the virtual time until PSNR is within 1 dB of the PSNR the view settles at (median over the "
        "last 0.5 s before the next cut). Transfer rates are sampled in windows of 0.10423 s of wall time "
        "(seed 000 §4.2). Frame 0 is left out of the latency and t_w statistics (one-time driver costs that every "
-       "configuration pays alike). Real-time runs measure latency; the camera advances a fixed virtual time per frame. Each "
+       "configuration pays alike). Real-time runs measure latency; the camera advances a fixed virtual time per frame. "
+       "Each "
        "frame is copied to host memory and appended to a spill file at the frame (outside its latency); the "
        "comparison with the reference runs after the last frame, so it never hands the server extra time.\n\n";
   m += "## Headline\n\n| quantity | value | meaning |\n|---|---:|---|\n";
-  m += fmt::format("| lockstep_identical | {} | two lock-step runs: every non-wall-clock per-frame column bit-equal{} |\n",
-                   h.lockstep_identical ? "true" : "false",
-                   h.lockstep_difference.empty() ? "" : " (first difference: " + h.lockstep_difference + ")");
+  m += fmt::format(
+      "| lockstep_identical | {} | two lock-step runs: every non-wall-clock per-frame column bit-equal{} |\n",
+      h.lockstep_identical ? "true" : "false",
+      h.lockstep_difference.empty() ? "" : " (first difference: " + h.lockstep_difference + ")");
   m += fmt::format("| max_latency_ratio | {} | max frame latency, seed baseline ÷ ours (seed 000: ~8×) |\n",
                    cell(h.max_latency_ratio));
   m += fmt::format("| popin_ratio | {} | largest pop-in MSE, seed baseline ÷ ours (seed 000: ~7× quality) |\n",
                    cell(h.popin_ratio));
-  m += fmt::format("| integrated_error_ratio | {} | ∫MSE dt, seed baseline ÷ ours (goal ≥ 1: throttling must not buy "
-                   "latency with accuracy) |\n",
-                   cell(h.integrated_error_ratio));
-  m += fmt::format("| streaming_overhead | {} | median frame latency, ours ÷ all textures resident (the same "
-                   "renderer and blending; seed 002: negligible) |\n",
-                   cell(h.streaming_overhead, 3));
+  m += fmt::format(
+      "| integrated_error_ratio | {} | ∫MSE dt, seed baseline ÷ ours (goal ≥ 1: throttling must not buy "
+      "latency with accuracy) |\n",
+      cell(h.integrated_error_ratio));
+  m += fmt::format(
+      "| streaming_overhead | {} | median frame latency, ours ÷ all textures resident (the same "
+      "renderer and blending; seed 002: negligible) |\n",
+      cell(h.streaming_overhead, 3));
   m += fmt::format("| process_boundary_cost | {} | median frame latency, two processes ÷ server in a thread |\n\n",
                    cell(h.process_boundary_cost, 3));
 
@@ -211,7 +218,8 @@ Status write_report(const BenchResults& r, const std::filesystem::path& file, bo
   };
   m += "## Ours against the baselines (real time)\n\n" + seed_table(group("baseline")) + "\n";
   if (!group("alpha").empty()) {
-    m += "## α sweep (seed 000 Tables 3–5: α × 0.75, 0.875, 1.125 of the configured one)\n\n" + seed_table(group("alpha")) + "\n";
+    m += "## α sweep (seed 000 Tables 3–5: α × 0.75, 0.875, 1.125 of the configured one)\n\n" +
+         seed_table(group("alpha")) + "\n";
   }
   if (!group("beta").empty()) m += "## β sweep (seed 000 Table 6)\n\n" + seed_table(group("beta")) + "\n";
   m += "## Lock-step (virtual clock, fixed per-frame budget)\n\n" + seed_table(group("lockstep")) + "\n";

@@ -11,21 +11,21 @@
 namespace texstream::bench {
 
 struct ConfigRun {
-  std::string name;    // file-safe: runs/<name>/, raw/<name>.csv
-  std::string group;   // "baseline", "alpha", "beta", "lockstep", "reference"
-  std::string label;   // what the report calls it
+  std::string name;               // file-safe: runs/<name>/, raw/<name>.csv
+  std::string group;              // "baseline", "alpha", "beta", "lockstep", "reference"
+  std::string label;              // what the report calls it
   std::vector<std::string> sets;  // --set overrides on top of the common ones
   bool in_process = false;        // texstream-render-inprocess
   bool measured = true;           // compared with the reference frames
   int exit_code = -1;
-  std::string failure;            // empty when the run and its analysis succeeded
-  double wall_s = 0;              // the whole process, start-up and preload included
+  std::string failure;  // empty when the run and its analysis succeeded
+  double wall_s = 0;    // the whole process, start-up and preload included
   RunAnalysis analysis;
 };
 
 struct HeadlineRatios {
   bool lockstep_identical = false;
-  std::string lockstep_difference;  // where the two lock-step runs first differ
+  std::string lockstep_difference;    // where the two lock-step runs first differ
   double max_latency_ratio = 0;       // baseline ÷ ours: max frame latency
   double popin_ratio = 0;             // baseline ÷ ours: largest frame-to-frame MSE while the camera is still
   double integrated_error_ratio = 0;  // baseline ÷ ours: Σ MSE · Δt

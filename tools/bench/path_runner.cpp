@@ -9,9 +9,8 @@
 #include <fstream>
 
 #include "bench_util.hpp"
-#include "texstream/common/child_process.hpp"
 #include "path_analysis.hpp"
-
+#include "texstream/common/child_process.hpp"
 
 namespace fs = std::filesystem;
 
@@ -94,8 +93,10 @@ ResidentCache resident_cache(const render::SceneData& scene) {
     c.error = "the scene needs " + std::to_string(c.layers) + " cache layers of " + std::to_string(c.layer_extent) +
               " px to be resident at once; a sparse image has at most " + std::to_string(kMaxLayers);
   } else if (c.memory_bytes > kMaxCacheBytes) {
-    c.error = "the scene needs " + std::to_string(c.memory_bytes >> 20) + " MiB of cache to be resident at once; "
-              "the sparse address space is " + std::to_string(kMaxCacheBytes >> 20) + " MiB";
+    c.error = "the scene needs " + std::to_string(c.memory_bytes >> 20) +
+              " MiB of cache to be resident at once; "
+              "the sparse address space is " +
+              std::to_string(kMaxCacheBytes >> 20) + " MiB";
   }
   return c;
 }
@@ -125,7 +126,8 @@ RenderOutcome run_renderer(const RenderRun& run) {
     out.failure = run.dir.string() + ": " + ec.message();
     return out;
   }
-  std::vector<std::string> argv{(run.bin / (run.in_process ? "texstream-render-inprocess" : "texstream-render")).string()};
+  std::vector<std::string> argv{
+      (run.bin / (run.in_process ? "texstream-render-inprocess" : "texstream-render")).string()};
   if (!run.config.empty()) argv.insert(argv.end(), {"--config", run.config.string()});
   argv.insert(argv.end(), {"--set", "render.output_dir=" + run.dir.string()});
   for (const std::string& s : run.sets) argv.insert(argv.end(), {"--set", s});

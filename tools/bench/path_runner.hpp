@@ -40,7 +40,7 @@ int run_python(const std::filesystem::path& script, const std::vector<std::strin
 // of one maximum extent (CacheAllocator: square regions, one extent per layer) and memory for every page.
 struct ResidentCache {
   uint64_t layer_extent = 4, layers = 0, memory_bytes = 0;
-  std::string error;  // non-empty: the scene cannot be resident at once on lavapipe's sparse limits
+  std::string error;                      // non-empty: the scene cannot be resident at once on lavapipe's sparse limits
   std::vector<std::string> sets() const;  // the --set overrides
 };
 ResidentCache resident_cache(const render::SceneData& scene);
@@ -64,8 +64,8 @@ struct RenderRun {
 };
 struct RenderOutcome {
   int exit_code = -1;
-  double wall_s = 0;     // the whole process, start-up and preload included
-  std::string failure;   // empty: it ran and its frames.csv was read
+  double wall_s = 0;    // the whole process, start-up and preload included
+  std::string failure;  // empty: it ran and its frames.csv was read
   std::vector<render::FrameRecord> frames;
 };
 RenderOutcome run_renderer(const RenderRun& run);

@@ -54,9 +54,9 @@
 #include "texstream/server/cache/level_eviction_policy.hpp"
 #include "texstream/server/cache/lru_eviction_policy.hpp"
 #include "texstream/server/cache/mip_cache.hpp"
+#include "texstream/server/dispatch/server.hpp"
 #include "texstream/server/load/mip_loader.hpp"
 #include "texstream/server/storage/posix_storage.hpp"
-#include "texstream/server/dispatch/server.hpp"
 
 namespace fs = std::filesystem;
 
@@ -98,9 +98,9 @@ struct Request {
 using Cycle = std::vector<Request>;
 
 uint64_t now_ns() {
-  return static_cast<uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                   std::chrono::steady_clock::now().time_since_epoch())
-                                   .count());
+  return static_cast<uint64_t>(
+      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+          .count());
 }
 
 uint64_t rss_bytes(pid_t pid) {
@@ -154,9 +154,16 @@ class Harness {
     h->segment_ = std::move(seg).value();
     h->endpoint_ = RendererEndpoint(*h->segment_);
     const std::string exe = (fs::read_symlink("/proc/self/exe").parent_path() / "texstream-server").string();
-    std::vector<std::string> args{exe, "--segment", h->segment_->name(), "--scene", scene.string(), "--spawned",
-                                  "--set", fmt::format("server.ram_cache_bytes={}", cache_bytes),
-                                  "--set", "server.log_level=warn"};
+    std::vector<std::string> args{exe,
+                                  "--segment",
+                                  h->segment_->name(),
+                                  "--scene",
+                                  scene.string(),
+                                  "--spawned",
+                                  "--set",
+                                  fmt::format("server.ram_cache_bytes={}", cache_bytes),
+                                  "--set",
+                                  "server.log_level=warn"};
     h->pid_ = fork();
     if (h->pid_ == 0) {
       std::vector<char*> argv;
@@ -256,14 +263,14 @@ class Harness {
   std::atomic<bool> stop_{false};
   std::thread thread_;
   std::atomic<pid_t> tid_{0};  // the dispatcher thread's id, once it runs
-  pid_t pid_ = 0;  // start_process(): the server child
+  pid_t pid_ = 0;              // start_process(): the server child
 };
 
 struct StreamResult {
   double seconds = 0;
-  uint64_t bytes = 0;       // payload bytes of kOk completions
+  uint64_t bytes = 0;  // payload bytes of kOk completions
   uint64_t completions = 0;
-  uint64_t failures = 0;    // anything but kOk
+  uint64_t failures = 0;  // anything but kOk
   std::vector<double> latency_us;
   std::vector<double> poll_us;  // duration of each poll() that found completions (the renderer's per-frame cost)
 };
@@ -392,7 +399,8 @@ std::vector<Cycle> build_trace(const Scene& s, uint32_t laps, uint64_t gpu_budge
         const double level = std::log2(std::max(1.0, dist * pixel_angle / texel_m));
         const uint32_t want = std::min(t.mip_count - 1, static_cast<uint32_t>(level));
         last_seen[m.texture_id] = cycle_no;
-        if (resident[m.texture_id] > want) wants.push_back({m.texture_id, want, static_cast<float>(1.0 / (1.0 + dist))});
+        if (resident[m.texture_id] > want)
+          wants.push_back({m.texture_id, want, static_cast<float>(1.0 / (1.0 + dist))});
       }
       std::sort(wants.begin(), wants.end(), [](const Want& a, const Want& b) { return a.priority > b.priority; });
       Cycle cycle;
@@ -578,7 +586,8 @@ double simulate_policy(const Scene& s, const std::vector<Cycle>& trace, uint64_t
     const scene::TextureRecord& t = s.textures[k.texture().value];
     return t.mip_count - 1 - std::min(k.mip().value, t.mip_count - 1);
   });
-  server::MipCache cache(budget, std::move(policy).value(), server::MipCacheOptions{arena, server::ArenaPrefault::kNone});
+  server::MipCache cache(budget, std::move(policy).value(),
+                         server::MipCacheOptions{arena, server::ArenaPrefault::kNone});
   uint64_t generation = 0;
   for (const Cycle& c : trace) {
     cache.advance_clock(++generation);
@@ -676,8 +685,9 @@ MemoryResult memory_run(const Scene& s, double seconds, uint64_t cache_budget) {
 bool generate_scene(const fs::path& dir, uint32_t textures) {
   const fs::path gen = fs::read_symlink("/proc/self/exe").parent_path() / "texstream-gen";
   // fmt rather than operator+: GCC 12 -O3 warns falsely (-Wrestrict) on some std::string concatenations.
-  const std::string cmd = fmt::format("'{}' --out '{}' --textures {} --seed 7 --format rgba8 --threads 2 --force > /dev/null",
-                                      gen.string(), dir.string(), textures);
+  const std::string cmd =
+      fmt::format("'{}' --out '{}' --textures {} --seed 7 --format rgba8 --threads 2 --force > /dev/null", gen.string(),
+                  dir.string(), textures);
   std::printf("generating a scene: %s\n", cmd.c_str());
   std::fflush(stdout);
   const int rc = std::system(cmd.c_str());
@@ -747,14 +757,17 @@ int run_server_bench(const Options& options) {
     const double memory_s = opt->memory_minutes >= 0 ? opt->memory_minutes * 60.0 : (opt->quick ? 4.0 : 30.0);
     const uint64_t memory_budget = std::min<uint64_t>(32ull << 20, scene_bytes / 4);
     const MemoryResult mem = memory_run(s, memory_s, memory_budget);
-    std::printf("\n[memory] texstream-server process, %.0f s random workload over %.1f MB of textures (%.1fx the cache), "
-                "%llu requests, hit rate %.3f\n  server RSS at start %.1f MB, peak %.1f MB; limit = cache %.1f + staging %.1f + 64 MB = %.1f MB -> %s\n",
-                memory_s, mem.set_mb, mem.set_mb / mem.cache_mb, static_cast<unsigned long long>(mem.requests),
-                mem.hit_rate, mem.start_rss_mb, mem.peak_rss_mb, mem.cache_mb,
-                static_cast<double>(kSlotCount * kSlotBytes) / (1 << 20), mem.limit_mb,
-                mem.peak_rss_mb <= mem.limit_mb ? "within" : "OVER");
-    std::printf("  server at start: %s\n  server at end:   %s\n", mem.start_breakdown.c_str(), mem.end_breakdown.c_str());
-    std::printf("  OpenImageIO mapped in the server process: %s\n", mem.oiio_mapped ? "yes" : "no (decoding runs in texstream-decode helpers)");
+    std::printf(
+        "\n[memory] texstream-server process, %.0f s random workload over %.1f MB of textures (%.1fx the cache), "
+        "%llu requests, hit rate %.3f\n  server RSS at start %.1f MB, peak %.1f MB; limit = cache %.1f + staging %.1f "
+        "+ 64 MB = %.1f MB -> %s\n",
+        memory_s, mem.set_mb, mem.set_mb / mem.cache_mb, static_cast<unsigned long long>(mem.requests), mem.hit_rate,
+        mem.start_rss_mb, mem.peak_rss_mb, mem.cache_mb, static_cast<double>(kSlotCount * kSlotBytes) / (1 << 20),
+        mem.limit_mb, mem.peak_rss_mb <= mem.limit_mb ? "within" : "OVER");
+    std::printf("  server at start: %s\n  server at end:   %s\n", mem.start_breakdown.c_str(),
+                mem.end_breakdown.c_str());
+    std::printf("  OpenImageIO mapped in the server process: %s\n",
+                mem.oiio_mapped ? "yes" : "no (decoding runs in texstream-decode helpers)");
     // RssFile is the mapped code of the linked libraries (OpenImageIO pulls in dozens), shared and evictable;
     // the growth under load is what the cache, the staging pool and the allocator add.
     std::printf("  growth under load %.1f MB vs cache + staging + 64 MB = %.1f MB -> %s\n",
@@ -779,7 +792,7 @@ int run_server_bench(const Options& options) {
     MemcpyBaseline baseline(s, hit_set);
     auto h = Harness::start(s.dir, config);
     if (!h) return 1;
-    wait_for_warm_arena(h->server());  // its idle-priority pre-fault must not run during the measurement
+    wait_for_warm_arena(h->server());           // its idle-priority pre-fault must not run during the measurement
     stream(*h, hit_set, h->slots(), 1, false);  // load them all once: misses
     StreamResult acc;
     Stopwatch sw;
@@ -799,18 +812,20 @@ int run_server_bench(const Options& options) {
     hit_bw = static_cast<double>(acc.bytes) / acc.seconds / 1e9;
     hit_lat = stream(*h, hit_set, kLatencyWindow, generation++, true);
     const server::MipCacheStats cs = h->server().cache_stats();
-    std::printf("\n[hits] %zu mips (%.1f MB) served from the RAM cache repeatedly: %.2f GB/s; memcpy of the same mips "
-                "into slot-sized buffers: %.2f GB/s -> summed ratio %.3f; median of %zu alternating pairs %.3f (goal "
-                ">= 0.5); %llu hits, %llu failures\n",
-                hit_set.size(), static_cast<double>(hit_set_bytes) / 1e6, hit_bw, memcpy_bw, hit_bw / memcpy_bw,
-                hit_pair_ratios.size(), percentile(hit_pair_ratios, 50), static_cast<unsigned long long>(cs.hits),
-                static_cast<unsigned long long>(acc.failures));
-    std::printf("  pair ratios: p10 %.3f, p90 %.3f\n", percentile(hit_pair_ratios, 10), percentile(hit_pair_ratios, 90));
+    std::printf(
+        "\n[hits] %zu mips (%.1f MB) served from the RAM cache repeatedly: %.2f GB/s; memcpy of the same mips "
+        "into slot-sized buffers: %.2f GB/s -> summed ratio %.3f; median of %zu alternating pairs %.3f (goal "
+        ">= 0.5); %llu hits, %llu failures\n",
+        hit_set.size(), static_cast<double>(hit_set_bytes) / 1e6, hit_bw, memcpy_bw, hit_bw / memcpy_bw,
+        hit_pair_ratios.size(), percentile(hit_pair_ratios, 50), static_cast<unsigned long long>(cs.hits),
+        static_cast<unsigned long long>(acc.failures));
+    std::printf("  pair ratios: p10 %.3f, p90 %.3f\n", percentile(hit_pair_ratios, 10),
+                percentile(hit_pair_ratios, 90));
   }
 
   // 2. Misses vs read().
   double miss_bw = 0, read_bw = 0, read_amp = 0;
-  double miss_dispatcher_cpu_s = 0;  // diagnostic
+  double miss_dispatcher_cpu_s = 0;                              // diagnostic
   double miss_dispatcher_user_s = 0, miss_dispatcher_sys_s = 0;  // diagnostic, in clock ticks
   if (opt->runs("misses")) {
     uint32_t end = 0;
@@ -854,8 +869,8 @@ int run_server_bench(const Options& options) {
       miss_dispatcher_user_s += user_after - user_before;
       miss_dispatcher_sys_s += sys_after - sys_before;
       const double read_after = read_gbps(s, first, end, &after_bytes);
-      const double read_k_s = static_cast<double>(before_bytes) / read_before / 1e9 +
-                              static_cast<double>(after_bytes) / read_after / 1e9;
+      const double read_k_s =
+          static_cast<double>(before_bytes) / read_before / 1e9 + static_cast<double>(after_bytes) / read_after / 1e9;
       read_s += read_k_s;
       read_total += before_bytes + after_bytes;
       read_bytes = before_bytes;
@@ -863,7 +878,7 @@ int run_server_bench(const Options& options) {
       r.seconds += rk.seconds;
       r.failures += rk.failures;
       miss_round_ratios.push_back((static_cast<double>(rk.bytes) / rk.seconds) /
-                             (static_cast<double>(before_bytes + after_bytes) / read_k_s));
+                                  (static_cast<double>(before_bytes + after_bytes) / read_k_s));
     }
     read_bw = static_cast<double>(read_total) / read_s / 1e9;
     miss_bw = static_cast<double>(r.bytes) / r.seconds / 1e9;
@@ -925,53 +940,58 @@ int run_server_bench(const Options& options) {
       loader_bw = static_cast<double>(bytes) / lw.seconds() / 1e9;
     }
     {
-    const server::MipCacheStats cs = h->server().cache_stats();
-    if (cs.arena_bytes > 0) {
-      std::printf("\n[misses] the server's cache arena: %.1f MB, %.1f MB pre-faulted, and its small-payload pool: %.1f "
-                  "MB, %.1f MB of it pre-faulted, after %.2f s of waiting before the misses (%llu arena evictions, %llu "
-                  "fallbacks)",
-                  static_cast<double>(cs.arena_bytes) / 1e6, static_cast<double>(cs.arena_warm_bytes) / 1e6,
-                  static_cast<double>(cs.small_pool_capacity) / 1e6,
-                  static_cast<double>(cs.small_pool_warm_bytes) / 1e6, arena_wait_s, static_cast<unsigned long long>(cs.arena_evictions),
-                  static_cast<unsigned long long>(cs.arena_fallbacks));
-    } else {
-      std::printf("\n[misses] the server's cache has no arena (payloads from malloc)");
+      const server::MipCacheStats cs = h->server().cache_stats();
+      if (cs.arena_bytes > 0) {
+        std::printf(
+            "\n[misses] the server's cache arena: %.1f MB, %.1f MB pre-faulted, and its small-payload pool: %.1f "
+            "MB, %.1f MB of it pre-faulted, after %.2f s of waiting before the misses (%llu arena evictions, %llu "
+            "fallbacks)",
+            static_cast<double>(cs.arena_bytes) / 1e6, static_cast<double>(cs.arena_warm_bytes) / 1e6,
+            static_cast<double>(cs.small_pool_capacity) / 1e6, static_cast<double>(cs.small_pool_warm_bytes) / 1e6,
+            arena_wait_s, static_cast<unsigned long long>(cs.arena_evictions),
+            static_cast<unsigned long long>(cs.arena_fallbacks));
+      } else {
+        std::printf("\n[misses] the server's cache has no arena (payloads from malloc)");
+      }
     }
-  }
-  const double per_round = static_cast<double>(rounds);
-  const double mips_streamed = per_round * static_cast<double>(std::max<size_t>(1, miss_set.size()));
-  std::printf("\n[misses] %zu mips of %u textures (%.1f MB delivered, page cache warm) x %d rounds, each a fresh server "
-                "between two read() passes: %.2f GB/s; plain sequential read() of the same files (%.1f MB): %.2f GB/s "
-                "-> summed ratio %.3f; median of the rounds %.3f (goal >= 0.5); read amplification %.4f (goal <= "
-                "1.1); %llu failures\n",
-                miss_set.size(), end - first, static_cast<double>(r.bytes) / per_round / 1e6, rounds, miss_bw,
-                static_cast<double>(read_bytes) / 1e6, read_bw, miss_bw / read_bw, percentile(miss_round_ratios, 50),
-                read_amp,
-                static_cast<unsigned long long>(r.failures));
+    const double per_round = static_cast<double>(rounds);
+    const double mips_streamed = per_round * static_cast<double>(std::max<size_t>(1, miss_set.size()));
+    std::printf(
+        "\n[misses] %zu mips of %u textures (%.1f MB delivered, page cache warm) x %d rounds, each a fresh server "
+        "between two read() passes: %.2f GB/s; plain sequential read() of the same files (%.1f MB): %.2f GB/s "
+        "-> summed ratio %.3f; median of the rounds %.3f (goal >= 0.5); read amplification %.4f (goal <= "
+        "1.1); %llu failures\n",
+        miss_set.size(), end - first, static_cast<double>(r.bytes) / per_round / 1e6, rounds, miss_bw,
+        static_cast<double>(read_bytes) / 1e6, read_bw, miss_bw / read_bw, percentile(miss_round_ratios, 50), read_amp,
+        static_cast<unsigned long long>(r.failures));
     std::printf("  ratio per round:");
     for (const double q : miss_round_ratios) std::printf(" %.3f", q);
-    std::printf("\n  (diagnostic) the dispatcher thread's CPU time during the misses: %.1f ms of %.1f ms, %.2f us per "
-                "mip; in clock ticks %.0f ms user, %.0f ms system\n",
-                miss_dispatcher_cpu_s * 1e3, r.seconds * 1e3, miss_dispatcher_cpu_s * 1e6 / mips_streamed,
-                miss_dispatcher_user_s * 1e3, miss_dispatcher_sys_s * 1e3);
+    std::printf(
+        "\n  (diagnostic) the dispatcher thread's CPU time during the misses: %.1f ms of %.1f ms, %.2f us per "
+        "mip; in clock ticks %.0f ms user, %.0f ms system\n",
+        miss_dispatcher_cpu_s * 1e3, r.seconds * 1e3, miss_dispatcher_cpu_s * 1e6 / mips_streamed,
+        miss_dispatcher_user_s * 1e3, miss_dispatcher_sys_s * 1e3);
     std::printf("  the server's statistics after the misses:\n");
     print_indented(miss_report);
-    std::printf("  (diagnostic) the same misses with the cache already full (steady state, 32 MiB): median of %zu "
-                "streams %.2f GB/s (",
-                steady_bws.size(), steady_bw);
+    std::printf(
+        "  (diagnostic) the same misses with the cache already full (steady state, 32 MiB): median of %zu "
+        "streams %.2f GB/s (",
+        steady_bws.size(), steady_bw);
     for (size_t k = 0; k < steady_bws.size(); ++k) std::printf("%s%.2f", k ? " " : "", steady_bws[k]);
     std::printf(") -> ratio %.3f\n", steady_bw / read_bw);
-    std::printf("  (diagnostic) the same misses through the loader alone on one thread, no rings: %.2f GB/s, %.2f us "
-                "per mip\n",
-                loader_bw, static_cast<double>(r.bytes) / per_round / 1e3 / loader_bw /
-                    static_cast<double>(std::max<size_t>(1, miss_set.size())));
+    std::printf(
+        "  (diagnostic) the same misses through the loader alone on one thread, no rings: %.2f GB/s, %.2f us "
+        "per mip\n",
+        loader_bw,
+        static_cast<double>(r.bytes) / per_round / 1e3 / loader_bw /
+            static_cast<double>(std::max<size_t>(1, miss_set.size())));
   }
   const double hit_p50 = percentile(hit_lat.latency_us, 50), hit_p99 = percentile(hit_lat.latency_us, 99);
   const double miss_p50 = percentile(miss_lat.latency_us, 50), miss_p99 = percentile(miss_lat.latency_us, 99);
-  std::printf("\n[latency] request pushed -> completion polled, %u outstanding: hits p50 %.1f us p99 %.1f us (n=%zu); "
-              "misses (page cache warm) p50 %.1f us p99 %.1f us (n=%zu)\n",
-              kLatencyWindow, hit_p50, hit_p99, hit_lat.latency_us.size(), miss_p50, miss_p99,
-              miss_lat.latency_us.size());
+  std::printf(
+      "\n[latency] request pushed -> completion polled, %u outstanding: hits p50 %.1f us p99 %.1f us (n=%zu); "
+      "misses (page cache warm) p50 %.1f us p99 %.1f us (n=%zu)\n",
+      kLatencyWindow, hit_p50, hit_p99, hit_lat.latency_us.size(), miss_p50, miss_p99, miss_lat.latency_us.size());
 
   // 4./5. The realistic trace.
   double oiio_hit_rate = 0, our_hit_rate = 0, throughput_ratio = 0;
@@ -986,38 +1006,42 @@ int run_server_bench(const Options& options) {
         trace_bytes += mip_size(s.textures[r.texture], r.mip);
         distinct[MipKey(TextureId(r.texture), MipLevel(r.mip)).value] = mip_size(s.textures[r.texture], r.mip);
       }
-  }
-  uint64_t distinct_bytes = 0;
-  for (const auto& [k, v] : distinct) distinct_bytes += v;
-  const uint64_t trace_budget = distinct_bytes / 4;
-  std::printf("\n[trace] camera path x%u, renderer GPU cache %.1f MB: %zu cycles, %llu requests, %.1f MB requested, "
-              "%zu distinct mips (%.1f MB); both caches get %.1f MB\n",
-              opt->quick ? 2u : 3u, static_cast<double>(gpu_budget) / 1e6, trace.size(),
-              static_cast<unsigned long long>(trace_requests), static_cast<double>(trace_bytes) / 1e6, distinct.size(),
-              static_cast<double>(distinct_bytes) / 1e6, static_cast<double>(trace_budget) / 1e6);
-  ServerConfig trace_config;
-  trace_config.ram_cache_bytes = static_cast<int64_t>(trace_budget);
-  const OursResult ours = replay_ours(s, trace, trace_config);
-  const OiioResult oiio = replay_oiio(s, trace, trace_budget);
-  const double ours_bw = static_cast<double>(ours.stream.bytes) / ours.stream.seconds / 1e6;
-  const double oiio_bw = static_cast<double>(oiio.bytes) / oiio.seconds / 1e6;
-  std::printf("  ours (server, %s policy): hit rate %.3f, %.1f MB/s (%.2f s, %llu failures)\n"
-              "  OpenImageIO ImageCache (same budget, get_pixels per request): hit rate %.3f, %.1f MB/s (%.2f s, "
-              "%llu failures)\n  throughput ours / OpenImageIO = %.2f\n",
-              std::string(choice_name(trace_config.cache_policy)).c_str(), ours.hit_rate, ours_bw, ours.stream.seconds, static_cast<unsigned long long>(ours.stream.failures),
-              oiio.hit_rate, oiio_bw, oiio.seconds, static_cast<unsigned long long>(oiio.failures), ours_bw / oiio_bw);
-  std::printf("  renderer polling cost per frame (each poll that found completions, incl. slot releases): mean %.1f us, "
-              "p99 %.1f us over %zu polls\n",
-              mean(ours.stream.poll_us), percentile(ours.stream.poll_us, 99), ours.stream.poll_us.size());
-  std::printf("\n[policy] cache alone over the same trace (hit rate):\n");
-  for (const uint64_t budget : {distinct_bytes / 8, distinct_bytes / 4, distinct_bytes / 2}) {
-    std::printf("  budget %6.1f MB: lru %.3f  level (seed 002 Eq. 4) %.3f  level with the buddy arena %.3f\n",
-                static_cast<double>(budget) / 1e6, simulate_policy(s, trace, budget, "lru"),
-                simulate_policy(s, trace, budget, "level"), simulate_policy(s, trace, budget, "level", true));
-  }
-  oiio_hit_rate = oiio.hit_rate;
-  our_hit_rate = ours.hit_rate;
-  throughput_ratio = ours_bw / oiio_bw;
+    }
+    uint64_t distinct_bytes = 0;
+    for (const auto& [k, v] : distinct) distinct_bytes += v;
+    const uint64_t trace_budget = distinct_bytes / 4;
+    std::printf(
+        "\n[trace] camera path x%u, renderer GPU cache %.1f MB: %zu cycles, %llu requests, %.1f MB requested, "
+        "%zu distinct mips (%.1f MB); both caches get %.1f MB\n",
+        opt->quick ? 2u : 3u, static_cast<double>(gpu_budget) / 1e6, trace.size(),
+        static_cast<unsigned long long>(trace_requests), static_cast<double>(trace_bytes) / 1e6, distinct.size(),
+        static_cast<double>(distinct_bytes) / 1e6, static_cast<double>(trace_budget) / 1e6);
+    ServerConfig trace_config;
+    trace_config.ram_cache_bytes = static_cast<int64_t>(trace_budget);
+    const OursResult ours = replay_ours(s, trace, trace_config);
+    const OiioResult oiio = replay_oiio(s, trace, trace_budget);
+    const double ours_bw = static_cast<double>(ours.stream.bytes) / ours.stream.seconds / 1e6;
+    const double oiio_bw = static_cast<double>(oiio.bytes) / oiio.seconds / 1e6;
+    std::printf(
+        "  ours (server, %s policy): hit rate %.3f, %.1f MB/s (%.2f s, %llu failures)\n"
+        "  OpenImageIO ImageCache (same budget, get_pixels per request): hit rate %.3f, %.1f MB/s (%.2f s, "
+        "%llu failures)\n  throughput ours / OpenImageIO = %.2f\n",
+        std::string(choice_name(trace_config.cache_policy)).c_str(), ours.hit_rate, ours_bw, ours.stream.seconds,
+        static_cast<unsigned long long>(ours.stream.failures), oiio.hit_rate, oiio_bw, oiio.seconds,
+        static_cast<unsigned long long>(oiio.failures), ours_bw / oiio_bw);
+    std::printf(
+        "  renderer polling cost per frame (each poll that found completions, incl. slot releases): mean %.1f us, "
+        "p99 %.1f us over %zu polls\n",
+        mean(ours.stream.poll_us), percentile(ours.stream.poll_us, 99), ours.stream.poll_us.size());
+    std::printf("\n[policy] cache alone over the same trace (hit rate):\n");
+    for (const uint64_t budget : {distinct_bytes / 8, distinct_bytes / 4, distinct_bytes / 2}) {
+      std::printf("  budget %6.1f MB: lru %.3f  level (seed 002 Eq. 4) %.3f  level with the buddy arena %.3f\n",
+                  static_cast<double>(budget) / 1e6, simulate_policy(s, trace, budget, "lru"),
+                  simulate_policy(s, trace, budget, "level"), simulate_policy(s, trace, budget, "level", true));
+    }
+    oiio_hit_rate = oiio.hit_rate;
+    our_hit_rate = ours.hit_rate;
+    throughput_ratio = ours_bw / oiio_bw;
   }
 
   std::printf("\ntotal %.1f s\n", total.seconds());
@@ -1048,7 +1072,8 @@ std::function<int()> define_server(CLI::App& app) {
 
 }  // namespace
 
-TEXSTREAM_BENCH_COMMAND(server, "Texture server: RAM-cache hits vs memcpy, misses vs read(), latency, vs OIIO ImageCache, memory",
-                        define_server);
+TEXSTREAM_BENCH_COMMAND(
+    server, "Texture server: RAM-cache hits vs memcpy, misses vs read(), latency, vs OIIO ImageCache, memory",
+    define_server);
 
 }  // namespace texstream::bench

@@ -34,10 +34,10 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
-#include <utility>
 #include <random>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "bench_registry.hpp"
@@ -175,14 +175,16 @@ HitLatency measure_hit_latency(const Plan& plan, const test::NginxOrigin& nginx,
     for (uint32_t m = 0; m < table[t].mip_count; ++m) misses.push_back({t, m, 0.5f});
   }
   auto bytes_of = [&](const WantedMip& w) {
-    return mip_bytes(static_cast<TexelFormat>(table[w.texture].format), table[w.texture].width,
-                     table[w.texture].height, w.mip);
+    return mip_bytes(static_cast<TexelFormat>(table[w.texture].format), table[w.texture].width, table[w.texture].height,
+                     w.mip);
   };
-  std::sort(misses.begin(), misses.end(), [&](const WantedMip& x, const WantedMip& y) { return bytes_of(x) > bytes_of(y); });
+  std::sort(misses.begin(), misses.end(),
+            [&](const WantedMip& x, const WantedMip& y) { return bytes_of(x) > bytes_of(y); });
   // Only mips that take seconds at ISDN (2 s or more of its 16 kB/s after the first second's allowance), so the
   // workers stay busy for the whole measurement instead of running through small mips.
   constexpr uint64_t kSlowMipBytes = 3 * 16000;
-  const auto slow_end = std::find_if(misses.begin(), misses.end(), [&](const WantedMip& w) { return bytes_of(w) < kSlowMipBytes; });
+  const auto slow_end =
+      std::find_if(misses.begin(), misses.end(), [&](const WantedMip& w) { return bytes_of(w) < kSlowMipBytes; });
   if (slow_end - misses.begin() >= kRemote + 2) misses.erase(slow_end, misses.end());
   size_t next_miss = 0;
   uint32_t misses_out = 0;
@@ -319,7 +321,8 @@ struct PolicyRates {
 PolicyRates compare_policies(const Plan& plan, const std::vector<scene::TextureRecord>& table) {
   // A camera moving along the city: each step sees a window of textures that slides by `step`, plus a few
   // landmarks visible from everywhere (popular: Zipf-like). Mips: the visible textures' finer mips nearer
-  // the camera (centre of the window). Same trace for both policies, budget 30% of the disk space of the trace's unique entries.
+  // the camera (centre of the window). Same trace for both policies, budget 30% of the disk space of the trace's unique
+  // entries.
   const uint32_t n = uint32_t(table.size());
   const uint32_t window = std::max<uint32_t>(8, n / 6), step = std::max<uint32_t>(1, window / 8);
   const uint32_t steps = plan.quick ? 200 : 800;
@@ -427,8 +430,8 @@ Failure run_failure(const Plan& plan, const char* name, const StorageConfig& c, 
   // Handled: an error completion (not kOk, not silence) before the deadline, and the server answers the next
   // request too (the renderer keeps drawing).
   const DriveResult again = test::drive(*st->harness, {{1, 0, 1.0f}}, deadline + 2s);
-  f.handled = d.complete && d.status[0] != uint32_t(CompletionStatus::kOk) && d.seconds * 1000 < double(deadline.count()) &&
-              again.complete;
+  f.handled = d.complete && d.status[0] != uint32_t(CompletionStatus::kOk) &&
+              d.seconds * 1000 < double(deadline.count()) && again.complete;
   return f;
 }
 
@@ -464,9 +467,9 @@ int run_storage(Plan plan) {
     scene_bytes += mip_chain_offset(static_cast<TexelFormat>(t.format), t.width, t.height, t.mip_count);
   }
   std::string error;
-  auto nginx = test::NginxOrigin::start(plan.scene, fs::path(TEXSTREAM_STORAGE_BENCH_SOURCE_DIR) /
-                                                        "config/nginx/texstream-origin.conf.in",
-                                        plan.work / "nginx", error);
+  auto nginx = test::NginxOrigin::start(
+      plan.scene, fs::path(TEXSTREAM_STORAGE_BENCH_SOURCE_DIR) / "config/nginx/texstream-origin.conf.in",
+      plan.work / "nginx", error);
   if (!nginx) {
     std::fprintf(stderr, "storage bench: %s\n", error.c_str());
     return 1;
@@ -476,18 +479,18 @@ int run_storage(Plan plan) {
 
   const HitLatency hits = plan.runs("hits") ? measure_hit_latency(plan, *nginx, *table) : HitLatency{};
   const double hit_ratio = hits.idle_p99_us > 0 ? hits.loaded_p99_us / hits.idle_p99_us : 0;
-  std::printf("1. RAM hits: idle p50 %.1f us p99 %.1f us; with the remote workers saturated through ISDN p50 %.1f us "
-              "p99 %.1f us (ratio %.2f; ~%llu remote fetches busy or started, %llu unfilled, %llu slow loads done meanwhile)\n",
-              hits.idle_p50_us, hits.idle_p99_us, hits.loaded_p50_us, hits.loaded_p99_us, hit_ratio,
-              (unsigned long long)hits.remote_fetches, (unsigned long long)hits.unfilled,
-              (unsigned long long)hits.loads_ok);
+  std::printf(
+      "1. RAM hits: idle p50 %.1f us p99 %.1f us; with the remote workers saturated through ISDN p50 %.1f us "
+      "p99 %.1f us (ratio %.2f; ~%llu remote fetches busy or started, %llu unfilled, %llu slow loads done meanwhile)\n",
+      hits.idle_p50_us, hits.idle_p99_us, hits.loaded_p50_us, hits.loaded_p99_us, hit_ratio,
+      (unsigned long long)hits.remote_fetches, (unsigned long long)hits.unfilled, (unsigned long long)hits.loads_ok);
 
   const Reuse reuse = plan.runs("reuse") ? measure_reuse(plan, *nginx, *table) : Reuse{};
-  std::printf("2. disk cache: first run %.2f s, %.2f MB from the origin; second run (new server, same folder) %.2f s, "
-              "%.2f MB from the disk cache, %.2f MB from the origin: reuse %.4f%s\n",
-              reuse.first_s, double(reuse.first_origin_bytes) / 1e6, reuse.second_s,
-              double(reuse.second_disk_bytes) / 1e6, double(reuse.second_origin_bytes) / 1e6, reuse.reuse,
-              reuse.complete ? "" : " (INCOMPLETE)");
+  std::printf(
+      "2. disk cache: first run %.2f s, %.2f MB from the origin; second run (new server, same folder) %.2f s, "
+      "%.2f MB from the disk cache, %.2f MB from the origin: reuse %.4f%s\n",
+      reuse.first_s, double(reuse.first_origin_bytes) / 1e6, reuse.second_s, double(reuse.second_disk_bytes) / 1e6,
+      double(reuse.second_origin_bytes) / 1e6, reuse.reuse, reuse.complete ? "" : " (INCOMPLETE)");
 
   std::ofstream csv(plan.out / "storage_bandwidth.csv");
   csv << "link,nominal_bytes_s,seconds,mips,bytes,mb_s,mips_s,first_mip_ms,complete\n";
@@ -502,14 +505,16 @@ int run_storage(Plan plan) {
     std::printf("   %-24s %8.3f MB/s %8.1f mips/s  first mip %7.2f ms  %llu mips, %.2f MB in %.2f s%s\n", link.name,
                 r.mb_s, r.mips_s, r.drive.first_ok_s * 1000, (unsigned long long)r.drive.ok,
                 double(r.drive.bytes) / 1e6, r.drive.seconds, r.drive.complete ? " (all)" : "");
-    csv << fmt::format("{},{},{:.4f},{},{},{:.6f},{:.3f},{:.3f},{}\n", link.name, link.nominal_bytes_s,
-                       r.drive.seconds, r.drive.ok, r.drive.bytes, r.mb_s, r.mips_s, r.drive.first_ok_s * 1000,
+    csv << fmt::format("{},{},{:.4f},{},{},{:.6f},{:.3f},{:.3f},{}\n", link.name, link.nominal_bytes_s, r.drive.seconds,
+                       r.drive.ok, r.drive.bytes, r.mb_s, r.mips_s, r.drive.first_ok_s * 1000,
                        r.drive.complete ? 1 : 0);
-    for (const auto& p : r.timeline) timeline << fmt::format("{},{:.4f},{},{}\n", link.name, p.seconds, p.bytes, p.mips);
+    for (const auto& p : r.timeline)
+      timeline << fmt::format("{},{:.4f},{},{}\n", link.name, p.seconds, p.bytes, p.mips);
     if (std::string(link.location) == "t1") t1_mb_s = r.mb_s;
     if (std::string(link.location) == "isdn") isdn_mb_s = r.mb_s;
   }
-  std::printf("   the same links as a true shared cap (nginx unlimited + slow-storage token bucket at the nominal rate):\n");
+  std::printf(
+      "   the same links as a true shared cap (nginx unlimited + slow-storage token bucket at the nominal rate):\n");
   for (const Link& link : kLinks) {
     if (!plan.runs("links")) break;
     if (link.nominal_bytes_s == 0) continue;
@@ -519,14 +524,16 @@ int run_storage(Plan plan) {
                 r.mb_s, r.mips_s, r.drive.first_ok_s * 1000, (unsigned long long)r.drive.ok,
                 double(r.drive.bytes) / 1e6, r.drive.seconds, r.drive.complete ? " (all)" : "");
     csv << fmt::format("{},{},{:.4f},{},{},{:.6f},{:.3f},{:.3f},{}\n", name, link.nominal_bytes_s, r.drive.seconds,
-                       r.drive.ok, r.drive.bytes, r.mb_s, r.mips_s, r.drive.first_ok_s * 1000, r.drive.complete ? 1 : 0);
+                       r.drive.ok, r.drive.bytes, r.mb_s, r.mips_s, r.drive.first_ok_s * 1000,
+                       r.drive.complete ? 1 : 0);
     for (const auto& p : r.timeline) timeline << fmt::format("{},{:.4f},{},{}\n", name, p.seconds, p.bytes, p.mips);
   }
 
   const PolicyRates rates = plan.runs("policies") ? compare_policies(plan, *table) : PolicyRates{};
-  std::printf("4. disk cache on a moving-window trace (%llu accesses, budget 30%% of its entries' disk space): byte hit rate "
-              "LRU %.4f, FIFO %.4f\n",
-              (unsigned long long)rates.accesses, rates.lru, rates.fifo);
+  std::printf(
+      "4. disk cache on a moving-window trace (%llu accesses, budget 30%% of its entries' disk space): byte hit rate "
+      "LRU %.4f, FIFO %.4f\n",
+      (unsigned long long)rates.accesses, rates.lru, rates.fifo);
 
   std::printf("5. remote fetches in flight over an emulated WAN origin (20 ms + 0-10 ms per read, 8 MB/s):\n");
   std::vector<InFlightRun> in_flight;
@@ -573,20 +580,22 @@ int run_storage(Plan plan) {
     for (const Link& link : kLinks) fp.links.push_back({link.name, link.nominal_bytes_s});
     Stopwatch sw;
     fig12 = run_fig12(fp);
-    std::printf("7. Fig. 12: texstream-render (lavapipe.toml, real time, paced 30 Hz) over a %.2f s camera path at "
-                "%ux%u, server reading through nginx; links capped by the slow-storage shared token bucket over "
-                "nginx's unthrottled prefix (%.1f s):\n",
-                fig12.path_s, fig12.width, fig12.height, sw.seconds());
+    std::printf(
+        "7. Fig. 12: texstream-render (lavapipe.toml, real time, paced 30 Hz) over a %.2f s camera path at "
+        "%ux%u, server reading through nginx; links capped by the slow-storage shared token bucket over "
+        "nginx's unthrottled prefix (%.1f s):\n",
+        fig12.path_s, fig12.width, fig12.height, sw.seconds());
     if (!fig12.failure.empty()) std::printf("   FAILED: %s\n", fig12.failure.c_str());
     for (const Fig12Row& r : fig12.rows) {
       if (!r.failure.empty()) {
         std::printf("   %-16s FAILED: %s\n", r.link.name.c_str(), r.failure.c_str());
         continue;
       }
-      std::printf("   %-16s ∫MSE dt %9.2f  mean PSNR %6.2f dB  %8.3f MB/s %7.1f mips/s  first mip %7.1f ms  "
-                  "%llu mips, %.2f MB, %llu frames\n",
-                  r.link.name.c_str(), r.integrated_mse, r.mean_psnr_db, r.mb_s, r.mips_s, r.first_mip_ms,
-                  (unsigned long long)r.mips, double(r.bytes) / 1e6, (unsigned long long)r.frames);
+      std::printf(
+          "   %-16s ∫MSE dt %9.2f  mean PSNR %6.2f dB  %8.3f MB/s %7.1f mips/s  first mip %7.1f ms  "
+          "%llu mips, %.2f MB, %llu frames\n",
+          r.link.name.c_str(), r.integrated_mse, r.mean_psnr_db, r.mb_s, r.mips_s, r.first_mip_ms,
+          (unsigned long long)r.mips, double(r.bytes) / 1e6, (unsigned long long)r.frames);
     }
   }
   nginx->stop();
@@ -613,7 +622,8 @@ int run_storage(Plan plan) {
   for (const auto& [key, name] : {std::pair{"fig12_error_ratio_t1_vs_unlimited", "T1_1.5Mbit_s"},
                                   std::pair{"fig12_error_ratio_isdn_vs_unlimited", "ISDN_128kbit_s"}}) {
     const Fig12Row* slow = fig12.find(name);
-    const bool ok = unlimited && slow && unlimited->failure.empty() && slow->failure.empty() && unlimited->integrated_mse > 0;
+    const bool ok =
+        unlimited && slow && unlimited->failure.empty() && slow->failure.empty() && unlimited->integrated_mse > 0;
     s.add(key, ok ? slow->integrated_mse / unlimited->integrated_mse : std::numeric_limits<double>::quiet_NaN());
   }
   s.print();
@@ -630,6 +640,7 @@ std::function<int()> define_storage(CLI::App& app) {
   return [plan] { return run_storage(*plan); };
 }
 
-TEXSTREAM_BENCH_COMMAND(storage, "remote/slow storage: nginx origin, disk cache, bimodal hits, failures", define_storage);
+TEXSTREAM_BENCH_COMMAND(storage, "remote/slow storage: nginx origin, disk cache, bimodal hits, failures",
+                        define_storage);
 
 }  // namespace texstream::bench

@@ -18,28 +18,28 @@ struct Fig12Link {
 
 struct Fig12Plan {
   bool quick = false;
-  std::filesystem::path scene;       // scene.dir (nginx serves the same folder)
-  std::filesystem::path work;        // run folders, reference frames (the caller removes it)
-  std::filesystem::path out;         // storage_fig12.csv, storage_fig12_frames.csv
-  std::filesystem::path config;      // the renderer's profile (config/lavapipe.toml)
-  std::string origin_url;            // nginx's unthrottled prefix: the cap comes from storage.slow_bandwidth_mb_s
+  std::filesystem::path scene;   // scene.dir (nginx serves the same folder)
+  std::filesystem::path work;    // run folders, reference frames (the caller removes it)
+  std::filesystem::path out;     // storage_fig12.csv, storage_fig12_frames.csv
+  std::filesystem::path config;  // the renderer's profile (config/lavapipe.toml)
+  std::string origin_url;        // nginx's unthrottled prefix: the cap comes from storage.slow_bandwidth_mb_s
   std::vector<Fig12Link> links;
 };
 
 struct Fig12Row {
   Fig12Link link;
-  std::string failure;         // empty: the run and its analysis succeeded
+  std::string failure;  // empty: the run and its analysis succeeded
   uint64_t frames = 0;
-  double integrated_mse = 0;   // Σ MSE · Δt over the path (MSE · s, virtual time)
+  double integrated_mse = 0;  // Σ MSE · Δt over the path (MSE · s, virtual time)
   double mean_psnr_db = 0;
-  double wall_s = 0;           // frame 0 start to last frame end
+  double wall_s = 0;  // frame 0 start to last frame end
   uint64_t bytes = 0, mips = 0;
   double mb_s = 0, mips_s = 0;  // delivered to the renderer, per wall second of the path
-  double first_mip_ms = 0;     // wall time from frame 0 to the end of the first frame that received a mip (NaN: none)
+  double first_mip_ms = 0;      // wall time from frame 0 to the end of the first frame that received a mip (NaN: none)
 };
 
 struct Fig12Result {
-  std::string failure;         // set when nothing could be measured (no scene, no reference)
+  std::string failure;  // set when nothing could be measured (no scene, no reference)
   uint32_t width = 0, height = 0;
   double path_s = 0;
   uint64_t reference_frames = 0;

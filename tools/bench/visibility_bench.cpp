@@ -17,12 +17,12 @@
 //      pass (GPU timestamps) and a streaming run's figure (feedback only where a cycle starts).
 //   5. submitted_per_visible: meshes the broad phase submits (wide frustum) per mesh with weight > 0.
 // The scene is generated with texstream-gen into a temp dir unless --scene is given.
-#include <cstdlib>
 #include <sys/wait.h>
 #include <unistd.h>
+#include <cstdlib>
 
-#include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
+#include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -40,11 +40,11 @@
 #include "bench_util.hpp"
 #include "texstream/common/camera_path.hpp"
 #include "texstream/common/config.hpp"
+#include "texstream/render/frame/view_renderer.hpp"
+#include "texstream/render/frame/visibility_list.hpp"
 #include "texstream/render/measure/frame_log.hpp"
 #include "texstream/render/measure/image_metrics.hpp"
 #include "texstream/render/scene/scene_data.hpp"
-#include "texstream/render/frame/view_renderer.hpp"
-#include "texstream/render/frame/visibility_list.hpp"
 
 namespace fs = std::filesystem;
 
@@ -156,11 +156,11 @@ PairedRun renderer_frame_pairs(const fs::path& profile, const fs::path& scene, c
       bin.string() + " --config '" + profile.string() + "' --set scene.dir='" + scene.string() +
       "' --set render.output_dir='" + out.string() + "' --set render.preload_all=" + (preload ? "true" : "false") +
       " --set render.pace_frames=false --set render.feedback=true --set render.feedback_pairs=" +
-      (preload ? "true" : "false") +
-      " --set render.frames=" + std::to_string(frames) + " --set render.frame_time_ms=" + frame_ms +
+      (preload ? "true" : "false") + " --set render.frames=" + std::to_string(frames) +
+      " --set render.frame_time_ms=" + frame_ms +
       " --set render.write_every_frames=0 --set render.width_px=" + std::to_string(cfg.render.width_px) +
-      " --set render.height_px=" + std::to_string(cfg.render.height_px) +
-      " --set cache.memory_bytes=1073741824 > '" + log + "' 2>&1";
+      " --set render.height_px=" + std::to_string(cfg.render.height_px) + " --set cache.memory_bytes=1073741824 > '" +
+      log + "' 2>&1";
   const int status = std::system(cmd.c_str());
   if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
     std::fprintf(stderr, "visibility bench: texstream-render failed, see %s\n", log.c_str());
@@ -211,8 +211,8 @@ int run_visibility(const VisibilityArgs& args) {
   // The profiles say which device and frame size: config/gpu.toml selects a non-lavapipe device by name.
   // The profiles live in config/; TEXSTREAM_CONFIG_DIR overrides the build-time path (a bundle run elsewhere).
   const char* config_dir = std::getenv("TEXSTREAM_CONFIG_DIR");
-  const fs::path profile = fs::path(config_dir ? config_dir : TEXSTREAM_VIS_CONFIG_DIR) /
-                           (device == "gpu" ? "gpu.toml" : "lavapipe.toml");
+  const fs::path profile =
+      fs::path(config_dir ? config_dir : TEXSTREAM_VIS_CONFIG_DIR) / (device == "gpu" ? "gpu.toml" : "lavapipe.toml");
   Config cfg = unwrap(load_config(profile, {}), "configuration");
   const Config profile_cfg = cfg;  // the renderer runs of the cost measurement keep the profile's frame size
   if (quick && device == "lavapipe") {
@@ -361,8 +361,8 @@ int run_visibility(const VisibilityArgs& args) {
           wide_ms += v.pass_times.wide_ms;
           compact_ms += v.pass_times.compact_ms;
           Stopwatch sw;
-          const auto candidates = render::build_candidates(v.entries, vr->scene().meshes.meshes.size(),
-                                                           vr->scene().textures.size());
+          const auto candidates =
+              render::build_candidates(v.entries, vr->scene().meshes.meshes.size(), vr->scene().textures.size());
           const double s = sw.seconds() * 1e3;
           on_ms += v.gpu_ms + s;
           on_cpu_ms += cpu + s;
@@ -390,25 +390,31 @@ int run_visibility(const VisibilityArgs& args) {
   const double sum_frac = cost_fraction(on_ms, off_ms);
   const double cpu_frac = cost_fraction(on_cpu_ms, off_cpu_ms);
   const double per_visible = visible ? static_cast<double>(submitted) / static_cast<double>(visible) : 0.0;
-  std::printf("cost (colormap-only views, no texture sampled): fastest frame per view with feedback %.2f ms, "
-              "without %.2f ms (summed over views): %.3f\n",
-              best_on_ms, best_off_ms, cost_frac);
-  std::printf("cost: all frames with feedback %.2f ms, without %.2f ms (sum over views and repeats): %.3f; "
-              "merge + sort %.3f ms\n", on_ms, off_ms, sum_frac, sort_ms);
+  std::printf(
+      "cost (colormap-only views, no texture sampled): fastest frame per view with feedback %.2f ms, "
+      "without %.2f ms (summed over views): %.3f\n",
+      best_on_ms, best_off_ms, cost_frac);
+  std::printf(
+      "cost: all frames with feedback %.2f ms, without %.2f ms (sum over views and repeats): %.3f; "
+      "merge + sort %.3f ms\n",
+      on_ms, off_ms, sum_frac, sort_ms);
   std::printf("cost: process CPU time with feedback %.2f ms, without %.2f ms: %.3f\n", on_cpu_ms, off_cpu_ms, cpu_frac);
-  std::printf("cost by pass (GPU timestamps, same sums): main pass %.2f ms with feedback (metadata writes) vs "
-              "%.2f ms without; wide pass %.2f ms; compaction + prefix copy %.2f ms\n",
-              on_main_ms, off_main_ms, wide_ms, compact_ms);
-  std::printf("draws: %llu meshes submitted, %llu drawn by the main pass in %llu indirect draws, %llu by the wide "
-              "pass in %llu (views summed; a draw covers a run of meshes adjacent in meshes.bin)\n",
-              static_cast<unsigned long long>(submitted), static_cast<unsigned long long>(main_meshes),
-              static_cast<unsigned long long>(main_draws), static_cast<unsigned long long>(wide_meshes),
-              static_cast<unsigned long long>(wide_draws));
-  std::printf("skipping: %llu meshes submitted after the broad phase, %llu with weight > 0 (%.1f%% visible); "
-              "broad phase %.3f ms per view\n",
-              static_cast<unsigned long long>(submitted), static_cast<unsigned long long>(visible),
-              submitted ? 100.0 * static_cast<double>(visible) / static_cast<double>(submitted) : 0.0,
-              poses.empty() ? 0.0 : broad_ms / static_cast<double>(poses.size()));
+  std::printf(
+      "cost by pass (GPU timestamps, same sums): main pass %.2f ms with feedback (metadata writes) vs "
+      "%.2f ms without; wide pass %.2f ms; compaction + prefix copy %.2f ms\n",
+      on_main_ms, off_main_ms, wide_ms, compact_ms);
+  std::printf(
+      "draws: %llu meshes submitted, %llu drawn by the main pass in %llu indirect draws, %llu by the wide "
+      "pass in %llu (views summed; a draw covers a run of meshes adjacent in meshes.bin)\n",
+      static_cast<unsigned long long>(submitted), static_cast<unsigned long long>(main_meshes),
+      static_cast<unsigned long long>(main_draws), static_cast<unsigned long long>(wide_meshes),
+      static_cast<unsigned long long>(wide_draws));
+  std::printf(
+      "skipping: %llu meshes submitted after the broad phase, %llu with weight > 0 (%.1f%% visible); "
+      "broad phase %.3f ms per view\n",
+      static_cast<unsigned long long>(submitted), static_cast<unsigned long long>(visible),
+      submitted ? 100.0 * static_cast<double>(visible) / static_cast<double>(submitted) : 0.0,
+      poses.empty() ? 0.0 : broad_ms / static_cast<double>(poses.size()));
 
   // ---- 4b. cost in the renderer's frames ----
   // The views above show every texture as its colormap colour (ViewRenderer streams nothing), so their frames
@@ -428,8 +434,8 @@ int run_visibility(const VisibilityArgs& args) {
     std::vector<double> best_on_frame(static_cast<size_t>(frames), std::numeric_limits<double>::max());
     std::vector<double> best_off_frame(best_on_frame);
     for (int k = 0; k < runs; ++k) {
-      const PairedRun r = renderer_frame_pairs(profile, scene_dir, work / "resident", profile_cfg, frames,
-                                               path.duration_s(), true);
+      const PairedRun r =
+          renderer_frame_pairs(profile, scene_dir, work / "resident", profile_cfg, frames, path.duration_s(), true);
       if (!r.ok()) break;
       fracs.push_back(r.cost_fraction(kRunWarmupFrames));
       for (size_t f = kRunWarmupFrames; f < r.on.size(); ++f) {
@@ -447,24 +453,26 @@ int run_visibility(const VisibilityArgs& args) {
         best_off_sum += best_off_frame[f];
       }
       const double n = static_cast<double>((frames - kRunWarmupFrames) * runs);
-      std::printf("cost (renderer frames, textures resident, every frame a cycle): %d frames of %lldx%lld x %d runs, "
-                  "each frame drawn with and without feedback back to back: with %.2f ms, without %.2f ms per "
-                  "frame; median of the runs' fractions %.3f (goal <= 0.1)\n",
-                  frames - kRunWarmupFrames, static_cast<long long>(profile_cfg.render.width_px),
-                  static_cast<long long>(profile_cfg.render.height_px), runs, on_sum / n, off_sum / n, run_frac);
+      std::printf(
+          "cost (renderer frames, textures resident, every frame a cycle): %d frames of %lldx%lld x %d runs, "
+          "each frame drawn with and without feedback back to back: with %.2f ms, without %.2f ms per "
+          "frame; median of the runs' fractions %.3f (goal <= 0.1)\n",
+          frames - kRunWarmupFrames, static_cast<long long>(profile_cfg.render.width_px),
+          static_cast<long long>(profile_cfg.render.height_px), runs, on_sum / n, off_sum / n, run_frac);
       std::sort(fracs.begin(), fracs.end());
       std::printf("  per run:");
       for (double f : fracs) std::printf(" %.3f", f);
       std::printf("; all frames summed %.3f; fastest per frame %.3f\n", cost_fraction(on_sum, off_sum),
                   cost_fraction(best_on_sum, best_off_sum));
       // Normal operation: a streaming run carries feedback only on the frames that start a cycle.
-      const PairedRun streamed = renderer_frame_pairs(profile, scene_dir, work / "streaming", profile_cfg, frames,
-                                                      path.duration_s(), false);
+      const PairedRun streamed =
+          renderer_frame_pairs(profile, scene_dir, work / "streaming", profile_cfg, frames, path.duration_s(), false);
       if (streamed.ok()) {
         const double share = static_cast<double>(streamed.cycles) / static_cast<double>(frames);
-        std::printf("cost: a streaming run of the same frames carries feedback on %llu of %d frames (cycle starts): "
-                    "%.3f of the worst case above, ~%.3f of frame time over the fly-through\n",
-                    static_cast<unsigned long long>(streamed.cycles), frames, share, share * run_frac);
+        std::printf(
+            "cost: a streaming run of the same frames carries feedback on %llu of %d frames (cycle starts): "
+            "%.3f of the worst case above, ~%.3f of frame time over the fly-through\n",
+            static_cast<unsigned long long>(streamed.cycles), frames, share, share * run_frac);
       }
     }
     std::error_code ec;
@@ -497,6 +505,7 @@ std::function<int()> define_visibility(CLI::App& app) {
   return [a] { return run_visibility(*a); };
 }
 
-TEXSTREAM_BENCH_COMMAND(visibility, "GPU visibility: LOD accuracy, exact visible set, large coordinates, cost", define_visibility);
+TEXSTREAM_BENCH_COMMAND(visibility, "GPU visibility: LOD accuracy, exact visible set, large coordinates, cost",
+                        define_visibility);
 
 }  // namespace texstream::bench

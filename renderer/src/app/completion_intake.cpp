@@ -31,8 +31,9 @@ void Renderer::tell_states() { states_->apply(stack_->cache().take_events()); }
 Result<Renderer::Clock::duration> Renderer::take_completions() {
   TextureCache& cache = stack_->cache();
   if (!cfg_.render.lockstep) {
-    LoadTimeSink timed(cache, Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                                 std::chrono::duration<double, std::milli>(cfg_.controller.load_time_ms)));
+    LoadTimeSink timed(cache,
+                       Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                          std::chrono::duration<double, std::milli>(cfg_.controller.load_time_ms)));
     client_->poll(timed, static_cast<size_t>(cfg_.stream.max_mips_per_cycle));
     if (timed.limited()) record_.count_load_time_limited();
     TS_TRY(server_not_refusing(kMaxDeathsBeforeAttach));
@@ -140,11 +141,11 @@ Status Renderer::load_fully(std::vector<stream::StreamCandidate> wanted, bool no
       if (incomplete == 0) return ok_status();
       if (Clock::now() - idle_since > kLockstepTimeout) {
         const std::string unattached = client_->unattached_reason();
-        return make_error(ErrorCode::kTimeout,
-                          std::to_string(incomplete) + " textures still incomplete and the server takes no requests (" +
-                              to_string(client_->stats().server_state) + ") after " +
-                              std::to_string(kLockstepTimeout.count()) + " s" +
-                              (unattached.empty() ? "" : ": " + unattached));
+        return make_error(ErrorCode::kTimeout, std::to_string(incomplete) +
+                                                   " textures still incomplete and the server takes no requests (" +
+                                                   to_string(client_->stats().server_state) + ") after " +
+                                                   std::to_string(kLockstepTimeout.count()) + " s" +
+                                                   (unattached.empty() ? "" : ": " + unattached));
       }
       client_->poll(cache, 0);  // supervision: reap, restart
       TS_TRY(server_can_start());
@@ -169,7 +170,8 @@ Status Renderer::load_fully(std::vector<stream::StreamCandidate> wanted, bool no
       } else if (Clock::now() - last_progress > kLockstepTimeout) {
         return make_error(ErrorCode::kTimeout, std::to_string(client_->stats().in_flight) +
                                                    " requests unanswered for " +
-                                                   std::to_string(kLockstepTimeout.count()) + " s while loading "
+                                                   std::to_string(kLockstepTimeout.count()) +
+                                                   " s while loading "
                                                    "whole mip chains");
       } else if (client_->stats().in_flight > 0) {
         std::this_thread::sleep_for(std::chrono::microseconds(200));
@@ -181,8 +183,9 @@ Status Renderer::load_fully(std::vector<stream::StreamCandidate> wanted, bool no
       if (no_evictions) {
         return make_error(ErrorCode::kResourceExhausted,
                           "render.preload_all: the cache evicted textures while loading the whole scene; raise "
-                          "cache.memory_bytes (now " + std::to_string(cfg_.cache.memory_bytes) +
-                              ") and cache.layers (now " + std::to_string(cfg_.cache.layers) + ")");
+                          "cache.memory_bytes (now " +
+                              std::to_string(cfg_.cache.memory_bytes) + ") and cache.layers (now " +
+                              std::to_string(cfg_.cache.layers) + ")");
       }
       return ok_status();  // the visible set does not fit: draw with what is resident
     }

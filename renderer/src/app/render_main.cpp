@@ -19,8 +19,7 @@ constexpr int kExitValidationErrors = 5;
 }  // namespace
 
 int render_main(int argc, char** argv, const char* program, InProcessServerFactory in_process_server) {
-  CLI::App app{std::string(program) +
-               ": renders a texstream scene while streaming its textures from texstream-server" +
+  CLI::App app{std::string(program) + ": renders a texstream scene while streaming its textures from texstream-server" +
                (in_process_server ? " (run in a thread of this process)" : "")};
   std::string config_file;
   std::vector<std::string> overrides;

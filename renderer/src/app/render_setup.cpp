@@ -52,8 +52,8 @@ Status Renderer::set_up() {
   auto scene = SceneData::open(cfg_.scene.dir);
   if (!scene) return scene.error();
   scene_ = std::move(*scene);
-  const fs::path path_file = cfg_.render.camera_path.empty() ? scene_.dir / scene_.manifest.camera_path
-                                                             : fs::path(cfg_.render.camera_path);
+  const fs::path path_file =
+      cfg_.render.camera_path.empty() ? scene_.dir / scene_.manifest.camera_path : fs::path(cfg_.render.camera_path);
   auto path = CameraPath::load(path_file);
   if (!path) return path.error();
   if (path->keys().empty()) return make_error(ErrorCode::kInvalidArgument, path_file.string() + ": no keyframes");

@@ -111,7 +111,7 @@ class Renderer {
   RunRecord record_;
 
   Clock::time_point run_start_{};
-  Clock::time_point stage_mark_{};   // startup_stage() and first_frame_stage(): end of the previous part
+  Clock::time_point stage_mark_{};  // startup_stage() and first_frame_stage(): end of the previous part
   std::vector<std::pair<std::string, double>> startup_seconds_;  // RunSummary::startup_seconds
   uint64_t cycles_ = 0;
   uint64_t last_cycle_sent_ = 0;

@@ -37,7 +37,8 @@ Renderer::~Renderer() = default;
 Result<RunSummary> Renderer::run() {
   TS_TRY(set_up());
   uint64_t frames = static_cast<uint64_t>(cfg_.render.frames);
-  if (frames == 0) frames = static_cast<uint64_t>(std::floor(path_->duration_s() * 1000.0 / cfg_.render.frame_time_ms)) + 1;
+  if (frames == 0)
+    frames = static_cast<uint64_t>(std::floor(path_->duration_s() * 1000.0 / cfg_.render.frame_time_ms)) + 1;
   // Window mode with render.frames = 0 runs until the window is closed.
   if (interactive_ && cfg_.render.frames == 0) frames = UINT64_MAX;
   run_start_ = Clock::now();
@@ -48,8 +49,8 @@ Result<RunSummary> Renderer::run() {
   // draws a frame in 0.5 ms flies the path 60x faster than real time and the streaming never keeps up. The
   // wait is not part of the frame's latency (render_frame measures from its own start).
   const bool pace = cfg_.render.pace_frames && !cfg_.render.lockstep && !interactive_;
-  const auto frame_period = std::chrono::duration_cast<Clock::duration>(
-      std::chrono::duration<double, std::milli>(cfg_.render.frame_time_ms));
+  const auto frame_period =
+      std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double, std::milli>(cfg_.render.frame_time_ms));
   for (uint64_t i = 0; i < frames && !(interactive_ && interactive_->closed()); ++i) {
     if (pace) std::this_thread::sleep_until(run_start_ + frame_period * static_cast<int64_t>(i));
     TS_TRY(render_frame(i, i + 1 == frames));
@@ -119,10 +120,10 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   const auto own_start = Clock::now();
   TS_TRY(stack_->submit({&rec, Uploads::kAll, write || record_.compares(), first ? frame0_step : StepHook{}}));
   if (first) {
-    spdlog::info("first frame: {} meshes in the wide frustum ({} in the viewport's), {} meshes of {} uploaded ({:.1f} MB)",
-                 stack_->visible().size(), plan->split.main_end, stack_->scene_gpu().stats().meshes_resident,
-                 stack_->scene_gpu().mesh_count(),
-                 static_cast<double>(stack_->scene_gpu().stats().bytes_uploaded) / 1e6);
+    spdlog::info(
+        "first frame: {} meshes in the wide frustum ({} in the viewport's), {} meshes of {} uploaded ({:.1f} MB)",
+        stack_->visible().size(), plan->split.main_end, stack_->scene_gpu().stats().meshes_resident,
+        stack_->scene_gpu().mesh_count(), static_cast<double>(stack_->scene_gpu().stats().bytes_uploaded) / 1e6);
   }
   if (interactive_) {
     InteractiveReadout r;
@@ -215,7 +216,7 @@ Result<RunSummary> Renderer::finish() {
   s.texture_count = scene_.texture_records().size();
   s.streaming_cycles = cycles_;
   s.evictions = cache.stats().evictions;
-  s.controller_mode = to_string(controller_->params().mode);
+  s.controller_mode = std::string(choice_name(controller_->params().mode));
   s.controller_rejected_frames = controller_->frames_rejected();
   s.startup_seconds = startup_seconds_;
   TS_TRY(cache.write_stats_json(output_dir_ / "cache.json"));  // budget checks, binds, thrash rate

@@ -26,8 +26,7 @@ Status Renderer::server_not_refusing(uint64_t limit) const {
   if (refusals < limit) return ok_status();
   return make_error(ErrorCode::kPeerDead,
                     "texstream-server refused to start, " + std::to_string(refusals) +
-                        (refusals == 1 ? " time" : " times") + " in a row (last: " +
-                        client_->last_server_exit() +
+                        (refusals == 1 ? " time" : " times") + " in a row (last: " + client_->last_server_exit() +
                         ": bad arguments, configuration or scene); its own messages are above. Check the "
                         "[server] and [storage] keys and scene.dir");
 }

@@ -61,8 +61,8 @@ Result<CacheRegion> CacheAllocator::allocate(TextureId texture, uint32_t width, 
   if (width == 0 || height == 0 || extent > layer_extent_) {
     return make_error(ErrorCode::kInvalidArgument,
                       "texture " + std::to_string(texture.value) + " (" + std::to_string(width) + "x" +
-                          std::to_string(height) + ") does not fit a cache layer of cache.layer_extent_px = " +
-                          std::to_string(layer_extent_));
+                          std::to_string(height) +
+                          ") does not fit a cache layer of cache.layer_extent_px = " + std::to_string(layer_extent_));
   }
   const uint32_t per_row = layer_extent_ / extent;
   const uint32_t capacity = per_row * per_row;

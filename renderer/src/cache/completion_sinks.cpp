@@ -10,8 +10,10 @@ std::span<std::byte> LoadTimeSink::reserve(TextureId texture, MipLevel mip, uint
     return {};
   }
   auto span = inner_.reserve(texture, mip, bytes);
-  if (!span.empty()) ++taken_;
-  else no_room_ = true;
+  if (!span.empty())
+    ++taken_;
+  else
+    no_room_ = true;
   return span;
 }
 

@@ -76,10 +76,10 @@ Result<std::unique_ptr<SparseMemory>> SparseMemory::create(const VulkanContext& 
   m->image_bytes_ = req.size;
   const VkDeviceSize space = ctx.properties().limits.sparseAddressSpaceSize;
   if (req.size > space) {
-    return make_error(ErrorCode::kInvalidArgument,
-                      "cache.layers = " + std::to_string(info.layers) + " x cache.layer_extent_px = " +
-                          std::to_string(info.extent) + " needs " + mib(req.size) +
-                          " of sparse address space; the device has " + mib(space));
+    return make_error(ErrorCode::kInvalidArgument, "cache.layers = " + std::to_string(info.layers) +
+                                                       " x cache.layer_extent_px = " + std::to_string(info.extent) +
+                                                       " needs " + mib(req.size) +
+                                                       " of sparse address space; the device has " + mib(space));
   }
   uint32_t nreq = 0;
   vkGetImageSparseMemoryRequirements(m->device_, image, &nreq, nullptr);
@@ -100,11 +100,12 @@ Result<std::unique_ptr<SparseMemory>> SparseMemory::create(const VulkanContext& 
     g.height *= block_side;
   }
   if (uint64_t{g.width} * g.height * block_bytes / (block_side * block_side) != m->page_bytes_) {
-    return make_error(ErrorCode::kUnsupported, "sparse page of " + std::to_string(m->page_bytes_) + " bytes does not match its " +
-                                                   std::to_string(g.width) + "x" + std::to_string(g.height) + " granularity");
+    return make_error(ErrorCode::kUnsupported, "sparse page of " + std::to_string(m->page_bytes_) +
+                                                   " bytes does not match its " + std::to_string(g.width) + "x" +
+                                                   std::to_string(g.height) + " granularity");
   }
-  m->geometry_ = PageGeometry{info.extent, info.mip_levels, info.layers, g.width, g.height,
-                              std::min(colour->imageMipTailFirstLod, info.mip_levels)};
+  m->geometry_ = PageGeometry{info.extent, info.mip_levels, info.layers,
+                              g.width,     g.height,        std::min(colour->imageMipTailFirstLod, info.mip_levels)};
 
   auto type = ctx.find_memory_type(req.memoryTypeBits, 0, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
   if (!type) return type.error();
@@ -120,7 +121,8 @@ Result<std::unique_ptr<SparseMemory>> SparseMemory::create(const VulkanContext& 
   }
   const uint64_t one_region = [&] {
     uint64_t pages = 0;
-    for (uint32_t l = 0; l < info.mip_levels; ++l) pages += SparsePageTable::pages_of_region(m->geometry_, 0, 0, info.extent, l);
+    for (uint32_t l = 0; l < info.mip_levels; ++l)
+      pages += SparsePageTable::pages_of_region(m->geometry_, 0, 0, info.extent, l);
     return pages * m->page_bytes_;
   }();
   if (info.memory_bytes < m->tail_bytes_ + one_region) {
@@ -128,8 +130,8 @@ Result<std::unique_ptr<SparseMemory>> SparseMemory::create(const VulkanContext& 
                       "cache.memory_bytes = " + std::to_string(info.memory_bytes) + " cannot hold one " +
                           std::to_string(info.extent) + "² texture with all its levels (" +
                           std::to_string(m->tail_bytes_ + one_region) + " bytes with " +
-                          std::to_string(m->page_bytes_) + "-byte pages" +
-                          (m->tail_bytes_ ? " and the mip tail" : "") + "); raise it or lower cache.layer_extent_px");
+                          std::to_string(m->page_bytes_) + "-byte pages" + (m->tail_bytes_ ? " and the mip tail" : "") +
+                          "); raise it or lower cache.layer_extent_px");
   }
   const uint64_t pages = (info.memory_bytes - m->tail_bytes_) / m->page_bytes_;
   m->slot_count_ = static_cast<uint32_t>(std::min<uint64_t>(pages, UINT32_MAX));

@@ -19,7 +19,8 @@ SparsePageTable::SparsePageTable(const PageGeometry& geometry, uint32_t slot_cou
 }
 
 uint64_t SparsePageTable::key(uint32_t layer, uint32_t mip, uint32_t x, uint32_t y) const {
-  return (static_cast<uint64_t>(layer) << 37) | (static_cast<uint64_t>(mip) << 32) | (static_cast<uint64_t>(x) << 16) | y;
+  return (static_cast<uint64_t>(layer) << 37) | (static_cast<uint64_t>(mip) << 32) | (static_cast<uint64_t>(x) << 16) |
+         y;
 }
 
 PageLocation SparsePageTable::location(uint64_t k) const {
@@ -28,8 +29,8 @@ PageLocation SparsePageTable::location(uint64_t k) const {
 }
 
 template <class F>
-void SparsePageTable::for_each_page(uint32_t layer, uint32_t origin_x, uint32_t origin_y, uint32_t extent,
-                                    uint32_t mip, F&& f) const {
+void SparsePageTable::for_each_page(uint32_t layer, uint32_t origin_x, uint32_t origin_y, uint32_t extent, uint32_t mip,
+                                    F&& f) const {
   TS_ASSERT(layer < geometry_.layers && mip < geometry_.mip_levels, "page of layer %u mip %u outside the image", layer,
             mip);
   if (mip >= geometry_.tail_first_level) return;  // the mip tail is bound for good at start-up
@@ -40,8 +41,8 @@ void SparsePageTable::for_each_page(uint32_t layer, uint32_t origin_x, uint32_t 
     for (uint32_t px = x0 / gw; px <= (x0 + side - 1) / gw; ++px) f(key(layer, mip, px, py));
 }
 
-uint32_t SparsePageTable::pages_of_region(const PageGeometry& g, uint32_t origin_x, uint32_t origin_y,
-                                          uint32_t extent, uint32_t mip) {
+uint32_t SparsePageTable::pages_of_region(const PageGeometry& g, uint32_t origin_x, uint32_t origin_y, uint32_t extent,
+                                          uint32_t mip) {
   if (mip >= g.tail_first_level) return 0;
   const uint32_t x0 = origin_x >> mip, y0 = origin_y >> mip;
   const uint32_t side = std::max(extent >> mip, 1u);

@@ -9,8 +9,8 @@
 #include <nlohmann/json.hpp>
 
 #include "texstream/render/scene/gpu_structs.hpp"
-#include "texstream/render/vulkan/one_shot.hpp"
 #include "texstream/render/scene/scene_data.hpp"
+#include "texstream/render/vulkan/one_shot.hpp"
 #include "texstream/render/vulkan/vk_check.hpp"
 #include "texstream/render/vulkan/vulkan_context.hpp"
 
@@ -46,13 +46,13 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
                                                            const SceneData& scene) {
   const auto t0 = std::chrono::steady_clock::now();
   if (options.layer_extent == 0 || (options.layer_extent & (options.layer_extent - 1)) != 0) {
-    return make_error(ErrorCode::kInvalidArgument, "cache.layer_extent_px = " + std::to_string(options.layer_extent) +
-                                                       " is not a power of two");
+    return make_error(ErrorCode::kInvalidArgument,
+                      "cache.layer_extent_px = " + std::to_string(options.layer_extent) + " is not a power of two");
   }
   if (options.layers > ctx.properties().limits.maxImageArrayLayers) {
-    return make_error(ErrorCode::kInvalidArgument,
-                      "cache.layers = " + std::to_string(options.layers) + " exceeds the device's maxImageArrayLayers " +
-                          std::to_string(ctx.properties().limits.maxImageArrayLayers));
+    return make_error(ErrorCode::kInvalidArgument, "cache.layers = " + std::to_string(options.layers) +
+                                                       " exceeds the device's maxImageArrayLayers " +
+                                                       std::to_string(ctx.properties().limits.maxImageArrayLayers));
   }
   std::unique_ptr<TextureCache> c(new TextureCache(options, scene));
   c->mip_levels_ = floor_log2(options.layer_extent) + 1;
@@ -72,15 +72,16 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
                options.memory_bytes >> 20,
                c->sparse_->tail_bytes() ? fmt::format(", {} KiB mip tail", c->sparse_->tail_bytes() >> 10) : "");
 
-  auto staging = GpuBuffer::create(ctx, options.staging_bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, MemoryUse::kHostVisible);
+  auto staging =
+      GpuBuffer::create(ctx, options.staging_bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, MemoryUse::kHostVisible);
   if (!staging) return staging.error();
   c->staging_ = std::move(*staging);
 
   // Entries are written by prepare_textures when first used: the shader reads only the entries of the
   // textures of the meshes it draws.
   const size_t n = std::max<size_t>(scene.texture_records().size(), 1);
-  auto table = GpuBuffer::create(ctx, n * sizeof(gpu::TextureGpu), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT,
-                                 MemoryUse::kHostVisible);
+  auto table =
+      GpuBuffer::create(ctx, n * sizeof(gpu::TextureGpu), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible);
   if (!table) return table.error();
   c->table_ = std::move(*table);
 
@@ -339,7 +340,8 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
     r.bufferRowLength = 0;  // tightly packed, as the DDS stores it
     r.bufferImageHeight = 0;
     r.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, c.mip, region->layer, 1};
-    r.imageOffset = {static_cast<int32_t>(region->origin_x >> c.mip), static_cast<int32_t>(region->origin_y >> c.mip), 0};
+    r.imageOffset = {static_cast<int32_t>(region->origin_x >> c.mip), static_cast<int32_t>(region->origin_y >> c.mip),
+                     0};
     // BC1: whole blocks (the payload holds them: mip_bytes rounds up), inside the region by the check in commit.
     r.imageExtent = {(e.width + block - 1) / block * block, (e.height + block - 1) / block * block, 1};
     regions.push_back(r);
@@ -442,9 +444,9 @@ Status TextureCache::write_stats_json(const std::filesystem::path& file) const {
   j["layers_recycled"] = allocator_.layers_recycled();
   j["texture_loads"] = stats_.texture_loads;
   j["texture_reloads"] = stats_.texture_reloads;
-  j["thrash_rate"] = stats_.texture_loads ? static_cast<double>(stats_.texture_reloads) /
-                                                static_cast<double>(stats_.texture_loads)
-                                          : 0.0;
+  j["thrash_rate"] = stats_.texture_loads
+                         ? static_cast<double>(stats_.texture_reloads) / static_cast<double>(stats_.texture_loads)
+                         : 0.0;
   j["bind_calls"] = b.calls;
   j["bind_ops"] = b.ops;
   j["bind_seconds"] = b.seconds;
@@ -454,9 +456,12 @@ Status TextureCache::write_stats_json(const std::filesystem::path& file) const {
   // The image the binds went to and the first frames' bind ops ([layer, mip, x, y, slot], slot -1 = unbind) and
   // copy regions, for the bind-cost benchmark's replay.
   const SparseImageInfo& si = sparse_->info();
-  j["sparse_image"] = {{"vk_format", static_cast<int64_t>(si.format)}, {"extent", si.extent},
-                       {"mip_levels", si.mip_levels},           {"layers", si.layers},
-                       {"memory_bytes", si.memory_bytes},       {"pages_per_block", sparse_->pages_per_block()}};
+  j["sparse_image"] = {{"vk_format", static_cast<int64_t>(si.format)},
+                       {"extent", si.extent},
+                       {"mip_levels", si.mip_levels},
+                       {"layers", si.layers},
+                       {"memory_bytes", si.memory_bytes},
+                       {"pages_per_block", sparse_->pages_per_block()}};
   nlohmann::json trace = nlohmann::json::array();
   for (const UploadTraceFrame& f : trace_) {
     nlohmann::json binds = nlohmann::json::array(), copies = nlohmann::json::array();

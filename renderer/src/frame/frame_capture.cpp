@@ -15,8 +15,8 @@ Result<FrameCapture> FrameCapture::create(const VulkanContext& ctx, uint32_t wid
   FrameCapture c;
   c.width_ = width;
   c.height_ = height;
-  auto b = GpuBuffer::create(ctx, VkDeviceSize{width} * height * 4, VK_BUFFER_USAGE_TRANSFER_DST_BIT,
-                             MemoryUse::kHostRead);
+  auto b =
+      GpuBuffer::create(ctx, VkDeviceSize{width} * height * 4, VK_BUFFER_USAGE_TRANSFER_DST_BIT, MemoryUse::kHostRead);
   if (!b) return b.error();
   c.buffer_ = std::move(*b);
   return c;

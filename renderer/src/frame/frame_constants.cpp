@@ -30,8 +30,8 @@ gpu::PassConstants wide_pass_constants(const Camera& cam, double fov_y_deg, doub
   return pc;
 }
 
-gpu::FrameUniforms frame_uniforms(const Camera& cam, const Config& cfg, uint32_t mesh_count,
-                                  uint32_t compact_capacity, uint32_t cache_layer_extent, uint32_t cache_mips) {
+gpu::FrameUniforms frame_uniforms(const Camera& cam, const Config& cfg, uint32_t mesh_count, uint32_t compact_capacity,
+                                  uint32_t cache_layer_extent, uint32_t cache_mips) {
   gpu::FrameUniforms fu{};
   const auto a_m = static_cast<float>(cfg.stream.max_anisotropy);
   fu.camera_forward = {cam.forward.x, cam.forward.y, cam.forward.z, 0.0f};

@@ -23,15 +23,14 @@ Result<FramePlan> plan_frame(RenderStack& stack, const Camera& cam, const Config
   plan.submitted = visible.size();
   const ScenePassesOptions& po = stack.passes().options();
   rec.main = main_pass_constants(cam);
-  rec.wide = wide_pass_constants(cam, cfg.render.fov_y_deg, cfg.render.offscreen_fov_y_deg, po.height,
-                                 po.wide_height);
+  rec.wide = wide_pass_constants(cam, cfg.render.fov_y_deg, cfg.render.offscreen_fov_y_deg, po.height, po.wide_height);
   // Meshes that cover no pixel centre of the passes drawing them have no fragment: neither uploaded nor drawn.
   if (options.drop_unsampled) {
     const uint32_t bits = stack.context().properties().limits.subPixelPrecisionBits;
-    plan.split = broad_phase.drop_unsampled(
-        SampleGrid::from_columns(rec.main.view_proj.m, po.width, po.height, bits),
-        SampleGrid::from_columns(rec.wide.view_proj.m, po.wide_width, po.wide_height, bits), cam.position,
-        visible, plan.split);
+    plan.split =
+        broad_phase.drop_unsampled(SampleGrid::from_columns(rec.main.view_proj.m, po.width, po.height, bits),
+                                   SampleGrid::from_columns(rec.wide.view_proj.m, po.wide_width, po.wide_height, bits),
+                                   cam.position, visible, plan.split);
   }
   plan.unsampled = plan.submitted - visible.size();
   step("broad_phase");

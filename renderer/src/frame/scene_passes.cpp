@@ -7,14 +7,14 @@
 #include <utility>
 #include <vector>
 
+#include "scene_pass_objects.hpp"
 #include "texstream/common/contract.hpp"
 #include "texstream/common/scene_format.hpp"
+#include "texstream/render/cache/texture_cache.hpp"
 #include "texstream/render/scene/scene_gpu.hpp"
 #include "texstream/render/vulkan/shader_compiler.hpp"
-#include "texstream/render/cache/texture_cache.hpp"
 #include "texstream/render/vulkan/vk_check.hpp"
 #include "texstream/render/vulkan/vulkan_context.hpp"
-#include "scene_pass_objects.hpp"
 
 namespace texstream::render {
 
@@ -23,10 +23,14 @@ using namespace pass_objects;
 
 uint32_t gpu_debug_view(DebugView view) {
   switch (view) {
-    case DebugView::kNone: return gpu::kDebugViewNone;
-    case DebugView::kMip: return gpu::kDebugViewMip;
-    case DebugView::kWeight: return gpu::kDebugViewWeight;
-    case DebugView::kMeshId: return gpu::kDebugViewMeshId;
+    case DebugView::kNone:
+      return gpu::kDebugViewNone;
+    case DebugView::kMip:
+      return gpu::kDebugViewMip;
+    case DebugView::kWeight:
+      return gpu::kDebugViewWeight;
+    case DebugView::kMeshId:
+      return gpu::kDebugViewMeshId;
   }
   TS_UNREACHABLE("render.debug_view %d is outside its table", static_cast<int>(view));
 }
@@ -100,12 +104,13 @@ Status ScenePasses::create_targets(const VulkanContext& ctx) {
   auto wide_pass = make_wide_pass(device);
   if (!wide_pass) return wide_pass.error();
   wide_pass_ = std::move(*wide_pass);
-  auto main_fb = make_framebuffer(device, main_pass_.get(), {colour_.view(), depth_.view(), owner_.view(), meta_.view()},
-                                  options_.width, options_.height);
+  auto main_fb =
+      make_framebuffer(device, main_pass_.get(), {colour_.view(), depth_.view(), owner_.view(), meta_.view()},
+                       options_.width, options_.height);
   if (!main_fb) return main_fb.error();
   main_fb_ = std::move(*main_fb);
-  auto wide_fb = make_framebuffer(device, wide_pass_.get(), {wide_depth_.view()}, options_.wide_width,
-                                  options_.wide_height);
+  auto wide_fb =
+      make_framebuffer(device, wide_pass_.get(), {wide_depth_.view()}, options_.wide_width, options_.wide_height);
   if (!wide_fb) return wide_fb.error();
   wide_fb_ = std::move(*wide_fb);
 
@@ -205,10 +210,9 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
   // texelFetch through a sampler (its compute time over 60 renderer frames, perf samples).
   const VkDescriptorImageInfo meta_texels{VK_NULL_HANDLE, meta_.view(), VK_IMAGE_LAYOUT_GENERAL};
   std::array<VkWriteDescriptorSet, kBuffers + 4> writes{};
-  const std::array<uint32_t, kBuffers> buffer_bindings{gpu::kBindingFrame,     gpu::kBindingMeshes,
-                                                       gpu::kBindingTextures,  gpu::kBindingMeshMeta,
-                                                       gpu::kBindingCompacted, gpu::kBindingReadback,
-                                                       gpu::kBindingLodProbe,  gpu::kBindingDrawn};
+  const std::array<uint32_t, kBuffers> buffer_bindings{
+      gpu::kBindingFrame,     gpu::kBindingMeshes,   gpu::kBindingTextures, gpu::kBindingMeshMeta,
+      gpu::kBindingCompacted, gpu::kBindingReadback, gpu::kBindingLodProbe, gpu::kBindingDrawn};
   for (size_t i = 0; i < kBuffers; ++i) {
     writes[i] = {};
     writes[i].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
@@ -231,7 +235,7 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
     w.dstBinding = sampled[k].first;
     w.descriptorCount = 1;
     w.descriptorType = sampled[k].first == gpu::kBindingMetaImage ? VK_DESCRIPTOR_TYPE_STORAGE_IMAGE
-                                                                   : VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
+                                                                  : VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
     w.pImageInfo = sampled[k].second;
   }
   VkWriteDescriptorSet& ow = writes[kBuffers];
@@ -413,10 +417,10 @@ void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const
 
   // The previous submission's compaction wrote the sparse metadata and the list counter; this frame's fragment
   // atomics and the counter reset come after it (submission order + this barrier).
-  memory_barrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_SHADER_READ_BIT,
-                 VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT |
-                     VK_PIPELINE_STAGE_TRANSFER_BIT,
-                 VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT);
+  memory_barrier(
+      cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_SHADER_READ_BIT,
+      VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+      VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT);
   // The list this frame compacts into: straight into the host-visible read-back list when a streaming cycle
   // is about to start (compact.comp with COMPACT_TO_HOST), else the device-local one.
   const GpuBuffer& list = frame.read_back_list ? scene_.readback() : scene_.compacted();
@@ -454,8 +458,9 @@ void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const
     vkCmdBindVertexBuffers(cmd, 0, 2, vbs.data(), offsets.data());
     vkCmdBindIndexBuffer(cmd, scene_.indices().handle(), 0, VK_INDEX_TYPE_UINT32);
     vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline);
-    vkCmdDrawIndexedIndirect(cmd, scene_.indirect().handle(), VkDeviceSize{first} * sizeof(VkDrawIndexedIndirectCommand),
-                             count, sizeof(VkDrawIndexedIndirectCommand));
+    vkCmdDrawIndexedIndirect(cmd, scene_.indirect().handle(),
+                             VkDeviceSize{first} * sizeof(VkDrawIndexedIndirectCommand), count,
+                             sizeof(VkDrawIndexedIndirectCommand));
   };
   // Main pass: the pre-pass (depth + owner id), then the shading subpass over the same draws.
   begin_pass(main_pass_.get(), main_fb_.get(), options_.width, options_.height, true);
@@ -481,10 +486,11 @@ void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const
   vkCmdDispatch(cmd, (runs + gpu::kMetaReduceGroup - 1) / gpu::kMetaReduceGroup, 1, 1);
   // Compaction reads what the wide pass's fragment shader and meta_reduce wrote and the cleared counter. One
   // invocation per mesh drawn this frame (the only meshes that can have metadata), not per mesh of the scene.
-  memory_barrier(cmd, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT |
-                          VK_PIPELINE_STAGE_TRANSFER_BIT,
-                 VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
-                 VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
+  memory_barrier(
+      cmd,
+      VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+      VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+      VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
   vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE,
                     frame.read_back_list ? compact_to_host_pipeline_.get() : compact_pipeline_.get());
   const uint32_t groups = (frame.mesh_count + gpu::kCompactWorkgroupSize - 1) / gpu::kCompactWorkgroupSize;
@@ -506,7 +512,9 @@ PassTimes ScenePasses::read_pass_times() const {
   if (vkGetQueryPoolResults(device_, timestamps_.get(), 0, timestamps_written_, sizeof v, v.data(), sizeof(uint64_t),
                             VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT) != VK_SUCCESS)
     return t;
-  auto ms = [&](int a, int b) { return v[b] > v[a] ? static_cast<double>(v[b] - v[a]) * timestamp_period_ns_ * 1e-6 : 0.0; };
+  auto ms = [&](int a, int b) {
+    return v[b] > v[a] ? static_cast<double>(v[b] - v[a]) * timestamp_period_ns_ * 1e-6 : 0.0;
+  };
   t.main_ms = ms(0, 1);
   t.wide_ms = ms(1, 2);
   t.compact_ms = ms(2, 3);

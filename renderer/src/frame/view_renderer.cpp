@@ -52,7 +52,7 @@ uint32_t ViewRenderer::validation_errors() const { return impl_->stack->context(
 bool ViewRenderer::probe_is_anisotropic() const { return impl_->stack->passes().probe_is_anisotropic(); }
 
 Result<std::unique_ptr<ViewRenderer>> ViewRenderer::create(const Config& cfg, SceneData scene,
-                                                            const ViewRendererOptions& options) {
+                                                           const ViewRendererOptions& options) {
   auto impl = std::make_unique<Impl>();
   Impl& m = *impl;
   m.cfg = cfg;

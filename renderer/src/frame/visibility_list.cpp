@@ -32,7 +32,7 @@ void sort_list(It first, It last, Less less) {
 }  // namespace
 
 std::vector<stream::StreamCandidate> build_candidates(std::span<const gpu::CompactEntry> entries, size_t mesh_count,
-                                              size_t texture_count, uint64_t* skipped) {
+                                                      size_t texture_count, uint64_t* skipped) {
   // Meshes sharing a texture merge by sorting on the texture id and combining neighbours: no hash table and no
   // allocation per entry (this runs on the frame thread every streaming cycle). Weights are summed in the GPU's
   // fixed point (exact, so the sum, and with it the order, does not depend on the order the compaction's
@@ -56,9 +56,9 @@ std::vector<stream::StreamCandidate> build_candidates(std::span<const gpu::Compa
       t.mip_fixed = std::min(t.mip_fixed, sums[i].mip_fixed);
       t.weight_fixed += sums[i].weight_fixed;
     }
-    out.push_back(stream::StreamCandidate{TextureId(t.texture),
-                                  static_cast<float>(t.mip_fixed) / static_cast<float>(gpu::kMipFixedScale),
-                                  static_cast<float>(static_cast<double>(t.weight_fixed) / gpu::kWeightFixedScale)});
+    out.push_back(stream::StreamCandidate{
+        TextureId(t.texture), static_cast<float>(t.mip_fixed) / static_cast<float>(gpu::kMipFixedScale),
+        static_cast<float>(static_cast<double>(t.weight_fixed) / gpu::kWeightFixedScale)});
   }
   // Descending weight (seed 000 §3.3), parallel for long lists. The order is total (ties by texture id, ids are
   // unique after the merge), so the result does not depend on the threads.

@@ -139,8 +139,10 @@ Result<std::vector<FrameRecord>> parse_frame_log(const std::string& text, const 
         if (s.empty() || r.ec != std::errc() || r.ptr != end) {
           return make_error(ErrorCode::kCorrupt, where + ": column " + c.name + ": '" + s + "' is not a count");
         }
-        if (c.count) f.*c.count = v;
-        else f.*c.flag = v != 0;
+        if (c.count)
+          f.*c.count = v;
+        else
+          f.*c.flag = v != 0;
       } else if (s.empty()) {
         f.*c.real = kNaN;
       } else {

@@ -8,8 +8,8 @@
 namespace texstream::render {
 
 Result<std::unique_ptr<FrameMeasurement>> FrameMeasurement::open(const std::filesystem::path& reference_dir,
-                                                                  const std::filesystem::path& output_dir,
-                                                                  uint32_t width, uint32_t height) {
+                                                                 const std::filesystem::path& output_dir,
+                                                                 uint32_t width, uint32_t height) {
   auto reference = ReferenceFrames::open(reference_dir, width, height);
   if (!reference) return reference.error();
   auto spill = FrameSpill::create(output_dir / "frames.spill", size_t{width} * height * 4);

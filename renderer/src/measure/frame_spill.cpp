@@ -40,8 +40,7 @@ Status FrameSpill::read(uint64_t index, std::vector<std::byte>& out) {
   TS_ASSERT(index < frames_, "FrameSpill::read: frame %llu of %llu", static_cast<unsigned long long>(index),
             static_cast<unsigned long long>(frames_));
   out.resize(frame_bytes_);
-  if (std::fflush(f_.get()) != 0 ||
-      std::fseek(f_.get(), static_cast<long>(index * frame_bytes_), SEEK_SET) != 0 ||
+  if (std::fflush(f_.get()) != 0 || std::fseek(f_.get(), static_cast<long>(index * frame_bytes_), SEEK_SET) != 0 ||
       std::fread(out.data(), 1, out.size(), f_.get()) != out.size()) {
     return make_error(ErrorCode::kIo, file_.string() + ": read of frame " + std::to_string(index) + " failed");
   }

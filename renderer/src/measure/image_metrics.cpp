@@ -68,14 +68,14 @@ Result<double> ssim(std::span<const float> a, std::span<const float> b, uint32_t
                                                        size_text(width, height));
   }
   if (width < static_cast<uint32_t>(kSsimWindow) || height < static_cast<uint32_t>(kSsimWindow)) {
-    return make_error(ErrorCode::kInvalidArgument,
-                      "ssim: " + size_text(width, height) + " is smaller than one " + std::to_string(kSsimWindow) +
-                          "x" + std::to_string(kSsimWindow) + " window");
+    return make_error(ErrorCode::kInvalidArgument, "ssim: " + size_text(width, height) + " is smaller than one " +
+                                                       std::to_string(kSsimWindow) + "x" + std::to_string(kSsimWindow) +
+                                                       " window");
   }
   static const std::array<double, kSsimWindow> g = gaussian_window();
   const double c1 = (kSsimK1 * kSsimRange) * (kSsimK1 * kSsimRange);
   const double c2 = (kSsimK2 * kSsimRange) * (kSsimK2 * kSsimRange);
-  const size_t ow = width - (kSsimWindow - 1);   // 'valid' output size
+  const size_t ow = width - (kSsimWindow - 1);  // 'valid' output size
   const size_t oh = height - (kSsimWindow - 1);
   // Horizontal pass of the five moments (x, y, x², y², xy) into ow-wide rows, then the vertical pass.
   std::vector<std::array<double, 5>> h(ow * height);

@@ -28,8 +28,8 @@ void RunRecord::start(const FrameCounters& totals, Clock::time_point now) {
 }
 
 Result<FrameRecord*> RunRecord::add(uint64_t index, double time_s, const CameraPose& pose, double latency_ms,
-                                    double waited_ms, const FrameCounters& totals,
-                                    const ControllerReadout& controller, std::span<const std::byte> pixels) {
+                                    double waited_ms, const FrameCounters& totals, const ControllerReadout& controller,
+                                    std::span<const std::byte> pixels) {
   const auto now = Clock::now();
   latencies_ms_.push_back(latency_ms);
   sum_load_mb_ += controller.load_size_mb;

@@ -25,8 +25,8 @@ std::string RunSummary::to_json() const {
   j["device"] = device;
   j["output_dir"] = output_dir.string();
   j["frames"] = frames;
-  j["frame_latency_ms"] = {{"median", frame_latency.median_ms}, {"avg", frame_latency.avg_ms},
-                           {"max", frame_latency.max_ms}};
+  j["frame_latency_ms"] = {
+      {"median", frame_latency.median_ms}, {"avg", frame_latency.avg_ms}, {"max", frame_latency.max_ms}};
   j["mips_streamed"] = mips_streamed;
   j["mb_streamed"] = mb_streamed;
   j["server_ram_cache_hit_rate"] = server_ram_hit_rate;
@@ -66,8 +66,8 @@ std::string RunSummary::to_text() const {
       "  output              {}\n",
       device, frames, frame_latency.median_ms, frame_latency.avg_ms, frame_latency.max_ms, mips_streamed, mb_streamed,
       streaming_cycles, 100.0 * server_ram_hit_rate, protocol_errors, server_restarts, validation_errors,
-      validation_warnings, textures_resident, texture_count, evictions, controller_mode, avg_load_size_mb,
-      avg_mip_bias, avg_weighted_latency_ms, load_time_limited_frames, output_dir.string());
+      validation_warnings, textures_resident, texture_count, evictions, controller_mode, avg_load_size_mb, avg_mip_bias,
+      avg_weighted_latency_ms, load_time_limited_frames, output_dir.string());
 }
 
 Status RunSummary::write_json(const std::filesystem::path& file) const {

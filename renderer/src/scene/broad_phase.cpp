@@ -5,8 +5,8 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <cmath>
 #include <chrono>
+#include <cmath>
 #include <limits>
 
 #include "texstream/render/scene/scene_data.hpp"
@@ -47,8 +47,8 @@ std::unique_ptr<BroadPhase> BroadPhase::for_scene(const SceneData& scene) {
     spdlog::warn("broad phase: tree of {} meshes built in {:.2f} s but not kept ({}): every start builds it",
                  meshes.size(), build_s, w.error().message);
   } else {
-    spdlog::info("broad phase: tree of {} meshes built in {:.2f} s and kept in {} for the next start",
-                 meshes.size(), build_s, (scene.dir / "mesh_index.bin").string());
+    spdlog::info("broad phase: tree of {} meshes built in {:.2f} s and kept in {} for the next start", meshes.size(),
+                 build_s, (scene.dir / "mesh_index.bin").string());
   }
   return built;
 }
@@ -127,9 +127,8 @@ void BroadPhase::query(const Frustum& frustum, const std::array<double, 3>& came
   }
   std::vector<std::vector<uint32_t>> parts(frontier_.size());
   std::vector<BroadPhaseStats> part_stats(frontier_.size());
-  tbb::parallel_for(size_t{0}, frontier_.size(), [&](size_t i) {
-    query_node(frontier_[i], frustum, camera, parts[i], part_stats[i]);
-  });
+  tbb::parallel_for(size_t{0}, frontier_.size(),
+                    [&](size_t i) { query_node(frontier_[i], frustum, camera, parts[i], part_stats[i]); });
   size_t n = 0;
   for (const auto& p : parts) n += p.size();
   out.reserve(n);
@@ -142,7 +141,7 @@ void BroadPhase::query(const Frustum& frustum, const std::array<double, 3>& came
 }
 
 ViewportSplit BroadPhase::split_by_viewport(const Frustum& viewport, const std::array<double, 3>& camera,
-                                           std::vector<uint32_t>& ids) const {
+                                            std::vector<uint32_t>& ids) const {
   std::vector<uint32_t> outside;
   uint32_t touching = 0;
   for (uint32_t id : ids) {

@@ -12,8 +12,8 @@ Status check_counts(const SceneData& s, size_t mesh_count, size_t vertex_count, 
     return make_error(ErrorCode::kCorrupt, (s.dir / "scene.json").string() + ": mesh_count/texture_count (" +
                                                std::to_string(s.manifest.mesh_count) + "/" +
                                                std::to_string(s.manifest.texture_count) +
-                                               ") differ from meshes.bin/textures.bin (" +
-                                               std::to_string(mesh_count) + "/" + std::to_string(texture_count) + ")");
+                                               ") differ from meshes.bin/textures.bin (" + std::to_string(mesh_count) +
+                                               "/" + std::to_string(texture_count) + ")");
   }
   // The GPU addresses meshes and textures with 32-bit ids, and vertex offsets are int32 in an indirect draw.
   if (vertex_count > 0x7fffffffull) {
@@ -115,8 +115,8 @@ std::vector<TextureShape> SceneData::shapes() const {
   out.reserve(records.size());
   for (const auto& t : records) {
     // Both forms validated the format value.
-    out.push_back(TextureShape{t.width, t.height, t.mip_count,
-                               texel_format_from_raw(t.format).value_or(TexelFormat::kRgba8)});
+    out.push_back(
+        TextureShape{t.width, t.height, t.mip_count, texel_format_from_raw(t.format).value_or(TexelFormat::kRgba8)});
   }
   return out;
 }

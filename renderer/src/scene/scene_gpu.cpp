@@ -106,8 +106,8 @@ Result<SceneGpu> SceneGpu::create(const VulkanContext& ctx, const SceneData& sce
   // so creating them costs the same for any scene.
   // Indices are stored absolute (first vertex added) in 32 bits, so every vertex must be addressable by one.
   if (scene.vertices().size() > std::numeric_limits<uint32_t>::max())
-    return make_error(ErrorCode::kCorrupt, scene.dir.string() + "/meshes.bin: " +
-                                               std::to_string(scene.vertices().size()) +
+    return make_error(ErrorCode::kCorrupt, scene.dir.string() +
+                                               "/meshes.bin: " + std::to_string(scene.vertices().size()) +
                                                " vertices; at most 2^32 - 1 can be drawn with 32-bit indices");
   const VkDeviceSize vbytes = std::max<VkDeviceSize>(scene.vertices().size() * sizeof(scene::Vertex), 4);
   const VkDeviceSize vmbytes = std::max<VkDeviceSize>(scene.vertices().size() * sizeof(uint32_t), 4);
@@ -124,14 +124,12 @@ Result<SceneGpu> SceneGpu::create(const VulkanContext& ctx, const SceneData& sce
   TS_TRY(make(g.drawn_, n * sizeof(uint32_t), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible));
   TS_TRY(make(g.mesh_meta_, n * sizeof(gpu::MeshMeta), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst, geometry));
   const VkDeviceSize list_bytes = sizeof(gpu::CompactListHeader) + n * sizeof(gpu::CompactEntry);
-  TS_TRY(make(g.compacted_, list_bytes,
-              VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst,
-              MemoryUse::kDeviceLocal));
+  TS_TRY(make(g.compacted_, list_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst, MemoryUse::kDeviceLocal));
   // Written by compact.comp (COMPACT_TO_HOST): only the header and the used prefix, only when a streaming cycle
   // starts.
   TS_TRY(make(g.readback_, list_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst, MemoryUse::kHostRead));
-  TS_TRY(make(g.frame_uniforms_, sizeof(gpu::FrameUniforms), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT,
-              MemoryUse::kHostVisible));
+  TS_TRY(
+      make(g.frame_uniforms_, sizeof(gpu::FrameUniforms), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT, MemoryUse::kHostVisible));
   g.resident_.assign((static_cast<size_t>(g.mesh_count_) + 63) / 64, 0);
   g.in_list_.assign((static_cast<size_t>(g.mesh_count_) + 63) / 64, 0);
   g.instanced_.assign((static_cast<size_t>(g.mesh_count_) + 63) / 64, 0);
@@ -308,20 +306,22 @@ Status SceneGpu::record_uploads(const SceneData& scene, VkCommandBuffer cmd) {
   queued_.clear();
 
   VkBuffer src = staging_.handle();
-  if (!vregions.empty()) vkCmdCopyBuffer(cmd, src, vertices_.handle(), static_cast<uint32_t>(vregions.size()), vregions.data());
+  if (!vregions.empty())
+    vkCmdCopyBuffer(cmd, src, vertices_.handle(), static_cast<uint32_t>(vregions.size()), vregions.data());
   if (!idregions.empty())
     vkCmdCopyBuffer(cmd, src, vertex_mesh_.handle(), static_cast<uint32_t>(idregions.size()), idregions.data());
-  if (!iregions.empty()) vkCmdCopyBuffer(cmd, src, indices_.handle(), static_cast<uint32_t>(iregions.size()), iregions.data());
+  if (!iregions.empty())
+    vkCmdCopyBuffer(cmd, src, indices_.handle(), static_cast<uint32_t>(iregions.size()), iregions.data());
   vkCmdCopyBuffer(cmd, src, mesh_meta_.handle(), static_cast<uint32_t>(mregions.size()), mregions.data());
   VkMemoryBarrier b{};
   b.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
   b.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
   b.dstAccessMask = VK_ACCESS_VERTEX_ATTRIBUTE_READ_BIT | VK_ACCESS_INDEX_READ_BIT | VK_ACCESS_SHADER_READ_BIT |
                     VK_ACCESS_SHADER_WRITE_BIT;
-  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT,
-                       VK_PIPELINE_STAGE_VERTEX_INPUT_BIT | VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT |
-                           VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
-                       0, 1, &b, 0, nullptr, 0, nullptr);
+  vkCmdPipelineBarrier(
+      cmd, VK_PIPELINE_STAGE_TRANSFER_BIT,
+      VK_PIPELINE_STAGE_VERTEX_INPUT_BIT | VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+      0, 1, &b, 0, nullptr, 0, nullptr);
   return ok_status();
 }
 
@@ -389,8 +389,8 @@ std::pair<uint32_t, uint32_t> SceneGpu::write_list(const SceneData& scene, std::
   return {meshes_listed, count};
 }
 
-void SceneGpu::emit_draw(uint32_t id, uint32_t first_index, uint32_t index_count,
-                         VkDrawIndexedIndirectCommand* draws, uint32_t& count, bool& open) const {
+void SceneGpu::emit_draw(uint32_t id, uint32_t first_index, uint32_t index_count, VkDrawIndexedIndirectCommand* draws,
+                         uint32_t& count, bool& open) const {
   if (is_instanced(id)) {
     // Its vertices carry the owner's id: drawn alone, its own id + 1 in firstInstance (scene.vert).
     draws[count++] = VkDrawIndexedIndirectCommand{index_count, 1, first_index, 0, id + 1};

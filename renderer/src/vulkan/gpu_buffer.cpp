@@ -26,9 +26,9 @@ Result<GpuBuffer> GpuBuffer::create(const VulkanContext& ctx, VkDeviceSize size,
   vkGetBufferMemoryRequirements(device, buffer, &req);
   const bool host = use != MemoryUse::kDeviceLocal;
   const VkMemoryPropertyFlags preferred = use == MemoryUse::kHostRead ? VK_MEMORY_PROPERTY_HOST_CACHED_BIT : 0;
-  auto mem = host ? ctx.allocate(req, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT,
-                                 preferred)
-                  : ctx.allocate(req, 0, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+  auto mem =
+      host ? ctx.allocate(req, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT, preferred)
+           : ctx.allocate(req, 0, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
   if (!mem) return mem.error();
   b.memory_ = std::move(*mem);
   VkDeviceMemory memory = b.memory_.get();

@@ -50,8 +50,9 @@ struct Expander {
     if (!text) return text.error();
     if (path.filename() == "shared_structs.h" && *text != kSharedStructsSource) {
       return make_error(ErrorCode::kInvalidArgument,
-                        path.string() + " differs from the shared_structs.h texstream-render was built with: C++ and "
-                                        "GLSL would disagree on struct layouts; rebuild (cmake --build build)");
+                        path.string() +
+                            " differs from the shared_structs.h texstream-render was built with: C++ and "
+                            "GLSL would disagree on struct layouts; rebuild (cmake --build build)");
     }
     static const std::regex include_re(R"(^\s*#\s*include\s*"([^"]+)\"\s*$)");
     std::istringstream lines(*text);
@@ -79,9 +80,12 @@ struct Expander {
 
 EShLanguage to_glslang(ShaderStage s) {
   switch (s) {
-    case ShaderStage::kVertex: return EShLangVertex;
-    case ShaderStage::kFragment: return EShLangFragment;
-    case ShaderStage::kCompute: return EShLangCompute;
+    case ShaderStage::kVertex:
+      return EShLangVertex;
+    case ShaderStage::kFragment:
+      return EShLangFragment;
+    case ShaderStage::kCompute:
+      return EShLangCompute;
   }
   TS_UNREACHABLE("stage %d", static_cast<int>(s));
 }

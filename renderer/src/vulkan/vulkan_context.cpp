@@ -41,7 +41,8 @@ bool layer_available(const char* name) {
 VkDebugUtilsMessengerCreateInfoEXT messenger_info(ValidationCounters* counters) {
   VkDebugUtilsMessengerCreateInfoEXT info{};
   info.sType = VK_STRUCTURE_TYPE_DEBUG_UTILS_MESSENGER_CREATE_INFO_EXT;
-  info.messageSeverity = VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
+  info.messageSeverity =
+      VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
   info.messageType = VK_DEBUG_UTILS_MESSAGE_TYPE_GENERAL_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT |
                      VK_DEBUG_UTILS_MESSAGE_TYPE_PERFORMANCE_BIT_EXT;
   info.pfnUserCallback = debug_callback;
@@ -106,12 +107,12 @@ Result<std::unique_ptr<VulkanContext>> VulkanContext::create(const VulkanContext
   }
   if (!ctx->physical_) {
     return make_error(ErrorCode::kNotFound, "render.device: no Vulkan device name contains '" +
-                                                options.device_substring + "' (devices: " +
-                                                (names.empty() ? "none" : names) + ")");
+                                                options.device_substring +
+                                                "' (devices: " + (names.empty() ? "none" : names) + ")");
   }
   if (ctx->properties_.apiVersion < VK_API_VERSION_1_2) {
-    return make_error(ErrorCode::kUnsupported, std::string("device '") + ctx->properties_.deviceName +
-                                                   "' supports only Vulkan < 1.2");
+    return make_error(ErrorCode::kUnsupported,
+                      std::string("device '") + ctx->properties_.deviceName + "' supports only Vulkan < 1.2");
   }
   vkGetPhysicalDeviceMemoryProperties(ctx->physical_, &ctx->memory_properties_);
   {

@@ -17,9 +17,8 @@ std::string glfw_error() {
 
 Result<std::unique_ptr<AppWindow>> AppWindow::open(uint32_t width, uint32_t height, const std::string& title) {
   if (!glfwInit()) {
-    return make_error(ErrorCode::kUnsupported,
-                      "render.window = true: cannot open the window system (" + glfw_error() +
-                          "); is DISPLAY set? (xvfb-run provides one)");
+    return make_error(ErrorCode::kUnsupported, "render.window = true: cannot open the window system (" + glfw_error() +
+                                                   "); is DISPLAY set? (xvfb-run provides one)");
   }
   if (!glfwVulkanSupported()) {
     glfwTerminate();

@@ -43,8 +43,10 @@ Status InteractiveSession::attach(const VulkanContext& ctx) {
   auto presenter = SwapchainPresenter::create(ctx, *window_, *surface);
   if (!presenter) return presenter.error();
   presenter_ = std::move(*presenter);
-  spdlog::info("window: mouse (left button) looks, WASD moves, Q/E down/up, Shift faster, R records the camera "
-               "to {}, Esc quits", recorder_.file().string());
+  spdlog::info(
+      "window: mouse (left button) looks, WASD moves, Q/E down/up, Shift faster, R records the camera "
+      "to {}, Esc quits",
+      recorder_.file().string());
   return ok_status();
 }
 

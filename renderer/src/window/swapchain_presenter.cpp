@@ -3,9 +3,9 @@
 #include <algorithm>
 #include <array>
 
-#include "texstream/render/window/app_window.hpp"
 #include "texstream/render/vulkan/vk_check.hpp"
 #include "texstream/render/vulkan/vulkan_context.hpp"
+#include "texstream/render/window/app_window.hpp"
 
 namespace texstream::render {
 
@@ -29,8 +29,7 @@ void image_barrier(VkCommandBuffer cmd, VkImage image, VkImageLayout from, VkIma
 }  // namespace
 
 Result<std::unique_ptr<SwapchainPresenter>> SwapchainPresenter::create(const VulkanContext& ctx,
-                                                                        const AppWindow& window,
-                                                                        VkSurfaceKHR surface) {
+                                                                       const AppWindow& window, VkSurfaceKHR surface) {
   std::unique_ptr<SwapchainPresenter> p(new SwapchainPresenter(ctx, window));
   p->surface_ = surface;
   VkBool32 supported = VK_FALSE;
@@ -114,10 +113,10 @@ Status SwapchainPresenter::rebuild() {
   ci.imageUsage = VK_IMAGE_USAGE_TRANSFER_DST_BIT;
   ci.imageSharingMode = VK_SHARING_MODE_EXCLUSIVE;
   ci.preTransform = caps.currentTransform;
-  ci.compositeAlpha = (caps.supportedCompositeAlpha & VK_COMPOSITE_ALPHA_OPAQUE_BIT_KHR)
-                          ? VK_COMPOSITE_ALPHA_OPAQUE_BIT_KHR
-                          : static_cast<VkCompositeAlphaFlagBitsKHR>(caps.supportedCompositeAlpha &
-                                                                     -caps.supportedCompositeAlpha);
+  ci.compositeAlpha =
+      (caps.supportedCompositeAlpha & VK_COMPOSITE_ALPHA_OPAQUE_BIT_KHR)
+          ? VK_COMPOSITE_ALPHA_OPAQUE_BIT_KHR
+          : static_cast<VkCompositeAlphaFlagBitsKHR>(caps.supportedCompositeAlpha & -caps.supportedCompositeAlpha);
   ci.presentMode = VK_PRESENT_MODE_FIFO_KHR;  // the one mode every surface has
   ci.clipped = VK_TRUE;
   ci.oldSwapchain = swapchain_.get();

@@ -21,9 +21,7 @@ constexpr uint64_t kWarmStep = 2ull << 20;
 
 }  // namespace
 
-uint64_t CacheArena::block_bytes(uint64_t bytes) {
-  return std::bit_ceil(std::max<uint64_t>(bytes, kMinBlock));
-}
+uint64_t CacheArena::block_bytes(uint64_t bytes) { return std::bit_ceil(std::max<uint64_t>(bytes, kMinBlock)); }
 
 CacheArena::CacheArena(uint64_t capacity, ArenaPrefault prefault, std::function<bool()> then_warm)
     : free_(kMaxOrders), then_warm_(std::move(then_warm)) {

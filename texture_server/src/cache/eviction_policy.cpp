@@ -8,8 +8,10 @@ namespace texstream::server {
 
 std::unique_ptr<EvictionPolicy> make_eviction_policy(RamCachePolicy policy, std::function<uint32_t(MipKey)> level_of) {
   switch (policy) {
-    case RamCachePolicy::kLru: return std::make_unique<LruEvictionPolicy>();
-    case RamCachePolicy::kLevel: return std::make_unique<LevelEvictionPolicy>(std::move(level_of));
+    case RamCachePolicy::kLru:
+      return std::make_unique<LruEvictionPolicy>();
+    case RamCachePolicy::kLevel:
+      return std::make_unique<LevelEvictionPolicy>(std::move(level_of));
   }
   TS_UNREACHABLE("server.cache_policy %d is outside its table", static_cast<int>(policy));
 }

@@ -1,5 +1,5 @@
-#include "texstream/server/support/fault_point.hpp"
 #include "texstream/server/cache/mip_cache.hpp"
+#include "texstream/server/support/fault_point.hpp"
 
 #include <algorithm>
 #include <cstring>

@@ -6,7 +6,7 @@ namespace texstream::server {
 
 void NodePool::add_chunk(size_t blocks) {
   auto chunk = std::make_unique<Block[]>(blocks);  // value-initialised: every page written (faulted) now
-  for (size_t i = blocks; i-- > 0;) {  // threaded back to front: allocation walks the chunk from its start
+  for (size_t i = blocks; i-- > 0;) {              // threaded back to front: allocation walks the chunk from its start
     chunk[i].next = free_;
     free_ = &chunk[i];
   }

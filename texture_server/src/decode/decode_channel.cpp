@@ -32,7 +32,8 @@ Status DecodeChannel::send(DecodeFrame frame, std::span<const std::byte> payload
       const ssize_t w = ::send(fd_, p, n, MSG_NOSIGNAL);
       if (w < 0) {
         if (errno == EINTR) continue;
-        if (errno == EPIPE || errno == ECONNRESET) return make_error(ErrorCode::kPeerDead, "the peer closed the channel");
+        if (errno == EPIPE || errno == ECONNRESET)
+          return make_error(ErrorCode::kPeerDead, "the peer closed the channel");
         return make_error(ErrorCode::kIo, std::string("send: ") + std::strerror(errno));
       }
       p += w;
@@ -48,7 +49,8 @@ Status DecodeChannel::read_exact(std::byte* out, size_t n, std::chrono::millisec
   const auto deadline = std::chrono::steady_clock::now() + timeout;
   while (n > 0) {
     if (timeout.count() >= 0) {
-      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+      const auto left =
+          std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
       pollfd p{fd_, POLLIN, 0};
       const int r = ::poll(&p, 1, static_cast<int>(std::max<int64_t>(0, left.count())));
       if (r < 0 && errno == EINTR) continue;

@@ -173,9 +173,8 @@ Status DecodeHelper::decode(StorageFile& file, const std::filesystem::path& path
     }
     if (frame->a == 0) {
       if (frame->payload_bytes != pixels_bytes) {
-        return broken(make_error(ErrorCode::kProtocol, fmt::format("{} bytes of pixels for {}x{}",
-                                                                   frame->payload_bytes, expected.width,
-                                                                   expected.height)));
+        return broken(make_error(ErrorCode::kProtocol, fmt::format("{} bytes of pixels for {}x{}", frame->payload_bytes,
+                                                                   expected.width, expected.height)));
       }
       if (Status s = channel_.receive_payload(out.first(pixels_bytes), timeout); !s.ok()) return broken(s.error());
       return ok_status();

@@ -48,8 +48,8 @@ bool DecodeHelperPool::note_failure(const std::string& key, std::string message)
   return true;
 }
 
-Status DecodeHelperPool::decode(StorageFile& file, const std::filesystem::path& path, uint32_t level,
-                                Extent2D expected, std::span<std::byte> out, uint64_t& bytes_read) {
+Status DecodeHelperPool::decode(StorageFile& file, const std::filesystem::path& path, uint32_t level, Extent2D expected,
+                                std::span<std::byte> out, uint64_t& bytes_read) {
   const std::string key = path.string();
   std::unique_ptr<DecodeHelper> helper;
   {
@@ -91,9 +91,10 @@ Status DecodeHelperPool::decode(StorageFile& file, const std::filesystem::path& 
       now_quarantined = note_failure(key, std::move(how));
     }
     if (now_quarantined) {
-      spdlog::warn("'{}' quarantined: it crashed or hung the decode helper {} times; its mips are refused "
-                   "(kCorrupt) without decoding until the server restarts",
-                   key, kQuarantineAfterFailures);
+      spdlog::warn(
+          "'{}' quarantined: it crashed or hung the decode helper {} times; its mips are refused "
+          "(kCorrupt) without decoding until the server restarts",
+          key, kQuarantineAfterFailures);
     }
   } else if (helper->usable()) {
     std::lock_guard lock(mutex_);

@@ -63,8 +63,9 @@ class RemoteProxy final : public OIIO::Filesystem::IOProxy {
       request.type = uint32_t(DecodeFrameType::kRead);
       request.a = static_cast<uint64_t>(offset) + done;
       request.b = want;
-      Result<DecodeFrame> reply = channel_.send(request).ok() ? channel_.receive_header(kForever)
-                                                               : Result<DecodeFrame>(make_error(ErrorCode::kPeerDead, ""));
+      Result<DecodeFrame> reply = channel_.send(request).ok()
+                                      ? channel_.receive_header(kForever)
+                                      : Result<DecodeFrame>(make_error(ErrorCode::kPeerDead, ""));
       if (!reply.ok() || reply->type != uint32_t(DecodeFrameType::kReadReply)) {
         channel_dead_ = true;  // the server is gone or confused: main() exits after this decode
         error("the server stopped answering reads");

@@ -1,5 +1,5 @@
-#include "texstream/server/support/fault_point.hpp"
 #include "texstream/server/dispatch/server.hpp"
+#include "texstream/server/support/fault_point.hpp"
 
 #include <unistd.h>
 
@@ -62,7 +62,6 @@ constexpr uint64_t kLivenessCheckNs = 1'000'000;
 // default stream.max_requests_in_flight: one whole cycle of requests.
 constexpr size_t kRemotePendingLimit = 256;
 
-
 uint64_t steady_now_ns() {
   return static_cast<uint64_t>(
       std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
@@ -73,10 +72,14 @@ uint64_t steady_now_ns() {
 
 const char* to_string(RunOutcome outcome) {
   switch (outcome) {
-    case RunOutcome::kStopped: return "stopped";
-    case RunOutcome::kRendererDead: return "renderer dead";
-    case RunOutcome::kPeerCorrupt: return "renderer broke the ring protocol";
-    case RunOutcome::kSegmentBusy: return "segment held by another server";
+    case RunOutcome::kStopped:
+      return "stopped";
+    case RunOutcome::kRendererDead:
+      return "renderer dead";
+    case RunOutcome::kPeerCorrupt:
+      return "renderer broke the ring protocol";
+    case RunOutcome::kSegmentBusy:
+      return "segment held by another server";
   }
   return "?";
 }
@@ -100,8 +103,8 @@ Result<std::unique_ptr<Server>> Server::create(Segment& segment, const std::file
                                                const ServerConfig& config, Storage& storage,
                                                std::optional<std::vector<scene::TextureRecord>> scene) {
   if (config.worker_threads < 1 || config.worker_threads > 64) {
-    return make_error(ErrorCode::kInvalidArgument, "server.worker_threads must be in [1, 64], not " +
-                                                       std::to_string(config.worker_threads));
+    return make_error(ErrorCode::kInvalidArgument,
+                      "server.worker_threads must be in [1, 64], not " + std::to_string(config.worker_threads));
   }
   if (config.ram_cache_bytes < 0) {
     return make_error(ErrorCode::kInvalidArgument, "server.ram_cache_bytes must be >= 0");
@@ -128,8 +131,8 @@ Result<std::unique_ptr<Server>> Server::create(Segment& segment, const std::file
                         fmt::format("segment '{}' was made by a renderer reading a texture table of {} textures "
                                     "(fingerprint {:016x}), but this server's scene '{}' has {} (fingerprint "
                                     "{:016x}): the two read different scenes (scene.dir, --scene, storage.origin)",
-                                    segment.name(), h.texture_count, h.texture_table_fingerprint,
-                                    scene_dir.string(), textures->size(), fingerprint));
+                                    segment.name(), h.texture_count, h.texture_table_fingerprint, scene_dir.string(),
+                                    textures->size(), fingerprint));
     }
   }
   if (!(config.rate_limit_mb_s >= 0)) {
@@ -147,9 +150,9 @@ Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const S
       textures_(std::move(textures)),
       requests_(segment.request_consumer()),
       completions_(segment.completion_producer()),
-      rate_limited_(config.rate_limit_mb_s > 0
-                        ? std::make_unique<RateLimitedStorage>(storage, config.rate_limit_mb_s, &stats_.rate_limit_wait_us)
-                        : nullptr),
+      rate_limited_(config.rate_limit_mb_s > 0 ? std::make_unique<RateLimitedStorage>(storage, config.rate_limit_mb_s,
+                                                                                      &stats_.rate_limit_wait_us)
+                                               : nullptr),
       // Eq. 4's quadtree level over this server's texture table: a texture's coarsest (1x1) mip is the root.
       cache_(static_cast<uint64_t>(config.ram_cache_bytes),
              make_eviction_policy(config.cache_policy,
@@ -605,7 +608,7 @@ void Server::idle_wait() {
   const auto idle = std::chrono::microseconds(static_cast<int64_t>(config_.idle_wait_ms * 1000.0));
   // Loads in flight or completions waiting for ring space: nap briefly (workers also wake us).
   const bool short_nap = loads_in_flight_ > 0 || !overflow_.empty();
-  const auto timeout = short_nap                ? std::min(idle, kBusyWait)
+  const auto timeout = short_nap               ? std::min(idle, kBusyWait)
                        : remote_in_flight_ > 0 ? std::min(idle, kRemoteBusyWait)
                                                : idle;
   // The server's half of the doorbell (doorbell.hpp): the ring and the workers' results are re-checked after

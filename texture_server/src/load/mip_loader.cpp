@@ -1,5 +1,5 @@
-#include "texstream/server/support/fault_point.hpp"
 #include "texstream/server/load/mip_loader.hpp"
+#include "texstream/server/support/fault_point.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -38,13 +38,17 @@ CompletionRecord ok_completion(const LoadRequest& request, const scene::TextureR
 
 CompletionStatus status_of(ErrorCode code) {
   switch (code) {
-    case ErrorCode::kNotFound: return CompletionStatus::kNotFound;
+    case ErrorCode::kNotFound:
+      return CompletionStatus::kNotFound;
     case ErrorCode::kCorrupt:
     case ErrorCode::kNotAFile:
-    case ErrorCode::kUnsupported: return CompletionStatus::kCorrupt;
+    case ErrorCode::kUnsupported:
+      return CompletionStatus::kCorrupt;
     case ErrorCode::kTimeout:
-    case ErrorCode::kUnavailable: return CompletionStatus::kTimedOut;
-    default: return CompletionStatus::kIoError;
+    case ErrorCode::kUnavailable:
+      return CompletionStatus::kTimedOut;
+    default:
+      return CompletionStatus::kIoError;
   }
 }
 
@@ -57,11 +61,15 @@ CompletionStatus status_of(ErrorCode code) {
 // place, kNotAFile): asking again cannot help, and it was 4 failed asks per texture as kIoError.
 CompletionStatus read_status(ErrorCode code) {
   switch (code) {
-    case ErrorCode::kNotFound: return CompletionStatus::kNotFound;
+    case ErrorCode::kNotFound:
+      return CompletionStatus::kNotFound;
     case ErrorCode::kTimeout:
-    case ErrorCode::kUnavailable: return CompletionStatus::kTimedOut;
-    case ErrorCode::kNotAFile: return CompletionStatus::kCorrupt;
-    default: return CompletionStatus::kIoError;
+    case ErrorCode::kUnavailable:
+      return CompletionStatus::kTimedOut;
+    case ErrorCode::kNotAFile:
+      return CompletionStatus::kCorrupt;
+    default:
+      return CompletionStatus::kIoError;
   }
 }
 
@@ -72,7 +80,7 @@ std::string extent_text(Extent2D e) { return std::to_string(e.width) + "x" + std
 scene::DdsLayout generated_dds_layout(const scene::TextureRecord& record) {
   scene::DdsLayout l;
   l.encoding = static_cast<TexelFormat>(record.format) == TexelFormat::kBc1 ? scene::DdsEncoding::kBc1
-                                                                          : scene::DdsEncoding::kRgba8;
+                                                                            : scene::DdsEncoding::kRgba8;
   l.width = record.width;
   l.height = record.height;
   l.mip_count = record.mip_count;
@@ -110,17 +118,24 @@ CompletionStatus MipLoader::fail_status(const LoadRequest& request, CompletionSt
                  path.string(), why);
   }
   switch (status) {
-    case CompletionStatus::kNotFound: stats_.add(stats_.not_found, 1); break;
-    case CompletionStatus::kCorrupt: stats_.add(stats_.corrupt, 1); break;
-    default: stats_.add(stats_.io_errors, 1); break;
+    case CompletionStatus::kNotFound:
+      stats_.add(stats_.not_found, 1);
+      break;
+    case CompletionStatus::kCorrupt:
+      stats_.add(stats_.corrupt, 1);
+      break;
+    default:
+      stats_.add(stats_.io_errors, 1);
+      break;
   }
   return status;
 }
 
 void MipLoader::log_left_out(uint64_t count) {
-  spdlog::warn("{} more load(s) timed out or found the storage unavailable after the last such warning (at most one "
-               "per {} s is logged)",
-               count, std::chrono::duration_cast<std::chrono::seconds>(kTimedOutLogPeriod).count());
+  spdlog::warn(
+      "{} more load(s) timed out or found the storage unavailable after the last such warning (at most one "
+      "per {} s is logged)",
+      count, std::chrono::duration_cast<std::chrono::seconds>(kTimedOutLogPeriod).count());
 }
 
 void MipLoader::log_left_out_timeouts(bool now_or_never) {
@@ -137,8 +152,8 @@ void MipLoader::log_left_out_timeouts(bool now_or_never) {
   log_left_out(quiet);
 }
 
-CompletionRecord MipLoader::fail(const LoadRequest& request, CompletionStatus status,
-                                 const std::filesystem::path& path, const std::string& why) {
+CompletionRecord MipLoader::fail(const LoadRequest& request, CompletionStatus status, const std::filesystem::path& path,
+                                 const std::string& why) {
   return make_completion(request, fail_status(request, status, path, why));
 }
 
@@ -160,8 +175,7 @@ CompletionRecord MipLoader::serve_cached(const LoadRequest& request, const scene
 void MipLoader::count_served_cached(uint64_t bytes, bool first_use_of_prefetch) {
   // relaxed: statistics, read for reports. Hits are served by one thread (the dispatcher, see the header):
   // load + store, no locked read-modify-write per hit.
-  block_.ram_cache_hits.v.store(block_.ram_cache_hits.v.load(std::memory_order_relaxed) + 1,
-                                std::memory_order_relaxed);
+  block_.ram_cache_hits.v.store(block_.ram_cache_hits.v.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
   ServerStats::add_one_writer(stats_.bytes_served_cached, bytes);
   // A coarse-tail mip read ahead (load()'s read_tail) is delivered now: the read it came with counts it here.
   if (first_use_of_prefetch) stats_.add(stats_.bytes_loaded, bytes);
@@ -254,8 +268,8 @@ bool MipLoader::open_texture(const LoadRequest& request, Opened& opened, Complet
 }
 
 CompletionStatus MipLoader::read_tail(const LoadRequest& request, const scene::TextureRecord& record, Opened& opened,
-                                      std::span<std::byte> target, bool local_only, Tail& tail,
-                                      uint32_t wanted_levels, bool guessed, bool& retry) {
+                                      std::span<std::byte> target, bool local_only, Tail& tail, uint32_t wanted_levels,
+                                      bool guessed, bool& retry) {
   retry = false;
   // read_mip() checked the asked level against the file (extent, encoding). A neighbour joins the read only
   // if it is small or wanted (asked for and queued), not cached, has the texture table's extent and exactly
@@ -351,8 +365,8 @@ CompletionStatus MipLoader::read_tail(const LoadRequest& request, const scene::T
 }
 
 CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::TextureRecord& record, Opened& opened,
-                                     std::span<std::byte> target, bool local_only, Tail* tail,
-                                     uint32_t wanted_levels, bool guess_layout) {
+                                     std::span<std::byte> target, bool local_only, Tail* tail, uint32_t wanted_levels,
+                                     bool guess_layout) {
   const TexelFormat format = static_cast<TexelFormat>(record.format);  // validated with the texture table
   const uint32_t level = request.mip.value;
   const Extent2D expected = mip_extent(record.width, record.height, level);
@@ -435,8 +449,8 @@ CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::Te
 }
 
 CompletionRecord MipLoader::load(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot_index,
-                                 std::span<std::byte> slot, bool local_only, bool read_tail,
-                                 uint32_t wanted_levels, bool hold_read) {
+                                 std::span<std::byte> slot, bool local_only, bool read_tail, uint32_t wanted_levels,
+                                 bool hold_read) {
   // A held read goes into the cache before this load looks at what is cached (read_tail's cached_levels).
   if (read_tail) release_held();
   const TexelFormat format = static_cast<TexelFormat>(record.format);  // validated with the texture table

@@ -6,10 +6,14 @@ namespace texstream::server {
 
 const char* suffix_of(TextureFileKind kind) {
   switch (kind) {
-    case TextureFileKind::kDds: return ".dds";
-    case TextureFileKind::kTx: return ".tx";
-    case TextureFileKind::kTif: return ".tif";
-    case TextureFileKind::kExr: return ".exr";
+    case TextureFileKind::kDds:
+      return ".dds";
+    case TextureFileKind::kTx:
+      return ".tx";
+    case TextureFileKind::kTif:
+      return ".tif";
+    case TextureFileKind::kExr:
+      return ".exr";
   }
   return ".dds";
 }

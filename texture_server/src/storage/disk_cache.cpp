@@ -235,9 +235,10 @@ Status DiskCache::load_index() {
     const uint64_t room = static_cast<uint64_t>(fsinfo.f_bavail) * fsinfo.f_frsize + bytes_;
     const uint64_t usable = room - room / 16;
     if (usable < budget_.load(std::memory_order_relaxed)) {
-      spdlog::warn("disk cache '{}': storage.disk_cache_bytes = {} is more than its file system can hold ({} bytes "
-                   "free, {} in entries already); using {}",
-                   dir_.string(), budget_.load(std::memory_order_relaxed), room - bytes_, bytes_, usable);
+      spdlog::warn(
+          "disk cache '{}': storage.disk_cache_bytes = {} is more than its file system can hold ({} bytes "
+          "free, {} in entries already); using {}",
+          dir_.string(), budget_.load(std::memory_order_relaxed), room - bytes_, bytes_, usable);
       budget_.store(usable, std::memory_order_relaxed);
     }
   }
@@ -247,8 +248,7 @@ Status DiskCache::load_index() {
     spdlog::warn("disk cache '{}': dropped {} entries whose files were missing or torn", dir_.string(), gone.size());
   }
   spdlog::info("disk cache '{}': {} entries, {} of {} bytes ({})", dir_.string(), entries_.size(), bytes_,
-               budget_.load(std::memory_order_relaxed),
-               choice_name(policy_));
+               budget_.load(std::memory_order_relaxed), choice_name(policy_));
   return ok_status();
 }
 
@@ -314,9 +314,10 @@ void DiskCache::shrink_for_space_locked() {
   const uint64_t lowered = bytes_ - bytes_ / 8;
   if (lowered >= before) return;
   budget_.store(lowered, std::memory_order_relaxed);
-  spdlog::warn("disk cache '{}': its file system is full with {} bytes of entries; budget lowered from {} to {} "
-               "bytes{}",
-               dir_.string(), bytes_, before, lowered, lowered == 0 ? " (the disk cache stores nothing more)" : "");
+  spdlog::warn(
+      "disk cache '{}': its file system is full with {} bytes of entries; budget lowered from {} to {} "
+      "bytes{}",
+      dir_.string(), bytes_, before, lowered, lowered == 0 ? " (the disk cache stores nothing more)" : "");
 }
 
 void DiskCache::evict_locked() {
@@ -367,8 +368,9 @@ std::optional<uint64_t> DiskCache::read(const std::string& key, std::span<std::b
     erase_locked(key, true);
     return std::nullopt;
   };
-  if (size > out.size()) return drop("it holds " + std::to_string(size) + " bytes, more than the " +
-                                     std::to_string(out.size()) + " its key asks");
+  if (size > out.size())
+    return drop("it holds " + std::to_string(size) + " bytes, more than the " + std::to_string(out.size()) +
+                " its key asks");
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) {
     if (errno == ENOENT) {  // evicted or replaced meanwhile: a plain miss
@@ -408,7 +410,9 @@ std::optional<uint64_t> DiskCache::read(const std::string& key, std::span<std::b
 }
 
 void DiskCache::insert(const std::string& key, std::span<const std::byte> data) {
-  if (footprint(key, data.size()) > budget_.load(std::memory_order_relaxed) || key.find_first_of("\n\t") != std::string::npos || key.empty()) return;
+  if (footprint(key, data.size()) > budget_.load(std::memory_order_relaxed) ||
+      key.find_first_of("\n\t") != std::string::npos || key.empty())
+    return;
   EntryHeader h{};
   std::memcpy(h.magic, kMagic, sizeof kMagic);
   h.payload_bytes = data.size();
@@ -416,14 +420,15 @@ void DiskCache::insert(const std::string& key, std::span<const std::byte> data) 
   h.key_bytes = key.size();
   const fs::path path = entry_path(key);
   // A temporary name unique to this thread: two workers inserting the same key never share a temporary.
-  const fs::path tmp = path.string() + ".tmp" + std::to_string(std::hash<std::thread::id>{}(std::this_thread::get_id()));
+  const fs::path tmp =
+      path.string() + ".tmp" + std::to_string(std::hash<std::thread::id>{}(std::this_thread::get_id()));
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) {
     spdlog::warn("disk cache: cannot create '{}': {}", tmp.string(), errno_text());
     return;
   }
-  const bool ok = write_all(fd, &h, sizeof h) && write_all(fd, key.data(), key.size()) &&
-                  write_all(fd, data.data(), data.size());
+  const bool ok =
+      write_all(fd, &h, sizeof h) && write_all(fd, key.data(), key.size()) && write_all(fd, data.data(), data.size());
   const int write_errno = errno;
   ::close(fd);
   std::error_code ec;

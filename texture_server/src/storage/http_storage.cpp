@@ -50,8 +50,8 @@ struct Transfer {
   std::span<std::byte> out;      // range read: the caller's buffer
   std::string* whole = nullptr;  // fetch_all: grows
   uint64_t received = 0;
-  bool overflow = false;         // the origin sent more than fits
-  std::string content_range;     // of the last response (a 100 Continue is followed by the real one)
+  bool overflow = false;      // the origin sent more than fits
+  std::string content_range;  // of the last response (a 100 Continue is followed by the real one)
   const std::atomic<bool>* aborted = nullptr;
 };
 
@@ -207,8 +207,9 @@ Attempt attempt(const std::string& url, std::span<std::byte> out, std::string* w
                 true);
   }
   if (rc == CURLE_PARTIAL_FILE) {
-    return fail(ErrorCode::kIo, what + ": truncated body (" + std::to_string(t.received) + " bytes arrived: " +
-                                    (errbuf[0] ? std::string(errbuf) : curl_easy_strerror(rc)) + ")",
+    return fail(ErrorCode::kIo,
+                what + ": truncated body (" + std::to_string(t.received) +
+                    " bytes arrived: " + (errbuf[0] ? std::string(errbuf) : curl_easy_strerror(rc)) + ")",
                 true);
   }
   if (rc != CURLE_OK && !(rc == CURLE_WRITE_ERROR && t.overflow)) {
@@ -222,15 +223,19 @@ Attempt attempt(const std::string& url, std::span<std::byte> out, std::string* w
       return fail(ErrorCode::kIo, what + ": " + (errbuf[0] ? std::string(errbuf) : curl_easy_strerror(rc)), true);
     }
   }
-  if (status == 404 || status == 410) return fail(ErrorCode::kNotFound, what + ": HTTP " + std::to_string(status), false);
+  if (status == 404 || status == 410)
+    return fail(ErrorCode::kNotFound, what + ": HTTP " + std::to_string(status), false);
   // A gateway or proxy with nothing behind it, or an origin that says it is overloaded or restarting.
   if (status == 502 || status == 503 || status == 504) {
     return fail(ErrorCode::kUnavailable, what + ": HTTP " + std::to_string(status), true);
   }
   if (status >= 500) return fail(ErrorCode::kIo, what + ": HTTP " + std::to_string(status), true);
   if (whole) {
-    if (status != 200) return fail(ErrorCode::kIo, what + ": HTTP " + std::to_string(status) + " (expected 200)", false);
-    if (t.overflow) return fail(ErrorCode::kCorrupt, what + ": larger than " + std::to_string(kMaxWholeObjectBytes) + " bytes", false);
+    if (status != 200)
+      return fail(ErrorCode::kIo, what + ": HTTP " + std::to_string(status) + " (expected 200)", false);
+    if (t.overflow)
+      return fail(ErrorCode::kCorrupt, what + ": larger than " + std::to_string(kMaxWholeObjectBytes) + " bytes",
+                  false);
     return Attempt{t.received, false};
   }
   if (status == 416) {
@@ -241,8 +246,8 @@ Attempt attempt(const std::string& url, std::span<std::byte> out, std::string* w
     return fail(ErrorCode::kCorrupt, what + ": HTTP 416 without a complete length at or below the offset", false);
   }
   if (status == 200) {
-    return fail(ErrorCode::kUnsupported, what + ": the origin ignored the Range header (HTTP 200); range requests are required",
-                false);
+    return fail(ErrorCode::kUnsupported,
+                what + ": the origin ignored the Range header (HTTP 200); range requests are required", false);
   }
   if (status != 206) return fail(ErrorCode::kIo, what + ": unexpected HTTP " + std::to_string(status), false);
   if (t.content_range.empty()) return fail(ErrorCode::kCorrupt, what + ": HTTP 206 without Content-Range", false);
@@ -253,9 +258,10 @@ Attempt attempt(const std::string& url, std::span<std::byte> out, std::string* w
   if (!expected.ok()) return Attempt{expected.error(), false};
   if (t.overflow) return fail(ErrorCode::kCorrupt, what + ": the body is longer than its Content-Range", false);
   if (t.received != *expected) {
-    return fail(ErrorCode::kIo, what + ": truncated body (" + std::to_string(t.received) + " of " +
-                                    std::to_string(*expected) + " bytes)",
-                true);
+    return fail(
+        ErrorCode::kIo,
+        what + ": truncated body (" + std::to_string(t.received) + " of " + std::to_string(*expected) + " bytes)",
+        true);
   }
   return Attempt{t.received, false};
 }
@@ -273,7 +279,8 @@ Result<uint64_t> HttpStorage::read_range(const std::string& url, std::span<std::
       const auto wait = std::chrono::milliseconds(options_.retry_backoff_ms << std::min<int64_t>(i - 1, 16));
       const auto end = std::chrono::steady_clock::now() + wait;
       while (std::chrono::steady_clock::now() < end && !aborted_.load(std::memory_order_relaxed)) {
-        std::this_thread::sleep_for(std::min<std::chrono::steady_clock::duration>(kBackoffSlice, end - std::chrono::steady_clock::now()));
+        std::this_thread::sleep_for(
+            std::min<std::chrono::steady_clock::duration>(kBackoffSlice, end - std::chrono::steady_clock::now()));
       }
     }
     counters_.requests.fetch_add(1, std::memory_order_relaxed);
@@ -305,7 +312,8 @@ Result<std::string> HttpStorage::fetch_all(const std::string& relative) {
   Attempt a{uint64_t{0}, false};
   std::string body;
   for (int64_t i = 0; i <= options_.retries; ++i) {
-    if (i > 0) std::this_thread::sleep_for(std::chrono::milliseconds(options_.retry_backoff_ms << std::min<int64_t>(i - 1, 16)));
+    if (i > 0)
+      std::this_thread::sleep_for(std::chrono::milliseconds(options_.retry_backoff_ms << std::min<int64_t>(i - 1, 16)));
     body.clear();
     counters_.requests.fetch_add(1, std::memory_order_relaxed);
     a = attempt(url, {}, &body, 0, options_, aborted_, nullptr);

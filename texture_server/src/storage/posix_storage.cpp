@@ -53,8 +53,8 @@ class PosixFile final : public StorageFile {
     uint64_t done = 0;
     size_t first = 0;  // the first part not completely read yet
     while (done < total) {
-      const ssize_t n = ::preadv(fd_, iov.data() + first, static_cast<int>(parts.size() - first),
-                                 static_cast<off_t>(offset + done));
+      const ssize_t n =
+          ::preadv(fd_, iov.data() + first, static_cast<int>(parts.size() - first), static_cast<off_t>(offset + done));
       if (n < 0) {
         if (errno == EINTR) continue;
         return read_error(errno, total, offset);
@@ -87,17 +87,17 @@ class PosixFile final : public StorageFile {
   Error read_error(int err, uint64_t bytes, uint64_t offset) const {
     struct stat st {};
     if (::fstat(fd_, &st) == 0 && !S_ISREG(st.st_mode)) {
-      const char* kind = S_ISFIFO(st.st_mode)  ? "a FIFO"
-                         : S_ISDIR(st.st_mode) ? "a directory"
+      const char* kind = S_ISFIFO(st.st_mode)   ? "a FIFO"
+                         : S_ISDIR(st.st_mode)  ? "a directory"
                          : S_ISSOCK(st.st_mode) ? "a socket"
                          : S_ISCHR(st.st_mode)  ? "a character device"
                          : S_ISBLK(st.st_mode)  ? "a block device"
                                                 : "not a file";
-      return Error{ErrorCode::kNotAFile, "'" + path_ + "' is " + kind + ", not a regular file (" +
-                                            std::strerror(err) + ")"};
+      return Error{ErrorCode::kNotAFile,
+                   "'" + path_ + "' is " + kind + ", not a regular file (" + std::strerror(err) + ")"};
     }
-    return Error{ErrorCode::kIo, "cannot read " + std::to_string(bytes) + " bytes at offset " +
-                                     std::to_string(offset) + " of '" + path_ + "': " + std::strerror(err)};
+    return Error{ErrorCode::kIo, "cannot read " + std::to_string(bytes) + " bytes at offset " + std::to_string(offset) +
+                                     " of '" + path_ + "': " + std::strerror(err)};
   }
 
   int fd_;

@@ -79,7 +79,8 @@ Status validate(const SlowStorageParams& p) {
   if (!(p.latency_ms >= 0)) return bad("slow_latency_ms", "must be >= 0");
   if (!(p.jitter_ms >= 0)) return bad("slow_jitter_ms", "must be >= 0");
   if (!(p.bandwidth_mb_s >= 0)) return bad("slow_bandwidth_mb_s", "must be >= 0");
-  if (!(p.stall_probability >= 0 && p.stall_probability <= 1)) return bad("slow_stall_probability", "must be in [0, 1]");
+  if (!(p.stall_probability >= 0 && p.stall_probability <= 1))
+    return bad("slow_stall_probability", "must be in [0, 1]");
   if (!(p.stall_ms >= 0)) return bad("slow_stall_ms", "must be >= 0");
   if (!(p.failure_rate >= 0 && p.failure_rate <= 1)) return bad("slow_failure_rate", "must be in [0, 1]");
   return ok_status();

@@ -67,9 +67,10 @@ Result<std::unique_ptr<StorageStack>> make_storage_stack(const StorageConfig& c,
     stack->scene_dir = scene_dir;
     if (!fs::exists(scene_dir / kTextureTable)) {
       // A bare URL: fetch the texture table once. The files' root stays the folder it is written to.
-      const fs::path local = (c.disk_cache_dir.empty() ? fs::temp_directory_path() /
-                                                             ("texstream-origin-" + std::to_string(::getpid()))
-                                                       : fs::path(c.disk_cache_dir)) / "scene";
+      const fs::path local =
+          (c.disk_cache_dir.empty() ? fs::temp_directory_path() / ("texstream-origin-" + std::to_string(::getpid()))
+                                    : fs::path(c.disk_cache_dir)) /
+          "scene";
       Result<std::string> table = stack->http->fetch_all(kTextureTable);
       // kPeerDead: the origin did not answer (texstream-server exits with its "storage unavailable" status,
       // which the renderer retries like a crash); an answer that is wrong keeps its own code.

@@ -57,8 +57,10 @@ void watch_arm_file(FaultState* state, std::string file) {
     if (const std::optional<FaultPoint> p = fault_point_from_string(name)) {
       state->armed.store(static_cast<int>(*p), std::memory_order_relaxed);  // relaxed: a lone flag, no data
     } else {
-      spdlog::error("{} named fault point '{}', not one of slot_write, before_completion, after_ring_push, "
-                    "eviction, mid_ring_push: ignored", file, name);
+      spdlog::error(
+          "{} named fault point '{}', not one of slot_write, before_completion, after_ring_push, "
+          "eviction, mid_ring_push: ignored",
+          file, name);
     }
   }
 }
@@ -140,7 +142,8 @@ void fault_point(FaultPoint point) {
 }
 
 bool fault_injection_enabled() {
-  static const bool enabled = std::getenv("TEXSTREAM_FAULT") != nullptr || std::getenv("TEXSTREAM_FAULT_ARM") != nullptr;
+  static const bool enabled =
+      std::getenv("TEXSTREAM_FAULT") != nullptr || std::getenv("TEXSTREAM_FAULT_ARM") != nullptr;
   return enabled;
 }
 

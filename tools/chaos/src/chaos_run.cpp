@@ -40,7 +40,7 @@ constexpr int kTailFrames = 450;
 constexpr double kPsnrBoundDb = 45.0;
 // Named kill points (texture_server fault_point.hpp), armed through TEXSTREAM_FAULT_ARM's file.
 constexpr const char* kFaultPoints[] = {"slot_write", "before_completion", "after_ring_push", "eviction",
-                                       "mid_ring_push"};
+                                        "mid_ring_push"};
 // Share of kills sent as named points instead of a SIGKILL at a random instant.
 constexpr double kNamedKillFraction = 0.5;
 // How long an armed point may take to be reached: the server's watcher polls every 2 ms, and the points lie
@@ -98,7 +98,7 @@ struct Tool {
 };
 
 struct RenderSpec {
-  std::string name;             // run name: output folder, log, segment suffix
+  std::string name;  // run name: output folder, log, segment suffix
   fs::path camera_path;
   int64_t frames = 0;
   bool lockstep = false;
@@ -116,21 +116,16 @@ class Runner {
   fs::path stats_file(const std::string& name) const { return work_ / (name + ".stats"); }
 
   Result<ChildProcess> start(const RenderSpec& r) const {
-    std::vector<std::string> argv{tool_.render.string(),
-                                  "--config",
-                                  (fs::path(TEXSTREAM_SOURCE_DIR) / "config/test.toml").string(),
-                                  "--set", "scene.dir=" + scene_.string(),
-                                  "--set", "render.output_dir=" + out_dir(r.name).string(),
-                                  "--set", "render.camera_path=" + r.camera_path.string(),
-                                  "--set", "render.frames=" + std::to_string(r.frames),
-                                  "--set", std::string("render.lockstep=") + (r.lockstep ? "true" : "false"),
-                                  "--set", "render.validation=false",
-                                  "--set", "render.write_every_frames=0",
-                                  "--set", "server.executable=" + tool_.server.string(),
-                                  // A RAM cache far smaller than the scene: the server keeps reading and
-                                  // evicting, so the eviction kill point is on its path (the image is the same).
-                                  "--set", "server.ram_cache_bytes=" + std::to_string(kChaosRamCacheBytes),
-                                  "--set", "protocol.segment_name=" + segment(r.name)};
+    std::vector<std::string> argv{
+        tool_.render.string(), "--config", (fs::path(TEXSTREAM_SOURCE_DIR) / "config/test.toml").string(), "--set",
+        "scene.dir=" + scene_.string(), "--set", "render.output_dir=" + out_dir(r.name).string(), "--set",
+        "render.camera_path=" + r.camera_path.string(), "--set", "render.frames=" + std::to_string(r.frames), "--set",
+        std::string("render.lockstep=") + (r.lockstep ? "true" : "false"), "--set", "render.validation=false", "--set",
+        "render.write_every_frames=0", "--set", "server.executable=" + tool_.server.string(),
+        // A RAM cache far smaller than the scene: the server keeps reading and
+        // evicting, so the eviction kill point is on its path (the image is the same).
+        "--set", "server.ram_cache_bytes=" + std::to_string(kChaosRamCacheBytes), "--set",
+        "protocol.segment_name=" + segment(r.name)};
     std::vector<std::string> env = r.env;
     env.push_back("TEXSTREAM_STREAM_STATS=" + stats_file(r.name).string());
     return ChildProcess::spawn(argv, log_file(r.name), env);
@@ -152,9 +147,9 @@ class Runner {
 }  // namespace
 
 bool ChaosResult::passed() const {
-  return renderer_crashes == 0 && (ipc_bound_us <= 0 || ipc_p9999_us <= ipc_bound_us) && bad_payloads == 0 && leaked_segments == 0 &&
-         leaked_servers == 0 && unserved_after_restart == 0 && !(final_psnr_db < kPsnrBoundDb) &&
-         server_exit_after_renderer_death_ms >= 0;
+  return renderer_crashes == 0 && (ipc_bound_us <= 0 || ipc_p9999_us <= ipc_bound_us) && bad_payloads == 0 &&
+         leaked_segments == 0 && leaked_servers == 0 && unserved_after_restart == 0 &&
+         !(final_psnr_db < kPsnrBoundDb) && server_exit_after_renderer_death_ms >= 0;
 }
 
 std::string ChaosResult::summary_line() const {
@@ -183,8 +178,8 @@ ChaosResult run_chaos(const ChaosOptions& o) {
       return res;
     }
   }
-  const fs::path work = o.work_dir.empty() ? fs::temp_directory_path() / ("texstream-chaos-" + std::to_string(::getpid()))
-                                           : o.work_dir;
+  const fs::path work =
+      o.work_dir.empty() ? fs::temp_directory_path() / ("texstream-chaos-" + std::to_string(::getpid())) : o.work_dir;
   fs::remove_all(work);
   fs::create_directories(work);
   const std::string prefix = "texstream-chaos-" + std::to_string(::getpid()) + "-";
@@ -298,11 +293,14 @@ ChaosResult run_chaos(const ChaosOptions& o) {
     // restart (back-off, start-up, attach) the kills still come about once per interval.
     // The interval is recomputed from the time and kills left, so that waits for named points and slow
     // restarts do not leave kills unsent when the phase ends.
-    const double left_s = std::chrono::duration<double>(start + std::chrono::duration_cast<Clock::duration>(
-                                                             std::chrono::duration<double>(kill_s)) - Clock::now()).count();
+    const double left_s =
+        std::chrono::duration<double>(
+            start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(kill_s)) - Clock::now())
+            .count();
     const double kills_left = static_cast<double>(static_cast<uint64_t>(o.kills) - res.kills);
-    const double interval_s = left_s > 0 ? std::min(mean_interval_s, left_s / (kills_left / std::max(0.05, 1.0 - o.stall_fraction)))
-                                         : 0.05 * mean_interval_s;
+    const double interval_s =
+        left_s > 0 ? std::min(mean_interval_s, left_s / (kills_left / std::max(0.05, 1.0 - o.stall_fraction)))
+                   : 0.05 * mean_interval_s;
     const auto wait = std::chrono::duration<double>(interval_s * (0.05 + 0.95 * unit(rng)));
     const auto at = Clock::now() + std::chrono::duration_cast<Clock::duration>(wait);
     while (Clock::now() < at && !(exit = render->try_wait())) std::this_thread::sleep_for(1ms);
@@ -349,7 +347,8 @@ ChaosResult run_chaos(const ChaosOptions& o) {
   }
   log("named kill points: " + std::to_string(named_tried) + " armed, " + std::to_string(named_hit) +
       " reached (the server died there), " + std::to_string(named_unclaimed) +
-      " never claimed (a server reads the arm file only once it has passed a point: one idle since its start never does); the rest SIGKILLed");
+      " never claimed (a server reads the arm file only once it has passed a point: one idle since its start never "
+      "does); the rest SIGKILLed");
   {
     std::string per_point = "named kill points reached / armed:";
     for (size_t i = 0; i < std::size(kFaultPoints); ++i)
@@ -357,8 +356,8 @@ ChaosResult run_chaos(const ChaosOptions& o) {
                    std::to_string(point_tried[i]);
     log(per_point + " (a point lies on the path of a served mip: an idle server passes none)");
   }
-  log("kill phase over after " + fmt_num(std::chrono::duration<double>(Clock::now() - start).count(), 1) + " s: " +
-      std::to_string(res.kills) + " SIGKILLs, " + std::to_string(res.stalls) + " stalls (" +
+  log("kill phase over after " + fmt_num(std::chrono::duration<double>(Clock::now() - start).count(), 1) +
+      " s: " + std::to_string(res.kills) + " SIGKILLs, " + std::to_string(res.stalls) + " stalls (" +
       std::to_string(watchdog_stalls) + " ended by the renderer's watchdog)");
   if (!exit) {
     // The rest of the fly-through and the tail, at up to 4x the calibrated frame time, plus a minute.
@@ -386,11 +385,11 @@ ChaosResult run_chaos(const ChaosOptions& o) {
     log("stream client: " + std::to_string(res.payloads_ok) + " payloads consumed, checksum verified; " +
         std::to_string(res.bad_payloads) + " checksum failures; " + std::to_string(res.protocol_errors) +
         " protocol errors; " + std::to_string(res.server_deaths) + " server deaths seen; " +
-        std::to_string(res.lost_resent) + " lost requests re-sent, " +
-        fmt_num(st->number("lost_answered_in_time"), 0) + " answered within 2 s; IPC per frame p50 " +
-        fmt_num(st->number("ipc_p50_us")) + " us, p99 " + fmt_num(st->number("ipc_p99_us")) + " us, p99.99 " +
-        fmt_num(res.ipc_p9999_us) + " us, max " + fmt_num(res.ipc_max_us) + " us over " +
-        std::to_string(res.ipc_frames) + " frames (" + fmt_num(st->number("ipc_frames_over_1ms"), 0) + " over 1 ms)");
+        std::to_string(res.lost_resent) + " lost requests re-sent, " + fmt_num(st->number("lost_answered_in_time"), 0) +
+        " answered within 2 s; IPC per frame p50 " + fmt_num(st->number("ipc_p50_us")) + " us, p99 " +
+        fmt_num(st->number("ipc_p99_us")) + " us, p99.99 " + fmt_num(res.ipc_p9999_us) + " us, max " +
+        fmt_num(res.ipc_max_us) + " us over " + std::to_string(res.ipc_frames) + " frames (" +
+        fmt_num(st->number("ipc_frames_over_1ms"), 0) + " over 1 ms)");
   } else {
     res.notes += st.error().message + "; ";
     ++res.renderer_crashes;

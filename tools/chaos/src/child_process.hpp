@@ -40,8 +40,8 @@ class ChildProcess {
 struct ProcInfo {
   pid_t pid = 0;
   pid_t ppid = 0;
-  char state = '?';   // R, S, T (stopped), Z ...
-  std::string comm;   // at most 15 characters (TASK_COMM_LEN)
+  char state = '?';  // R, S, T (stopped), Z ...
+  std::string comm;  // at most 15 characters (TASK_COMM_LEN)
 };
 std::optional<ProcInfo> read_proc(pid_t pid);
 // The whole file (small files: /proc entries, texture files); nullopt if it cannot be read.

@@ -62,7 +62,9 @@ Bytes encode_other(const Bytes& dds, const scene::TextureRecord& t, OtherFormat 
   OIIO::ImageSpec spec(static_cast<int>(t.width), static_cast<int>(t.height), 4, OIIO::TypeDesc::UINT8);
   OIIO::ImageBuf src(spec);
   src.set_pixels(OIIO::ROI::All(), OIIO::TypeDesc::UINT8, dds.data() + scene::kDdsHeaderBytes);
-  const fs::path tmp = scratch.string() + (format == OtherFormat::kExr ? ".exr" : format == OtherFormat::kTiff ? ".tif" : ".jpg");
+  const fs::path tmp = scratch.string() + (format == OtherFormat::kExr    ? ".exr"
+                                           : format == OtherFormat::kTiff ? ".tif"
+                                                                          : ".jpg");
   bool ok = false;
   if (format == OtherFormat::kJpegAsTif) {
     OIIO::ImageBuf rgb = OIIO::ImageBufAlgo::channels(src, 3, {});  // JPEG has no alpha
@@ -177,16 +179,15 @@ std::vector<Mutation> mutations_for(const scene::TextureRecord& t, std::mt19937_
   header("width 65536", kOffWidth, 65536, true);
   header("width doubled (not the table's extent)", kOffWidth, t.width * 2, true);
   header("mip count 0xffffffff", kOffMipCount, 0xffffffffu, false);  // may be refused, or read as "levels present"
-  header("mip count 0", kOffMipCount, 0, false);                      // legacy files: 0 means one level
+  header("mip count 0", kOffMipCount, 0, false);                     // legacy files: 0 means one level
   header("mip count 1 more than possible", kOffMipCount, t.mip_count + 1, false);
   header("pixel-format flags 0", kOffPfFlags, 0, f == TexelFormat::kBc1);
   header("unknown FourCC 'XYZW'", kOffFourCc, 0x575a5958u, f == TexelFormat::kBc1);
   header("FourCC DXT5", kOffFourCc, 0x35545844u, f == TexelFormat::kBc1);  // a bc1 texture is never re-encoded
   for (int i = 0; i < 6; ++i) {
     const size_t bit = std::uniform_int_distribution<size_t>(0, scene::kDdsHeaderBytes * 8 - 1)(rng);
-    m.push_back({"bit flip in the header (bit " + std::to_string(bit) + ")", [bit](Bytes& b, CorruptCase&) {
-                   b[bit / 8] ^= static_cast<std::byte>(1u << (bit % 8));
-                 }});
+    m.push_back({"bit flip in the header (bit " + std::to_string(bit) + ")",
+                 [bit](Bytes& b, CorruptCase&) { b[bit / 8] ^= static_cast<std::byte>(1u << (bit % 8)); }});
   }
   const uint64_t data_bytes = scene::dds_file_bytes(f, t.width, t.height, t.mip_count) - scene::kDdsHeaderBytes;
   for (int i = 0; i < 4; ++i) {

@@ -24,28 +24,28 @@ namespace texstream::chaos {
 
 struct CorruptCase {
   uint32_t texture = 0;
-  std::string mutation;           // e.g. "truncated at 640 (end of mip 1)"
-  std::filesystem::path file;     // the damaged file (or where it would be)
-  bool all_must_fail = false;     // no mip of it may be served
+  std::string mutation;              // e.g. "truncated at 640 (end of mip 1)"
+  std::filesystem::path file;        // the damaged file (or where it would be)
+  bool all_must_fail = false;        // no mip of it may be served
   uint32_t first_failing_mip = ~0u;  // mips >= this lie (partly) past a truncation: must fail
-  bool unreadable = false;        // chmod 000 (only when that stops reads: not as root)
+  bool unreadable = false;           // chmod 000 (only when that stops reads: not as root)
   // The header differs from the original: for an rgba8 texture the server may then decode the file through
   // OpenImageIO (e.g. other channel masks), so a kOk payload need not be the raw bytes.
   bool header_changed = false;
-  bool other_format = false;      // not a DDS any more (TIFF, OpenEXR, JPEG): `file` has that suffix
+  bool other_format = false;  // not a DDS any more (TIFF, OpenEXR, JPEG): `file` has that suffix
 };
 
 struct CorpusOptions {
   uint64_t seed = 1;
-  uint32_t max_cases = 0;         // 0: one texture per mutation until textures or mutations run out
-  bool repeat = false;            // cycle the mutation list over every texture (10^4+ files from a big scene)
+  uint32_t max_cases = 0;  // 0: one texture per mutation until textures or mutations run out
+  bool repeat = false;     // cycle the mutation list over every texture (10^4+ files from a big scene)
 };
 
 struct Corpus {
   std::vector<CorruptCase> cases;
-  std::vector<uint32_t> intact;   // control textures, copied unchanged
+  std::vector<uint32_t> intact;  // control textures, copied unchanged
   std::vector<scene::TextureRecord> table;
-  std::string skipped;            // mutations that could not be made here, and why
+  std::string skipped;  // mutations that could not be made here, and why
 };
 
 // Copies `scene_dir`'s scene files into `out_dir` (created; must not be the source) and writes the damaged

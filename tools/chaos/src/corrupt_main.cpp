@@ -24,7 +24,7 @@ int main(int argc, char** argv) {
   }
   for (const auto& c : corpus->cases) {
     std::printf("%u\t%s\t%s\t%s\n", c.texture, c.file.c_str(), c.mutation.c_str(),
-                c.all_must_fail ? "all mips must fail"
+                c.all_must_fail              ? "all mips must fail"
                 : c.first_failing_mip != ~0u ? ("mips >= " + std::to_string(c.first_failing_mip) + " must fail").c_str()
                                              : "served as stored");
   }

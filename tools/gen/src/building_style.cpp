@@ -10,18 +10,24 @@ namespace {
 
 // Palettes read off typical Berlin street fronts: pastel and ochre plaster, red and yellow clinker, grey and
 // beige concrete, blue-green and bronze glass.
-constexpr std::array<std::array<int, 3>, 10> kPlaster = {{{226, 214, 188}, {214, 190, 150}, {200, 200, 196},
-                                                          {232, 220, 200}, {190, 160, 130}, {222, 196, 180},
-                                                          {205, 214, 190}, {238, 234, 224}, {180, 176, 170},
+constexpr std::array<std::array<int, 3>, 10> kPlaster = {{{226, 214, 188},
+                                                          {214, 190, 150},
+                                                          {200, 200, 196},
+                                                          {232, 220, 200},
+                                                          {190, 160, 130},
+                                                          {222, 196, 180},
+                                                          {205, 214, 190},
+                                                          {238, 234, 224},
+                                                          {180, 176, 170},
                                                           {226, 200, 140}}};
-constexpr std::array<std::array<int, 3>, 5> kBrick = {{{150, 70, 50}, {128, 58, 44}, {170, 100, 70},
-                                                       {190, 150, 100}, {110, 70, 60}}};
-constexpr std::array<std::array<int, 3>, 5> kConcrete = {{{176, 174, 168}, {196, 188, 170}, {160, 164, 166},
-                                                          {210, 204, 190}, {150, 146, 138}}};
-constexpr std::array<std::array<int, 3>, 5> kGlass = {{{70, 100, 120}, {60, 90, 90}, {90, 80, 60},
-                                                       {80, 90, 110}, {50, 60, 70}}};
-constexpr std::array<std::array<int, 3>, 6> kAccent = {{{90, 40, 30}, {40, 60, 90}, {40, 70, 50},
-                                                        {60, 60, 60}, {120, 90, 50}, {150, 30, 30}}};
+constexpr std::array<std::array<int, 3>, 5> kBrick = {
+    {{150, 70, 50}, {128, 58, 44}, {170, 100, 70}, {190, 150, 100}, {110, 70, 60}}};
+constexpr std::array<std::array<int, 3>, 5> kConcrete = {
+    {{176, 174, 168}, {196, 188, 170}, {160, 164, 166}, {210, 204, 190}, {150, 146, 138}}};
+constexpr std::array<std::array<int, 3>, 5> kGlass = {
+    {{70, 100, 120}, {60, 90, 90}, {90, 80, 60}, {80, 90, 110}, {50, 60, 70}}};
+constexpr std::array<std::array<int, 3>, 6> kAccent = {
+    {{90, 40, 30}, {40, 60, 90}, {40, 70, 50}, {60, 60, 60}, {120, 90, 50}, {150, 30, 30}}};
 
 template <size_t N>
 Rgb pick(Rng& rng, const std::array<std::array<int, 3>, N>& palette) {
@@ -47,18 +53,28 @@ BuildingStyle make_building_style(uint64_t seed, uint32_t building, BuildingClas
       s.material = m < 0.55f ? FacadeMaterial::kGlass : m < 0.85f ? FacadeMaterial::kPanel : FacadeMaterial::kPlaster;
       break;
     case BuildingClass::kPerimeter:
-      s.material = m < 0.55f ? FacadeMaterial::kPlaster : m < 0.75f ? FacadeMaterial::kBrick
-                 : m < 0.93f ? FacadeMaterial::kPanel : FacadeMaterial::kGlass;
+      s.material = m < 0.55f   ? FacadeMaterial::kPlaster
+                   : m < 0.75f ? FacadeMaterial::kBrick
+                   : m < 0.93f ? FacadeMaterial::kPanel
+                               : FacadeMaterial::kGlass;
       break;
     case BuildingClass::kHouse:
       s.material = m < 0.6f ? FacadeMaterial::kPlaster : FacadeMaterial::kBrick;
       break;
   }
   switch (s.material) {
-    case FacadeMaterial::kPlaster: s.wall = jitter(rng, pick(rng, kPlaster), 0.04f, 0.3f, 0.08f); break;
-    case FacadeMaterial::kBrick: s.wall = jitter(rng, pick(rng, kBrick), 0.02f, 0.15f, 0.1f); break;
-    case FacadeMaterial::kPanel: s.wall = jitter(rng, pick(rng, kConcrete), 0.05f, 0.4f, 0.06f); break;
-    case FacadeMaterial::kGlass: s.wall = jitter(rng, pick(rng, kConcrete), 0.03f, 0.2f, 0.1f); break;
+    case FacadeMaterial::kPlaster:
+      s.wall = jitter(rng, pick(rng, kPlaster), 0.04f, 0.3f, 0.08f);
+      break;
+    case FacadeMaterial::kBrick:
+      s.wall = jitter(rng, pick(rng, kBrick), 0.02f, 0.15f, 0.1f);
+      break;
+    case FacadeMaterial::kPanel:
+      s.wall = jitter(rng, pick(rng, kConcrete), 0.05f, 0.4f, 0.06f);
+      break;
+    case FacadeMaterial::kGlass:
+      s.wall = jitter(rng, pick(rng, kConcrete), 0.03f, 0.2f, 0.1f);
+      break;
   }
   s.trim = rng.chance(0.6f) ? jitter(rng, rgb8(235, 232, 225), 0.02f, 0.5f, 0.05f)
                             : jitter(rng, rgb8(60, 58, 56), 0.05f, 0.5f, 0.2f);
@@ -70,10 +86,18 @@ BuildingStyle make_building_style(uint64_t seed, uint32_t building, BuildingClas
            : rng.chance(0.1f)           ? RoofMaterial::kMetal
                                         : RoofMaterial::kGravel;
   switch (s.roof) {
-    case RoofMaterial::kGravel: s.roof_colour = jitter(rng, rgb8(128, 124, 118), 0.05f, 0.3f, 0.15f); break;
-    case RoofMaterial::kTiles: s.roof_colour = jitter(rng, rgb8(160, 70, 45), 0.03f, 0.2f, 0.2f); break;
-    case RoofMaterial::kGreen: s.roof_colour = jitter(rng, rgb8(90, 120, 60), 0.04f, 0.2f, 0.15f); break;
-    case RoofMaterial::kMetal: s.roof_colour = jitter(rng, rgb8(100, 110, 115), 0.1f, 0.3f, 0.15f); break;
+    case RoofMaterial::kGravel:
+      s.roof_colour = jitter(rng, rgb8(128, 124, 118), 0.05f, 0.3f, 0.15f);
+      break;
+    case RoofMaterial::kTiles:
+      s.roof_colour = jitter(rng, rgb8(160, 70, 45), 0.03f, 0.2f, 0.2f);
+      break;
+    case RoofMaterial::kGreen:
+      s.roof_colour = jitter(rng, rgb8(90, 120, 60), 0.04f, 0.2f, 0.15f);
+      break;
+    case RoofMaterial::kMetal:
+      s.roof_colour = jitter(rng, rgb8(100, 110, 115), 0.1f, 0.3f, 0.15f);
+      break;
   }
   s.solar = s.roof == RoofMaterial::kGravel && rng.chance(0.3f);
 

@@ -29,14 +29,14 @@ struct BuildingStyle {
   float window_pitch_m;  // horizontal distance between window centres
   float window_w_m;
   float window_h_m;
-  float panel_w_m;       // panel grid (kPanel) / mullion spacing (kGlass)
-  float lit_fraction;    // share of windows that look lit or curtained (brighter)
-  float dirt;            // 0..1: weathering streaks and grime near the ground
-  float texel_m;         // base texel size of this building's textures, metres per texel
-  bool cornices;         // a band at every floor
-  bool shop_front;       // wide shop windows on the ground floor instead of regular windows
-  bool mullion_cross;    // windows divided into four panes
-  bool solar;            // solar panels on flat roofs
+  float panel_w_m;     // panel grid (kPanel) / mullion spacing (kGlass)
+  float lit_fraction;  // share of windows that look lit or curtained (brighter)
+  float dirt;          // 0..1: weathering streaks and grime near the ground
+  float texel_m;       // base texel size of this building's textures, metres per texel
+  bool cornices;       // a band at every floor
+  bool shop_front;     // wide shop windows on the ground floor instead of regular windows
+  bool mullion_cross;  // windows divided into four panes
+  bool solar;          // solar panels on flat roofs
 };
 
 // What kind of building it is decides the likely materials (towers are glass or panels, houses have tiles).

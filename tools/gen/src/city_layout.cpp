@@ -69,8 +69,8 @@ class LayoutBuilder {
     split_lots(interior, max_lot, rng, lots);
     for (const Rect& lot : lots) {
       if (full()) return;
-      const bool on_street = lot.x0 == interior.x0 || lot.y0 == interior.y0 || lot.x1 == interior.x1 ||
-                             lot.y1 == interior.y1;
+      const bool on_street =
+          lot.x0 == interior.x0 || lot.y0 == interior.y0 || lot.x1 == interior.x1 || lot.y1 == interior.y1;
       // Berlin perimeter blocks: buildings line the streets around an open courtyard.
       if (density > 0.5f && !on_street && rng.chance(0.7f)) continue;
       if (!rng.chance(0.3f + 0.7f * density)) continue;
@@ -81,8 +81,8 @@ class LayoutBuilder {
   CityLayout take() { return std::move(out_); }
 
  private:
-  static Surface quad(std::array<double, 3> corner, std::array<double, 3> u, std::array<double, 3> v,
-                      SurfaceKind kind, uint32_t building, BuildingClass cls) {
+  static Surface quad(std::array<double, 3> corner, std::array<double, 3> u, std::array<double, 3> v, SurfaceKind kind,
+                      uint32_t building, BuildingClass cls) {
     Surface s{};
     for (int a = 0; a < 3; ++a) {
       s.corner[a] = corner[a];
@@ -118,8 +118,8 @@ class LayoutBuilder {
 
   // Four walls (counter-clockwise seen from above, each wall's u running left to right seen from outside)
   // and a roof for a box over `f` from z0 to z1.
-  void add_box(std::vector<Surface>& out, const Rect& f, double z0, double z1, uint32_t building,
-               BuildingClass cls, const BuildingStyle& style, bool utility, uint8_t variant, Rng& rng) const {
+  void add_box(std::vector<Surface>& out, const Rect& f, double z0, double z1, uint32_t building, BuildingClass cls,
+               const BuildingStyle& style, bool utility, uint8_t variant, Rng& rng) const {
     const double h = z1 - z0;
     const std::array<std::array<double, 2>, 4> c = {{{f.x0, f.y0}, {f.x1, f.y0}, {f.x1, f.y1}, {f.x0, f.y1}}};
     for (int k = 0; k < 4; ++k) {
@@ -166,9 +166,16 @@ class LayoutBuilder {
 
     int floors = 0;
     switch (cls) {
-      case BuildingClass::kHouse: floors = rng.range(1, 2); break;
-      case BuildingClass::kPerimeter: floors = std::clamp(static_cast<int>(std::lround(2.0 + 5.0 * static_cast<double>(density))) + rng.range(-1, 1), 2, 8); break;
-      case BuildingClass::kTower: floors = rng.range(10, 24); break;  // Berlin: few high-rises, ~125 m at most
+      case BuildingClass::kHouse:
+        floors = rng.range(1, 2);
+        break;
+      case BuildingClass::kPerimeter:
+        floors = std::clamp(static_cast<int>(std::lround(2.0 + 5.0 * static_cast<double>(density))) + rng.range(-1, 1),
+                            2, 8);
+        break;
+      case BuildingClass::kTower:
+        floors = rng.range(10, 24);
+        break;  // Berlin: few high-rises, ~125 m at most
     }
     const double height = static_cast<double>(style.ground_floor_m) + (floors - 1) * static_cast<double>(style.floor_m);
 

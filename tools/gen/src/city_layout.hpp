@@ -23,24 +23,24 @@ enum class SurfaceKind : uint8_t {
 // Points: corner + s*edge_u + t*edge_v for s, t in [0, 1]; texture u = s, v = 1 - t (row 0 of the image is
 // at t = 1: the top of a wall, the north edge of a roof or ground).
 struct Surface {
-  double corner[3];     // city-local metres (x east, y north, z up; z = 0 is street level)
-  float edge_u[3];      // metres
+  double corner[3];  // city-local metres (x east, y north, z up; z = 0 is street level)
+  float edge_u[3];   // metres
   float edge_v[3];
-  float width_m;        // |edge_u|
-  float height_m;       // |edge_v|
-  float base_m;         // height of the quad's lower edge above the street (storeys line up across tiers)
-  uint32_t building;    // style id: surfaces of one building share it
-  uint16_t width_px;    // texture extent, a power of two in [kMinExtent, kMaxExtent]
+  float width_m;      // |edge_u|
+  float height_m;     // |edge_v|
+  float base_m;       // height of the quad's lower edge above the street (storeys line up across tiers)
+  uint32_t building;  // style id: surfaces of one building share it
+  uint16_t width_px;  // texture extent, a power of two in [kMinExtent, kMaxExtent]
   uint16_t height_px;
   SurfaceKind kind;
   BuildingClass cls;
-  uint8_t grid;         // subdivisions per side (1: one quad, 2 triangles)
-  uint8_t variant;      // kind-specific: for kGround 1 = park; for kFacade 1 = a setback tier's wall
+  uint8_t grid;     // subdivisions per side (1: one quad, 2 triangles)
+  uint8_t variant;  // kind-specific: for kGround 1 = park; for kFacade 1 = a setback tier's wall
 };
 
 struct Block {
-  int32_t i, j;     // grid cell: spans [(i - 0.5) P, (i + 0.5) P] in x, likewise j in y
-  float density;    // 0 (outskirts) .. 1 (centre)
+  int32_t i, j;   // grid cell: spans [(i - 0.5) P, (i + 0.5) P] in x, likewise j in y
+  float density;  // 0 (outskirts) .. 1 (centre)
 };
 
 struct CityLayout {

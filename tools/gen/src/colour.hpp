@@ -14,7 +14,9 @@ struct Rgb {
 inline Rgb operator*(Rgb c, float k) { return {c.r * k, c.g * k, c.b * k}; }
 inline Rgb operator+(Rgb a, Rgb b) { return {a.r + b.r, a.g + b.g, a.b + b.b}; }
 inline Rgb lerp(Rgb a, Rgb b, float t) { return {a.r + (b.r - a.r) * t, a.g + (b.g - a.g) * t, a.b + (b.b - a.b) * t}; }
-inline Rgb rgb8(int r, int g, int b) { return {static_cast<float>(r) / 255.0f, static_cast<float>(g) / 255.0f, static_cast<float>(b) / 255.0f}; }
+inline Rgb rgb8(int r, int g, int b) {
+  return {static_cast<float>(r) / 255.0f, static_cast<float>(g) / 255.0f, static_cast<float>(b) / 255.0f};
+}
 
 // Packs to RGBA8 with R in the low byte (the DDS masks of scene_format.hpp), alpha opaque.
 inline uint32_t pack_rgba8(Rgb c) {
@@ -45,12 +47,18 @@ inline Rgb from_hsv(float h, float s, float v) {
   const int i = std::min(5, static_cast<int>(h));
   const float f = h - static_cast<float>(i), p = v * (1 - s), q = v * (1 - s * f), t = v * (1 - s * (1 - f));
   switch (i) {
-    case 0: return {v, t, p};
-    case 1: return {q, v, p};
-    case 2: return {p, v, t};
-    case 3: return {p, q, v};
-    case 4: return {t, p, v};
-    default: return {v, p, q};
+    case 0:
+      return {v, t, p};
+    case 1:
+      return {q, v, p};
+    case 2:
+      return {p, v, t};
+    case 3:
+      return {p, q, v};
+    case 4:
+      return {t, p, v};
+    default:
+      return {v, p, q};
   }
 }
 

@@ -15,15 +15,15 @@ constexpr Rgb kSky{0.67f, 0.75f, 0.84f};
 constexpr Rgb kLitWarm{0.86f, 0.76f, 0.55f};
 
 struct Column {
-  float u;          // metres from the wall's left edge (texel centre)
-  float cu;         // metres from the centre of its window column
-  int window_col;   // index of the window column
-  bool in_window;   // inside a regular window's horizontal span
-  bool in_shop;     // inside a shop window's horizontal span
-  bool in_door;     // inside the door's horizontal span (door column only)
-  bool frame;       // on a window frame's vertical bar or mullion
-  float streak;     // weathering streak strength 0..1
-  bool mullion;     // curtain wall: on a vertical mullion
+  float u;         // metres from the wall's left edge (texel centre)
+  float cu;        // metres from the centre of its window column
+  int window_col;  // index of the window column
+  bool in_window;  // inside a regular window's horizontal span
+  bool in_shop;    // inside a shop window's horizontal span
+  bool in_door;    // inside the door's horizontal span (door column only)
+  bool frame;      // on a window frame's vertical bar or mullion
+  float streak;    // weathering streak strength 0..1
+  bool mullion;    // curtain wall: on a vertical mullion
 };
 
 struct Row {
@@ -34,12 +34,12 @@ struct Row {
   float win_t;     // 0 at the window's bottom, 1 at its top
   bool in_shop;
   bool in_door;
-  bool frame;      // on a window frame's horizontal bar or transom
+  bool frame;  // on a window frame's horizontal bar or transom
   bool cornice;
   bool sill_shadow;
   bool parapet;
-  bool spandrel;   // curtain wall: opaque band at the floor slab
-  bool seam;       // concrete panels: horizontal seam
+  bool spandrel;  // curtain wall: opaque band at the floor slab
+  bool seam;      // concrete panels: horizontal seam
 };
 
 // A triangle wave in [0, 1] with period 1: a cheap stand-in for a sine in reflections.
@@ -142,7 +142,8 @@ void paint_facade(const PaintContext& ctx, Canvas& cv) {
           const int64_t ci = static_cast<int64_t>(course);
           const float offset = (ci & 1) ? 0.5f : 0.0f;
           const int64_t bi = static_cast<int64_t>(c.u / brick_w + offset);
-          const float tone = 0.82f + 0.3f * unit_float(hash3(ctx.key, static_cast<uint64_t>(ci), static_cast<uint64_t>(bi)));
+          const float tone =
+              0.82f + 0.3f * unit_float(hash3(ctx.key, static_cast<uint64_t>(ci), static_cast<uint64_t>(bi)));
           const bool mortar = brick_h > 3 * tv && course - static_cast<float>(ci) < 0.18f;
           col = mortar ? rgb8(180, 172, 160) : st.wall * tone;
           break;
@@ -172,7 +173,8 @@ void paint_facade(const PaintContext& ctx, Canvas& cv) {
       if (st.material != FacadeMaterial::kGlass) {
         const bool door = c.in_door && r.in_door;
         const bool shop = !door && c.in_shop && r.in_shop;
-        const bool window = !door && !shop && c.in_window && r.in_window && !(r.storey == 0 && at_street && st.shop_front);
+        const bool window =
+            !door && !shop && c.in_window && r.in_window && !(r.storey == 0 && at_street && st.shop_front);
         if (door) {
           const bool door_edge = std::fabs(c.cu) > door_half - frame_u || r.fz > door_h - frame_v;
           const bool panel_line = std::fabs(std::fabs(c.cu) - door_half * 0.5f) < frame_u * 0.5f;
@@ -186,8 +188,10 @@ void paint_facade(const PaintContext& ctx, Canvas& cv) {
             const float t = shop ? (r.fz - 0.35f) / shop_h : r.win_t;
             const float refl = tri((c.u * refl_slope + r.z) * 0.05f + phase);
             col = lerp(st.glass * 0.7f, kSky, 0.1f + 0.35f * t + 0.25f * refl * refl * refl);
-            if (shop) col = lerp(col, kLitWarm, 0.35f * unit_float(win_id));
-            else if (unit_float(win_id) < st.lit_fraction) col = lerp(col, kLitWarm, 0.6f);
+            if (shop)
+              col = lerp(col, kLitWarm, 0.35f * unit_float(win_id));
+            else if (unit_float(win_id) < st.lit_fraction)
+              col = lerp(col, kLitWarm, 0.6f);
           }
         } else if (r.sill_shadow && c.in_window && r.storey > 0) {
           col = col * 0.72f;

@@ -30,13 +30,15 @@ void paint_trees(const PaintContext& ctx, Canvas& cv, int count, float lo_m, flo
     const float sx = cx + rx * 0.5f, sy = cy - ry * 0.5f;
     fill_rect(cv, static_cast<int>(sx - rx), static_cast<int>(sy - ry), static_cast<int>(sx + rx) + 1,
               static_cast<int>(sy + ry) + 1, [&](int x, int y) {
-                const float dx = (static_cast<float>(x) + 0.5f - sx) / rx, dy = (static_cast<float>(y) + 0.5f - sy) / ry;
+                const float dx = (static_cast<float>(x) + 0.5f - sx) / rx,
+                            dy = (static_cast<float>(y) + 0.5f - sy) / ry;
                 const Rgb under = get_rgb(cv, static_cast<uint32_t>(x), static_cast<uint32_t>(y));
                 return dx * dx + dy * dy < 1 ? under * 0.6f : under;
               });
     fill_rect(cv, static_cast<int>(cx - rx), static_cast<int>(cy - ry), static_cast<int>(cx + rx) + 1,
               static_cast<int>(cy + ry) + 1, [&](int x, int y) {
-                const float dx = (static_cast<float>(x) + 0.5f - cx) / rx, dy = (static_cast<float>(y) + 0.5f - cy) / ry;
+                const float dx = (static_cast<float>(x) + 0.5f - cx) / rx,
+                            dy = (static_cast<float>(y) + 0.5f - cy) / ry;
                 const float d2 = dx * dx + dy * dy;
                 const Rgb under = get_rgb(cv, static_cast<uint32_t>(x), static_cast<uint32_t>(y));
                 if (d2 >= 1) return under;
@@ -88,7 +90,8 @@ void paint_ground(const PaintContext& ctx, Canvas& cv) {
         const bool joint = std::fmod(u, slab) < tu * 0.9f || std::fmod(v, slab) < tv * 0.9f;
         col = kSidewalk * ((joint ? 0.8f : 0.95f + 0.1f * fine.at(x, y)) + 0.05f * g);
       } else if (park) {
-        const float d1 = std::fabs(u - v - (path_a - size / 2)) * 0.7071f, d2 = std::fabs(u + v - path_b - size / 2) * 0.7071f;
+        const float d1 = std::fabs(u - v - (path_a - size / 2)) * 0.7071f,
+                    d2 = std::fabs(u + v - path_b - size / 2) * 0.7071f;
         col = std::min(d1, d2) < 1.5f ? kGravelPath * (0.9f + 0.1f * g)
                                       : kGrass * (0.8f + 0.3f * fine.at(x, y) + 0.15f * stains.at(x, y) + 0.08f * g);
       } else {

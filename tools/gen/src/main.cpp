@@ -24,7 +24,8 @@ class ProgressBar {
     const int width = 30, filled = static_cast<int>(width * done / std::max<uint64_t>(total, 1));
     std::fprintf(stderr, "\r[%.*s%*s] %llu/%llu textures  %.0f/s  ETA %.0f s   ", filled,
                  "##############################", width - filled, "", static_cast<unsigned long long>(done),
-                 static_cast<unsigned long long>(total), rate, rate > 0 ? static_cast<double>(total - done) / rate : 0.0);
+                 static_cast<unsigned long long>(total), rate,
+                 rate > 0 ? static_cast<double>(total - done) / rate : 0.0);
     if (done >= total) std::fprintf(stderr, "\n");
   }
 
@@ -41,17 +42,22 @@ int main(int argc, char** argv) {
   gen::GeneratorOptions opt;
   std::string format = "bc1";
   std::vector<double> origin;
-  CLI::App app{"texstream-gen: writes a procedural city scene (meshes, one DDS texture per mesh with a full mip "
-               "chain, City Colormap, default camera path)"};
+  CLI::App app{
+      "texstream-gen: writes a procedural city scene (meshes, one DDS texture per mesh with a full mip "
+      "chain, City Colormap, default camera path)"};
   app.add_option("--out", opt.out, "Scene folder to write")->required();
-  app.add_option("--textures", opt.texture_count, "Number of textures (= meshes), exactly")->required()
+  app.add_option("--textures", opt.texture_count, "Number of textures (= meshes), exactly")
+      ->required()
       ->check(CLI::Range(uint64_t{1}, uint64_t{0xffffffffu}));
   app.add_option("--seed", opt.seed, "Random seed: the same seed gives byte-identical files")->required();
-  app.add_option("--format", format, "Texel format of the textures")->check(CLI::IsMember({"rgba8", "bc1"}))
+  app.add_option("--format", format, "Texel format of the textures")
+      ->check(CLI::IsMember({"rgba8", "bc1"}))
       ->capture_default_str();
   app.add_option("--threads", opt.threads, "Worker threads (default: all cores)")->check(CLI::Range(1u, 1024u));
-  app.add_option("--origin", origin, "Map coordinates X Y of the city centre, metres (default: 392000 5820000, "
-                                     "UTM 33N Berlin)")->expected(2);
+  app.add_option("--origin", origin,
+                 "Map coordinates X Y of the city centre, metres (default: 392000 5820000, "
+                 "UTM 33N Berlin)")
+      ->expected(2);
   app.add_flag("--force", opt.force, "Write into a non-empty folder, replacing a previous scene there");
   CLI11_PARSE(app, argc, argv);
   opt.format = *texel_format_from_string(format);
@@ -84,14 +90,16 @@ int main(int argc, char** argv) {
                 static_cast<unsigned long long>(stats->side_histogram[k]), share, static_cast<int>(share / 2),
                 "##################################################");
   }
-  std::printf("non-square textures: %.1f%%, average %.1f KB per texture, %.2f triangles per texture\n",
-              100.0 * static_cast<double>(stats->textures - stats->square_textures) / static_cast<double>(stats->textures),
-              static_cast<double>(stats->texture_bytes) / static_cast<double>(stats->textures) / 1024.0,
-              static_cast<double>(stats->triangles) / static_cast<double>(stats->textures));
-  std::printf("texstream-gen: %llu textures, %llu meshes, %llu triangles, %.1f MB written to %s in %.2f s "
-              "(%.0f textures/s on %u threads, %s)\n",
-              static_cast<unsigned long long>(stats->textures), static_cast<unsigned long long>(stats->meshes),
-              static_cast<unsigned long long>(stats->triangles), static_cast<double>(stats->bytes_written) / 1e6,
-              opt.out.c_str(), seconds, static_cast<double>(stats->textures) / seconds, threads, format.c_str());
+  std::printf(
+      "non-square textures: %.1f%%, average %.1f KB per texture, %.2f triangles per texture\n",
+      100.0 * static_cast<double>(stats->textures - stats->square_textures) / static_cast<double>(stats->textures),
+      static_cast<double>(stats->texture_bytes) / static_cast<double>(stats->textures) / 1024.0,
+      static_cast<double>(stats->triangles) / static_cast<double>(stats->textures));
+  std::printf(
+      "texstream-gen: %llu textures, %llu meshes, %llu triangles, %.1f MB written to %s in %.2f s "
+      "(%.0f textures/s on %u threads, %s)\n",
+      static_cast<unsigned long long>(stats->textures), static_cast<unsigned long long>(stats->meshes),
+      static_cast<unsigned long long>(stats->triangles), static_cast<double>(stats->bytes_written) / 1e6,
+      opt.out.c_str(), seconds, static_cast<double>(stats->textures) / seconds, threads, format.c_str());
   return 0;
 }

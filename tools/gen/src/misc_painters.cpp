@@ -10,7 +10,8 @@ void paint_utility_wall(const PaintContext& ctx, Canvas& cv) {
   const float tu = ctx.texel_u, tv = ctx.texel_v;
   const Surface& s = ctx.surface;
   const bool chimney = s.width_m < 1.0f;
-  const Rgb base = chimney ? lerp(ctx.style.wall, rgb8(130, 60, 45), 0.6f) : lerp(ctx.style.wall, rgb8(150, 150, 148), 0.5f);
+  const Rgb base =
+      chimney ? lerp(ctx.style.wall, rgb8(130, 60, 45), 0.6f) : lerp(ctx.style.wall, rgb8(150, 150, 148), 0.5f);
   const float rib = line_m(0.3f, tv, 2.0f);
   const bool door = !chimney && s.width_m > 1.6f && ctx.rng.chance(0.5f);
   const float door_u0 = s.width_m * 0.5f - 0.45f, door_u1 = door_u0 + 0.9f, door_h = std::min(2.0f, s.height_m - 0.2f);
@@ -39,7 +40,8 @@ void paint_panel(const PaintContext& ctx, Canvas& cv) {
   // A poster: two to four colour fields, blocks of "text", a frame.
   Rgb fields[4];
   const int n = ctx.rng.range(2, 4);
-  for (int k = 0; k < n; ++k) fields[k] = from_hsv(ctx.rng.uniform(), ctx.rng.uniform(0.4f, 0.9f), ctx.rng.uniform(0.5f, 1.0f));
+  for (int k = 0; k < n; ++k)
+    fields[k] = from_hsv(ctx.rng.uniform(), ctx.rng.uniform(0.4f, 0.9f), ctx.rng.uniform(0.5f, 1.0f));
   const Rgb ink = ctx.rng.chance(0.5f) ? rgb8(20, 20, 24) : rgb8(245, 245, 240);
   for (uint32_t y = 0; y < cv.height; ++y)
     for (uint32_t x = 0; x < cv.width; ++x) {

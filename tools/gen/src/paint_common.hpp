@@ -74,6 +74,8 @@ inline Rgb get_rgb(const Canvas& c, uint32_t x, uint32_t y) {
 
 // Width of a painted line in metres: at least `min_px` texels, so thin details (frames, seams) survive at
 // coarse texel densities instead of falling between texel centres.
-inline float line_m(float metres, float texel_m, float min_px) { return metres > texel_m * min_px ? metres : texel_m * min_px; }
+inline float line_m(float metres, float texel_m, float min_px) {
+  return metres > texel_m * min_px ? metres : texel_m * min_px;
+}
 
 }  // namespace texstream::gen

@@ -9,10 +9,10 @@ namespace texstream::gen {
 struct PaintContext {
   const Surface& surface;
   const BuildingStyle& style;
-  uint64_t key;    // hash of (seed, texture id): seeds all per-texel noise
-  Rng& rng;        // per-texture random choices (window lights, vents, trees)
-  float texel_u;   // metres per texel along u (image x)
-  float texel_v;   // metres per texel along v (image y)
+  uint64_t key;   // hash of (seed, texture id): seeds all per-texel noise
+  Rng& rng;       // per-texture random choices (window lights, vents, trees)
+  float texel_u;  // metres per texel along u (image x)
+  float texel_v;  // metres per texel along v (image y)
 };
 
 void paint_facade(const PaintContext& ctx, Canvas& canvas);

@@ -26,9 +26,8 @@ void paint_vents(const PaintContext& ctx, Canvas& cv, int count) {
       return (edge ? rim : centre) * (1.0f + g);
     });
     // Shadow to the north-east (sun from the south-west).
-    fill_rect(cv, x0 + sw, y0 - 1, x0 + sw + std::max(1, sw / 3), y0 + sh - 1, [&](int x, int y) {
-      return get_rgb(cv, static_cast<uint32_t>(x), static_cast<uint32_t>(y)) * 0.7f;
-    });
+    fill_rect(cv, x0 + sw, y0 - 1, x0 + sw + std::max(1, sw / 3), y0 + sh - 1,
+              [&](int x, int y) { return get_rgb(cv, static_cast<uint32_t>(x), static_cast<uint32_t>(y)) * 0.7f; });
   }
 }
 
@@ -78,18 +77,21 @@ void paint_roof(const PaintContext& ctx, Canvas& cv) {
       switch (st.roof) {
         case RoofMaterial::kGravel:
           col = st.roof_colour * (0.85f + 0.22f * stains.at(x, y) + 0.12f * g);
-          if (edge < parapet) col = rim * (0.95f + 0.05f * g);
-          else if (edge < parapet + tu * 1.5f) col = col * 0.75f;  // the parapet's shadow
+          if (edge < parapet)
+            col = rim * (0.95f + 0.05f * g);
+          else if (edge < parapet + tu * 1.5f)
+            col = col * 0.75f;  // the parapet's shadow
           break;
         case RoofMaterial::kTiles: {
           const float course = v / course_m;
           const int64_t ci = static_cast<int64_t>(course);
           const float f = course - static_cast<float>(ci);
           const int64_t ti = static_cast<int64_t>(u / tile_m + ((ci & 1) ? 0.5f : 0.0f));
-          const float tone = 0.85f + 0.25f * unit_float(hash3(ctx.key, static_cast<uint64_t>(ci), static_cast<uint64_t>(ti)));
+          const float tone =
+              0.85f + 0.25f * unit_float(hash3(ctx.key, static_cast<uint64_t>(ci), static_cast<uint64_t>(ti)));
           col = st.roof_colour * (tone * (0.75f + 0.3f * f));  // each course darker under the one above
           if (std::fabs(v - h_m / 2) < line_m(0.15f, tv, 1.0f)) col = st.roof_colour * 0.6f;  // ridge
-          if (patches.at(x, y) > 0.78f) col = lerp(col, rgb8(90, 100, 60), 0.5f);  // moss
+          if (patches.at(x, y) > 0.78f) col = lerp(col, rgb8(90, 100, 60), 0.5f);             // moss
           col = col * (1.0f + 0.05f * g);
           break;
         }
@@ -101,7 +103,8 @@ void paint_roof(const PaintContext& ctx, Canvas& cv) {
         }
         case RoofMaterial::kMetal: {
           const float fs = std::fmod(u, seam_m) / seam_m;
-          col = st.roof_colour * (fs < 0.12f ? 1.25f : 0.95f + 0.1f * fs) * (0.92f + 0.12f * stains.at(x, y) + 0.03f * g);
+          col =
+              st.roof_colour * (fs < 0.12f ? 1.25f : 0.95f + 0.1f * fs) * (0.92f + 0.12f * stains.at(x, y) + 0.03f * g);
           break;
         }
       }

@@ -103,7 +103,8 @@ scene::MeshData build_meshes(const CityLayout& city, const std::array<double, 3>
     m.texture_id = static_cast<uint32_t>(k);
     for (uint32_t j = 0; j <= g; ++j)
       for (uint32_t i = 0; i <= g; ++i) {
-        const float fs = static_cast<float>(i) / static_cast<float>(g), ft = static_cast<float>(j) / static_cast<float>(g);
+        const float fs = static_cast<float>(i) / static_cast<float>(g),
+                    ft = static_cast<float>(j) / static_cast<float>(g);
         scene::Vertex vx{};
         for (int a = 0; a < 3; ++a) {
           vx.pos[a] = fs * u[a] + ft * v[a];
@@ -122,8 +123,10 @@ scene::MeshData build_meshes(const CityLayout& city, const std::array<double, 3>
         for (uint32_t idx : {a, b, c, a, c, e}) d.indices.push_back(idx);
       }
     for (int a = 0; a < 3; ++a) {
-      bounds_min[static_cast<size_t>(a)] = std::min(bounds_min[static_cast<size_t>(a)], m.origin[a] + static_cast<double>(m.bounds_min[a]));
-      bounds_max[static_cast<size_t>(a)] = std::max(bounds_max[static_cast<size_t>(a)], m.origin[a] + static_cast<double>(m.bounds_max[a]));
+      bounds_min[static_cast<size_t>(a)] =
+          std::min(bounds_min[static_cast<size_t>(a)], m.origin[a] + static_cast<double>(m.bounds_min[a]));
+      bounds_max[static_cast<size_t>(a)] =
+          std::max(bounds_max[static_cast<size_t>(a)], m.origin[a] + static_cast<double>(m.bounds_max[a]));
     }
     d.meshes.push_back(m);
   }
@@ -156,8 +159,7 @@ Status write_texture(const GeneratorOptions& opt, const Surface& s, uint32_t id,
     for (uint32_t l = 0; l < levels; ++l) {
       const Extent2D e = mip_extent(w, h, l);
       const uint64_t at = scene::dds_mip_offset(opt.format, w, h, l);
-      encode_bc1(ws.chain.data() + src, e.width, e.height,
-                 std::span(ws.file.data() + at, mip_bytes(opt.format, e)));
+      encode_bc1(ws.chain.data() + src, e.width, e.height, std::span(ws.file.data() + at, mip_bytes(opt.format, e)));
       src += uint64_t{e.width} * e.height;
     }
   }
@@ -169,7 +171,8 @@ Status write_texture(const GeneratorOptions& opt, const Surface& s, uint32_t id,
 Status write_textures(const GeneratorOptions& opt, const CityLayout& city, std::vector<uint32_t>& colormap,
                       uint64_t& bytes, const ProgressFn& progress) {
   const uint64_t n = city.surfaces.size();
-  const unsigned threads = std::max(1u, std::min<unsigned>(opt.threads, static_cast<unsigned>((n + kChunk - 1) / kChunk)));
+  const unsigned threads =
+      std::max(1u, std::min<unsigned>(opt.threads, static_cast<unsigned>((n + kChunk - 1) / kChunk)));
   std::atomic<uint64_t> next{0};
   std::atomic<uint64_t> done{0};
   std::atomic<bool> failed{false};
@@ -210,8 +213,8 @@ Status write_textures(const GeneratorOptions& opt, const CityLayout& city, std::
 Result<GeneratorStats> generate_scene(const GeneratorOptions& options, const ProgressFn& progress) {
   GeneratorOptions opt = options;
   if (opt.texture_count == 0 || opt.texture_count > std::numeric_limits<uint32_t>::max())
-    return make_error(ErrorCode::kInvalidArgument, "--textures: must be in 1.." +
-                                                       std::to_string(std::numeric_limits<uint32_t>::max()));
+    return make_error(ErrorCode::kInvalidArgument,
+                      "--textures: must be in 1.." + std::to_string(std::numeric_limits<uint32_t>::max()));
   if (opt.threads == 0) opt.threads = std::max(1u, std::thread::hardware_concurrency());
   for (double c : opt.origin)
     if (!std::isfinite(c) || std::fabs(c) > 1e8)
@@ -252,8 +255,8 @@ Result<GeneratorStats> generate_scene(const GeneratorOptions& options, const Pro
   TS_TRY(scene::write_texture_table(opt.out, table));
 
   const CameraPath path = build_default_camera_path(city, opt.origin.data());
-  const std::string path_text = "# texstream-gen default fly-through: 4 pauses of 2 s, 4 cuts (seed 000 §4.1)\n" +
-                                path.to_text();
+  const std::string path_text =
+      "# texstream-gen default fly-through: 4 pauses of 2 s, 4 cuts (seed 000 §4.1)\n" + path.to_text();
   TS_TRY(write_whole_file(opt.out / manifest.camera_path, path_text.data(), path_text.size()));
 
   // One folder per 4096 textures (scene_format.hpp texture_path), made before the workers start.

@@ -32,7 +32,7 @@ struct GeneratorStats {
   uint64_t texture_bytes = 0;  // all DDS files
   uint64_t bytes_written = 0;  // every file of the scene
   uint64_t square_textures = 0;
-  std::array<uint64_t, 16> side_histogram{};  // [k]: texture sides (widths and heights) equal to 2^k
+  std::array<uint64_t, 16> side_histogram{};      // [k]: texture sides (widths and heights) equal to 2^k
   std::array<uint64_t, 16> max_side_histogram{};  // [k]: textures whose larger side is 2^k
 };
 

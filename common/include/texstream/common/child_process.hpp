@@ -17,11 +17,11 @@ namespace texstream {
 struct SpawnFd {
   enum class Kind { kOpen, kDup2, kCloseFrom };
   Kind kind = Kind::kOpen;
-  int fd = -1;        // kOpen/kDup2: the child's descriptor; kCloseFrom: the first one closed
-  int from = -1;      // kDup2: the parent's descriptor copied to `fd`
-  std::string path;   // kOpen
-  int flags = 0;      // kOpen
-  mode_t mode = 0;    // kOpen
+  int fd = -1;       // kOpen/kDup2: the child's descriptor; kCloseFrom: the first one closed
+  int from = -1;     // kDup2: the parent's descriptor copied to `fd`
+  std::string path;  // kOpen
+  int flags = 0;     // kOpen
+  mode_t mode = 0;   // kOpen
 
   static SpawnFd open(int fd, std::string path, int flags, mode_t mode = 0644);
   static SpawnFd dup2(int from, int to);
@@ -49,7 +49,7 @@ struct ExitStatus {
   bool exited = false;  // normal exit (code), else killed by `signal`
   int code = 0;
   int signal = 0;
-  int raw = 0;          // the wait status as waitpid gave it
+  int raw = 0;  // the wait status as waitpid gave it
   static ExitStatus from_wait_status(int status);
   std::string describe() const;  // "exited with status N" / "killed by signal N (name)"
 };

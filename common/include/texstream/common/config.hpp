@@ -25,17 +25,18 @@ template <>
 struct ChoiceTable<LogLevel> {
   // spdlog's level names: texstream-server hands the name to spdlog::level::from_str.
   static constexpr std::array<ChoiceEntry<LogLevel>, 5> kEntries{{{LogLevel::kTrace, "trace", ""},
-                                                                   {LogLevel::kDebug, "debug", ""},
-                                                                   {LogLevel::kInfo, "info", ""},
-                                                                   {LogLevel::kWarn, "warn", ""},
-                                                                   {LogLevel::kError, "error", ""}}};
+                                                                  {LogLevel::kDebug, "debug", ""},
+                                                                  {LogLevel::kInfo, "info", ""},
+                                                                  {LogLevel::kWarn, "warn", ""},
+                                                                  {LogLevel::kError, "error", ""}}};
 };
 
 enum class RamCachePolicy : uint8_t { kLevel, kLru };  // server.cache_policy
 template <>
 struct ChoiceTable<RamCachePolicy> {
   static constexpr std::array<ChoiceEntry<RamCachePolicy>, 2> kEntries{
-      {{RamCachePolicy::kLevel, "level", "seed 002 Eq. 4 discard priority; measured higher hit rates than lru at every budget"},
+      {{RamCachePolicy::kLevel, "level",
+        "seed 002 Eq. 4 discard priority; measured higher hit rates than lru at every budget"},
        {RamCachePolicy::kLru, "lru", ""}}};
 };
 
@@ -43,9 +44,9 @@ enum class DebugView : uint8_t { kNone, kMip, kWeight, kMeshId };  // render.deb
 template <>
 struct ChoiceTable<DebugView> {
   static constexpr std::array<ChoiceEntry<DebugView>, 4> kEntries{{{DebugView::kNone, "none", ""},
-                                                                    {DebugView::kMip, "mip", "displayed mip as grey"},
-                                                                    {DebugView::kWeight, "weight", "heat map"},
-                                                                    {DebugView::kMeshId, "mesh_id", ""}}};
+                                                                   {DebugView::kMip, "mip", "displayed mip as grey"},
+                                                                   {DebugView::kWeight, "weight", "heat map"},
+                                                                   {DebugView::kMeshId, "mesh_id", ""}}};
 };
 
 // Adaptive streaming controller mode (controller.mode), seed 000 §3.4.
@@ -66,15 +67,18 @@ enum class CacheFormat : uint8_t { kAuto, kRgba8, kBc1 };  // cache.format
 template <>
 struct ChoiceTable<CacheFormat> {
   static constexpr std::array<ChoiceEntry<CacheFormat>, 3> kEntries{{{CacheFormat::kAuto, "auto", "the scene's"},
-                                                                      {CacheFormat::kRgba8, "rgba8", ""},
-                                                                      {CacheFormat::kBc1, "bc1", ""}}};
+                                                                     {CacheFormat::kRgba8, "rgba8", ""},
+                                                                     {CacheFormat::kBc1, "bc1", ""}}};
 };
 // The GPU cache's texel format: auto takes the scene's; an explicit one must match the scene's textures.
 constexpr TexelFormat cache_texel_format(CacheFormat format, TexelFormat scene_format) {
   switch (format) {
-    case CacheFormat::kRgba8: return TexelFormat::kRgba8;
-    case CacheFormat::kBc1: return TexelFormat::kBc1;
-    case CacheFormat::kAuto: break;
+    case CacheFormat::kRgba8:
+      return TexelFormat::kRgba8;
+    case CacheFormat::kBc1:
+      return TexelFormat::kBc1;
+    case CacheFormat::kAuto:
+      break;
   }
   return scene_format;
 }
@@ -93,97 +97,98 @@ struct SceneConfig {
 };
 
 struct ProtocolConfig {
-  std::string segment_name;             // empty: "texstream-<renderer pid>"
-  int64_t request_ring_capacity = 1024; // records, power of two
+  std::string segment_name;              // empty: "texstream-<renderer pid>"
+  int64_t request_ring_capacity = 1024;  // records, power of two
   int64_t completion_ring_capacity = 1024;
   int64_t staging_slot_count = 32;
-  int64_t staging_slot_bytes = 1 << 20; // one 512x512 RGBA8 mip
-  double heartbeat_timeout_ms = 1400;   // hung after this long without progress; + one watchdog poll stays < 1.5 s (issue 9)
+  int64_t staging_slot_bytes = 1 << 20;  // one 512x512 RGBA8 mip
+  double heartbeat_timeout_ms =
+      1400;  // hung after this long without progress; + one watchdog poll stays < 1.5 s (issue 9)
 };
 
 struct ServerConfig {
-  bool spawn = true;                     // false: no child; a standalone texstream-server serves segment_name
-  std::string executable;               // empty: texstream-server next to texstream-render
-  int64_t worker_threads = 2;           // read + decode workers (2-core default)
+  bool spawn = true;           // false: no child; a standalone texstream-server serves segment_name
+  std::string executable;      // empty: texstream-server next to texstream-render
+  int64_t worker_threads = 2;  // read + decode workers (2-core default)
   int64_t ram_cache_bytes = 256ll << 20;
-  double idle_wait_ms = 20;             // futex wait between doorbells (also paces the heartbeat)
+  double idle_wait_ms = 20;  // futex wait between doorbells (also paces the heartbeat)
   LogLevel log_level = LogLevel::kInfo;
   RamCachePolicy cache_policy = RamCachePolicy::kLevel;  // RAM cache eviction
-  double rate_limit_mb_s = 0;           // storage read rate cap in MB/s (0: unlimited), seed 002 §3.3
-  int64_t remote_fetches_in_flight = 4; // bound on concurrent fetches from a remote/slow origin (seed 002: 1)
+  double rate_limit_mb_s = 0;                            // storage read rate cap in MB/s (0: unlimited), seed 002 §3.3
+  int64_t remote_fetches_in_flight = 4;  // bound on concurrent fetches from a remote/slow origin (seed 002: 1)
 };
 
 struct RenderConfig {
-  std::string device = "llvmpipe";      // substring of the Vulkan device name; empty: the first device
-  bool validation = false;              // Khronos validation layer (tests turn it on)
-  bool window = false;                  // GLFW window instead of headless
+  std::string device = "llvmpipe";  // substring of the Vulkan device name; empty: the first device
+  bool validation = false;          // Khronos validation layer (tests turn it on)
+  bool window = false;              // GLFW window instead of headless
   int64_t width_px = 960;
   int64_t height_px = 540;
-  int64_t frames = 90;                  // headless: frames to render (0: the whole camera path)
-  double frame_time_ms = 33.333;        // virtual time per frame along the camera path
-  bool lockstep = false;                // each frame first takes every answer to the previous cycle (reproducible)
-  bool pace_frames = false;             // real time: frame N starts no earlier than N × frame_time_ms (a fixed-rate display)
-  std::string camera_path;              // empty: <scene>/camera_path.txt
+  int64_t frames = 90;            // headless: frames to render (0: the whole camera path)
+  double frame_time_ms = 33.333;  // virtual time per frame along the camera path
+  bool lockstep = false;          // each frame first takes every answer to the previous cycle (reproducible)
+  bool pace_frames = false;       // real time: frame N starts no earlier than N × frame_time_ms (a fixed-rate display)
+  std::string camera_path;        // empty: <scene>/camera_path.txt
   std::string output_dir = "out";
-  int64_t write_every_frames = 10;      // write every Nth frame as PNG (0: none; the last frame always)
+  int64_t write_every_frames = 10;  // write every Nth frame as PNG (0: none; the last frame always)
   double fov_y_deg = 60;
-  double offscreen_fov_y_deg = 75;      // wider off-screen FOV whose meshes are requested at W = 1 (seed 000 §3.2)
+  double offscreen_fov_y_deg = 75;  // wider off-screen FOV whose meshes are requested at W = 1 (seed 000 §3.2)
   double near_m = 1;
   double far_m = 20000;
-  double headlight_ambient = 0.6;       // headlight: camera-facing surfaces 1, edge-on ones this fraction (1 = unlit)
-  int64_t staging_bytes = 32ll << 20;   // host-visible staging ring for uploads into the cache
+  double headlight_ambient = 0.6;      // headlight: camera-facing surfaces 1, edge-on ones this fraction (1 = unlit)
+  int64_t staging_bytes = 32ll << 20;  // host-visible staging ring for uploads into the cache
   DebugView debug_view = DebugView::kNone;
-  bool feedback = true;                 // visibility metadata pass + compaction (off: for cost measurements)
-  bool feedback_pairs = false;          // measurement: each frame also drawn without feedback (latency_off_ms)
-  bool preload_all = false;             // load every mip of every texture before frame 0: no streaming (reference frames)
-  bool blocking_loads = false;          // each frame loads the full chain of every visible texture before drawing
-  std::string reference_dir;            // a preload_all run's output folder: per-frame MSE/PSNR/SSIM against its frames
+  bool feedback = true;         // visibility metadata pass + compaction (off: for cost measurements)
+  bool feedback_pairs = false;  // measurement: each frame also drawn without feedback (latency_off_ms)
+  bool preload_all = false;     // load every mip of every texture before frame 0: no streaming (reference frames)
+  bool blocking_loads = false;  // each frame loads the full chain of every visible texture before drawing
+  std::string reference_dir;    // a preload_all run's output folder: per-frame MSE/PSNR/SSIM against its frames
 };
 
 struct StreamConfig {
-  double tau = 150;                     // mesh weight cutoff (seed 000 §3.3, Table 2)
-  double max_anisotropy = 16;           // A_m for the mip-level metadata; sampling uses A_m / 2 (seed 000 §3.2)
-  int64_t max_requests_in_flight = 256; // pre-queue depth sent to the server per cycle
-  int64_t max_mips_per_cycle = 512;     // upload budget per streaming cycle
-  bool colormap_blend = true;           // Eq. 8 blending; false samples directly
-  double foreground_distance_m = 500;   // Eq. 2: w_d falls from 1 at the camera to 0 at this view depth
+  double tau = 150;                      // mesh weight cutoff (seed 000 §3.3, Table 2)
+  double max_anisotropy = 16;            // A_m for the mip-level metadata; sampling uses A_m / 2 (seed 000 §3.2)
+  int64_t max_requests_in_flight = 256;  // pre-queue depth sent to the server per cycle
+  int64_t max_mips_per_cycle = 512;      // upload budget per streaming cycle
+  bool colormap_blend = true;            // Eq. 8 blending; false samples directly
+  double foreground_distance_m = 500;    // Eq. 2: w_d falls from 1 at the camera to 0 at this view depth
 };
 
 // Adaptive streaming controller, seed 000 §3.4 Eq. 4-7 and Table 2.
 struct ControllerConfig {
   ControllerMode mode = ControllerMode::kAdaptive;
-  double alpha_ms = 16;                 // α: target maximum frame latency
-  double beta = 8;                      // β: maximum mip bias
-  double s_min_mb = 0.065;              // minimum load size (one 64 KiB sparse block)
-  double s_max_mb = 64;                 // maximum load size
-  double load_time_ms = 16;             // maximum time one streaming cycle may spend loading
-  double fixed_load_mb = 16;            // mode = fixed: load size s
-  double fixed_bias = 0;                // mode = fixed: mip bias b
+  double alpha_ms = 16;       // α: target maximum frame latency
+  double beta = 8;            // β: maximum mip bias
+  double s_min_mb = 0.065;    // minimum load size (one 64 KiB sparse block)
+  double s_max_mb = 64;       // maximum load size
+  double load_time_ms = 16;   // maximum time one streaming cycle may spend loading
+  double fixed_load_mb = 16;  // mode = fixed: load size s
+  double fixed_bias = 0;      // mode = fixed: mip bias b
 };
 
 struct CacheConfig {
   CacheFormat format = CacheFormat::kAuto;  // the texel format of the GPU cache
-  int64_t layer_extent_px = 512;        // side of one cache layer; the largest texture extent it can hold
-  int64_t layers = 512;                 // array layers of the sparse cache image: virtual space only; memory_bytes bounds memory
-  int64_t memory_bytes = 128ll << 20;   // GPU memory the cache's bound sparse pages may use (never exceeded)
+  int64_t layer_extent_px = 512;            // side of one cache layer; the largest texture extent it can hold
+  int64_t layers = 512;  // array layers of the sparse cache image: virtual space only; memory_bytes bounds memory
+  int64_t memory_bytes = 128ll << 20;  // GPU memory the cache's bound sparse pages may use (never exceeded)
 };
 
 // Where texture bytes come from and the tiers in front of it (issue 4, seed 002 §3.2 Meta-texture Server).
 struct StorageConfig {
-  std::string origin;                     // empty: scene.dir on the local file system; else a path or http(s):// URL
-  std::string disk_cache_dir;             // empty: no disk cache
-  int64_t disk_cache_bytes = 1ll << 30;   // byte budget of the disk cache
+  std::string origin;                    // empty: scene.dir on the local file system; else a path or http(s):// URL
+  std::string disk_cache_dir;            // empty: no disk cache
+  int64_t disk_cache_bytes = 1ll << 30;  // byte budget of the disk cache
   DiskCachePolicy disk_cache_policy = DiskCachePolicy::kLru;
-  int64_t connect_timeout_ms = 2000;      // http: TCP/TLS connect
-  int64_t request_timeout_ms = 10000;     // http: one whole range request
-  int64_t low_speed_bytes_s = 1024;       // http: slower than this for low_speed_time_s aborts (slowloris)
+  int64_t connect_timeout_ms = 2000;   // http: TCP/TLS connect
+  int64_t request_timeout_ms = 10000;  // http: one whole range request
+  int64_t low_speed_bytes_s = 1024;    // http: slower than this for low_speed_time_s aborts (slowloris)
   int64_t low_speed_time_s = 3;
-  int64_t retries = 2;                    // http: extra attempts after a transient failure
-  int64_t retry_backoff_ms = 50;          // http: first back-off, doubled per retry
-  bool slow_enabled = false;              // wrap the origin in the slow-storage emulation below
+  int64_t retries = 2;            // http: extra attempts after a transient failure
+  int64_t retry_backoff_ms = 50;  // http: first back-off, doubled per retry
+  bool slow_enabled = false;      // wrap the origin in the slow-storage emulation below
   double slow_latency_ms = 0;
   double slow_jitter_ms = 0;
-  double slow_bandwidth_mb_s = 0;         // 0: unlimited
+  double slow_bandwidth_mb_s = 0;  // 0: unlimited
   double slow_stall_probability = 0;
   double slow_stall_ms = 0;
   double slow_failure_rate = 0;

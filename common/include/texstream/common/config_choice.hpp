@@ -27,7 +27,9 @@ template <class E>
 struct ChoiceTable;
 
 template <class E>
-concept ConfigChoice = std::is_enum_v<E> && requires { ChoiceTable<E>::kEntries.size(); };
+concept ConfigChoice = std::is_enum_v<E> && requires {
+  ChoiceTable<E>::kEntries.size();
+};
 
 template <ConfigChoice E>
 constexpr std::optional<E> choice_from_name(std::string_view name) {
@@ -79,8 +81,8 @@ std::string choice_docs() {
 template <ConfigChoice E>
 Result<E> parse_choice(std::string_view key, std::string_view name) {
   if (std::optional<E> v = choice_from_name<E>(name)) return *v;
-  return make_error(ErrorCode::kInvalidArgument, std::string(key) + " must be " + choice_names<E>() + ", not '" +
-                                                     std::string(name) + "'");
+  return make_error(ErrorCode::kInvalidArgument,
+                    std::string(key) + " must be " + choice_names<E>() + ", not '" + std::string(name) + "'");
 }
 
 }  // namespace texstream

@@ -9,10 +9,9 @@ namespace texstream::detail {
     __attribute__((format(printf, 4, 5)));
 }  // namespace texstream::detail
 
-#define TS_ASSERT(cond, ...)                                                     \
-  do {                                                                           \
-    if (__builtin_expect(!(cond), 0))                                            \
-      ::texstream::detail::contract_failed(__FILE__, __LINE__, #cond, __VA_ARGS__); \
+#define TS_ASSERT(cond, ...)                                                                                        \
+  do {                                                                                                              \
+    if (__builtin_expect(!(cond), 0)) ::texstream::detail::contract_failed(__FILE__, __LINE__, #cond, __VA_ARGS__); \
   } while (0)
 
 #define TS_UNREACHABLE(...) ::texstream::detail::contract_failed(__FILE__, __LINE__, "unreachable", __VA_ARGS__)

@@ -23,9 +23,8 @@ inline constexpr uint64_t kDdsMaxHeaderBytes = 148;  // the legacy header plus t
 // DDS_HEADER / DDS_PIXELFORMAT / DDS_HEADER_DXT10 documentation. Tools that damage headers on purpose use them.
 namespace dds_field {
 inline constexpr size_t kMagic = 0, kSize = 4, kFlags = 8, kHeight = 12, kWidth = 16, kPitchOrLinearSize = 20,
-                        kDepth = 24, kMipMapCount = 28, kPfSize = 76, kPfFlags = 80, kPfFourCC = 84,
-                        kPfBitCount = 88, kPfRMask = 92, kPfGMask = 96, kPfBMask = 100, kPfAMask = 104,
-                        kCaps = 108, kCaps2 = 112;
+                        kDepth = 24, kMipMapCount = 28, kPfSize = 76, kPfFlags = 80, kPfFourCC = 84, kPfBitCount = 88,
+                        kPfRMask = 92, kPfGMask = 96, kPfBMask = 100, kPfAMask = 104, kCaps = 108, kCaps2 = 112;
 inline constexpr size_t kDx10Format = 128, kDx10Dimension = 132, kDx10ArraySize = 140;
 }  // namespace dds_field
 
@@ -43,8 +42,8 @@ struct DdsLayout {
   DdsEncoding encoding = DdsEncoding::kOther;
   uint32_t width = 0;
   uint32_t height = 0;
-  uint32_t mip_count = 0;     // levels stored in the file (1 when the header has no mip count)
-  uint64_t data_offset = 0;   // 128, or 148 with the DX10 extension
+  uint32_t mip_count = 0;    // levels stored in the file (1 when the header has no mip count)
+  uint64_t data_offset = 0;  // 128, or 148 with the DX10 extension
 
   // Byte range of `level` (< mip_count) for kBc1 / kRgba8.
   uint64_t mip_offset(uint32_t level) const;

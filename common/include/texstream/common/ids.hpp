@@ -22,7 +22,7 @@ struct GenerationTag {};
 struct MeshIdTag {};
 
 using TextureId = StrongId<TextureIdTag, uint32_t>;
-using MipLevel = StrongId<MipLevelTag, uint32_t>;   // 0 = full resolution
+using MipLevel = StrongId<MipLevelTag, uint32_t>;  // 0 = full resolution
 using SlotIndex = StrongId<SlotIndexTag, uint32_t>;
 using Generation = StrongId<GenerationTag, uint64_t>;  // streaming cycle number, ever increasing
 using MeshId = StrongId<MeshIdTag, uint32_t>;

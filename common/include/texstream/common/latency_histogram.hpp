@@ -80,7 +80,7 @@ class LogLinearHistogram {
 
   // Bucket of a value in units; and the largest value in units a bucket holds.
   static constexpr uint32_t bucket_of(uint64_t units) {
-    if (units < kSubBuckets) return static_cast<uint32_t>(units);  // exact
+    if (units < kSubBuckets) return static_cast<uint32_t>(units);                 // exact
     const uint32_t octave = 63u - static_cast<uint32_t>(__builtin_clzll(units));  // >= SubBucketBits
     if (octave >= kOctaves) return kBuckets - 1;
     const uint32_t sub = static_cast<uint32_t>(units >> (octave - SubBucketBits)) & (kSubBuckets - 1);

@@ -19,9 +19,10 @@
 namespace texstream {
 
 struct MemoryInfo {
-  uint64_t limit = 0;        // bytes: the lower of MemTotal and every memory cgroup limit above this process
-  std::string limit_source;  // what `limit` is, for messages: "physical memory, MemTotal in /proc/meminfo" or the cgroup file
-  uint64_t available = 0;    // bytes free for new allocations now: MemAvailable, or the cgroup's room if lower
+  uint64_t limit = 0;  // bytes: the lower of MemTotal and every memory cgroup limit above this process
+  std::string
+      limit_source;  // what `limit` is, for messages: "physical memory, MemTotal in /proc/meminfo" or the cgroup file
+  uint64_t available = 0;  // bytes free for new allocations now: MemAvailable, or the cgroup's room if lower
 };
 
 // /proc/meminfo and the memory cgroup (v2 memory.max / memory.current / memory.stat, or v1

@@ -33,7 +33,7 @@ inline constexpr uint32_t kMeshIndexMaxDepth = 20;
 struct MeshIndexHeader {
   uint64_t magic;
   uint32_t version;
-  uint32_t depth;               // of the deepest node (the root is 0)
+  uint32_t depth;  // of the deepest node (the root is 0)
   uint64_t mesh_count;
   uint64_t node_count;
   // The meshes.bin this index was built from: its size and a fingerprint of its header and of
@@ -48,7 +48,7 @@ static_assert(sizeof(MeshIndexHeader) == 48);
 struct MeshIndexNode {
   double min[3];  // map coordinates: fitted to every mesh below
   double max[3];
-  uint32_t begin;        // range of order
+  uint32_t begin;  // range of order
   uint32_t end;
   uint32_t first_child;  // 0: leaf (the root is node 0, so no node has it as a child)
   uint32_t child_count;  // children are first_child .. first_child + child_count - 1

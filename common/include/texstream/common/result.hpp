@@ -10,18 +10,18 @@
 namespace texstream {
 
 enum class ErrorCode {
-  kInvalidArgument,   // a bad value from a user (config key, command line)
-  kNotFound,          // a file or key that is not there
-  kIo,                // a read or write that failed
-  kCorrupt,           // data that does not match its own header or checksum
-  kUnsupported,       // a format or feature we do not handle
-  kProtocol,          // a peer broke the shared-memory protocol
-  kPeerDead,          // the other process is gone
+  kInvalidArgument,  // a bad value from a user (config key, command line)
+  kNotFound,         // a file or key that is not there
+  kIo,               // a read or write that failed
+  kCorrupt,          // data that does not match its own header or checksum
+  kUnsupported,      // a format or feature we do not handle
+  kProtocol,         // a peer broke the shared-memory protocol
+  kPeerDead,         // the other process is gone
   kTimeout,
-  kUnavailable,       // a storage origin that does not answer now (refused, reset, 502/503/504): try later
+  kUnavailable,  // a storage origin that does not answer now (refused, reset, 502/503/504): try later
   kVulkan,
-  kResourceExhausted, // a bounded pool or budget is full
-  kNotAFile,          // a path that names a FIFO, directory, socket or device where a regular file belongs
+  kResourceExhausted,  // a bounded pool or budget is full
+  kNotAFile,           // a path that names a FIFO, directory, socket or device where a regular file belongs
 };
 
 const char* to_string(ErrorCode code);
@@ -34,7 +34,7 @@ struct Error {
 template <class T>
 class [[nodiscard]] Result {
  public:
-  Result(T value) : v_(std::move(value)) {}  // NOLINT(google-explicit-constructor): mirrors std::expected
+  Result(T value) : v_(std::move(value)) {}      // NOLINT(google-explicit-constructor): mirrors std::expected
   Result(Error error) : v_(std::move(error)) {}  // NOLINT(google-explicit-constructor)
 
   bool ok() const { return v_.index() == 0; }
@@ -76,8 +76,8 @@ inline Error make_error(ErrorCode code, std::string message) { return Error{code
 }  // namespace texstream
 
 // Propagates an error from an expression returning Result<...> out of a function returning Result<...>.
-#define TS_TRY(expr)                                       \
-  do {                                                     \
-    auto&& ts_try_result_ = (expr);                        \
+#define TS_TRY(expr)                                         \
+  do {                                                       \
+    auto&& ts_try_result_ = (expr);                          \
     if (!ts_try_result_.ok()) return ts_try_result_.error(); \
   } while (0)

@@ -19,8 +19,8 @@
 #include <vector>
 
 #include "texstream/common/dds.hpp"
-#include "texstream/common/result.hpp"
 #include "texstream/common/ids.hpp"
+#include "texstream/common/result.hpp"
 #include "texstream/common/texel_format.hpp"
 
 namespace texstream::scene {
@@ -42,15 +42,15 @@ static_assert(sizeof(MeshFileHeader) == 40);
 
 // One mesh = one texture (seed 000: "a mesh is a set of primitives with one texture map").
 struct MeshRecord {
-  double origin[3];       // map coordinates in metres (x east, y north, z up); vertices are relative to it
-  float bounds_min[3];    // relative to origin
+  double origin[3];     // map coordinates in metres (x east, y north, z up); vertices are relative to it
+  float bounds_min[3];  // relative to origin
   float bounds_max[3];
   // A mesh owns its vertex and index ranges, or shares all four fields with another mesh (instancing: the
   // same geometry at another origin). Any other overlap is refused by the renderer when it first draws the
   // mesh (it stores indices absolute and a mesh id per vertex, renderer/src/scene/scene_gpu.cpp).
   uint32_t first_vertex;
   uint32_t vertex_count;
-  uint32_t first_index;   // indices are relative to first_vertex
+  uint32_t first_index;  // indices are relative to first_vertex
   uint32_t index_count;
   uint32_t texture_id;
   uint32_t reserved;
@@ -58,9 +58,9 @@ struct MeshRecord {
 static_assert(sizeof(MeshRecord) == 72);
 
 struct Vertex {
-  float pos[3];     // metres, relative to the mesh origin
+  float pos[3];  // metres, relative to the mesh origin
   float normal[3];
-  float uv[2];      // [0,1] over the mesh's texture
+  float uv[2];  // [0,1] over the mesh's texture
 };
 static_assert(sizeof(Vertex) == 32);
 

@@ -35,9 +35,7 @@ inline constexpr uint32_t kMaxTextureExtent = 1u << 15;
 constexpr uint32_t floor_log2(uint32_t v) { return v == 0 ? 0 : 31u - static_cast<uint32_t>(__builtin_clz(v)); }
 
 // Full mip chain down to 1x1: levels = floor(log2(max(w, h))) + 1.
-constexpr uint32_t full_mip_count(uint32_t width, uint32_t height) {
-  return floor_log2(std::max(width, height)) + 1;
-}
+constexpr uint32_t full_mip_count(uint32_t width, uint32_t height) { return floor_log2(std::max(width, height)) + 1; }
 
 struct Extent2D {
   uint32_t width;

@@ -20,6 +20,5 @@ uint64_t payload_checksum_avx512(const void* data, size_t bytes);
 // renderer states it in the segment header and a server whose scene gives another one refuses to serve (the
 // two read different scenes). Over each texture's width, height, mip count and format.
 inline constexpr uint64_t kTextureTableSeed = 0x7465787461626c65ull;  // "textable"
-uint64_t texture_table_step(uint64_t fingerprint, uint32_t width, uint32_t height, uint32_t mip_count,
-                            uint32_t format);
+uint64_t texture_table_step(uint64_t fingerprint, uint32_t width, uint32_t height, uint32_t mip_count, uint32_t format);
 }  // namespace texstream

@@ -4,10 +4,10 @@
 // what the scene's texture table implies) need the texture table and are done by `check_against_texture`.
 #include <cstdint>
 
-#include "texstream/common/result.hpp"
 #include "texstream/common/ids.hpp"
-#include "texstream/protocol/records.hpp"
+#include "texstream/common/result.hpp"
 #include "texstream/common/texel_format.hpp"
+#include "texstream/protocol/records.hpp"
 
 namespace texstream {
 
@@ -16,10 +16,10 @@ struct CheckedCompletion {
   TextureId texture;
   MipLevel mip;
   Generation generation;
-  SlotIndex slot;         // valid only for kOk
-  uint64_t byte_size;     // kOk: <= slot_bytes
-  TexelFormat format;     // kOk only
-  Extent2D extent;        // kOk only
+  SlotIndex slot;      // valid only for kOk
+  uint64_t byte_size;  // kOk: <= slot_bytes
+  TexelFormat format;  // kOk only
+  Extent2D extent;     // kOk only
   uint64_t checksum;
 };
 

@@ -51,8 +51,8 @@ inline constexpr uint32_t kMaxCompletionStatus = 7;
 
 // server → renderer. 64 bytes. Everything in it is untrusted until the renderer has validated its copy.
 struct CompletionRecord {
-  uint32_t status;      // CompletionStatus
-  uint32_t slot;        // kOk: staging slot holding the payload; otherwise kNoSlot
+  uint32_t status;  // CompletionStatus
+  uint32_t slot;    // kOk: staging slot holding the payload; otherwise kNoSlot
   uint32_t texture_id;
   uint32_t mip_level;
   uint64_t generation;  // echoed from the request
@@ -61,7 +61,7 @@ struct CompletionRecord {
   uint32_t width;       // texels of this mip
   uint32_t height;
   uint32_t reserved0;
-  uint64_t checksum;    // XXH3-64 of the payload bytes
+  uint64_t checksum;  // XXH3-64 of the payload bytes
   uint64_t reserved1;
 };
 static_assert(std::is_trivially_copyable_v<CompletionRecord> && std::is_standard_layout_v<CompletionRecord>);

@@ -77,9 +77,7 @@ class RendererEndpoint {
   // The server's published read position of the request ring, or nullopt when it is impossible.
   std::optional<uint64_t> server_read_position() const { return requests_.consumer_position(); }
   // A ring saw an impossible position published by the server: nothing more moves through it.
-  bool ring_broken() const {
-    return requests_.error() != RingError::kNone || completions_.error() != RingError::kNone;
-  }
+  bool ring_broken() const { return requests_.error() != RingError::kNone || completions_.error() != RingError::kNone; }
   bool completions_broken() const { return completions_.error() != RingError::kNone; }
 
  private:

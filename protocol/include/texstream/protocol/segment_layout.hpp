@@ -27,22 +27,22 @@ inline constexpr uint32_t kCompilerIdBytes = 64;
 struct SegmentHeader {
   uint64_t magic;
   uint32_t layout_version;
-  uint32_t header_bytes;            // sizeof(SegmentHeader)
-  uint32_t boost_version;           // BOOST_VERSION of the creator
-  uint32_t request_record_bytes;    // sizeof(RequestRecord)
-  uint32_t completion_record_bytes; // sizeof(CompletionRecord)
+  uint32_t header_bytes;             // sizeof(SegmentHeader)
+  uint32_t boost_version;            // BOOST_VERSION of the creator
+  uint32_t request_record_bytes;     // sizeof(RequestRecord)
+  uint32_t completion_record_bytes;  // sizeof(CompletionRecord)
   uint32_t reserved0;
   char compiler[kCompilerIdBytes];  // __VERSION__ of the creator, NUL-padded
   uint64_t segment_bytes;
-  uint32_t request_capacity;        // records, power of two
-  uint32_t completion_capacity;     // records, power of two
+  uint32_t request_capacity;     // records, power of two
+  uint32_t completion_capacity;  // records, power of two
   uint32_t slot_count;
   uint32_t reserved1;
-  uint64_t slot_bytes;              // multiple of kSlotAlignment
+  uint64_t slot_bytes;  // multiple of kSlotAlignment
   uint64_t request_ring_offset;
   uint64_t completion_ring_offset;
   uint64_t slots_offset;
-  uint64_t epoch;                   // random per creation and per reset after a server death
+  uint64_t epoch;  // random per creation and per reset after a server death
   // The renderer's texture table (texture_table_step over every texture; 0: not stated, nothing checked): a
   // server whose scene differs refuses the segment.
   uint64_t texture_count;
@@ -80,22 +80,22 @@ inline constexpr uint32_t kLoadingWords = 8;
 
 // Written by the server only.
 struct alignas(64) ServerBlock {
-  ShmAtomic<uint32_t> attached;    // 1 while a server serves this segment
+  ShmAtomic<uint32_t> attached;  // 1 while a server serves this segment
   ShmAtomic<uint32_t> pid;
   ShmAtomic<uint64_t> start_time;
-  ShmAtomic<uint64_t> heartbeat;   // bumped by the server loop each iteration: progress, not time
-  ShmAtomic<uint32_t> sleeping;    // 1 while waiting on the doorbell futex (the renderer then wakes it)
+  ShmAtomic<uint64_t> heartbeat;  // bumped by the server loop each iteration: progress, not time
+  ShmAtomic<uint32_t> sleeping;   // 1 while waiting on the doorbell futex (the renderer then wakes it)
   // The pid of a standalone server that refused this segment (its scene's texture table differs from the
   // renderer's, SegmentHeader::texture_table_fingerprint) and waits for the next renderer instead. Written
   // by that server, which does not claim the segment (pid stays 0); the renderer ends its run naming it.
   ShmAtomic<uint32_t> refused_by;
   // Statistics (monotonic counters; relaxed stores, read for reports only).
-  ShmAtomic<uint64_t> completions;        // completions published
-  ShmAtomic<uint64_t> requests_received;  // kLoad records taken off the request ring
-  ShmAtomic<uint64_t> requests_cancelled; // superseded by a newer generation or coalesced away
-  ShmAtomic<uint64_t> ram_cache_hits;     // mips served from the RAM cache
-  ShmAtomic<uint64_t> ram_cache_misses;   // mips read from storage
-  ShmAtomic<uint64_t> bytes_read;         // bytes read from storage (exact mip reads + headers)
+  ShmAtomic<uint64_t> completions;         // completions published
+  ShmAtomic<uint64_t> requests_received;   // kLoad records taken off the request ring
+  ShmAtomic<uint64_t> requests_cancelled;  // superseded by a newer generation or coalesced away
+  ShmAtomic<uint64_t> ram_cache_hits;      // mips served from the RAM cache
+  ShmAtomic<uint64_t> ram_cache_misses;    // mips read from storage
+  ShmAtomic<uint64_t> bytes_read;          // bytes read from storage (exact mip reads + headers)
   // Crash attribution (issue 9): loading[i] = texture id + 1 while load worker i works on that texture, 0
   // while idle (relaxed stores; workers beyond kLoadingWords are not recorded). Read by the renderer only
   // after the server died by a crash signal, before it resets the block: a texture being loaded during two
@@ -113,7 +113,7 @@ struct SegmentParams {
   uint32_t completion_capacity = 1024;
   uint32_t slot_count = 64;
   uint64_t slot_bytes = 1u << 20;
-  uint64_t texture_count = 0;              // the renderer's texture table (SegmentHeader); 0, 0: not stated
+  uint64_t texture_count = 0;  // the renderer's texture table (SegmentHeader); 0, 0: not stated
   uint64_t texture_table_fingerprint = 0;
 };
 

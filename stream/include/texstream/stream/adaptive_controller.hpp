@@ -19,8 +19,8 @@
 //
 // Windowed averages never drift: the 200-sample t_wa and 5-sample t_b windows keep their samples as integer
 // femtoseconds with an exact integer running sum (a double running sum keeps the rounding residue of every
-// sample that passes through it, e.g. of a 10 s spike among 1 µs frames); the 40-sample t_bl/t_bu edges depend on the current t_w through min/max and are recomputed
-// from their window every frame anyway.
+// sample that passes through it, e.g. of a 10 s spike among 1 µs frames); the 40-sample t_bl/t_bu edges depend on the
+// current t_w through min/max and are recomputed from their window every frame anyway.
 #include <array>
 #include <cstddef>
 #include <cstdint>
@@ -31,18 +31,17 @@
 
 namespace texstream::stream {
 
-// ControllerMode (adaptive, none, fixed) is the controller.mode key's enum, in config.hpp with its names.
-const char* to_string(ControllerMode mode);
+// ControllerMode is the controller.mode key's enum, in config.hpp; its names come from config_choice.hpp.
 
 // Parameters in the controller's units (seconds, bytes, levels). Built from [controller] by from_config.
 struct ControllerParams {
   ControllerMode mode = ControllerMode::kAdaptive;
-  double alpha_s = 0.016;             // α, Table 2: 16 ms
-  double beta = 8;                    // β, Table 2
-  double s_min_bytes = 0.065e6;       // Table 2: 0.065 MB, one 64 KiB sparse block
-  double s_max_bytes = 64e6;          // Table 2: 64 MB
-  double fixed_load_bytes = 16e6;     // mode = fixed
-  double fixed_bias = 0;              // mode = fixed
+  double alpha_s = 0.016;          // α, Table 2: 16 ms
+  double beta = 8;                 // β, Table 2
+  double s_min_bytes = 0.065e6;    // Table 2: 0.065 MB, one 64 KiB sparse block
+  double s_max_bytes = 64e6;       // Table 2: 64 MB
+  double fixed_load_bytes = 16e6;  // mode = fixed
+  double fixed_bias = 0;           // mode = fixed
 
   // Converts ms → s and MB → bytes; errors name the [controller] key.
   static Result<ControllerParams> from_config(const ControllerConfig& config);
@@ -93,25 +92,25 @@ struct EdgeHistory {
 class AdaptiveController {
  public:
   // Window lengths of seed 000 Eq. 6 and 7.
-  static constexpr size_t kTwaSamples = 200;   // t_wa: "200 previous samples of t_w" (~2 s)
-  static constexpr size_t kEdgeSamples = 40;   // t_bl, t_bu: "40 samples ... one-third of the frames in a second"
-  static constexpr size_t kTbSamples = 5;      // t_b: "5 previous weighted maximum frame latency t_w"
+  static constexpr size_t kTwaSamples = 200;  // t_wa: "200 previous samples of t_w" (~2 s)
+  static constexpr size_t kEdgeSamples = 40;  // t_bl, t_bu: "40 samples ... one-third of the frames in a second"
+  static constexpr size_t kTbSamples = 5;     // t_b: "5 previous weighted maximum frame latency t_w"
   // A frame latency above an hour is a clock error, not a stutter; it is rejected like NaN. It also bounds
   // a window sample: 3600 s = 3.6·10^18 fs < 2^63.
   static constexpr double kMaxFrameLatencyS = 3600.0;
 
   // The controller's state after the last accepted frame (all latencies in seconds).
   struct State {
-    double t_w = 0;     // Eq. 5 weighted maximum frame latency (0 before the first frame)
-    double l = 0;       // Eq. 4 load factor; starts at 0: streaming ramps up from s_min, never starts with a burst
-    double x = 0;       // Eq. 4 t_w - t_m of the last frame
-    double t_wa = 0;    // Eq. 6 mean of the previous 200 t_w used by the last frame
-    double t_m = 0;     // Eq. 6 threshold of the last frame
-    double t_b = 0;     // Eq. 7 mean of the previous 5 t_w
-    double t_bl = 0;    // Eq. 7 lower edge
-    double t_bu = 0;    // Eq. 7 upper edge
-    double s_bytes = 0; // Eq. 4 load size
-    double b = 0;       // Eq. 7 mip bias
+    double t_w = 0;      // Eq. 5 weighted maximum frame latency (0 before the first frame)
+    double l = 0;        // Eq. 4 load factor; starts at 0: streaming ramps up from s_min, never starts with a burst
+    double x = 0;        // Eq. 4 t_w - t_m of the last frame
+    double t_wa = 0;     // Eq. 6 mean of the previous 200 t_w used by the last frame
+    double t_m = 0;      // Eq. 6 threshold of the last frame
+    double t_b = 0;      // Eq. 7 mean of the previous 5 t_w
+    double t_bl = 0;     // Eq. 7 lower edge
+    double t_bu = 0;     // Eq. 7 upper edge
+    double s_bytes = 0;  // Eq. 4 load size
+    double b = 0;        // Eq. 7 mip bias
     LatencyWindow<kTwaSamples> twa_window;
     LatencyWindow<kTbSamples> tb_window;
     EdgeHistory<kEdgeSamples> bl_history;

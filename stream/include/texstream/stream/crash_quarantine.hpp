@@ -54,9 +54,9 @@ class CrashQuarantine {
 
   size_t texture_count_;
   std::unordered_map<uint32_t, uint32_t> charges_;  // texture id → deaths while it was being loaded
-  std::unordered_set<uint32_t> quarantined_;         // texture ids
-  std::vector<uint64_t> refused_;                    // keys refused since the last fail_refused()
-  std::unordered_set<uint64_t> refused_set_;         // the same keys: each failed once per poll
+  std::unordered_set<uint32_t> quarantined_;        // texture ids
+  std::vector<uint64_t> refused_;                   // keys refused since the last fail_refused()
+  std::unordered_set<uint64_t> refused_set_;        // the same keys: each failed once per poll
 };
 
 }  // namespace texstream::stream

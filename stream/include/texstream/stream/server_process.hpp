@@ -55,9 +55,9 @@ Result<std::filesystem::path> resolve_server_executable(const Config& config);
 // toward the back-off — a restart storm of 100 kills in 60 s must end in normal streaming within 5 s, which
 // exponential back-off towards colormap-only (30 s retries) would make impossible.
 struct RestartPolicy {
-  std::chrono::milliseconds first_delay{50};    // first restart after a crash; doubles per recent crash
-  std::chrono::milliseconds max_delay{5000};    // cap of the doubling
-  uint32_t crash_limit = 5;                     // this many crashes within crash_window → colormap only
+  std::chrono::milliseconds first_delay{50};  // first restart after a crash; doubles per recent crash
+  std::chrono::milliseconds max_delay{5000};  // cap of the doubling
+  uint32_t crash_limit = 5;                   // this many crashes within crash_window → colormap only
   std::chrono::milliseconds crash_window{30000};
   std::chrono::milliseconds slow_retry{30000};  // colormap only: still try this often
   // Until the server reports `attached`, it may still be loading its scene and config: its heartbeat is
@@ -79,10 +79,10 @@ inline constexpr int kServerExitBadConfig = 2;
 
 struct ServerExit {
   int pid = 0;
-  std::string how;          // "exited with status 3", "killed by signal 9", "could not be spawned: ..."
-  int term_signal = 0;      // the signal that ended it; 0 if it exited or was never spawned
-  int exit_status = -1;     // its exit status if it exited (texstream-server: 2 = bad arguments, configuration
-                            // or scene, see kServerExitBadConfig); -1 otherwise
+  std::string how;       // "exited with status 3", "killed by signal 9", "could not be spawned: ..."
+  int term_signal = 0;   // the signal that ended it; 0 if it exited or was never spawned
+  int exit_status = -1;  // its exit status if it exited (texstream-server: 2 = bad arguments, configuration
+                         // or scene, see kServerExitBadConfig); -1 otherwise
   bool killed_by_us = false;
   std::string kill_reason;  // why we killed it, if we did
   bool hung = false;        // we killed it because its heartbeat stalled while it was serving (attached)

@@ -19,10 +19,10 @@ class ServerSupervisor {
  public:
   // How a server ended, for the client and its quarantine.
   struct Death {
-    std::string why;         // for the log ("pid 12 exited with status 2 ...")
-    int crash_signal = 0;    // the signal that ended a spawned server we did not kill; 0 otherwise
-    bool hung = false;       // we killed it because its heartbeat stalled while it was serving
-    bool reset = true;       // the segment is to be reset (false: an external server broke a ring)
+    std::string why;       // for the log ("pid 12 exited with status 2 ...")
+    int crash_signal = 0;  // the signal that ended a spawned server we did not kill; 0 otherwise
+    bool hung = false;     // we killed it because its heartbeat stalled while it was serving
+    bool reset = true;     // the segment is to be reset (false: an external server broke a ring)
   };
   // What the supervisor asks of the client it serves; called from within supervise() and restart().
   class Client {
@@ -35,7 +35,8 @@ class ServerSupervisor {
   };
 
   // `process`: the spawned server (its first spawn is due), or null when someone else serves the segment.
-  ServerSupervisor(Segment& segment, std::unique_ptr<ServerProcess> process, std::chrono::milliseconds heartbeat_timeout);
+  ServerSupervisor(Segment& segment, std::unique_ptr<ServerProcess> process,
+                   std::chrono::milliseconds heartbeat_timeout);
   ~ServerSupervisor();  // kills and reaps a spawned server
   ServerSupervisor(const ServerSupervisor&) = delete;
   ServerSupervisor& operator=(const ServerSupervisor&) = delete;

@@ -35,9 +35,9 @@
 #include <vector>
 
 #include "texstream/common/config.hpp"
+#include "texstream/common/ids.hpp"
 #include "texstream/common/result.hpp"
 #include "texstream/protocol/completion_check.hpp"
-#include "texstream/common/ids.hpp"
 #include "texstream/protocol/records.hpp"
 #include "texstream/protocol/renderer_endpoint.hpp"
 #include "texstream/protocol/segment.hpp"
@@ -54,13 +54,13 @@ namespace texstream::stream {
 // Why a request was or was not sent.
 enum class RequestOutcome : uint8_t {
   kSent,
-  kAlreadyInFlight,   // that (texture, mip) is still in flight
-  kInFlightLimit,     // stream.max_requests_in_flight reached
-  kRingFull,          // no room in the request ring (room is kept for slot releases)
-  kNoServer,          // the server is dead, backing off or in colormap-only mode
-  kUnknownTexture,    // id outside the texture table
-  kBadMip,            // mip level >= the texture's mip count
-  kQuarantined,       // the texture was being loaded when the server crashed twice: failed (kCorrupt) at next poll
+  kAlreadyInFlight,  // that (texture, mip) is still in flight
+  kInFlightLimit,    // stream.max_requests_in_flight reached
+  kRingFull,         // no room in the request ring (room is kept for slot releases)
+  kNoServer,         // the server is dead, backing off or in colormap-only mode
+  kUnknownTexture,   // id outside the texture table
+  kBadMip,           // mip level >= the texture's mip count
+  kQuarantined,      // the texture was being loaded when the server crashed twice: failed (kCorrupt) at next poll
 };
 const char* to_string(RequestOutcome outcome);
 // kSent and kQuarantined (answered kCorrupt at the next poll) → kSent; other outcomes about this one
@@ -155,8 +155,8 @@ class StreamClient {
     bool resent = false;
     SteadyTime resent_at{};
   };
-  class TimedSink;   // forwards to the renderer's sink and measures the time spent there
-  class IpcScope;    // measures one client call into the current frame's IPC time
+  class TimedSink;        // forwards to the renderer's sink and measures the time spent there
+  class IpcScope;         // measures one client call into the current frame's IPC time
   class SupervisorHooks;  // what the supervisor asks of us, with the current call's sink
   void note_answered(uint64_t k);
   uint64_t overdue_lost(SteadyTime t) const;
@@ -186,24 +186,24 @@ class StreamClient {
   std::unique_ptr<Segment> segment_;
   std::unique_ptr<ServerSupervisor> supervisor_;  // whoever serves the segment: spawned or standalone
   CrashQuarantine quarantine_;
-  RendererEndpoint endpoint_;              // the rings and the doorbell; rebuilt after every reset
+  RendererEndpoint endpoint_;  // the rings and the doorbell; rebuilt after every reset
   Generation generation_{0};
   std::unordered_map<uint64_t, InFlight> in_flight_;
-  std::vector<uint8_t> slot_held_;          // by slot index: handed to us and not yet handed back
+  std::vector<uint8_t> slot_held_;  // by slot index: handed to us and not yet handed back
   // By slot: request-ring position of the kReleaseSlot that handed it back (kNoPosition: none pending). The
   // slot is the server's only once it has read that record; naming it in a completion earlier is a violation.
   std::vector<uint64_t> release_pos_;
   std::optional<CheckedCompletion> held_;  // passed every check; the sink had no room
-  uint32_t release_reserve_ = 0;            // request-ring records kept free for releases
+  uint32_t release_reserve_ = 0;           // request-ring records kept free for releases
   StreamStats stats_;
   // ServerBlock counters of servers that have died (the block is zeroed by the reset).
   uint64_t past_hits_ = 0, past_misses_ = 0, past_bytes_read_ = 0, past_cancelled_ = 0;
   std::unordered_map<uint64_t, Lost> lost_;
   IpcTimeHistogram ipc_time_;
-  uint64_t frame_ipc_ns_ = 0;   // the open frame's client time so far
+  uint64_t frame_ipc_ns_ = 0;  // the open frame's client time so far
   bool frame_open_ = false;
-  uint64_t sink_ns_ = 0;        // time inside the sink during the current client call
-  int ipc_depth_ = 0;           // nested client calls (poll → restart paths) count once
+  uint64_t sink_ns_ = 0;  // time inside the sink during the current client call
+  int ipc_depth_ = 0;     // nested client calls (poll → restart paths) count once
   SteadyTime next_expiry_scan_{};
 };
 

@@ -11,11 +11,11 @@
 namespace texstream::stream {
 
 enum class StreamServerState : uint8_t {
-  kExternal,      // spawn_server = false: someone else serves the segment
+  kExternal,  // spawn_server = false: someone else serves the segment
   kRunning,
   kBackingOff,
   kColormapOnly,
-  kBroken,        // external server broke a ring: nothing is sent until reset_external_server()
+  kBroken,  // external server broke a ring: nothing is sent until reset_external_server()
 };
 const char* to_string(StreamServerState state);
 
@@ -42,17 +42,17 @@ class IpcTimeHistogram {
 struct StreamStats {
   uint64_t requests_sent = 0;
   uint64_t releases_sent = 0;
-  uint64_t completions_ok = 0;                           // committed to the sink (checksum matched)
-  uint64_t completions_rejected = 0;                     // kOk whose payload the checks refused
-  uint64_t payload_checksum_failures = 0;                // of those: copied, checksum did not match
+  uint64_t completions_ok = 0;                                 // committed to the sink (checksum matched)
+  uint64_t completions_rejected = 0;                           // kOk whose payload the checks refused
+  uint64_t payload_checksum_failures = 0;                      // of those: copied, checksum did not match
   uint64_t completions_failed[kMaxCompletionStatus + 1] = {};  // by CompletionStatus value
-  uint64_t requests_lost = 0;                            // in flight when the server died
-  uint64_t requests_timed_out = 0;                       // unanswered for StreamClientOptions::request_timeout
-  uint64_t bytes_received = 0;                           // payload bytes committed
+  uint64_t requests_lost = 0;                                  // in flight when the server died
+  uint64_t requests_timed_out = 0;                             // unanswered for StreamClientOptions::request_timeout
+  uint64_t bytes_received = 0;                                 // payload bytes committed
   uint64_t protocol_errors = 0;
-  uint64_t server_restarts = 0;                          // spawns after the first
+  uint64_t server_restarts = 0;  // spawns after the first
   uint64_t server_deaths = 0;
-  uint64_t server_crashes = 0;                           // deaths counted as crashes (RestartPolicy)
+  uint64_t server_crashes = 0;  // deaths counted as crashes (RestartPolicy)
   // Servers in a row (up to now) that died before attaching to the segment: a binary that cannot start (a
   // bad option, a missing library) rather than one that crashed while serving. 0 once one attached.
   uint64_t server_deaths_before_attach = 0;
@@ -62,16 +62,16 @@ struct StreamStats {
   // server.spawn = false: the pid of a standalone server that refused the segment because it reads another
   // scene (ServerBlock::refused_by); 0 if none. No restart of ours changes that: the run ends (renderer_app).
   uint32_t standalone_refused_by = 0;
-  uint64_t crash_signal_deaths = 0;                      // deaths by a crash signal the server raised itself
-  uint64_t textures_quarantined = 0;                     // loaded during kQuarantineAfterCrashes such deaths
+  uint64_t crash_signal_deaths = 0;   // deaths by a crash signal the server raised itself
+  uint64_t textures_quarantined = 0;  // loaded during kQuarantineAfterCrashes such deaths
   // Recovery (issue 9): a request in flight when the server died, sent again to a later server, must be
   // answered (any status) within kRecoveryDeadline of being sent again.
-  uint64_t lost_resent = 0;                              // lost requests sent again
+  uint64_t lost_resent = 0;  // lost requests sent again
   uint64_t lost_answered_in_time = 0;
-  uint64_t unserved_after_restart = 0;                   // answered late, or still unanswered past the deadline
+  uint64_t unserved_after_restart = 0;  // answered late, or still unanswered past the deadline
   uint64_t in_flight = 0;
-  uint64_t slots_held = 0;                               // handed to us, not yet handed back
-  uint64_t releases_queued = 0;                          // waiting for room in the request ring
+  uint64_t slots_held = 0;       // handed to us, not yet handed back
+  uint64_t releases_queued = 0;  // waiting for room in the request ring
   // Copied from ServerBlock, summed over every server this client has run.
   uint64_t server_ram_cache_hits = 0;
   uint64_t server_ram_cache_misses = 0;

@@ -26,8 +26,8 @@
 #include <span>
 #include <vector>
 
-#include "texstream/protocol/completion_check.hpp"
 #include "texstream/common/ids.hpp"
+#include "texstream/protocol/completion_check.hpp"
 #include "texstream/protocol/records.hpp"
 
 namespace texstream::stream {
@@ -66,7 +66,7 @@ struct TextureStateView {
   std::optional<uint32_t> resident;  // finest uploaded level, if any
   std::optional<uint32_t> pending;   // level in flight, if any
   bool broken;
-  uint32_t failures;                 // consecutive counted failures (see kMaxCountedFailures)
+  uint32_t failures;  // consecutive counted failures (see kMaxCountedFailures)
 };
 
 struct TextureStateCounts {
@@ -79,7 +79,7 @@ struct TextureStateCounts {
 
 struct CycleResult {
   std::vector<MipRequest> sent;
-  uint64_t bytes = 0;           // sum of sent[i].bytes
+  uint64_t bytes = 0;  // sum of sent[i].bytes
   bool stopped_by_load_size = false;
   bool stopped_by_sender = false;
   bool stopped_by_count = false;  // max_requests reached

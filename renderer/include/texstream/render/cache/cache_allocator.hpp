@@ -12,8 +12,8 @@
 #include <unordered_map>
 #include <vector>
 
-#include "texstream/common/result.hpp"
 #include "texstream/common/ids.hpp"
+#include "texstream/common/result.hpp"
 
 namespace texstream::render {
 
@@ -22,7 +22,7 @@ struct CacheRegion {
   uint32_t index = 0;     // region within the layer, row-major
   uint32_t origin_x = 0;  // texels at mip 0
   uint32_t origin_y = 0;
-  uint32_t extent = 0;    // side of the square region at mip 0
+  uint32_t extent = 0;  // side of the square region at mip 0
 };
 
 class CacheAllocator {
@@ -57,10 +57,10 @@ class CacheAllocator {
 
   uint32_t layer_extent_;
   std::vector<Layer> layers_;
-  uint64_t assignments_ = 0;                      // layers handed out so far; the next is assignments_ % layers
-  uint64_t oldest_ = 0;                           // assignment number of the oldest live layer
+  uint64_t assignments_ = 0;  // layers handed out so far; the next is assignments_ % layers
+  uint64_t oldest_ = 0;       // assignment number of the oldest live layer
   uint64_t recycled_ = 0;
-  std::unordered_map<uint32_t, uint32_t> open_;   // extent -> layer that still has free regions
+  std::unordered_map<uint32_t, uint32_t> open_;  // extent -> layer that still has free regions
   std::unordered_map<TextureId, CacheRegion> placed_;
 };
 

@@ -18,11 +18,15 @@ class LoadTimeSink final : public stream::MipSink {
   using Clock = std::chrono::steady_clock;
   LoadTimeSink(stream::MipSink& inner, Clock::time_point deadline) : inner_(inner), deadline_(deadline) {}
   std::span<std::byte> reserve(TextureId texture, MipLevel mip, uint64_t bytes) override;
-  void commit(TextureId texture, MipLevel mip, std::span<std::byte> data) override { inner_.commit(texture, mip, data); }
+  void commit(TextureId texture, MipLevel mip, std::span<std::byte> data) override {
+    inner_.commit(texture, mip, data);
+  }
   void reject(TextureId texture, MipLevel mip, std::span<std::byte> reserved) override {
     inner_.reject(texture, mip, reserved);
   }
-  void failed(TextureId texture, MipLevel mip, CompletionStatus status) override { inner_.failed(texture, mip, status); }
+  void failed(TextureId texture, MipLevel mip, CompletionStatus status) override {
+    inner_.failed(texture, mip, status);
+  }
   bool limited() const { return limited_; }
   bool no_room() const { return no_room_; }  // the staging ring was full: the rest waits for the next frame
 
@@ -49,7 +53,9 @@ class OrderedCommitSink final : public stream::MipSink {
   void reject(TextureId texture, MipLevel mip, std::span<std::byte> reserved) override {
     inner_.reject(texture, mip, reserved);
   }
-  void failed(TextureId texture, MipLevel mip, CompletionStatus status) override { inner_.failed(texture, mip, status); }
+  void failed(TextureId texture, MipLevel mip, CompletionStatus status) override {
+    inner_.failed(texture, mip, status);
+  }
   // Hands the commits held so far to the inner sink, in (texture, mip) order.
   void flush();
 

@@ -30,17 +30,17 @@ class VulkanContext;
 
 struct SparseImageInfo {
   VkFormat format = VK_FORMAT_R8G8B8A8_SRGB;
-  uint32_t extent = 512;      // layer side at mip 0 (cache.layer_extent_px)
+  uint32_t extent = 512;  // layer side at mip 0 (cache.layer_extent_px)
   uint32_t mip_levels = 10;
   uint32_t layers = 64;       // cache.layers
   uint64_t memory_bytes = 0;  // cache.memory_bytes: the GPU memory budget of the pages (and mip tail)
 };
 
 struct SparseBindStats {
-  uint64_t calls = 0;            // vkQueueBindSparse calls
-  uint64_t ops = 0;              // page binds + unbinds submitted
-  double seconds = 0;            // building the bind arrays + the calls (and the waits for them)
-  double call_seconds = 0;       // of which the calls and waits alone
+  uint64_t calls = 0;       // vkQueueBindSparse calls
+  uint64_t ops = 0;         // page binds + unbinds submitted
+  double seconds = 0;       // building the bind arrays + the calls (and the waits for them)
+  double call_seconds = 0;  // of which the calls and waits alone
   uint64_t max_ops_per_call = 0;
   std::vector<uint32_t> ops_per_call;  // one entry per call (the bind-cost benchmark replays these sizes)
 };

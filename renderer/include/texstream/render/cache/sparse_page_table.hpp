@@ -30,10 +30,10 @@
 namespace texstream::render {
 
 struct PageGeometry {
-  uint32_t layer_extent = 0;      // texels of a layer at mip 0 (power of two)
-  uint32_t mip_levels = 0;        // levels of the cache image
+  uint32_t layer_extent = 0;  // texels of a layer at mip 0 (power of two)
+  uint32_t mip_levels = 0;    // levels of the cache image
   uint32_t layers = 0;
-  uint32_t granularity_w = 0;     // texels per page (VkSparseImageFormatProperties::imageGranularity)
+  uint32_t granularity_w = 0;  // texels per page (VkSparseImageFormatProperties::imageGranularity)
   uint32_t granularity_h = 0;
   uint32_t tail_first_level = 0;  // first level in the mip tail; == mip_levels when there is none
 };
@@ -47,8 +47,8 @@ struct PageLocation {
 
 struct PageBindOp {
   PageLocation page;
-  bool bind = false;    // false: unbind
-  uint32_t slot = 0;    // bind: the memory slot
+  bool bind = false;  // false: unbind
+  uint32_t slot = 0;  // bind: the memory slot
 };
 
 struct PageTableStats {
@@ -107,11 +107,11 @@ class SparsePageTable {
 
   PageGeometry geometry_;
   uint32_t slot_count_;
-  std::vector<uint32_t> free_;                  // free slots; the lowest on top (blocks fill in order)
-  std::unordered_map<uint64_t, Page> pages_;    // referenced or retired (slot still held)
+  std::vector<uint32_t> free_;                // free slots; the lowest on top (blocks fill in order)
+  std::unordered_map<uint64_t, Page> pages_;  // referenced or retired (slot still held)
   uint64_t retired_count_ = 0;
-  std::unordered_map<uint64_t, Op> batch_;      // the last op per location since take_batch()
-  std::unordered_set<uint64_t> device_bound_;   // bound once the taken batches have executed
+  std::unordered_map<uint64_t, Op> batch_;     // the last op per location since take_batch()
+  std::unordered_set<uint64_t> device_bound_;  // bound once the taken batches have executed
   PageTableStats stats_;
 };
 

@@ -15,7 +15,7 @@ class StagingRing {
   struct Allocation {
     uint64_t offset = 0;  // in the buffer
     uint64_t size = 0;
-    uint64_t id = 0;      // for release()
+    uint64_t id = 0;  // for release()
   };
 
   explicit StagingRing(uint64_t capacity);

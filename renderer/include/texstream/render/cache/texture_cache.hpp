@@ -34,13 +34,13 @@
 #include "texstream/common/result.hpp"
 #include "texstream/common/texel_format.hpp"
 #include "texstream/render/cache/cache_allocator.hpp"
-#include "texstream/render/vulkan/gpu_buffer.hpp"
 #include "texstream/render/cache/sparse_memory.hpp"
 #include "texstream/render/cache/sparse_page_table.hpp"
 #include "texstream/render/cache/staging_ring.hpp"
+#include "texstream/render/vulkan/gpu_buffer.hpp"
+#include "texstream/render/vulkan/zeroed_array.hpp"
 #include "texstream/stream/stream_client.hpp"
 #include "texstream/stream/texture_states.hpp"
-#include "texstream/render/vulkan/zeroed_array.hpp"
 
 namespace texstream::render {
 
@@ -56,18 +56,18 @@ struct TextureCacheOptions {
 };
 
 struct TextureCacheStats {
-  uint64_t mips_uploaded = 0;     // copies completed and published
+  uint64_t mips_uploaded = 0;  // copies completed and published
   uint64_t bytes_uploaded = 0;
-  uint64_t mips_dropped = 0;      // committed, but the texture was evicted before its copy was recorded or done
-  uint64_t evictions = 0;         // textures invalidated by layer recycling or the memory budget
-  uint64_t staging_full = 0;      // reserve() answered "no room now"
-  uint64_t budget_evicted_layers = 0;  // layers evicted because the pages of a frame's copies did not fit
-  uint64_t frames = 0;                 // on_submission_complete calls (one per frame)
-  uint64_t budget_exceeded_frames = 0; // frames that ended with bound pages x page size above the budget (0)
-  uint64_t max_bound_bytes = 0;        // most bytes bound at the end of any frame (pages + mip tail)
-  uint64_t texture_loads = 0;          // textures placed in a region (first mip or again after an eviction)
-  uint64_t texture_reloads = 0;        // of those, textures that had been evicted before (thrashing)
-  double create_seconds = 0;           // TextureCache::create (image, table of every texture, first barrier)
+  uint64_t mips_dropped = 0;            // committed, but the texture was evicted before its copy was recorded or done
+  uint64_t evictions = 0;               // textures invalidated by layer recycling or the memory budget
+  uint64_t staging_full = 0;            // reserve() answered "no room now"
+  uint64_t budget_evicted_layers = 0;   // layers evicted because the pages of a frame's copies did not fit
+  uint64_t frames = 0;                  // on_submission_complete calls (one per frame)
+  uint64_t budget_exceeded_frames = 0;  // frames that ended with bound pages x page size above the budget (0)
+  uint64_t max_bound_bytes = 0;         // most bytes bound at the end of any frame (pages + mip tail)
+  uint64_t texture_loads = 0;           // textures placed in a region (first mip or again after an eviction)
+  uint64_t texture_reloads = 0;         // of those, textures that had been evicted before (thrashing)
+  double create_seconds = 0;            // TextureCache::create (image, table of every texture, first barrier)
 };
 
 // What the frame's queue submission must wait for: the sparse binds recorded with its uploads.
@@ -174,15 +174,15 @@ class TextureCache final : public stream::MipSink {
   StagingRing ring_;
   CacheAllocator allocator_;
   ZeroedArray<Residency> residency_;  // per texture; all-zero = not resident (created in O(1), see zeroed_array.hpp)
-  uint64_t resident_count_ = 0;  // textures with a non-zero mask
+  uint64_t resident_count_ = 0;       // textures with a non-zero mask
   std::vector<UploadTraceFrame> trace_;
   size_t trace_entries_ = 0;
   bool trace_open_ = false;  // the last prepare_uploads started a trace frame that record_uploads adds to
   std::unordered_map<uint64_t, StagingRing::Allocation> reserved_;  // by buffer offset, until commit/reject
-  std::vector<Copy> queued_;        // committed, pages not yet bound
-  std::vector<Copy> ready_;         // pages bound (prepare_uploads), not yet recorded
+  std::vector<Copy> queued_;                                        // committed, pages not yet bound
+  std::vector<Copy> ready_;                                         // pages bound (prepare_uploads), not yet recorded
   uint64_t prepared_serial_ = 0;
-  std::deque<Copy> in_flight_;      // recorded, submission not yet complete
+  std::deque<Copy> in_flight_;  // recorded, submission not yet complete
   std::vector<bool> unplaceable_logged_;
   std::vector<bool> entry_written_;  // prepare_texture wrote the texture's table entry
   TextureCacheStats stats_;

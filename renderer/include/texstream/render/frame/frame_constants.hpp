@@ -13,7 +13,7 @@ gpu::PassConstants main_pass_constants(const Camera& cam);
 gpu::PassConstants wide_pass_constants(const Camera& cam, double fov_y_deg, double wide_fov_y_deg, uint32_t height,
                                        uint32_t wide_height);
 // Everything but FrameUniforms.view and the kFlagFeedback bit (ScenePasses::record sets those).
-gpu::FrameUniforms frame_uniforms(const Camera& cam, const Config& cfg, uint32_t mesh_count,
-                                  uint32_t compact_capacity, uint32_t cache_layer_extent, uint32_t cache_mips);
+gpu::FrameUniforms frame_uniforms(const Camera& cam, const Config& cfg, uint32_t mesh_count, uint32_t compact_capacity,
+                                  uint32_t cache_layer_extent, uint32_t cache_mips);
 
 }  // namespace texstream::render

@@ -16,17 +16,17 @@
 namespace texstream::render {
 
 struct FramePlanOptions {
-  bool drop_unsampled = true;         // BroadPhase::drop_unsampled (false: draw every mesh the frusta keep)
-  BroadPhaseStats* stats = nullptr;   // the broad phase's counters, if wanted
+  bool drop_unsampled = true;        // BroadPhase::drop_unsampled (false: draw every mesh the frusta keep)
+  BroadPhaseStats* stats = nullptr;  // the broad phase's counters, if wanted
   // "broad_phase", "make_resident", "texture_entries", "draw_list", each as it ends.
   StepHook step;
 };
 
 struct FramePlan {
-  FrameRecording rec;     // the draw lists and pass constants; feedback and read_back_list are the caller's
-  ViewportSplit split;    // the runs of RenderStack::visible(): [0, main_end) main pass, the rest wide pass
-  size_t submitted = 0;   // meshes the broad phase kept (wide frustum)
-  size_t unsampled = 0;   // of those, dropped: no pixel centre in their passes
+  FrameRecording rec;    // the draw lists and pass constants; feedback and read_back_list are the caller's
+  ViewportSplit split;   // the runs of RenderStack::visible(): [0, main_end) main pass, the rest wide pass
+  size_t submitted = 0;  // meshes the broad phase kept (wide frustum)
+  size_t unsampled = 0;  // of those, dropped: no pixel centre in their passes
 };
 
 // Plans the frame seen by `cam` on `stack`; the meshes it draws are left in stack.visible(). `cfg` supplies

@@ -49,7 +49,7 @@ enum class Uploads { kAll, kMips, kGeometry, kNone };
 struct Submission {
   const FrameRecording* passes = nullptr;  // the frame's passes; null: uploads only
   Uploads uploads = Uploads::kAll;
-  bool capture = false;                    // copy the colour target to the host (FrameCapture)
+  bool capture = false;  // copy the colour target to the host (FrameCapture)
   // "record_uploads" once the uploads are recorded, "gpu" once the fence has signalled (frame 0's parts).
   StepHook step;
 };

@@ -25,9 +25,9 @@
 #include "texstream/common/config.hpp"
 #include "texstream/common/result.hpp"
 #include "texstream/render/scene/frame_recording.hpp"
+#include "texstream/render/scene/gpu_structs.hpp"
 #include "texstream/render/vulkan/gpu_buffer.hpp"
 #include "texstream/render/vulkan/gpu_image.hpp"
-#include "texstream/render/scene/gpu_structs.hpp"
 #include "texstream/render/vulkan/vk_handle.hpp"
 
 namespace texstream::render {
@@ -40,12 +40,12 @@ class SceneGpu;
 struct ScenePassesOptions {
   uint32_t width = 960;
   uint32_t height = 540;
-  uint32_t wide_width = 240;   // the wide pass only feeds metadata: a quarter of the viewport per axis
+  uint32_t wide_width = 240;  // the wide pass only feeds metadata: a quarter of the viewport per axis
   uint32_t wide_height = 135;
-  uint32_t debug_view = 0;     // gpu::kDebugView*; any other than none renders into a UNORM target
-  bool lod_probe = false;      // main pass compiled with LOD_PROBE: per-pixel metadata level vs textureQueryLod
-  float probe_anisotropy = 16; // A_m of the probe sampler (clamped to the device's maxSamplerAnisotropy)
-  bool timestamps = false;     // GPU timestamps around the passes (read_pass_times)
+  uint32_t debug_view = 0;      // gpu::kDebugView*; any other than none renders into a UNORM target
+  bool lod_probe = false;       // main pass compiled with LOD_PROBE: per-pixel metadata level vs textureQueryLod
+  float probe_anisotropy = 16;  // A_m of the probe sampler (clamped to the device's maxSamplerAnisotropy)
+  bool timestamps = false;      // GPU timestamps around the passes (read_pass_times)
   // The wide pass's atomics combined per subgroup first (scene.frag SUBGROUP_FEEDBACK) where the device has
   // fragment-stage subgroup arithmetic and ballot; false: one atomic pair per fragment.
   bool subgroup_reduce = true;

@@ -17,6 +17,6 @@ namespace texstream::render {
 // records are not read: one random access each was most of this function's time on the frame thread (a cold
 // cache line per entry, ~100 ns: 30 of 32 us for 295 entries on lavapipe).
 std::vector<stream::StreamCandidate> build_candidates(std::span<const gpu::CompactEntry> entries, size_t mesh_count,
-                                              size_t texture_count, uint64_t* skipped = nullptr);
+                                                      size_t texture_count, uint64_t* skipped = nullptr);
 
 }  // namespace texstream::render

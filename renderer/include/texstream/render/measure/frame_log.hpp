@@ -16,20 +16,20 @@ namespace texstream::render {
 
 struct FrameRecord {
   uint64_t index = 0;
-  double time_s = 0;          // virtual time along the camera path: index * render.frame_time_ms
-  double wall_s = 0;          // wall time from the start of frame 0 to the end of this frame
-  double latency_ms = 0;      // frame latency (lock-step waits for the server excluded; blocking loads included)
-  double waited_ms = 0;       // lock-step: time spent waiting for the previous cycle's answers
-  double tw_ms = 0;           // t_w, weighted maximum frame latency (seed 000 Eq. 5)
-  double load_size_mb = 0;    // s for the next cycle, 10^6 bytes
-  double mip_bias = 0;        // b for the next cycle, levels
-  uint64_t mips = 0;          // mips uploaded and published during this frame
-  uint64_t bytes = 0;         // their bytes
-  uint64_t bound_pages = 0;   // sparse pages bound in the cache at the end of the frame
-  double server_hit_rate = 0; // server RAM cache hits / lookups during this frame (NaN: no lookups)
-  uint64_t in_flight = 0;     // requests outstanding at the server after the frame
-  bool camera_still = false;  // the pose equals the previous frame's (a pause): pop-in is measured
-  double mse = 0;             // against the reference frame (NaN: no reference)
+  double time_s = 0;           // virtual time along the camera path: index * render.frame_time_ms
+  double wall_s = 0;           // wall time from the start of frame 0 to the end of this frame
+  double latency_ms = 0;       // frame latency (lock-step waits for the server excluded; blocking loads included)
+  double waited_ms = 0;        // lock-step: time spent waiting for the previous cycle's answers
+  double tw_ms = 0;            // t_w, weighted maximum frame latency (seed 000 Eq. 5)
+  double load_size_mb = 0;     // s for the next cycle, 10^6 bytes
+  double mip_bias = 0;         // b for the next cycle, levels
+  uint64_t mips = 0;           // mips uploaded and published during this frame
+  uint64_t bytes = 0;          // their bytes
+  uint64_t bound_pages = 0;    // sparse pages bound in the cache at the end of the frame
+  double server_hit_rate = 0;  // server RAM cache hits / lookups during this frame (NaN: no lookups)
+  uint64_t in_flight = 0;      // requests outstanding at the server after the frame
+  bool camera_still = false;   // the pose equals the previous frame's (a pause): pop-in is measured
+  double mse = 0;              // against the reference frame (NaN: no reference)
   double psnr_db = 0;
   double ssim = 0;
   double popin_mse = 0;       // MSE to the previous frame while the camera is still (NaN otherwise)

@@ -27,7 +27,7 @@ struct FrameCounters {
   uint64_t bound_pages = 0;     // sparse pages bound now
   uint64_t server_hits = 0;     // server RAM cache hits and misses, all frames
   uint64_t server_misses = 0;
-  uint64_t in_flight = 0;       // requests outstanding now
+  uint64_t in_flight = 0;  // requests outstanding now
 };
 
 // The adaptive controller's outputs after the frame (seed 000 §3.4): for the next cycle.

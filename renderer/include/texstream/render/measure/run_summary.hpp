@@ -22,24 +22,24 @@ struct RunSummary {
   std::filesystem::path output_dir;
   uint64_t frames = 0;
   LatencyStats frame_latency;
-  uint64_t mips_streamed = 0;       // uploaded into the cache and published
-  double mb_streamed = 0;           // 10^6 bytes of those
-  double server_ram_hit_rate = 0;   // server RAM cache hits / (hits + misses); 0 when nothing was asked
+  uint64_t mips_streamed = 0;      // uploaded into the cache and published
+  double mb_streamed = 0;          // 10^6 bytes of those
+  double server_ram_hit_rate = 0;  // server RAM cache hits / (hits + misses); 0 when nothing was asked
   uint64_t protocol_errors = 0;
   uint64_t server_restarts = 0;
   uint64_t validation_errors = 0;
   uint64_t validation_warnings = 0;
-  uint64_t textures_resident = 0;   // textures with at least one mip in the cache at the end
+  uint64_t textures_resident = 0;  // textures with at least one mip in the cache at the end
   uint64_t texture_count = 0;
   uint64_t streaming_cycles = 0;
   uint64_t evictions = 0;
   // Adaptive controller (seed 000 §3.4): per-frame averages of its outputs and of t_w.
   std::string controller_mode;
-  double avg_load_size_mb = 0;         // s, 10^6 bytes
-  double avg_mip_bias = 0;             // b, levels
-  double avg_weighted_latency_ms = 0;  // t_w (Eq. 5)
-  uint64_t load_time_limited_frames = 0;   // frames whose completion intake hit controller.load_time_ms
-  uint64_t controller_rejected_frames = 0; // frame latencies the controller refused (non-finite, negative)
+  double avg_load_size_mb = 0;              // s, 10^6 bytes
+  double avg_mip_bias = 0;                  // b, levels
+  double avg_weighted_latency_ms = 0;       // t_w (Eq. 5)
+  uint64_t load_time_limited_frames = 0;    // frames whose completion intake hit controller.load_time_ms
+  uint64_t controller_rejected_frames = 0;  // frame latencies the controller refused (non-finite, negative)
   // Start-up, stage by stage in order (seconds of wall time): what grows with the scene's size.
   std::vector<std::pair<std::string, double>> startup_seconds;
 

@@ -3,11 +3,11 @@
 // The tree itself is common/mesh_index.hpp, usually mapped from the scene folder (built once, not at every
 // start). Each node keeps the 3D box fitted to every mesh below it ("mesh-fitted bounding box"), so a node
 // entirely inside the frustum hands over all its meshes without testing them, and one entirely outside drops
-// them all. Meshes are filed by the centre of their bounds and stored depth-first in one id array, so every node's meshes
-// are one contiguous range of it. Boxes are made camera-relative in double before the float frustum test (at
-// map coordinates a float has 0.5 m steps). Large scenes are queried by several threads (TBB), one task per
-// subtree of a fixed frontier, concatenated in tree order so the result does not depend on scheduling.
-// Record bounds are trusted to hold the mesh's vertices (the frustum tests and drop_unsampled rely on it).
+// them all. Meshes are filed by the centre of their bounds and stored depth-first in one id array, so every node's
+// meshes are one contiguous range of it. Boxes are made camera-relative in double before the float frustum test (at map
+// coordinates a float has 0.5 m steps). Large scenes are queried by several threads (TBB), one task per subtree of a
+// fixed frontier, concatenated in tree order so the result does not depend on scheduling. Record bounds are trusted to
+// hold the mesh's vertices (the frustum tests and drop_unsampled rely on it).
 #include <algorithm>
 #include <array>
 #include <cstdint>
@@ -100,7 +100,8 @@ class BroadPhase {
   // that would draw them: the screen rectangle of the mesh's box, widened by the grid's margin_px, holds no
   // pixel centre of that pass's grid (main for the first run, wide for the outside run). A mesh without a
   // sample has no fragment, so no depth, colour or metadata: the frame is the same, and the meshes of a far
-  // horizon (10^5 of them a few tenths of a pixel wide in a 10^6-mesh city) are neither uploaded nor drawn. Boxes reaching behind the camera plane are kept. Returns the runs' new ends.
+  // horizon (10^5 of them a few tenths of a pixel wide in a 10^6-mesh city) are neither uploaded nor drawn. Boxes
+  // reaching behind the camera plane are kept. Returns the runs' new ends.
   ViewportSplit drop_unsampled(const SampleGrid& main, const SampleGrid& wide, const std::array<double, 3>& camera,
                                std::vector<uint32_t>& ids, ViewportSplit split) const;
 

@@ -12,9 +12,9 @@ namespace texstream::render {
 inline constexpr uint32_t kAllDraws = 0xffffffffu;
 
 struct FrameRecording {
-  uint32_t draw_count = 0;      // draws written by SceneGpu::write_draws (each covers a run of meshes)
-  uint32_t mesh_count = 0;      // meshes those draws cover (SceneGpu::drawn; compact.comp visits them)
-  uint32_t main_meshes = 0;     // of those, drawn by the main pass / by the wide pass (statistics)
+  uint32_t draw_count = 0;   // draws written by SceneGpu::write_draws (each covers a run of meshes)
+  uint32_t mesh_count = 0;   // meshes those draws cover (SceneGpu::drawn; compact.comp visits them)
+  uint32_t main_meshes = 0;  // of those, drawn by the main pass / by the wide pass (statistics)
   uint32_t wide_meshes = 0;
   // Draws [0, main_count) are the main pass's (meshes touching the viewport's frustum), draws
   // [wide_first, draw_count) the wide pass's (meshes entirely outside it). SceneGpu::write_draws writes them

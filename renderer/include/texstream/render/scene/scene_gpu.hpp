@@ -26,8 +26,8 @@
 #include <vector>
 
 #include "texstream/common/result.hpp"
-#include "texstream/render/vulkan/gpu_buffer.hpp"
 #include "texstream/render/scene/gpu_structs.hpp"
+#include "texstream/render/vulkan/gpu_buffer.hpp"
 #include "texstream/render/vulkan/zeroed_array.hpp"
 
 namespace texstream::render {
@@ -124,16 +124,16 @@ class SceneGpu {
                                    // streaming cycle starts (compact.comp, COMPACT_TO_HOST)
   GpuBuffer frame_uniforms_;       // gpu::FrameUniforms, host-visible
   const VulkanContext* ctx_ = nullptr;
-  bool in_place_ = false;           // unified memory: make_resident writes the buffers, nothing is queued
-  std::vector<uint64_t> resident_;  // one bit per mesh
-  std::vector<uint32_t> queued_;    // checked, marked resident, not yet recorded
-  std::vector<uint32_t> fresh_;     // make_resident's scratch: the call's meshes not resident before
-  std::vector<uint64_t> in_list_;   // write_list's scratch: one bit per mesh, all clear between calls
-  std::vector<uint64_t> instanced_;      // one bit per mesh: its ranges are another resident mesh's (instancing)
+  bool in_place_ = false;                 // unified memory: make_resident writes the buffers, nothing is queued
+  std::vector<uint64_t> resident_;        // one bit per mesh
+  std::vector<uint32_t> queued_;          // checked, marked resident, not yet recorded
+  std::vector<uint32_t> fresh_;           // make_resident's scratch: the call's meshes not resident before
+  std::vector<uint64_t> in_list_;         // write_list's scratch: one bit per mesh, all clear between calls
+  std::vector<uint64_t> instanced_;       // one bit per mesh: its ranges are another resident mesh's (instancing)
   std::vector<uint64_t> vertex_claimed_;  // one bit per vertex / index of meshes.bin: owned by a resident mesh
   std::vector<uint64_t> index_claimed_;
-  ZeroedArray<uint32_t> range_owner_;     // at an owned index range's first index: the owner's id + 1 (0: none)
-  GpuBuffer staging_;               // host-visible, grown to the largest frame's uploads
+  ZeroedArray<uint32_t> range_owner_;  // at an owned index range's first index: the owner's id + 1 (0: none)
+  GpuBuffer staging_;                  // host-visible, grown to the largest frame's uploads
   SceneGpuStats stats_;
 };
 

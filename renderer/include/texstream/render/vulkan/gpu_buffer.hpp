@@ -21,8 +21,7 @@ enum class MemoryUse {
 
 class GpuBuffer {
  public:
-  static Result<GpuBuffer> create(const VulkanContext& ctx, VkDeviceSize size, VkBufferUsageFlags usage,
-                                  MemoryUse use);
+  static Result<GpuBuffer> create(const VulkanContext& ctx, VkDeviceSize size, VkBufferUsageFlags usage, MemoryUse use);
   GpuBuffer() = default;
   GpuBuffer(GpuBuffer&&) noexcept = default;
   GpuBuffer& operator=(GpuBuffer&&) noexcept = default;

@@ -15,7 +15,7 @@ namespace texstream::render {
 enum class ShaderStage { kVertex, kFragment, kCompute };
 
 struct ShaderRequest {
-  std::string file;                  // relative to the source dir, e.g. "scene.frag"
+  std::string file;  // relative to the source dir, e.g. "scene.frag"
   ShaderStage stage;
   std::vector<std::string> defines;  // "NAME" or "NAME=VALUE"
 };

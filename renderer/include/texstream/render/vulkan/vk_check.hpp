@@ -16,8 +16,8 @@ inline Error vk_error(VkResult result, const std::string& what) {
 
 }  // namespace texstream::render
 
-#define TS_VK_TRY(call)                                                       \
-  do {                                                                        \
-    const VkResult ts_vk_result_ = (call);                                    \
+#define TS_VK_TRY(call)                                                                          \
+  do {                                                                                           \
+    const VkResult ts_vk_result_ = (call);                                                       \
     if (ts_vk_result_ != VK_SUCCESS) return ::texstream::render::vk_error(ts_vk_result_, #call); \
   } while (0)

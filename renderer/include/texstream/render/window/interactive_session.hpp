@@ -14,17 +14,17 @@
 
 #include "texstream/common/camera_path.hpp"
 #include "texstream/common/result.hpp"
+#include "texstream/render/vulkan/vulkan_context.hpp"
 #include "texstream/render/window/app_window.hpp"
 #include "texstream/render/window/camera_recorder.hpp"
 #include "texstream/render/window/fly_camera.hpp"
 #include "texstream/render/window/swapchain_presenter.hpp"
-#include "texstream/render/vulkan/vulkan_context.hpp"
 
 namespace texstream::render {
 
 struct InteractiveReadout {
   double frame_latency_ms = 0;
-  uint64_t bytes_uploaded_total = 0;   // the rate is computed from successive totals
+  uint64_t bytes_uploaded_total = 0;  // the rate is computed from successive totals
   uint64_t textures_resident = 0;
   uint64_t texture_count = 0;
   std::optional<double> load_size_mb;  // s (seed 000 Eq. 4-7)

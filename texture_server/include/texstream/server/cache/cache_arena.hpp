@@ -61,7 +61,7 @@ class CacheArena {
   uint64_t capacity() const { return capacity_; }
   // The largest block the arena can ever hand out (the largest power of two in the capacity).
   uint64_t largest_block() const { return capacity_ == 0 ? 0 : std::bit_floor(capacity_); }
-  uint64_t bytes_in_use() const;   // rounded block sizes
+  uint64_t bytes_in_use() const;                                                 // rounded block sizes
   uint64_t bytes_warm() const { return warm_.load(std::memory_order_relaxed); }  // relaxed: a progress gauge
   // Blocks the caller until the background pre-fault is done (tests and benchmarks: measure warm misses).
   void wait_warm();

@@ -45,7 +45,7 @@ class LevelEvictionPolicy final : public EvictionPolicy {
     uint64_t last_used;  // clock value of the last use (f = now - last_used)
     uint64_t sequence;   // global use order: the tie break
     uint32_t level;
-    bool indexed;        // entered in where_ (on_insert), not only reachable through its node (insert_new)
+    bool indexed;         // entered in where_ (on_insert), not only reachable through its node (insert_new)
     List::iterator self;  // this node's own position (list iterators survive splices)
   };
   using WhereMap = std::unordered_map<MipKey, List::iterator, MipKeyHash>;
@@ -61,7 +61,7 @@ class LevelEvictionPolicy final : public EvictionPolicy {
   void touch(Node& n);
 
   std::function<uint32_t(MipKey)> level_of_;
-  NodePool pool_;  // the lists' nodes (before levels_: destroyed after them)
+  NodePool pool_;                        // the lists' nodes (before levels_: destroyed after them)
   std::array<List, kMaxLevels> levels_;  // front = most recently used
   WhereMap where_;
   uint64_t now_ = 0;

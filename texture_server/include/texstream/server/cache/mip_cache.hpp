@@ -80,24 +80,24 @@ struct MipCacheStats {
   uint64_t misses = 0;
   uint64_t insertions = 0;
   uint64_t evictions = 0;
-  uint64_t rejections = 0;  // insert() refused: larger than the budget, or the rest was pinned
-  uint64_t prefetched = 0;      // entries inserted ahead of any request (a coarse-tail read)
-  uint64_t prefetch_hits = 0;   // of the hits: first uses of such entries (the rest of the hits were asked before)
-  uint64_t prefetched_bytes = 0;     // their payload bytes
-  uint64_t prefetch_hit_bytes = 0;   // the payload bytes of those first uses
-  uint64_t bytes = 0;       // payload bytes held now
+  uint64_t rejections = 0;          // insert() refused: larger than the budget, or the rest was pinned
+  uint64_t prefetched = 0;          // entries inserted ahead of any request (a coarse-tail read)
+  uint64_t prefetch_hits = 0;       // of the hits: first uses of such entries (the rest of the hits were asked before)
+  uint64_t prefetched_bytes = 0;    // their payload bytes
+  uint64_t prefetch_hit_bytes = 0;  // the payload bytes of those first uses
+  uint64_t bytes = 0;               // payload bytes held now
   uint64_t entries = 0;
   uint64_t budget_bytes = 0;
-  uint64_t arena_bytes = 0;           // the arena's capacity (0: no arena)
-  uint64_t arena_warm_bytes = 0;      // of which pre-faulted so far
-  uint64_t arena_in_use_bytes = 0;    // blocks handed out (rounded to powers of two)
-  uint64_t arena_evictions = 0;       // evictions make_payload() made to find a free block (fragmentation)
-  uint64_t arena_fallbacks = 0;       // make_payload() found no block even after evicting (all pinned)
-  uint64_t arena_overflows = 0;       // payloads put on the heap because no arena block was free
-  uint64_t small_pool_bytes = 0;      // slabs of the small payload pool in use (payloads < 4 KiB)
-  uint64_t small_pool_capacity = 0;   // the pool's reserved bytes (0: no pool)
-  uint64_t small_pool_prefault = 0;   // of which the arena's pre-fault faults in (SmallPayloadPool)
-  uint64_t small_pool_warm_bytes = 0; // of which faulted in so far
+  uint64_t arena_bytes = 0;            // the arena's capacity (0: no arena)
+  uint64_t arena_warm_bytes = 0;       // of which pre-faulted so far
+  uint64_t arena_in_use_bytes = 0;     // blocks handed out (rounded to powers of two)
+  uint64_t arena_evictions = 0;        // evictions make_payload() made to find a free block (fragmentation)
+  uint64_t arena_fallbacks = 0;        // make_payload() found no block even after evicting (all pinned)
+  uint64_t arena_overflows = 0;        // payloads put on the heap because no arena block was free
+  uint64_t small_pool_bytes = 0;       // slabs of the small payload pool in use (payloads < 4 KiB)
+  uint64_t small_pool_capacity = 0;    // the pool's reserved bytes (0: no pool)
+  uint64_t small_pool_prefault = 0;    // of which the arena's pre-fault faults in (SmallPayloadPool)
+  uint64_t small_pool_warm_bytes = 0;  // of which faulted in so far
 };
 
 class MipCache {
@@ -163,8 +163,8 @@ class MipCache {
   // When the arena has no free block of a size (buddy fragmentation) although the byte budget has room, up to
   // budget / this many bytes of arena-sized payloads go on the heap before make_payload() evicts for a block.
   // Measured on texstream-bench server's trace (level policy, 30 MB): hit rate 0.595 without an arena, 0.532
-  // when make_payload() evicted at once, 0.572 with this heap share. Those heap bytes are outside the pre-faulted arena: the resident set of the cache can
-  // reach budget * (1 + 1/8) plus its sub-4-KiB payloads.
+  // when make_payload() evicted at once, 0.572 with this heap share. Those heap bytes are outside the pre-faulted
+  // arena: the resident set of the cache can reach budget * (1 + 1/8) plus its sub-4-KiB payloads.
   static constexpr uint64_t kHeapOverflowDivisor = 8;
   // Payloads below CacheArena::kMinBlock come from a pool of warm slabs beside the arena
   // (small_payload_pool.hpp), at most budget / this many bytes of them; past that from the heap, as before.
@@ -179,11 +179,9 @@ class MipCache {
 
   const uint64_t budget_;
   // A heap payload the arena would have held (overflow_bytes_ counts those among the entries).
-  bool is_overflow(const PayloadBytes& p) const {
-    return arena_ && !p.in_arena() && p.size() >= CacheArena::kMinBlock;
-  }
+  bool is_overflow(const PayloadBytes& p) const { return arena_ && !p.in_arena() && p.size() >= CacheArena::kMinBlock; }
   uint64_t overflow_bytes_ = 0;
-  std::shared_ptr<CacheArena> arena_;  // shared with the payloads it backs: they may outlive the cache
+  std::shared_ptr<CacheArena> arena_;             // shared with the payloads it backs: they may outlive the cache
   std::shared_ptr<SmallPayloadPool> small_pool_;  // with the arena only (null without one)
   // new_cached_mip()'s allocator, made once: a temporary one per payload was two more atomic reference-count
   // changes of the pool's shared_ptr per cached mip (texstream-bench server, misses, perf: the larger part of

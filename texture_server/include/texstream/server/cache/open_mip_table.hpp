@@ -84,7 +84,7 @@ class OpenMipTable {
   bool empty() const { return size_ == 0; }
 
  private:
-  size_t home(MipKey key) const { return MipKeyHash{}(key) & mask_; }
+  size_t home(MipKey key) const { return MipKeyHash{}(key)&mask_; }
 
   Slot* place(Slot&& slot) {
     size_t i = home(slot.key);

@@ -53,7 +53,7 @@ class PayloadBytes {
 
   std::byte* data_ = nullptr;
   size_t size_ = 0;
-  std::shared_ptr<CacheArena> arena_;      // non-null: data_ is an arena block
+  std::shared_ptr<CacheArena> arena_;       // non-null: data_ is an arena block
   std::shared_ptr<SmallPayloadPool> pool_;  // non-null: data_ is the pool's; both null: from operator new[]
 };
 

@@ -8,8 +8,9 @@
 // Size classes: the powers of two from kMinClass (16 B) to CacheArena::kMinBlock (4 KiB); a payload takes the
 // smallest class that holds it (mip sizes are powers of two times 4 or 8 bytes, so nearly all fill their
 // class exactly). Each class takes slabs of kSlabBytes as it needs them, carves its newest slab from the
-// start, and keeps freed payloads on an intrusive free list (a free payload's first bytes hold the link; a payload in use is never written by the
-// pool). The mapping goes away with the pool, once the cache and every payload (each holds the pool) are gone.
+// start, and keeps freed payloads on an intrusive free list (a free payload's first bytes hold the link; a payload in
+// use is never written by the pool). The mapping goes away with the pool, once the cache and every payload (each holds
+// the pool) are gone.
 //
 // Bounded: at most `max_bytes` of slabs (the cache passes a share of its budget: like the heap payloads they
 // replace, they are memory beside the arena); past that allocate() returns nullptr and the caller uses the
@@ -81,7 +82,7 @@ class SmallPayloadPool {
   static constexpr uint64_t kPrefetchBytes = 128;
   static constexpr uint64_t kLineBytes = 64;
   static constexpr uint64_t kWarmStepBytes = 1 << 20;  // one warm_step(): ~4 ms on this machine
-  static constexpr uint32_t kClasses = 9;   // 16 B .. 4 KiB
+  static constexpr uint32_t kClasses = 9;              // 16 B .. 4 KiB
   static uint32_t class_of(uint64_t bytes);
   struct FreeNode {
     FreeNode* next;

@@ -26,7 +26,7 @@ namespace texstream::server {
 
 struct DecodeHelperPoolStats {
   uint64_t helpers_started = 0;
-  uint64_t helper_failures = 0;      // decodes that ended with the helper crashed, hung or out of protocol
+  uint64_t helper_failures = 0;  // decodes that ended with the helper crashed, hung or out of protocol
   uint64_t files_quarantined = 0;
   uint64_t quarantine_refusals = 0;  // decodes refused at once because their file is quarantined
 };

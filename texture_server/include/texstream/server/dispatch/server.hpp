@@ -16,8 +16,8 @@
 // serve disk hits, and the dispatcher serves RAM hits throughout. While those threads are busy, remote loads
 // wait in their own priority queue without a staging slot (at most kRemotePendingLimit, then kUnfilled); like
 // the main queue it is cut back to the renderer's newest cycle whenever a new batch arrives (kCancelled:
-// stale), so a slow link never builds up a backlog the renderer no longer wants. Invalid records are logged and dropped. A full completion ring never blocks
-// and never drops: completions wait in a local queue.
+// stale), so a slow link never builds up a backlog the renderer no longer wants. Invalid records are logged and
+// dropped. A full completion ring never blocks and never drops: completions wait in a local queue.
 #include <atomic>
 #include <cstdint>
 #include <deque>
@@ -32,12 +32,12 @@
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
 #include "texstream/server/cache/mip_cache.hpp"
-#include "texstream/server/load/mip_loader.hpp"
 #include "texstream/server/dispatch/request_scheduler.hpp"
-#include "texstream/server/load/server_stats.hpp"
 #include "texstream/server/dispatch/slot_pool.hpp"
-#include "texstream/server/storage/storage.hpp"
 #include "texstream/server/dispatch/worker_pool.hpp"
+#include "texstream/server/load/mip_loader.hpp"
+#include "texstream/server/load/server_stats.hpp"
+#include "texstream/server/storage/storage.hpp"
 
 namespace texstream::server {
 
@@ -128,10 +128,10 @@ class Server {
   MipCache cache_;
   MipLoader loader_;
   RequestScheduler scheduler_;
-  RequestScheduler remote_pending_;      // remote loads waiting for a remote-fetch worker (no slot held)
+  RequestScheduler remote_pending_;  // remote loads waiting for a remote-fetch worker (no slot held)
   SlotPool slots_;
-  uint32_t loads_in_flight_ = 0;         // jobs of the local workers
-  uint32_t remote_in_flight_ = 0;        // jobs of the remote-fetch workers (≤ server.remote_fetches_in_flight)
+  uint32_t loads_in_flight_ = 0;   // jobs of the local workers
+  uint32_t remote_in_flight_ = 0;  // jobs of the remote-fetch workers (≤ server.remote_fetches_in_flight)
   std::atomic<uint64_t> remote_fetches_{0};
   std::atomic<uint64_t> unfilled_{0};
   uint32_t busy_holder_ = 0;
@@ -140,13 +140,13 @@ class Server {
   bool publish_each_completion_ = false;        // fault injection: publish per record (kAfterRingPush)
   std::vector<LoadRequest> cancelled_scratch_;  // reused each iteration: no allocation when warm
   std::vector<LoadResult> results_scratch_;
-  std::vector<MipKey> drained_keys_;            // the loads of the pass's drained batch (MipCache::prefetch_index)
-  std::vector<uint64_t> hits_unrecorded_;       // receive times of hits served, latency not yet recorded
-  uint64_t pass_now_ns_ = 0;                    // steady clock at the start of the loop's current pass
+  std::vector<MipKey> drained_keys_;               // the loads of the pass's drained batch (MipCache::prefetch_index)
+  std::vector<uint64_t> hits_unrecorded_;          // receive times of hits served, latency not yet recorded
+  uint64_t pass_now_ns_ = 0;                       // steady clock at the start of the loop's current pass
   ShmAtomic<uint32_t>* inline_loading_ = nullptr;  // the dispatcher's crash-attribution word (null: no inline loads)
-  std::vector<bool> inline_ok_;                 // per texture: may be loaded inline (not remote, not slow)
-  uint64_t clock_generation_ = 0;               // last generation forwarded to the cache policy (Eq. 4 clock)
-  std::unique_ptr<WorkerPool> workers_;         // last members: their threads die before what they use
+  std::vector<bool> inline_ok_;                    // per texture: may be loaded inline (not remote, not slow)
+  uint64_t clock_generation_ = 0;                  // last generation forwarded to the cache policy (Eq. 4 clock)
+  std::unique_ptr<WorkerPool> workers_;            // last members: their threads die before what they use
   std::unique_ptr<WorkerPool> remote_workers_;
 };
 

@@ -29,7 +29,7 @@ struct LoadJob {
 
 struct LoadResult {
   CompletionRecord completion;
-  uint32_t slot;  // the slot the job held, whatever its status
+  uint32_t slot;         // the slot the job held, whatever its status
   uint64_t received_ns;  // the request's, for the latency histogram
   LoadRequest request;   // the job's request (a local attempt that found the mip remote is handed on with it)
 };
@@ -41,8 +41,7 @@ class WorkerPool {
   // `loading` (ServerBlock::loading, or part of it): worker i stores its job's texture id + 1 in loading[i]
   // while the job runs and 0 after, so that the renderer can tell which texture a crashed server was
   // loading; workers beyond loading.size() are not recorded.
-  WorkerPool(uint32_t threads, Work work, std::function<void()> on_result,
-             std::span<ShmAtomic<uint32_t>> loading = {});
+  WorkerPool(uint32_t threads, Work work, std::function<void()> on_result, std::span<ShmAtomic<uint32_t>> loading = {});
   ~WorkerPool();  // finishes the jobs already started, drops the others, joins
   WorkerPool(const WorkerPool&) = delete;
   WorkerPool& operator=(const WorkerPool&) = delete;

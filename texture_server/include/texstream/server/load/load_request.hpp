@@ -11,7 +11,7 @@ struct LoadRequest {
   TextureId texture;
   MipLevel mip;
   Generation generation;
-  float priority = 0;  // larger = sooner; finite (the dispatcher drops NaN)
+  float priority = 0;        // larger = sooner; finite (the dispatcher drops NaN)
   uint64_t received_ns = 0;  // steady clock when taken off the ring (latency statistics only)
 
   MipKey key() const { return MipKey(texture, mip); }

@@ -21,19 +21,18 @@
 #include "texstream/protocol/records.hpp"
 #include "texstream/protocol/segment_layout.hpp"
 #include "texstream/server/cache/mip_cache.hpp"
-#include "texstream/server/storage/open_file_cache.hpp"
 #include "texstream/server/load/load_request.hpp"
 #include "texstream/server/load/server_stats.hpp"
-#include "texstream/server/storage/storage.hpp"
 #include "texstream/server/load/texture_file_index.hpp"
+#include "texstream/server/storage/open_file_cache.hpp"
+#include "texstream/server/storage/storage.hpp"
 
 namespace texstream::server {
 
 class MipLoader {
  public:
   // `block` gets the segment's load counters (ServerBlock); `stats` the server's detailed statistics.
-  MipLoader(std::filesystem::path scene_dir, Storage& storage, MipCache& cache, ServerBlock& block,
-            ServerStats& stats);
+  MipLoader(std::filesystem::path scene_dir, Storage& storage, MipCache& cache, ServerBlock& block, ServerStats& stats);
 
   // Reads the mip from storage into `slot` (and into the cache when it is admissible). `record` is the
   // texture's entry of the texture table, already validated; `slot` holds at least the mip's bytes.

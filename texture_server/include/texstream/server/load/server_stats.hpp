@@ -28,19 +28,19 @@ struct QueueGauge {
 
 struct ServerStats {
   // relaxed everywhere: statistics only, nothing is published through them.
-  std::atomic<uint64_t> bytes_read{0};         // from storage: mip ranges, headers, OIIO's reads
-  std::atomic<uint64_t> bytes_loaded{0};       // payload bytes of mips loaded from storage (kOk misses)
-  std::atomic<uint64_t> bytes_served_cached{0};// payload bytes served from the RAM cache (dispatcher only)
-  std::atomic<uint64_t> loads_ok{0};           // misses answered kOk
-  std::atomic<uint64_t> hits_ok{0};            // hits answered kOk (dispatcher only)
+  std::atomic<uint64_t> bytes_read{0};           // from storage: mip ranges, headers, OIIO's reads
+  std::atomic<uint64_t> bytes_loaded{0};         // payload bytes of mips loaded from storage (kOk misses)
+  std::atomic<uint64_t> bytes_served_cached{0};  // payload bytes served from the RAM cache (dispatcher only)
+  std::atomic<uint64_t> loads_ok{0};             // misses answered kOk
+  std::atomic<uint64_t> hits_ok{0};              // hits answered kOk (dispatcher only)
   std::atomic<uint64_t> not_found{0};
   std::atomic<uint64_t> corrupt{0};
   std::atomic<uint64_t> io_errors{0};
   std::atomic<uint64_t> cancelled{0};
-  std::atomic<uint64_t> rate_limit_wait_us{0}; // time workers slept in the token bucket
-  QueueGauge pending;    // requests in the scheduler's heap
-  QueueGauge in_flight;  // loads handed to workers
-  QueueGauge overflow;   // completions waiting for room in the completion ring
+  std::atomic<uint64_t> rate_limit_wait_us{0};  // time workers slept in the token bucket
+  QueueGauge pending;                           // requests in the scheduler's heap
+  QueueGauge in_flight;                         // loads handed to workers
+  QueueGauge overflow;                          // completions waiting for room in the completion ring
   // Recorded by the dispatcher alone (record_one_writer()).
   LatencyHistogram hit_latency;   // request taken off the ring → completion pushed, RAM-cache hits
   LatencyHistogram miss_latency;  // the same for loads from storage

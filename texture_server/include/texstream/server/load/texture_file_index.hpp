@@ -18,8 +18,8 @@
 #include <string>
 #include <vector>
 
-#include "texstream/common/ids.hpp"
 #include "texstream/common/dds.hpp"
+#include "texstream/common/ids.hpp"
 
 namespace texstream::server {
 

@@ -14,7 +14,7 @@ namespace texstream::server {
 struct ContentRange {
   // "bytes first-last/total"; an unsatisfied-range answer ("bytes */total") has no first/last.
   std::optional<uint64_t> first;
-  std::optional<uint64_t> last;  // inclusive
+  std::optional<uint64_t> last;   // inclusive
   std::optional<uint64_t> total;  // nullopt for "*" (unknown length)
 };
 

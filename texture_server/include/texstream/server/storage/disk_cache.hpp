@@ -111,7 +111,8 @@ class DiskCache {
   int journal_fd_ = -1;
   uint64_t journal_lines_ = 0;
   bool append_failed_ = false;
-  uint64_t block_ = 4096;  // the file system's block size (statvfs f_bsize at open)  // the last journal append failed (logged once until one succeeds again)
+  uint64_t block_ = 4096;  // the file system's block size (statvfs f_bsize at open)  // the last journal append failed
+                           // (logged once until one succeeds again)
   DiskCacheCounters counters_;
 };
 
