@@ -483,7 +483,12 @@ TEST_F(ServerStreamingTest, FullCompletionRingQueuesInsteadOfDropping) {
   start_server();
   for (uint32_t mip = 0; mip < 7; ++mip) load(kRgbaA, mip);
   for (uint32_t mip = 0; mip < 3; ++mip) load(kBc1, mip);
-  std::this_thread::sleep_for(100ms);  // let the server fill the ring and queue the rest
+  // The server fills the ring (however slowly a sanitized build on a busy machine gets there), then must queue
+  // the rest: the count stays at the ring's capacity until the renderer reads.
+  const auto give_up = std::chrono::steady_clock::now() + test::kHangAfter;
+  while (stats().completions.v.load() < 4u && std::chrono::steady_clock::now() < give_up)
+    std::this_thread::sleep_for(5ms);
+  std::this_thread::sleep_for(100ms);
   EXPECT_EQ(stats().completions.v.load(), 4u);
   std::vector<CompletionRecord> all = next_n(10);
   for (const auto& c : all) expect_payload(c);
