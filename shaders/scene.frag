@@ -1,5 +1,5 @@
 #version 450
-// Main pass: shades with the texture cache (only resident mips) and the City Colormap (Eq. 8), and writes the
+// Main pass: shades with the texture cache (only resident mips) and the City Colormap (Eq. 8, stream.blend), and writes the
 // fragment's visibility metadata (Eq. 1-3) into a second colour attachment, which meta_reduce.comp sums per
 // mesh. It runs in the subpass after the depth pre-pass with an EQUAL depth
 // test, so only the fragments that end up in the image run it, and of those only the pixel's owner (the mesh id
@@ -110,8 +110,15 @@ void main() {
       sum += textureLod(cache_image, vec3(st, float(tex.placement.x)), lod).rgb;
     }
     vec3 sampled = sum / float(taps);
-    // Eq. 8: c = (1 - M / M_max) c_s + (M / M_max) c_o, M = the displayed level.
-    float blend = ((frame.flags.x & kFlagColormapBlend) != 0u && mip_max > 0.0) ? lod / mip_max : 0.0;
+    // The colour placeholder c = (1 - M / M_max) c_s + (M / M_max) c_o (seed 000 Eq. 8). stream.blend = seed:
+    // M = the displayed level, as written (a far texture stays part colormap for good). converge: M = the levels
+    // still missing, displayed - the level sampled with everything resident, so a texture at its wanted level is
+    // drawn exactly as the reference draws it (docs/design/blend.md).
+    float blend = 0.0;
+    if ((frame.flags.x & kFlagColormapBlend) != 0u && mip_max > 0.0) {
+      float m = (frame.flags.x & kFlagBlendSeed) != 0u ? lod : max(lod - clamp(s.lod, 0.0, mip_max), 0.0);
+      blend = m / mip_max;
+    }
     colour = mix(sampled, colormap, blend);
 #endif
   }

@@ -50,9 +50,10 @@ TS_CONST kWeightFixedScale = 16u;
 // frame covered by one mesh would otherwise wrap it). Sums at or above it mean "at least this much".
 TS_CONST kWeightSaturate = 0x80000000u;
 // FrameUniforms.flags.x bits.
-TS_CONST kFlagColormapBlend = 1u;  // Eq. 8 blending (config stream.colormap_blend)
+TS_CONST kFlagColormapBlend = 1u;  // colormap blending (config stream.colormap_blend)
 TS_CONST kFlagLighting = 2u;       // headlight shading; off gives the plain texel colour
 TS_CONST kFlagFeedback = 4u;       // write visibility metadata (config render.feedback)
+TS_CONST kFlagBlendSeed = 8u;      // blend by Eq. 8 as written (stream.blend = seed), else by the missing levels
 TS_CONST kCompactWorkgroupSize = 64u;
 // meta_reduce.comp: one invocation per run of kMetaReduceRun pixels of a row, kMetaReduceGroup per workgroup.
 TS_CONST kMetaReduceRun = 16u;

@@ -127,14 +127,22 @@ void visit_keys(Config& c, V&& v) {
   v("stream", "max_mips_per_cycle", c.stream.max_mips_per_cycle, "mips", "Most mips requested in one streaming cycle",
     Range{1, 1e7});
   v("stream", "colormap_blend", c.stream.colormap_blend, "bool",
-    "Blend sampled colour with the City Colormap by Eq. 8 (false: sample directly)", kAny);
+    "Blend sampled colour with the City Colormap while finer mips arrive (false: sample directly)", kAny);
+  v("stream", "blend", c.stream.blend, "name", "How the colormap is blended in:", kAny);
   v("stream", "foreground_distance_m", c.stream.foreground_distance_m, "m",
     "Eq. 2 distance weight: w_d = (1 - min(depth / this, 1))^4 (the seed's c_w normalised to metres)",
     Range{1e-3, 1e7});
 
   v("controller", "mode", c.controller.mode, "name", "Load size s and mip bias b:", kAny);
-  v("controller", "alpha_ms", c.controller.alpha_ms, "ms", "α: target maximum frame latency (seed 000 Table 2)",
-    Range{0.1, 10000});
+  v("controller", "target_ms", c.controller.target_ms, "ms",
+    "mode = auto: cap on the target frame latency (0: none; the target is 2x the measured latency without "
+    "streaming, and a cap never brings it below 1.25x that)",
+    Range{0, 3.6e6});
+  v("controller", "target_min_ms", c.controller.target_min_ms, "ms",
+    "mode = auto: the target is never below this (one 60 Hz refresh: a frame inside it is no stutter)",
+    Range{0, 3.6e6});
+  v("controller", "alpha_ms", c.controller.alpha_ms, "ms",
+    "mode = seed: α, target maximum frame latency (seed 000 Table 2)", Range{0.1, 10000});
   v("controller", "beta", c.controller.beta, "levels", "β: maximum mip bias (Table 2)", Range{0, 16});
   v("controller", "s_min_mb", c.controller.s_min_mb, "MB", "Minimum load size s_min (Table 2: one 64 KiB sparse block)",
     Range{0.001, 1e5});

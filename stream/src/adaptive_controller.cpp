@@ -23,6 +23,9 @@ constexpr double kEdgeHistoryWeight = 0.8;
 constexpr double kLowerEdgeScale = 0.96;
 constexpr double kUpperEdgeScale = 1.2;
 
+// An hour: as AdaptiveController::kMaxFrameLatencyS.
+constexpr double kMaxTargetS = 3600.0;
+
 bool finite_non_negative(double v) { return std::isfinite(v) && v >= 0.0; }
 
 std::string num(double v) {
@@ -48,6 +51,8 @@ Result<ControllerParams> ControllerParams::from_config(const ControllerConfig& c
   p.s_max_bytes = c.s_max_mb * 1e6;
   p.fixed_load_bytes = c.fixed_load_mb * 1e6;
   p.fixed_bias = c.fixed_bias;
+  p.target_min_s = c.target_min_ms / 1e3;
+  p.target_cap_s = c.target_ms / 1e3;
   TS_TRY(p.validate());
   return p;
 }
@@ -63,6 +68,12 @@ Status ControllerParams::validate() const {
     return bad("s_max_mb", "must be a finite byte count, not " + num(s_max_bytes / 1e6) + " MB");
   }
   if (s_min_bytes > s_max_bytes) return bad("s_min_mb", "must not exceed controller.s_max_mb");
+  if (!(std::isfinite(target_min_s) && target_min_s >= 0 && target_min_s <= kMaxTargetS)) {
+    return bad("target_min_ms", "must be a number in [0, 3600000], not " + num(target_min_s * 1e3));
+  }
+  if (!(std::isfinite(target_cap_s) && target_cap_s >= 0 && target_cap_s <= kMaxTargetS)) {
+    return bad("target_ms", "must be 0 (automatic) or a number up to 3600000, not " + num(target_cap_s * 1e3));
+  }
   if (mode == ControllerMode::kFixed) {
     // The fixed mode is held to the same output ranges as the others rather than silently clamped.
     if (!(fixed_load_bytes >= s_min_bytes && fixed_load_bytes <= s_max_bytes)) {
@@ -144,6 +155,19 @@ double AdaptiveController::mip_bias(double beta, double t_bl, double t_bu, doubl
 
 // ---- the controller ----
 
+HeadroomParams headroom_params(const ControllerParams& p) {
+  HeadroomParams h;
+  h.s_min_bytes = p.s_min_bytes;
+  h.s_max_bytes = p.s_max_bytes;
+  h.beta = p.beta;
+  h.target_min_s = p.target_min_s;
+  h.target_cap_s = p.target_cap_s;
+  return h;
+}
+
+AdaptiveController::AdaptiveController(const ControllerParams& params)
+    : params_(params), headroom_(headroom_params(params)) {}
+
 Result<AdaptiveController> AdaptiveController::create(const ControllerParams& params) {
   TS_TRY(params.validate());
   AdaptiveController c(params);
@@ -151,8 +175,9 @@ Result<AdaptiveController> AdaptiveController::create(const ControllerParams& pa
   return c;
 }
 
-bool AdaptiveController::on_frame(double dt) {
-  if (!(std::isfinite(dt) && dt >= 0.0 && dt <= kMaxFrameLatencyS)) {
+bool AdaptiveController::on_frame(double dt, double bytes) {
+  if (!(std::isfinite(dt) && dt >= 0.0 && dt <= kMaxFrameLatencyS && std::isfinite(bytes) && bytes >= 0.0 &&
+        bytes <= kMaxFrameBytes)) {
     ++rejected_;
     return false;
   }
@@ -199,12 +224,15 @@ bool AdaptiveController::on_frame(double dt) {
             "load size %g outside [%g, %g]", s.s_bytes, params_.s_min_bytes, params_.s_max_bytes);
   TS_ASSERT(s.b >= 0.0 && s.b <= params_.beta, "mip bias %g outside [0, %g]", s.b, params_.beta);
   TS_ASSERT(s.l >= 0.0 && s.l <= 1.0, "load factor %g outside [0, 1]", s.l);
+  if (params_.mode == ControllerMode::kAuto) headroom_.on_frame(dt, bytes, s.t_w, s.t_b);
   return true;
 }
 
 double AdaptiveController::load_size_bytes() const {
   switch (params_.mode) {
-    case ControllerMode::kAdaptive:
+    case ControllerMode::kAuto:
+      return headroom_.load_size_bytes();
+    case ControllerMode::kSeed:
       return state_.s_bytes;
     case ControllerMode::kNone:
       return params_.s_max_bytes;
@@ -218,12 +246,27 @@ uint64_t AdaptiveController::load_bytes() const { return static_cast<uint64_t>(l
 
 double AdaptiveController::mip_bias() const {
   switch (params_.mode) {
-    case ControllerMode::kAdaptive:
+    case ControllerMode::kAuto:
+      return headroom_.mip_bias();
+    case ControllerMode::kSeed:
       return state_.b;
     case ControllerMode::kNone:
       return 0.0;
     case ControllerMode::kFixed:
       return params_.fixed_bias;
+  }
+  return 0.0;
+}
+
+double AdaptiveController::target_s() const {
+  switch (params_.mode) {
+    case ControllerMode::kAuto:
+      return headroom_.target_s();
+    case ControllerMode::kSeed:
+      return params_.alpha_s;
+    case ControllerMode::kNone:
+    case ControllerMode::kFixed:
+      break;
   }
   return 0.0;
 }

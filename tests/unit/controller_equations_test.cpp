@@ -13,7 +13,14 @@ namespace {
 
 using C = stream::AdaptiveController;
 
-stream::AdaptiveController make(const stream::ControllerParams& p = {}) {
+// Table 2 in mode seed: these tests pin the seed's equations (mode auto has controller_headroom_test.cpp).
+stream::ControllerParams seed_params() {
+  stream::ControllerParams p;
+  p.mode = ControllerMode::kSeed;
+  return p;
+}
+
+stream::AdaptiveController make(const stream::ControllerParams& p = seed_params()) {
   auto c = C::create(p);
   EXPECT_TRUE(c.ok()) << (c.ok() ? "" : c.error().message);
   return std::move(*c);
@@ -243,7 +250,7 @@ TEST(ControllerParamsTest, FromConfigConvertsUnits) {
   EXPECT_DOUBLE_EQ(p->alpha_s, 0.016);
   EXPECT_DOUBLE_EQ(p->s_min_bytes, 65000.0);
   EXPECT_DOUBLE_EQ(p->s_max_bytes, 64e6);
-  EXPECT_EQ(p->mode, ControllerMode::kAdaptive);
+  EXPECT_EQ(p->mode, ControllerMode::kAuto);
   cfg.mode = ControllerMode::kNone;
   EXPECT_EQ(stream::ControllerParams::from_config(cfg)->mode, ControllerMode::kNone);
 }

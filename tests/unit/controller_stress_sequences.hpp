@@ -57,6 +57,7 @@ enum class Family : uint32_t {
   kNegative,             // negative values (and -0.0) among normal frames
   kAbsurd,               // just above the accepted maximum, 1e300, DBL_MAX
   kRandomBits,           // any 64-bit pattern reinterpreted as a double
+  kBadBytes,             // normal latencies, uploaded bytes NaN, ±inf, negative or absurd
   kCount
 };
 const char* family_name(Family f);
@@ -87,9 +88,9 @@ struct DriftResult {
 // ---- implementation ----
 
 inline const char* family_name(Family f) {
-  static const char* names[] = {"random_uniform", "log_uniform", "zeros",      "denormals", "microsecond",
-                                "10s_spikes",     "alternating", "slow_drift", "nan",       "infinities",
-                                "negative",       "absurd",      "random_bits"};
+  static const char* names[] = {"random_uniform", "log_uniform", "zeros",       "denormals", "microsecond",
+                                "10s_spikes",     "alternating", "slow_drift",  "nan",       "infinities",
+                                "negative",       "absurd",      "random_bits", "bad_bytes"};
   const auto i = static_cast<uint32_t>(f);
   return i < static_cast<uint32_t>(Family::kCount) ? names[i] : "?";
 }
@@ -145,24 +146,50 @@ inline double sample(Family f, Rng& rng, size_t i, size_t n) {
     }
     case Family::kRandomBits:
       return from_bits(rng.next());
+    case Family::kBadBytes:
+      return normal;
     case Family::kCount:
       break;
   }
   return 0.0;
 }
 
+// The bytes uploaded in step `i` (mode auto fits its plant from them): mostly a plausible upload, sometimes
+// none or an extreme; family kBadBytes feeds invalid ones, kRandomBits any bit pattern.
+inline double sample_bytes(Family f, Rng& rng) {
+  constexpr double kMaxBytes = stream::AdaptiveController::kMaxFrameBytes;
+  if (f == Family::kRandomBits) return from_bits(rng.next());
+  if (f == Family::kBadBytes && rng.chance(0.3)) {
+    static const double kBad[] = {std::numeric_limits<double>::quiet_NaN(),
+                                  std::numeric_limits<double>::infinity(),
+                                  -std::numeric_limits<double>::infinity(),
+                                  -1.0,
+                                  -0.5,
+                                  std::nextafter(kMaxBytes, 1e300),
+                                  1e300};
+    return kBad[rng.next() % (sizeof kBad / sizeof kBad[0])];
+  }
+  if (rng.chance(0.3)) return 0.0;
+  if (rng.chance(0.05)) return rng.chance(0.5) ? kMaxBytes : 4.9e-324;
+  return rng.log_uniform(1.0, 1e9);
+}
+
+// Parameter set `which` (0..9): five sets, each in mode seed (which < 5) and mode auto.
 inline stream::ControllerParams stress_params(uint32_t which) {
   stream::ControllerParams p;  // Table 2
+  p.mode = which < 5 ? ControllerMode::kSeed : ControllerMode::kAuto;
   switch (which % 5) {
     case 0:
       break;
     case 1:
       p.alpha_s = 1e-4;
       p.beta = 16;
+      p.target_min_s = 0;
       break;  // tiny target, largest β config allows
     case 2:
       p.alpha_s = 10.0;
       p.beta = 0;
+      p.target_min_s = 3600;
       break;  // huge target, no bias
     case 3:
       p.s_min_bytes = p.s_max_bytes = 0.065e6;
@@ -172,6 +199,7 @@ inline stream::ControllerParams stress_params(uint32_t which) {
       p.beta = 4;
       p.s_min_bytes = 1;
       p.s_max_bytes = 1e5 * 1e6;
+      p.target_cap_s = 1e-6;
       break;  // config extremes
   }
   return p;
@@ -182,12 +210,14 @@ inline stream::AdaptiveController warmed(const stream::ControllerParams& p, uint
   auto c = stream::AdaptiveController::create(p);
   stream::AdaptiveController ctl = std::move(*c);
   Rng rng(seed);
-  for (int i = 0; i < 300 && warm != 0; ++i) ctl.on_frame(warm == 1 ? 0.004 : rng.uniform(0.003, 0.06));
+  for (int i = 0; i < 300 && warm != 0; ++i)
+    ctl.on_frame(warm == 1 ? 0.004 : rng.uniform(0.003, 0.06), warm == 1 ? 0.0 : rng.uniform(0.0, 64e6));
   return ctl;
 }
 
-inline bool accepted_input(double dt) {
-  return std::isfinite(dt) && dt >= 0.0 && dt <= stream::AdaptiveController::kMaxFrameLatencyS;
+inline bool accepted_input(double dt, double bytes = 0.0) {
+  return std::isfinite(dt) && dt >= 0.0 && dt <= stream::AdaptiveController::kMaxFrameLatencyS &&
+         std::isfinite(bytes) && bytes >= 0.0 && bytes <= stream::AdaptiveController::kMaxFrameBytes;
 }
 
 // Empty when every promise holds after a step.
@@ -206,6 +236,10 @@ inline std::string check_outputs(const stream::AdaptiveController& c) {
   }
   if (!std::isfinite(s.x)) return "x not finite";
   if (s.t_bl > s.t_bu) return "t_bl above t_bu";
+  const auto& h = c.headroom().state();
+  if (!(std::isfinite(h.f_s) && h.f_s >= 0.0)) return "auto: latency without streaming not finite and >= 0";
+  if (!(std::isfinite(h.k_s_per_mb) && h.k_s_per_mb >= 0.0)) return "auto: upload cost not finite and >= 0";
+  if (!(std::isfinite(h.target_s) && h.target_s > 0.0)) return "auto: target not finite and > 0";
   return {};
 }
 
@@ -214,7 +248,7 @@ inline StressResult run_stress(const StressOptions& o) {
   constexpr uint32_t kFamilies = static_cast<uint32_t>(Family::kCount);
   // Prepared starting points: 5 parameter sets × 3 warm-ups, copied for each sequence.
   std::vector<stream::AdaptiveController> bases;
-  for (uint32_t ps = 0; ps < 5; ++ps) {
+  for (uint32_t ps = 0; ps < 10; ++ps) {
     for (uint32_t w = 0; w < 3; ++w) bases.push_back(warmed(stress_params(ps), w, o.seed + ps * 3 + w));
   }
   Rng rng(o.seed);
@@ -225,16 +259,18 @@ inline StressResult run_stress(const StressOptions& o) {
     ++r.per_family[static_cast<uint32_t>(fam)];
     for (size_t i = 0; i < o.steps_per_sequence; ++i) {
       const double dt = sample(fam, rng, i, o.steps_per_sequence);
-      const bool should = accepted_input(dt);
+      const double bytes = sample_bytes(fam, rng);
+      const bool should = accepted_input(dt, bytes);
       std::string what;
       if (should) {
-        if (!c.on_frame(dt)) what = "a valid input was rejected";
+        if (!c.on_frame(dt, bytes)) what = "a valid input was rejected";
       } else {
         const stream::AdaptiveController::State before = c.state();
+        const stream::HeadroomController::State before_auto = c.headroom().state();
         const uint64_t rejected = c.frames_rejected();
-        if (c.on_frame(dt)) {
+        if (c.on_frame(dt, bytes)) {
           what = "an invalid input was accepted";
-        } else if (!(c.state() == before)) {
+        } else if (!(c.state() == before) || !(c.headroom().state() == before_auto)) {
           what = "a rejected input changed the state";
         } else if (c.frames_rejected() != rejected + 1) {
           what = "a rejected input was not counted";
@@ -247,8 +283,9 @@ inline StressResult run_stress(const StressOptions& o) {
         ++r.bad_outputs;
         if (r.first_failure.empty()) {
           char buf[160];
-          std::snprintf(buf, sizeof buf, "sequence %llu (%s) step %zu, input %a: ", static_cast<unsigned long long>(q),
-                        family_name(fam), i, dt);
+          std::snprintf(buf, sizeof buf, "sequence %llu (%s, mode %s) step %zu, input %a s %a bytes: ",
+                        static_cast<unsigned long long>(q), family_name(fam),
+                        std::string(choice_name(c.params().mode)).c_str(), i, dt, bytes);
           r.first_failure = buf + what;
         }
       }

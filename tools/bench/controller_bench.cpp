@@ -5,6 +5,8 @@
 //   (b) a closed loop against a simulated plant (below) for α ∈ {12, 14, 16, 18} ms and the no-adaptive
 //       baseline (s = s_max, b = 0) on the same plant and seed.
 // Last line: summary: stress_sequences=N bad_outputs=B max_latency_reduction=R mbps_ratio=Q
+// auto_max_latency_reduction=R2
+//   auto_mbps_ratio=Q2 (R2, Q2: the same for controller.mode = auto)
 //   R = 1 - max frame latency (α = 16 ms) / max frame latency (baseline); Q = MB/s (α = 16 ms) / MB/s (baseline).
 //
 // THE PLANT: a fly-through in the spirit of seed 000 §4.1 (68.6 s, the Berlin benchmark's length): the camera
@@ -197,7 +199,7 @@ class Plant {
       ms += o_.bind_ms_per_page * pages * (1 + pages / o_.bind_batch_pages) *
             (1 + cached_pages_ / o_.bind_resident_pages);
       const double dt_s = ms / 1e3;
-      ctl.on_frame(dt_s);
+      ctl.on_frame(dt_s, batch);
 
       st.latency_ms.push_back(ms);
       st.bytes += batch;
@@ -371,11 +373,14 @@ int run_controller(const ControllerArgs& args) {
               "avg s MB", "avg b", "MB/s", "mips/s");
   stream::ControllerParams none;
   none.mode = ControllerMode::kNone;
+  stream::ControllerParams seed16;
+  seed16.mode = ControllerMode::kSeed;
   const RunStats base = Plant(po, seed).run(make_controller(none), load_time_s, "baseline");
   print_row(base);
   RunStats at16;
   for (double alpha_ms : {12.0, 14.0, 16.0, 18.0}) {
     stream::ControllerParams p;
+    p.mode = ControllerMode::kSeed;
     p.alpha_s = alpha_ms / 1e3;
     char name[32];
     std::snprintf(name, sizeof name, "alpha=%.0fms", alpha_ms);
@@ -383,19 +388,26 @@ int run_controller(const ControllerArgs& args) {
     print_row(r);
     if (alpha_ms == 16.0) at16 = std::move(r);
   }
+  // Mode auto (the default): no α; its target comes from the plant's measured latency without streaming.
+  stream::ControllerParams auto_params;
+  auto_params.mode = ControllerMode::kAuto;
+  const RunStats automatic = Plant(po, seed).run(make_controller(auto_params), load_time_s, "auto");
+  print_row(automatic);
   const Comparison c16 = compare(base, at16);
   std::printf(
       "\nalpha=16ms vs baseline: max frame latency %.1f -> %.1f ms (reduction %.1f %%, goal >= 80 %%), "
       "MB/s ratio %.2f (goal >= 0.5)\n",
       c16.base_max_ms, c16.max_ms, 100 * c16.reduction, c16.ratio);
+  const Comparison ca = compare(base, automatic);
+  std::printf("auto vs baseline: max frame latency %.1f -> %.1f ms (reduction %.1f %%), MB/s ratio %.2f\n",
+              ca.base_max_ms, ca.max_ms, 100 * ca.reduction, ca.ratio);
 
   if (!quick) {
     // How much the figures depend on the seed (the maximum is one frame) and on the plant.
     std::printf("\nsensitivity (alpha=16ms vs baseline):\n");
     for (uint64_t sd = seed + 1; sd <= seed + 4; ++sd) {
-      const Comparison c =
-          compare(Plant(po, sd).run(make_controller(none), load_time_s, "baseline"),
-                  Plant(po, sd).run(make_controller(stream::ControllerParams{}), load_time_s, "alpha=16ms"));
+      const Comparison c = compare(Plant(po, sd).run(make_controller(none), load_time_s, "baseline"),
+                                   Plant(po, sd).run(make_controller(seed16), load_time_s, "alpha=16ms"));
       std::printf("  seed %-3llu            max %7.1f -> %6.1f ms  reduction %5.1f %%  MB/s ratio %.2f\n",
                   static_cast<unsigned long long>(sd), c.base_max_ms, c.max_ms, 100 * c.reduction, c.ratio);
     }
@@ -403,9 +415,8 @@ int run_controller(const ControllerArgs& args) {
     cheap.bind_ms_per_page = 0.1;
     cheap.bind_batch_pages = 100;
     cheap.bind_resident_pages = 1e9;
-    const Comparison c =
-        compare(Plant(cheap, seed).run(make_controller(none), load_time_s, "baseline"),
-                Plant(cheap, seed).run(make_controller(stream::ControllerParams{}), load_time_s, "alpha=16ms"));
+    const Comparison c = compare(Plant(cheap, seed).run(make_controller(none), load_time_s, "baseline"),
+                                 Plant(cheap, seed).run(make_controller(seed16), load_time_s, "alpha=16ms"));
     std::printf("  cheap-bind plant    max %7.1f -> %6.1f ms  reduction %5.1f %%  MB/s ratio %.2f\n", c.base_max_ms,
                 c.max_ms, 100 * c.reduction, c.ratio);
   }
@@ -415,6 +426,8 @@ int run_controller(const ControllerArgs& args) {
       .add("bad_outputs", static_cast<double>(stress.bad_outputs + (drift_ok ? 0 : 1)))
       .add("max_latency_reduction", c16.reduction)
       .add("mbps_ratio", c16.ratio)
+      .add("auto_max_latency_reduction", ca.reduction)
+      .add("auto_mbps_ratio", ca.ratio)
       .print();
   return stress.bad_outputs == 0 && drift_ok ? 0 : 1;
 }

@@ -61,6 +61,7 @@ Result<RunSummary> Renderer::run() {
 Status Renderer::render_frame(uint64_t index, bool last) {
   const auto t0 = Clock::now();
   stage_mark_ = t0;
+  const uint64_t uploaded_before = stack_->cache().stats().bytes_uploaded;
   const bool first = index == 0;
   const auto frame0_step = [this](const char* name) { first_frame_stage(name); };
   const double time_s = static_cast<double>(index) * cfg_.render.frame_time_ms / 1000.0;
@@ -149,10 +150,12 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   if (pairs && !twin_first) TS_TRY(draw_twin());
 
   // 6. The frame's latency (lock-step waits for the server are not frame latency: they would not exist in
-  //    real time); Δt of Eq. 4-7 is in seconds, and the next cycle uses the s and b this frame leads to.
+  //    real time); Δt is in seconds, and the next cycle uses the s and b this frame leads to.
   const Clock::duration shared = own_start - t0 - not_frame_time - (twin_first ? twin_time : Clock::duration{0});
   const double latency_ms = ms(shared + (own_end - own_start));
-  controller_->on_frame(latency_ms / 1e3);
+  // The frame's uploads let mode auto tell its streaming work from its rendering (headroom_controller.hpp).
+  controller_->on_frame(latency_ms / 1e3,
+                        static_cast<double>(stack_->cache().stats().bytes_uploaded - uploaded_before));
   tell_states();
 
   // 7. The frame's record (frames.csv) and, with render.write_every_frames, its PNG: not the run's time.

@@ -49,16 +49,31 @@ struct ChoiceTable<DebugView> {
                                                                    {DebugView::kMeshId, "mesh_id", ""}}};
 };
 
-// Adaptive streaming controller mode (controller.mode), seed 000 §3.4.
+// How the colour placeholder is blended with the sampled colour (stream.blend; docs/design/blend.md).
+enum class BlendMode : uint8_t {
+  kConverge,  // by the levels still missing: (displayed - wanted) / M_max; 0 once the wanted level is resident
+  kSeed,      // seed 000 Eq. 8: by the displayed level, M / M_max (never 0 for a texture seen from afar)
+};
+template <>
+struct ChoiceTable<BlendMode> {
+  static constexpr std::array<ChoiceEntry<BlendMode>, 2> kEntries{
+      {{BlendMode::kConverge, "converge", "by the levels still missing; exact once the wanted level is resident"},
+       {BlendMode::kSeed, "seed", "seed 000 Eq. 8, by the displayed level"}}};
+};
+
+// Streaming controller mode (controller.mode): docs/controller.md.
 enum class ControllerMode : uint8_t {
-  kAdaptive,  // Eq. 4-7
-  kNone,      // s = s_max, b = 0: the seed's "no adaptive algorithms" baseline (Tables 3-5)
-  kFixed,     // s and b fixed by configuration (benchmarks)
+  kAuto,   // target 2x the latency without streaming, measured; s and b from it (headroom_controller.hpp)
+  kSeed,   // seed 000 §3.4 Eq. 4-7 with α
+  kNone,   // s = s_max, b = 0: the seed's "no adaptive algorithms" baseline (Tables 3-5)
+  kFixed,  // s and b fixed by configuration (benchmarks)
 };
 template <>
 struct ChoiceTable<ControllerMode> {
-  static constexpr std::array<ChoiceEntry<ControllerMode>, 3> kEntries{
-      {{ControllerMode::kAdaptive, "adaptive", "Eq. 4-7"},
+  static constexpr std::array<ChoiceEntry<ControllerMode>, 5> kEntries{
+      {{ControllerMode::kAuto, "auto", "target set from the measured latency without streaming"},
+       {ControllerMode::kSeed, "seed", "seed 000 Eq. 4-7 with alpha_ms"},
+       {ControllerMode::kSeed, "adaptive", "the old name of seed"},
        {ControllerMode::kNone, "none", "s = s_max, b = 0: the seed's baseline"},
        {ControllerMode::kFixed, "fixed", "s and b from fixed_load_mb and fixed_bias"}}};
 };
@@ -146,24 +161,27 @@ struct RenderConfig {
 };
 
 struct StreamConfig {
-  double tau = 150;                      // mesh weight cutoff (seed 000 §3.3, Table 2)
-  double max_anisotropy = 16;            // A_m for the mip-level metadata; sampling uses A_m / 2 (seed 000 §3.2)
-  int64_t max_requests_in_flight = 256;  // pre-queue depth sent to the server per cycle
-  int64_t max_mips_per_cycle = 512;      // upload budget per streaming cycle
-  bool colormap_blend = true;            // Eq. 8 blending; false samples directly
-  double foreground_distance_m = 500;    // Eq. 2: w_d falls from 1 at the camera to 0 at this view depth
+  double tau = 150;                        // mesh weight cutoff (seed 000 §3.3, Table 2)
+  double max_anisotropy = 16;              // A_m for the mip-level metadata; sampling uses A_m / 2 (seed 000 §3.2)
+  int64_t max_requests_in_flight = 256;    // pre-queue depth sent to the server per cycle
+  int64_t max_mips_per_cycle = 512;        // upload budget per streaming cycle
+  bool colormap_blend = true;              // colormap blended in while mips arrive; false samples directly
+  BlendMode blend = BlendMode::kConverge;  // how (colormap_blend = true)
+  double foreground_distance_m = 500;      // Eq. 2: w_d falls from 1 at the camera to 0 at this view depth
 };
 
 // Adaptive streaming controller, seed 000 §3.4 Eq. 4-7 and Table 2.
 struct ControllerConfig {
-  ControllerMode mode = ControllerMode::kAdaptive;
-  double alpha_ms = 16;       // α: target maximum frame latency
-  double beta = 8;            // β: maximum mip bias
-  double s_min_mb = 0.065;    // minimum load size (one 64 KiB sparse block)
-  double s_max_mb = 64;       // maximum load size
-  double load_time_ms = 16;   // maximum time one streaming cycle may spend loading
-  double fixed_load_mb = 16;  // mode = fixed: load size s
-  double fixed_bias = 0;      // mode = fixed: mip bias b
+  ControllerMode mode = ControllerMode::kAuto;
+  double target_ms = 0;           // auto: cap on the target (0: 2x the measured latency without streaming)
+  double target_min_ms = 16.667;  // auto: the target is never below one 60 Hz refresh
+  double alpha_ms = 16;           // seed: α, target maximum frame latency
+  double beta = 8;                // β: maximum mip bias
+  double s_min_mb = 0.065;        // minimum load size (one 64 KiB sparse block)
+  double s_max_mb = 64;           // maximum load size
+  double load_time_ms = 16;       // maximum time one streaming cycle may spend loading
+  double fixed_load_mb = 16;      // mode = fixed: load size s
+  double fixed_bias = 0;          // mode = fixed: mip bias b
 };
 
 struct CacheConfig {

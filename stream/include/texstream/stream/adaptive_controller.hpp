@@ -1,5 +1,6 @@
 #pragma once
-// The adaptive streaming controller of seed 000 §3.4 (Eq. 4-7, Table 2): from one measured frame latency Δt
+// The streaming controller. Mode seed is seed 000 §3.4 (Eq. 4-7, Table 2); mode auto (the default) is
+// headroom_controller.hpp, which takes Eq. 5's t_w and Eq. 7's t_b from here. From one measured frame latency Δt
 // per frame it derives the load size s (the bytes one streaming cycle may request, Algorithm 1's
 // `loadedBatchSize > s` test) and the mip bias b (levels coarser than the visibility metadata asks for,
 // Algorithm 1's `mipLevelSampled + b < mipLevel` test).
@@ -28,6 +29,7 @@
 
 #include "texstream/common/config.hpp"
 #include "texstream/common/result.hpp"
+#include "texstream/stream/headroom_controller.hpp"
 
 namespace texstream::stream {
 
@@ -35,13 +37,15 @@ namespace texstream::stream {
 
 // Parameters in the controller's units (seconds, bytes, levels). Built from [controller] by from_config.
 struct ControllerParams {
-  ControllerMode mode = ControllerMode::kAdaptive;
-  double alpha_s = 0.016;          // α, Table 2: 16 ms
+  ControllerMode mode = ControllerMode::kAuto;
+  double alpha_s = 0.016;          // α, Table 2: 16 ms (mode seed)
   double beta = 8;                 // β, Table 2
   double s_min_bytes = 0.065e6;    // Table 2: 0.065 MB, one 64 KiB sparse block
   double s_max_bytes = 64e6;       // Table 2: 64 MB
   double fixed_load_bytes = 16e6;  // mode = fixed
   double fixed_bias = 0;           // mode = fixed
+  double target_min_s = 1.0 / 60;  // mode = auto: the target is never below this
+  double target_cap_s = 0;         // mode = auto: the target's cap (0: none)
 
   // Converts ms → s and MB → bytes; errors name the [controller] key.
   static Result<ControllerParams> from_config(const ControllerConfig& config);
@@ -98,6 +102,8 @@ class AdaptiveController {
   // A frame latency above an hour is a clock error, not a stutter; it is rejected like NaN. It also bounds
   // a window sample: 3600 s = 3.6·10^18 fs < 2^63.
   static constexpr double kMaxFrameLatencyS = 3600.0;
+  // Bytes uploaded in one frame above an exabyte are a counter error; rejected like a bad latency.
+  static constexpr double kMaxFrameBytes = 1e18;
 
   // The controller's state after the last accepted frame (all latencies in seconds).
   struct State {
@@ -120,19 +126,25 @@ class AdaptiveController {
 
   static Result<AdaptiveController> create(const ControllerParams& params);
 
-  // One frame: Δt in seconds. Returns false (and changes nothing but the rejected counter) for NaN, ±inf,
-  // negative or absurd (> kMaxFrameLatencyS) input. 0 and denormals are accepted (a frame can be that fast
-  // only on a broken clock, but they are numbers the equations handle).
-  bool on_frame(double frame_latency_s);
+  // One frame: Δt in seconds and the bytes of mips uploaded during it (mode auto uses them to tell the
+  // frame's streaming work from its rendering; the seed's equations ignore them). Returns false (and changes
+  // nothing but the rejected counter) for NaN, ±inf, negative or absurd (> kMaxFrameLatencyS, >
+  // kMaxFrameBytes) input. 0 and denormals are accepted (a frame can be that fast only on a broken clock, but
+  // they are numbers the equations handle).
+  bool on_frame(double frame_latency_s, double uploaded_bytes = 0);
 
-  // Outputs for the next streaming cycle. In mode none/fixed they are constant and the state still follows
-  // Eq. 4-7 (so a baseline run can still report t_w as the seed's Tables do).
+  // Outputs for the next streaming cycle: mode auto's (headroom_controller.hpp), mode seed's (Eq. 4-7), or
+  // constant in mode none/fixed. The seed's state follows Eq. 4-7 in every mode (so a baseline run can still
+  // report t_w as the seed's Tables do, and mode auto takes its t_w and t_b).
   double load_size_bytes() const;
   uint64_t load_bytes() const;  // load_size_bytes() rounded down, for byte counters
   double mip_bias() const;
   double load_factor() const { return state_.l; }
   double weighted_latency_s() const { return state_.t_w; }
-  const State& state() const { return state_; }
+  const State& state() const { return state_; }  // the seed's (Eq. 4-7)
+  const HeadroomController& headroom() const { return headroom_; }
+  // The latency the controller aims at: T in mode auto, α in mode seed, 0 in none/fixed.
+  double target_s() const;
   const ControllerParams& params() const { return params_; }
   uint64_t frames_accepted() const { return accepted_; }
   uint64_t frames_rejected() const { return rejected_; }
@@ -153,10 +165,11 @@ class AdaptiveController {
   static double mip_bias(double beta, double t_bl, double t_bu, double t_b);
 
  private:
-  explicit AdaptiveController(const ControllerParams& params) : params_(params) {}
+  explicit AdaptiveController(const ControllerParams& params);
 
   ControllerParams params_;
   State state_;
+  HeadroomController headroom_;
   uint64_t accepted_ = 0;
   uint64_t rejected_ = 0;
 };

@@ -1,0 +1,115 @@
+#include "texstream/stream/headroom_controller.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "texstream/common/contract.hpp"
+
+namespace texstream::stream {
+
+namespace {
+
+double smoothstep01(double t) {
+  if (!(t > 0.0)) return 0.0;  // also NaN
+  if (t >= 1.0) return 1.0;
+  return std::min(t * t * (3.0 - 2.0 * t), 1.0);
+}
+
+}  // namespace
+
+HeadroomController::HeadroomController(const HeadroomParams& p) : params_(p) {
+  // Start at s_min: the first frames tell nothing about the plant yet; growth doubles s per frame while
+  // there is room, so full speed is ~10 frames away (65 kB to 64 MB).
+  state_.s_bytes = p.s_min_bytes;
+  state_.target_s = std::max(p.target_min_s, kMinTargetS);
+}
+
+double HeadroomController::target(double f_s, const HeadroomParams& p) {
+  double t = std::max(kTargetFactor * f_s, p.target_min_s);
+  if (p.target_cap_s > 0) t = std::min(t, std::max(p.target_cap_s, kCapHeadroom * f_s));
+  return std::max(t, kMinTargetS);
+}
+
+double HeadroomController::load_factor(double t_w_s, double f_s, double target_s) {
+  if (t_w_s > target_s) {
+    // A stutter (twice the target or more) drops s to s_min at once, as Eq. 4's quartic does for a spike of
+    // tens of ms; a smaller overshoot cuts by (T / t_w)^4, e.g. 0.68 at 10 % over.
+    if (t_w_s >= kStutterRatio * target_s) return 0.0;
+    const double r = target_s / t_w_s;
+    return (r * r) * (r * r);
+  }
+  // Growth slows as t_w nears the line: ×2 per frame at f, ×1 at the line, so an upload cost that rises
+  // faster than linearly (sparse binds) is approached rather than jumped over.
+  const double line = f_s + kGrowBelow * (target_s - f_s);
+  if (t_w_s < line) {
+    const double room = line > f_s ? std::min((line - t_w_s) / (line - f_s), 1.0) : 1.0;
+    return std::exp2(room);
+  }
+  return 1.0;
+}
+
+double HeadroomController::bias(double beta, double t_b_s, double target_s) {
+  return beta * smoothstep01((t_b_s / target_s - kBiasFrom) / (kBiasFull - kBiasFrom));
+}
+
+void HeadroomController::fit() {
+  State& s = state_;
+  const size_t n = s.count;
+  double min_dt = std::numeric_limits<double>::infinity();
+  double sx = 0, sy = 0, sxx = 0, sxy = 0;
+  double max_mb = 0, min_mb = std::numeric_limits<double>::infinity();
+  for (size_t i = 0; i < n; ++i) {
+    min_dt = std::min(min_dt, s.dt[i]);
+    max_mb = std::max(max_mb, s.mb[i]);
+    min_mb = std::min(min_mb, s.mb[i]);
+    sx += s.mb[i];
+    sy += s.dt[i];
+    sxx += s.mb[i] * s.mb[i];
+    sxy += s.mb[i] * s.dt[i];
+  }
+  // k is plant knowledge: a window without enough spread in its uploads (a pause) keeps the last estimate.
+  double k = s.k_s_per_mb;
+  if (n >= kMinFitFrames && max_mb - min_mb >= kMinSpreadMb) {
+    k = 0;
+    // Least squares over the window, recomputed every frame (nothing accumulates). Uploading cannot make a
+    // frame faster: a negative slope is noise or a view change and counts as 0; a degenerate one as 0 too.
+    const double nn = static_cast<double>(n);
+    const double var = nn * sxx - sx * sx, cov = nn * sxy - sx * sy;
+    if (var > 0 && std::isfinite(cov / var)) k = std::max(cov / var, 0.0);
+  }
+  double f = min_dt;
+  if (k > 0) {
+    for (size_t i = 0; i < n; ++i) f = std::min(f, s.dt[i] - k * s.mb[i]);
+  }
+  s.k_s_per_mb = k;
+  s.f_s = std::clamp(f, kFloorShare * min_dt, min_dt);  // NaN cannot reach here: inputs are finite
+}
+
+void HeadroomController::on_frame(double dt_s, double bytes, double t_w_s, double t_b_s) {
+  TS_ASSERT(std::isfinite(dt_s) && dt_s >= 0 && std::isfinite(bytes) && bytes >= 0 && std::isfinite(t_w_s) &&
+                t_w_s >= 0 && std::isfinite(t_b_s) && t_b_s >= 0,
+            "headroom controller input out of contract: dt %g bytes %g t_w %g t_b %g", dt_s, bytes, t_w_s, t_b_s);
+  State& s = state_;
+  s.dt[s.next] = dt_s;
+  s.mb[s.next] = bytes / kBytesPerUnit;
+  s.next = (s.next + 1) % kWindow;
+  s.count = std::min(s.count + 1, kWindow);
+  fit();
+  s.target_s = target(s.f_s, params_);
+  // s never exceeds what the plant model says fits between f and the growth line in one frame: where uploads
+  // cost frame time (lavapipe) a pause does not bank a full-size burst for the next cut; where they cost
+  // nothing measurable (k = 0, a GPU) the cap is s_max.
+  s.budget_bytes = params_.s_max_bytes;
+  if (s.k_s_per_mb > 0) {
+    const double line = s.f_s + kGrowBelow * (s.target_s - s.f_s);
+    s.budget_bytes = std::min((line - s.f_s) / s.k_s_per_mb * kBytesPerUnit, params_.s_max_bytes);
+  }
+  const double cap = std::max(s.budget_bytes, params_.s_min_bytes);
+  s.s_bytes = std::clamp(s.s_bytes * load_factor(t_w_s, s.f_s, s.target_s), params_.s_min_bytes, cap);
+  s.b = bias(params_.beta, t_b_s, s.target_s);
+  TS_ASSERT(std::isfinite(s.s_bytes) && s.b >= 0 && s.b <= params_.beta, "headroom output out of range: s %g b %g",
+            s.s_bytes, s.b);
+}
+
+}  // namespace texstream::stream
