@@ -3,7 +3,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <fstream>
 #include <limits>
+#include <sstream>
 
 #include "path_analysis.hpp"
 #include "texstream/render/measure/frame_log.hpp"
@@ -20,7 +22,7 @@ std::vector<FrameRecord> series(size_t n, double dt) {
     v[i].index = i;
     v[i].time_s = static_cast<double>(i) * dt;
     v[i].wall_s = static_cast<double>(i + 1) * dt;
-    v[i].mse = v[i].psnr_db = v[i].ssim = v[i].popin_mse = kNaN;
+    v[i].mse = v[i].psnr_db = v[i].ssim = v[i].popin_mse = v[i].mip_deficit = kNaN;
   }
   return v;
 }
@@ -35,6 +37,10 @@ TEST(FrameLog, RoundTripKeepsValuesAndNaN) {
   v[2].psnr_db = 58.1;
   v[2].ssim = 0.99;
   v[2].server_hit_rate = kNaN;
+  v[1].list_fresh = true;
+  v[1].mip_deficit = 1.25;
+  v[2].mip_deficit = 0.0;
+  v[2].wasted_bytes = 4096;
   auto back = render::parse_frame_log(render::frame_log_csv(v), "mem");
   ASSERT_TRUE(back.ok()) << back.error().message;
   ASSERT_EQ(back->size(), 3u);
@@ -45,7 +51,38 @@ TEST(FrameLog, RoundTripKeepsValuesAndNaN) {
   EXPECT_TRUE(std::isnan((*back)[0].mse));
   EXPECT_TRUE(std::isnan((*back)[2].server_hit_rate));
   EXPECT_EQ((*back)[2].ssim, 0.99);
+  EXPECT_TRUE((*back)[1].list_fresh);
+  EXPECT_FALSE((*back)[2].list_fresh);
+  EXPECT_TRUE(std::isnan((*back)[0].mip_deficit));  // before the first list
+  EXPECT_EQ((*back)[1].mip_deficit, 1.25);
+  EXPECT_EQ((*back)[2].mip_deficit, 0.0);
+  EXPECT_EQ((*back)[2].wasted_bytes, 4096u);
   EXPECT_EQ(lockstep_difference(v, *back), "");
+}
+
+TEST(FrameLog, TheHeaderCommentListsTheColumnsInFileOrder) {
+  std::ifstream in(TEXSTREAM_SOURCE_DIR "/renderer/include/texstream/render/measure/frame_log.hpp");
+  ASSERT_TRUE(in) << "frame_log.hpp not found";
+  // The comment block after "Columns, in file order": its indented lines hold the names, comma-separated.
+  std::string line, listed;
+  bool in_list = false;
+  while (std::getline(in, line)) {
+    if (line.find("Columns, in file order") != std::string::npos) {
+      in_list = true;
+    } else if (in_list && line.rfind("//   ", 0) == 0) {
+      listed += line.substr(5);
+    } else if (in_list && !listed.empty()) {
+      break;
+    }
+  }
+  std::vector<std::string> names;
+  std::stringstream ss(listed);
+  for (std::string name; std::getline(ss, name, ',');) {
+    name.erase(0, name.find_first_not_of(' '));
+    name.erase(name.find_last_not_of(' ') + 1);
+    names.push_back(name);
+  }
+  EXPECT_EQ(names, render::frame_log_columns());
 }
 
 TEST(FrameLog, BadInputNamesTheLineAndColumn) {
