@@ -76,7 +76,14 @@ TEST_F(BenchPath, QuickRunWritesTheSummaryLineAndReport) {
     EXPECT_NE(found, std::string::npos) << key << " missing or out of order: " << summary;
     if (found != std::string::npos) at = found;
   }
-  EXPECT_EQ(summary.find("nan"), std::string::npos) << summary;
+  // Every value measured, except that time_to_detail_ratio is NaN when neither run's deficit reached 0 after
+  // the cut: the quick section's camera moves on after its cut, and a moving view keeps wanting finer levels a
+  // cycle ahead of what has arrived (docs/design/stream_metrics.md).
+  std::string others = summary;
+  const size_t ttd = others.find("time_to_detail_ratio=");
+  if (ttd != std::string::npos) others.erase(ttd, others.find(' ', ttd) - ttd);
+  EXPECT_EQ(others.find("nan"), std::string::npos) << summary;
+  EXPECT_TRUE(fs::exists(work_ / "out" / "plots" / "mip_deficit.png"));
   EXPECT_TRUE(fs::exists(work_ / "out" / "report.md"));
   EXPECT_TRUE(fs::exists(work_ / "out" / "plots" / "pareto.png"));
   EXPECT_TRUE(fs::exists(work_ / "out" / "raw" / "ours.csv"));

@@ -111,7 +111,7 @@ TEST(MipUseLedger, MipsNeverSampledWhileResidentAreWasted) {
   EXPECT_FALSE(ledger.levels(TextureId(0)).finest.has_value());  // finish() empties the residency
 }
 
-TEST(MipUseLedger, AWantedLevelBelowTheResidentRunSamplesItsCoarsestAndAReuploadReplaces) {
+TEST(MipUseLedger, AWantedLevelCoarserThanTheResidentRunSamplesItsCoarsestAndAReuploadReplaces) {
   MipUseLedger ledger({shape64()});
   EXPECT_TRUE(std::isnan(ledger.wasted_fraction()));
   ledger.apply(std::vector<TextureEvent>{{Kind::kCommitted, TextureId(0), MipLevel(5)},
