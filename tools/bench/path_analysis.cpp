@@ -9,6 +9,7 @@ namespace texstream::bench {
 
 namespace {
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kInf = std::numeric_limits<double>::infinity();
 
 // Exact equality that also holds for two NaNs (columns that were not measured in either run).
 bool same(double a, double b) {
@@ -77,6 +78,50 @@ Recovery recovery_after_cut(const std::vector<render::FrameRecord>& frames, doub
   return r;
 }
 
+TimeToDetail time_to_detail(const std::vector<render::FrameRecord>& frames, double cut_s, double segment_end_s,
+                            double frame_time_s) {
+  TimeToDetail d;
+  d.cut_s = cut_s;
+  d.deficit_s = kNaN;
+  const Recovery r = recovery_after_cut(frames, cut_s, segment_end_s, kDetailToleranceDb);
+  d.psnr_s = r.seconds;
+  d.target_psnr_db = r.settled_psnr_db;
+  bool list_since_cut = false;
+  for (const render::FrameRecord& f : frames) {
+    if (f.time_s < cut_s || f.time_s >= segment_end_s) continue;
+    list_since_cut = list_since_cut || f.list_fresh;
+    if (list_since_cut && std::isfinite(f.mip_deficit) && f.mip_deficit <= kZeroDeficit) {
+      d.deficit_s = f.time_s + frame_time_s - cut_s;  // frame f + 1 draws the residency f ended with
+      break;
+    }
+  }
+  return d;
+}
+
+double median_time_to_detail(const std::vector<TimeToDetail>& cuts) {
+  if (cuts.empty()) return kNaN;
+  std::vector<double> t;
+  for (const TimeToDetail& d : cuts) t.push_back(std::isnan(d.deficit_s) ? kInf : d.deficit_s);
+  std::sort(t.begin(), t.end());
+  const size_t n = t.size();
+  return n % 2 ? t[n / 2] : 0.5 * (t[n / 2 - 1] + t[n / 2]);  // +∞ when the middle holds a "never"
+}
+
+double headline_ratio(double a, double b) {
+  if (std::isnan(a) || std::isnan(b) || (std::isinf(a) && std::isinf(b))) return kNaN;
+  if (std::isinf(a)) return kInf;
+  if (std::isinf(b)) return 0.0;
+  if (b == 0) return a == 0 ? 1.0 : kInf;
+  return a / b;
+}
+
+double nearest_rank(std::vector<double> values, double q) {
+  if (values.empty()) return kNaN;
+  std::sort(values.begin(), values.end());
+  const size_t rank = static_cast<size_t>(std::ceil(q * static_cast<double>(values.size())));
+  return values[std::min(values.size(), std::max<size_t>(rank, 1)) - 1];
+}
+
 std::vector<double> cut_times(const CameraPath& path) {
   std::vector<double> cuts;
   const auto& k = path.keys();
@@ -105,7 +150,7 @@ RunAnalysis analyse_run(const std::vector<render::FrameRecord>& frames, double f
                         const std::vector<double>& cuts_s) {
   RunAnalysis a;
   a.frames = frames.size();
-  std::vector<double> lat, tw, s, b, pages, hit, mse, psnr, ssim;
+  std::vector<double> lat, tw, s, b, pages, hit, mse, psnr, ssim, deficit;
   for (const render::FrameRecord& f : frames) {
     if (f.index >= kWarmUpFrames || frames.size() <= kWarmUpFrames) {
       lat.push_back(f.latency_ms);
@@ -120,6 +165,8 @@ RunAnalysis analyse_run(const std::vector<render::FrameRecord>& frames, double f
     ssim.push_back(f.ssim);
     if (std::isfinite(f.mse)) a.integrated_mse += f.mse * frame_time_s;
     if (std::isfinite(f.ssim)) a.integrated_dssim += (1.0 - f.ssim) * frame_time_s;
+    deficit.push_back(f.mip_deficit);
+    if (std::isfinite(f.mip_deficit)) a.integrated_mip_deficit += f.mip_deficit * frame_time_s;
     if (std::isfinite(f.popin_mse)) {
       ++a.popin_frames;
       a.max_popin_mse = std::max(a.max_popin_mse, f.popin_mse);
@@ -134,21 +181,20 @@ RunAnalysis analyse_run(const std::vector<render::FrameRecord>& frames, double f
   a.mse = stat3(mse);
   a.psnr_db = stat3(psnr);
   a.ssim = stat3(ssim);
+  a.mip_deficit = stat3(deficit);
   const Rates r = windowed_rates(frames);
   a.mips_per_s = stat3(r.mips_per_s);
   a.mb_per_s = stat3(r.mb_per_s);
-  std::vector<double> sorted = lat;
-  std::sort(sorted.begin(), sorted.end());
-  if (!sorted.empty()) {
-    // Nearest rank: the smallest latency that at least 95 % of the frames do not exceed.
-    const size_t rank = static_cast<size_t>(std::ceil(0.95 * static_cast<double>(sorted.size())));
-    a.p95_latency_ms = sorted[std::min(sorted.size(), std::max<size_t>(rank, 1)) - 1];
+  if (!lat.empty()) {
+    a.p95_latency_ms = nearest_rank(lat, 0.95);
+    a.p99_latency_ms = nearest_rank(lat, 0.99);
   }
   const double end_s = frames.empty() ? 0.0 : frames.back().time_s + frame_time_s;
   for (size_t i = 0; i < cuts_s.size(); ++i) {
     if (cuts_s[i] >= end_s) break;
     const double next = i + 1 < cuts_s.size() ? std::min(cuts_s[i + 1], end_s) : end_s;
     a.recoveries.push_back(recovery_after_cut(frames, cuts_s[i], next));
+    a.detail.push_back(time_to_detail(frames, cuts_s[i], next, frame_time_s));
   }
   return a;
 }
@@ -171,6 +217,9 @@ std::string lockstep_difference(const std::vector<render::FrameRecord>& a, const
     if (!same(x.psnr_db, y.psnr_db)) return at("psnr_db");
     if (!same(x.ssim, y.ssim)) return at("ssim");
     if (!same(x.popin_mse, y.popin_mse)) return at("popin_mse");
+    if (x.list_fresh != y.list_fresh) return at("list_fresh");
+    if (!same(x.mip_deficit, y.mip_deficit)) return at("mip_deficit");
+    if (x.wasted_bytes != y.wasted_bytes) return at("wasted_bytes");
   }
   return "";
 }

@@ -1,7 +1,8 @@
 #pragma once
 // What texstream-bench path computes from the per-frame log of one run (render/frame_log.hpp): the seed's
-// table quantities (median / average / max, seed 000 Tables 3-7), time-integrated image error, the largest
-// pop-in, and how fast the image recovers after each instant view switch. Pure: no I/O, no clock.
+// table quantities (median / average / max, seed 000 Tables 3-7), time-integrated image error and mip
+// deficit, p95/p99 latency, the largest pop-in, and how fast the image recovers and gets its detail after
+// each instant view switch (docs/design/stream_metrics.md). Pure: no I/O, no clock.
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -41,6 +42,40 @@ inline constexpr double kSettleWindowS = 0.5;
 Recovery recovery_after_cut(const std::vector<render::FrameRecord>& frames, double cut_s, double segment_end_s,
                             double tolerance_db = kRecoveryToleranceDb, double settle_window_s = kSettleWindowS);
 
+// Time to detail after a cut (issue 25; the Cesium-style "time until everything is loaded", but for what the
+// view needs), two kinds, each the virtual time from the cut at `cut_s` to the first frame of the segment
+// [cut_s, segment_end_s) that draws the view in detail, NaN ("never") when no frame of the segment does:
+//   deficit_s  the first frame drawn with a weighted mip deficit of 0 (≤ kZeroDeficit): frame f's
+//              mip_deficit is measured on the residency at its end, which frame f + 1 draws, so deficit_s =
+//              time_s(f) + frame_time_s − cut_s for the first f in the segment whose mip_deficit ≤ kZeroDeficit
+//              with a visibility list read at or after the cut (list_fresh in a frame of [cut_s, f]): the
+//              list of the view before the cut says nothing about the view after it.
+//   psnr_s     the first frame whose PSNR is within kDetailToleranceDb of the segment's target: the settled
+//              PSNR (recovery_after_cut: median PSNR over the last kSettleWindowS of the segment) standing in
+//              for the reference's own, which every frame matches only up to the blending's and the
+//              sampling's error. A segment still refining at its end settles low, and reaches it early.
+struct TimeToDetail {
+  double cut_s = 0;
+  double deficit_s = 0;
+  double psnr_s = 0;
+  double target_psnr_db = 0;  // the settled PSNR psnr_s aims at (NaN: no PSNR in the segment)
+};
+inline constexpr double kZeroDeficit = 1e-6;       // levels: a float desired level's rounding, not a mip
+inline constexpr double kDetailToleranceDb = 0.5;  // issue 25: "within 0.5 dB of the reference"
+TimeToDetail time_to_detail(const std::vector<render::FrameRecord>& frames, double cut_s, double segment_end_s,
+                            double frame_time_s);
+
+// The median over cuts of the deficit-based time to detail, a "never" counted as +∞ (longer than any time
+// reached); NaN without cuts.
+double median_time_to_detail(const std::vector<TimeToDetail>& cuts);
+
+// a ÷ b for the headline ratios (baseline ÷ ours): 1 when both are 0; a ÷ 0 = +∞; with a "never" (+∞):
+// +∞ ÷ b = +∞ and a ÷ +∞ = 0; NaN when either is NaN or both are +∞ (neither got there: no comparison).
+double headline_ratio(double a, double b);
+
+// Nearest rank: the smallest value that at least fraction `q` of `values` do not exceed (NaN when empty).
+double nearest_rank(std::vector<double> values, double q);
+
 // Times of the instant switches of a path: keyframes that repeat the previous keyframe's time with a
 // different pose (camera_path.hpp). Times in the path's own clock.
 std::vector<double> cut_times(const CameraPath& path);
@@ -64,7 +99,11 @@ struct RunAnalysis {
   double max_popin_mse = 0;          // largest frame-to-frame MSE while the camera is still
   uint64_t popin_frames = 0;         // frames where pop-in was measured (camera still)
   std::vector<Recovery> recoveries;  // one per cut inside the run
-  double p95_latency_ms = 0;
+  double p95_latency_ms = 0;         // nearest rank, frame 0 excluded as for latency_ms
+  double p99_latency_ms = 0;
+  Stat3 mip_deficit;                  // per frame, levels (frame_log.hpp)
+  double integrated_mip_deficit = 0;  // Σ mip_deficit · Δt over the frames that have one (levels · s)
+  std::vector<TimeToDetail> detail;   // one per cut inside the run
 };
 RunAnalysis analyse_run(const std::vector<render::FrameRecord>& frames, double frame_time_s,
                         const std::vector<double>& cuts_s);

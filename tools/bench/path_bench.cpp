@@ -20,7 +20,9 @@
 //
 // --quick: a 4 s section of the path around its first cut, 256x144, one α and one β besides ours; under 60 s
 // on the 2-core lavapipe machine. Ends with `summary: lockstep_identical=... max_latency_ratio=...
-// popin_ratio=... integrated_error_ratio=... streaming_overhead=... process_boundary_cost=...`.
+// popin_ratio=... integrated_error_ratio=... streaming_overhead=... process_boundary_cost=...
+// time_to_detail_ratio=... mip_deficit_ratio=... p99_latency_ratio=... resident_blend_psnr_db=...
+// wasted_bytes_frac=...` (issue 25's metrics: docs/design/stream_metrics.md).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -88,6 +90,11 @@ void execute(const Plan& p, ConfigRun& r, double frame_time_s, const std::vector
   fs::create_directories(p.out / "raw", ec);
   fs::copy_file(dir / "frames.csv", p.out / "raw" / (r.name + ".csv"), fs::copy_options::overwrite_existing, ec);
   r.analysis = analyse_run(o.frames, frame_time_s, cuts);
+  r.wasted_bytes_frac = kNaN;
+  std::ifstream summary_file(dir / "summary.json");
+  const nlohmann::json summary = nlohmann::json::parse(summary_file, nullptr, false);
+  if (summary.is_object() && summary.contains("wasted_bytes_frac") && summary["wasted_bytes_frac"].is_number())
+    r.wasted_bytes_frac = summary["wasted_bytes_frac"].get<double>();
   std::printf("  %-14s %5.1f s  latency median %6.2f ms max %7.2f ms  PSNR median %6.2f dB  ∫MSE %8.1f  pop-in %7.2f\n",
               r.name.c_str(), r.wall_s, r.analysis.latency_ms.median, r.analysis.latency_ms.max,
               r.analysis.psnr_db.median, r.analysis.integrated_mse, r.analysis.max_popin_mse);
@@ -106,12 +113,6 @@ std::string load_average() {
   std::ifstream in("/proc/loadavg");
   std::string first;
   return in >> first ? first : std::string("?");
-}
-
-double ratio(double a, double b) {
-  if (!std::isfinite(a) || !std::isfinite(b)) return kNaN;
-  if (b == 0) return a == 0 ? 1.0 : std::numeric_limits<double>::infinity();
-  return a / b;
 }
 
 struct PathArgs {
@@ -278,11 +279,18 @@ int run_path(const PathArgs& args) {
   HeadlineRatios& h = res.ratios;
   const RunAnalysis *ours = get("ours"), *base = get("baseline"), *resident = get("resident_blend"),
                     *inproc = get("inprocess");
-  h.max_latency_ratio = ours && base ? ratio(base->latency_ms.max, ours->latency_ms.max) : kNaN;
-  h.popin_ratio = ours && base ? ratio(base->max_popin_mse, ours->max_popin_mse) : kNaN;
-  h.integrated_error_ratio = ours && base ? ratio(base->integrated_mse, ours->integrated_mse) : kNaN;
-  h.streaming_overhead = ours && resident ? ratio(ours->latency_ms.median, resident->latency_ms.median) : kNaN;
-  h.process_boundary_cost = ours && inproc ? ratio(ours->latency_ms.median, inproc->latency_ms.median) : kNaN;
+  h.max_latency_ratio = ours && base ? headline_ratio(base->latency_ms.max, ours->latency_ms.max) : kNaN;
+  h.popin_ratio = ours && base ? headline_ratio(base->max_popin_mse, ours->max_popin_mse) : kNaN;
+  h.integrated_error_ratio = ours && base ? headline_ratio(base->integrated_mse, ours->integrated_mse) : kNaN;
+  h.streaming_overhead = ours && resident ? headline_ratio(ours->latency_ms.median, resident->latency_ms.median) : kNaN;
+  h.process_boundary_cost = ours && inproc ? headline_ratio(ours->latency_ms.median, inproc->latency_ms.median) : kNaN;
+  h.time_to_detail_ratio =
+      ours && base ? headline_ratio(median_time_to_detail(base->detail), median_time_to_detail(ours->detail)) : kNaN;
+  h.mip_deficit_ratio =
+      ours && base ? headline_ratio(base->integrated_mip_deficit, ours->integrated_mip_deficit) : kNaN;
+  h.p99_latency_ratio = ours && base ? headline_ratio(base->p99_latency_ms, ours->p99_latency_ms) : kNaN;
+  h.resident_blend_psnr_db = resident ? resident->psnr_db.median : kNaN;
+  h.wasted_bytes_frac = ours ? res.find("ours")->wasted_bytes_frac : kNaN;
   if (get("lockstep_a") && get("lockstep_b")) {
     auto a = render::read_frame_log(plan.out / "raw" / "lockstep_a.csv");
     auto b = render::read_frame_log(plan.out / "raw" / "lockstep_b.csv");
@@ -323,6 +331,11 @@ int run_path(const PathArgs& args) {
       .add("integrated_error_ratio", h.integrated_error_ratio)
       .add("streaming_overhead", h.streaming_overhead)
       .add("process_boundary_cost", h.process_boundary_cost)
+      .add("time_to_detail_ratio", h.time_to_detail_ratio)
+      .add("mip_deficit_ratio", h.mip_deficit_ratio)
+      .add("p99_latency_ratio", h.p99_latency_ratio)
+      .add("resident_blend_psnr_db", h.resident_blend_psnr_db)
+      .add("wasted_bytes_frac", h.wasted_bytes_frac)
       .print();
   return all_ok ? 0 : 1;
 }

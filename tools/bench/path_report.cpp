@@ -55,27 +55,62 @@ std::string seed_table(const std::vector<const ConfigRun*>& runs) {
   return t;
 }
 
+// Seconds, or "never" for NaN (a time not reached).
+std::string seconds_or_never(double s) { return std::isnan(s) ? std::string("never") : cell(s, 2); }
+
 std::string error_table(const std::vector<ConfigRun>& runs) {
   std::string t =
-      "| configuration | p95 latency (ms) | max latency (ms) | ∫MSE dt (MSE·s) | ∫(1−SSIM) dt (s) | max pop-in MSE | "
-      "recovery after each cut (s) | process wall (s) |\n|---|---:|---:|---:|---:|---:|---|---:|\n";
+      "| configuration | p95 latency (ms) | p99 latency (ms) | max latency (ms) | ∫MSE dt (MSE·s) | ∫(1−SSIM) dt (s) | "
+      "∫mip deficit dt (levels·s) | never displayed (of bytes streamed) | max pop-in MSE | recovery after each cut (s) "
+      "| process "
+      "wall (s) |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|\n";
   for (const ConfigRun& r : runs) {
     if (!r.measured) continue;
     if (!r.failure.empty()) {
-      t += "| " + r.label + " | failed: " + r.failure + " | | | | | | |\n";
+      t += "| " + r.label + " | failed: " + r.failure + " | | | | | | | | | |\n";
       continue;
     }
     const RunAnalysis& a = r.analysis;
     std::string rec;
     for (const Recovery& v : a.recoveries) {
-      rec += (rec.empty() ? "" : ", ") + fmt::format("{} ({} dB)",
-                                                     std::isnan(v.seconds) ? std::string("never") : cell(v.seconds, 2),
-                                                     cell(v.settled_psnr_db, 1));
+      rec += (rec.empty() ? "" : ", ") +
+             fmt::format("{} ({} dB)", seconds_or_never(v.seconds), cell(v.settled_psnr_db, 1));
     }
     if (rec.empty()) rec = "no cut";
-    t += fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} |\n", r.label, cell(a.p95_latency_ms),
-                     cell(a.latency_ms.max), cell(a.integrated_mse, 1), cell(a.integrated_dssim, 4),
+    t += fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n", r.label, cell(a.p95_latency_ms),
+                     cell(a.p99_latency_ms), cell(a.latency_ms.max), cell(a.integrated_mse, 1),
+                     cell(a.integrated_dssim, 4), cell(a.integrated_mip_deficit, 3),
+                     std::isnan(r.wasted_bytes_frac) ? std::string("–") : cell(100.0 * r.wasted_bytes_frac, 1) + " %",
                      cell(a.max_popin_mse, 2), rec, cell(r.wall_s, 1));
+  }
+  return t;
+}
+
+// Time to detail after each cut (path_analysis.hpp, TimeToDetail): one row per measured run, one column per
+// cut, "deficit / PSNR" seconds.
+std::string detail_table(const std::vector<ConfigRun>& runs, const std::vector<double>& cuts_s) {
+  if (cuts_s.empty()) return "The path has no cut.\n";
+  std::string t = "| configuration |";
+  std::string rule = "|---|";
+  for (double c : cuts_s) {
+    t += fmt::format(" cut at {:.2f} s: deficit 0 / PSNR (target) |", c);
+    rule += "---|";
+  }
+  t += " median deficit-based (s) |\n" + rule + "---:|\n";
+  for (const ConfigRun& r : runs) {
+    if (!r.measured || !r.failure.empty()) continue;
+    t += "| " + r.label + " |";
+    for (size_t i = 0; i < cuts_s.size(); ++i) {
+      if (i < r.analysis.detail.size()) {
+        const TimeToDetail& d = r.analysis.detail[i];
+        t += fmt::format(" {} / {} ({} dB) |", seconds_or_never(d.deficit_s), seconds_or_never(d.psnr_s),
+                         cell(d.target_psnr_db, 1));
+      } else {
+        t += " after the run |";
+      }
+    }
+    const double m = median_time_to_detail(r.analysis.detail);
+    t += " " + (std::isinf(m) ? std::string("never") : cell(m, 2)) + " |\n";
   }
   return t;
 }
@@ -111,13 +146,26 @@ Status write_results_json(const BenchResults& r, const std::filesystem::path& fi
                   {"popin_ratio", num(h.popin_ratio)},
                   {"integrated_error_ratio", num(h.integrated_error_ratio)},
                   {"streaming_overhead", num(h.streaming_overhead)},
-                  {"process_boundary_cost", num(h.process_boundary_cost)}};
+                  {"process_boundary_cost", num(h.process_boundary_cost)},
+                  {"time_to_detail_ratio", num(h.time_to_detail_ratio)},
+                  {"mip_deficit_ratio", num(h.mip_deficit_ratio)},
+                  {"p99_latency_ratio", num(h.p99_latency_ratio)},
+                  {"resident_blend_psnr_db", num(h.resident_blend_psnr_db)},
+                  {"wasted_bytes_frac", num(h.wasted_bytes_frac)}};
   nlohmann::json runs = nlohmann::json::array();
   for (const ConfigRun& c : r.runs) {
     const RunAnalysis& a = c.analysis;
     nlohmann::json rec = nlohmann::json::array();
     for (const Recovery& v : a.recoveries)
       rec.push_back({{"cut_s", v.cut_s}, {"settled_psnr_db", num(v.settled_psnr_db)}, {"seconds", num(v.seconds)}});
+    // null: never reached within the segment.
+    nlohmann::json detail = nlohmann::json::array();
+    for (const TimeToDetail& d : a.detail) {
+      detail.push_back({{"cut_s", d.cut_s},
+                        {"deficit_s", num(d.deficit_s)},
+                        {"psnr_s", num(d.psnr_s)},
+                        {"target_psnr_db", num(d.target_psnr_db)}});
+    }
     runs.push_back({{"name", c.name},
                     {"group", c.group},
                     {"label", c.label},
@@ -131,6 +179,7 @@ Status write_results_json(const BenchResults& r, const std::filesystem::path& fi
                     {"frames", a.frames},
                     {"frame_latency_ms", stat_json(a.latency_ms)},
                     {"p95_latency_ms", num(a.p95_latency_ms)},
+                    {"p99_latency_ms", num(a.p99_latency_ms)},
                     {"tw_ms", stat_json(a.tw_ms)},
                     {"load_size_mb", stat_json(a.load_size_mb)},
                     {"mip_bias", stat_json(a.mip_bias)},
@@ -145,7 +194,11 @@ Status write_results_json(const BenchResults& r, const std::filesystem::path& fi
                     {"integrated_dssim", num(a.integrated_dssim)},
                     {"max_popin_mse", num(a.max_popin_mse)},
                     {"popin_frames", a.popin_frames},
-                    {"recoveries", rec}});
+                    {"recoveries", rec},
+                    {"mip_deficit", stat_json(a.mip_deficit)},
+                    {"integrated_mip_deficit", num(a.integrated_mip_deficit)},
+                    {"wasted_bytes_frac", num(c.wasted_bytes_frac)},
+                    {"time_to_detail", detail}});
   }
   j["runs"] = runs;
   std::ofstream out(file);
@@ -184,7 +237,15 @@ Status write_report(const BenchResults& r, const std::filesystem::path& file, bo
        "whole frame. ∫MSE dt sums MSE × frame time over the run. Pop-in is the largest MSE between two consecutive "
        "frames while the camera is still (a pause): then every change is refinement (seed 000 Fig. 7). Recovery "
        "after a cut is the virtual time until PSNR is within 1 dB of the PSNR the view settles at (median over the "
-       "last 0.5 s before the next cut). Transfer rates are sampled in windows of 0.10423 s of wall time "
+       "last 0.5 s before the next cut). The weighted mip deficit of a frame is Σ W·max(0, displayed − wanted) / Σ W "
+       "over the textures of the latest visibility list (W its weight, wanted its desired level without the bias, "
+       "displayed the finest resident level or the wanted one if coarser; the level count with nothing resident), "
+       "on the residency the next frame draws; ∫mip deficit dt sums it × frame time. Time to detail after a cut: "
+       "the virtual time until the first frame drawn with deficit 0 (on a list read after the cut), and until PSNR "
+       "is within 0.5 dB of the settled PSNR (the target in brackets), \"never\" when not within the segment. "
+       "Never displayed: bytes of streamed mips that were never sampled at the wanted (or coarsest resident) level "
+       "while resident ÷ bytes streamed (docs/design/stream_metrics.md). Transfer rates are sampled in windows of "
+       "0.10423 s of wall time "
        "(seed 000 §4.2). Frame 0 is left out of the latency and t_w statistics (one-time driver costs that every "
        "configuration pays alike). Real-time runs measure latency; the camera advances a fixed virtual time per frame. "
        "Each "
@@ -207,8 +268,21 @@ Status write_report(const BenchResults& r, const std::filesystem::path& file, bo
       "| streaming_overhead | {} | median frame latency, ours ÷ all textures resident (the same "
       "renderer and blending; seed 002: negligible) |\n",
       cell(h.streaming_overhead, 3));
-  m += fmt::format("| process_boundary_cost | {} | median frame latency, two processes ÷ server in a thread |\n\n",
+  m += fmt::format("| process_boundary_cost | {} | median frame latency, two processes ÷ server in a thread |\n",
                    cell(h.process_boundary_cost, 3));
+  m += fmt::format(
+      "| time_to_detail_ratio | {} | median over cuts of the time until the mip deficit is 0, seed baseline ÷ ours "
+      "(a \"never\" counts as longest) |\n",
+      cell(h.time_to_detail_ratio));
+  m += fmt::format("| mip_deficit_ratio | {} | ∫ weighted mip deficit dt, seed baseline ÷ ours |\n",
+                   cell(h.mip_deficit_ratio));
+  m += fmt::format("| p99_latency_ratio | {} | p99 frame latency, seed baseline ÷ ours |\n", cell(h.p99_latency_ratio));
+  m += fmt::format(
+      "| resident_blend_psnr_db | {} | median PSNR with every texture resident and the default blend (goal ≥ 60 dB) "
+      "|\n",
+      cell(h.resident_blend_psnr_db));
+  m += fmt::format("| wasted_bytes_frac | {} | ours: bytes streamed for mips never displayed ÷ bytes streamed |\n\n",
+                   cell(h.wasted_bytes_frac, 3));
 
   auto group = [&](const std::string& g) {
     std::vector<const ConfigRun*> v;
@@ -224,17 +298,24 @@ Status write_report(const BenchResults& r, const std::filesystem::path& file, bo
   if (!group("beta").empty()) m += "## β sweep (seed 000 Table 6)\n\n" + seed_table(group("beta")) + "\n";
   m += "## Lock-step (virtual clock, fixed per-frame budget)\n\n" + seed_table(group("lockstep")) + "\n";
   m += "## Run time against error (one row per configuration)\n\n" + error_table(r.runs) + "\n";
+  m += "## Time to detail after each cut (s)\n\n" + detail_table(r.runs, r.cuts_s) + "\n";
   if (with_plots) {
     m += "## Plots\n\n";
     m += "![frame latency, t_w, s and b over time (seed 000 Fig. 6)](plots/fig6_ours.png)\n\n";
     m += "![the seed baseline over time](plots/fig6_baseline.png)\n\n";
     m += "![PSNR against the reference over time](plots/error_over_time.png)\n\n";
+    m += "![weighted mip deficit over time](plots/mip_deficit.png)\n\n";
     m += "![p95 frame latency against integrated error: the Pareto view](plots/pareto.png)\n\n";
   } else {
     m += "Plots were not made (python3 with matplotlib failed or is missing; see the bench output).\n\n";
   }
+  m += "## Notes\n\nFLIP (NVIDIA's perceptual image difference) is not measured: Debian 12 packages no implementation "
+       "of it (`apt-cache search flip` lists only unrelated packages), and the tree takes its libraries from Debian; "
+       "NVIDIA's own code (NVlabs/flip) is distributed on PyPI as `flip-evaluator`. Image error here is MSE, PSNR and "
+       "SSIM.\n\n";
   m += "## Raw data\n\n`raw/<configuration>.csv`: one row per frame (columns of renderer/include/texstream/render/"
-       "frame_log.hpp); `results.json`: everything in this report; `runs/<configuration>/`: each run's summary.json, "
+       "measure/frame_log.hpp); `results.json`: everything in this report; `runs/<configuration>/`: each run's "
+       "summary.json, "
        "cache.json and log.\n";
   std::ofstream out(file);
   out << m;

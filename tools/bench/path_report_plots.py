@@ -4,6 +4,7 @@
   plots/fig6_<name>.png   seed 000 Fig. 6 for one configuration: frame latency and t_w over time (top), load
                           size s and mip bias b (middle), transfer rate in MB/s and mips/s (bottom)
   plots/error_over_time.png   PSNR against the reference frames over the path, cuts marked
+  plots/mip_deficit.png   weighted mip deficit over the path (levels; frames.csv mip_deficit), cuts marked
   plots/pareto.png        run time against error: p95 frame latency vs time-integrated MSE, one point per
                           configuration, the Pareto front drawn through the non-dominated ones
 
@@ -108,6 +109,24 @@ def main():
     ax.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
     fig.savefig(os.path.join(out, "plots", "error_over_time.png"), dpi=110)
+    plt.close(fig)
+
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    for r in runs:
+        if r["group"] not in ("baseline", "lockstep") or r["name"] == "lockstep_b":
+            continue
+        fr = frames[r["name"]]
+        # Older frames.csv files have no mip_deficit column: skip them.
+        if fr and "mip_deficit" in fr[0]:
+            ax.plot([f["time_s"] for f in fr], [f["mip_deficit"] for f in fr], lw=1.0, label=r["label"])
+    for x in cuts:
+        ax.axvline(x, color="grey", ls=":", lw=0.8)
+    ax.set_xlabel("path time (s)")
+    ax.set_ylabel("weighted mip deficit (levels)")
+    ax.set_ylim(bottom=0)
+    ax.legend(fontsize=7, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "plots", "mip_deficit.png"), dpi=110)
     plt.close(fig)
 
     pts = [(r["p95_latency_ms"], r["integrated_mse"], r["name"]) for r in runs

@@ -20,6 +20,8 @@ struct ConfigRun {
   int exit_code = -1;
   std::string failure;  // empty when the run and its analysis succeeded
   double wall_s = 0;    // the whole process, start-up and preload included
+  // From the run's summary.json: bytes of streamed mips never displayed ÷ bytes streamed (NaN: unknown).
+  double wasted_bytes_frac = 0;
   RunAnalysis analysis;
 };
 
@@ -31,6 +33,12 @@ struct HeadlineRatios {
   double integrated_error_ratio = 0;  // baseline ÷ ours: Σ MSE · Δt
   double streaming_overhead = 0;      // ours ÷ all-resident: median frame latency
   double process_boundary_cost = 0;   // two-process ÷ in-process: median frame latency
+  // Issue 25 (docs/design/stream_metrics.md), each baseline ÷ ours but the last two:
+  double time_to_detail_ratio = 0;    // median over cuts of the deficit-based time to detail (NaN: no cuts)
+  double mip_deficit_ratio = 0;       // Σ mip deficit · Δt
+  double p99_latency_ratio = 0;       // p99 frame latency
+  double resident_blend_psnr_db = 0;  // median PSNR of resident_blend: all resident, the default blend
+  double wasted_bytes_frac = 0;       // ours: bytes of mips never displayed ÷ bytes streamed
 };
 
 struct BenchResults {

@@ -26,7 +26,11 @@ constexpr uint32_t kMaxFruitlessLoadRounds = 64;
 
 }  // namespace
 
-void Renderer::tell_states() { states_->apply(stack_->cache().take_events()); }
+void Renderer::tell_states() {
+  const std::vector<stream::TextureEvent> events = stack_->cache().take_events();
+  states_->apply(events);
+  mip_use_->apply(events);
+}
 
 Result<Renderer::Clock::duration> Renderer::take_completions() {
   TextureCache& cache = stack_->cache();
@@ -75,8 +79,7 @@ std::vector<stream::StreamCandidate> Renderer::read_candidates() {
   return candidates;
 }
 
-void Renderer::start_cycle() {
-  const auto candidates = read_candidates();
+void Renderer::start_cycle(const std::vector<stream::StreamCandidate>& candidates) {
   tell_states();
   client_->begin_cycle();
   ++cycles_;

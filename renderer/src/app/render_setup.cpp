@@ -85,6 +85,7 @@ Status Renderer::set_up() {
   controller_ = std::make_unique<stream::AdaptiveController>(std::move(*controller));
   load_bytes_ = controller_->load_bytes();
   states_ = std::make_unique<stream::TextureStates>(scene_.shapes());
+  mip_use_ = std::make_unique<stream::MipUseLedger>(scene_.shapes());
 
   auto stack = RenderStack::create(scene_, *options);
   if (!stack) return stack.error();

@@ -25,6 +25,7 @@
 #include "texstream/render/scene/camera.hpp"
 #include "texstream/render/scene/scene_data.hpp"
 #include "texstream/stream/adaptive_controller.hpp"
+#include "texstream/stream/mip_use_ledger.hpp"
 #include "texstream/stream/stream_client.hpp"
 #include "texstream/stream/texture_states.hpp"
 
@@ -70,7 +71,7 @@ class Renderer {
   // Returns the time waited for the server (lock-step), which is not frame latency.
   Result<Clock::duration> take_completions();
   // A streaming cycle (Algorithm 1, LoadTextures) over the compacted list the frame read back.
-  void start_cycle();
+  void start_cycle(const std::vector<stream::StreamCandidate>& candidates);
   std::vector<stream::StreamCandidate> read_candidates();
   // Loads the whole mip chain (down to level 0) of every texture in `wanted`, waiting for the server and
   // uploading as it goes: render.preload_all before frame 0 and render.blocking_loads each frame. With
@@ -79,8 +80,8 @@ class Renderer {
   Status load_fully(std::vector<stream::StreamCandidate> wanted, bool no_evictions);
   // A submission that only carries the mips committed so far (no drawing, no geometry).
   Status upload_now();
-  // Hands what the cache learnt (published, rejected, failed mips; evictions) to the texture states, which
-  // the frame loop alone feeds: before they are read, and once a frame.
+  // Hands what the cache learnt (published, rejected, failed mips; evictions) to the texture states and the
+  // mip-use ledger, which the frame loop alone feeds: before they are read, and once a frame.
   void tell_states();
 
   // ---- server_checks.cpp ----
@@ -102,6 +103,12 @@ class Renderer {
   CameraLens lens_{};
   std::unique_ptr<RenderStack> stack_;
   std::unique_ptr<stream::TextureStates> states_;
+  // The cache's residency and which mips the view displayed: the mip deficit and the wasted bytes
+  // (docs/design/stream_metrics.md).
+  std::unique_ptr<stream::MipUseLedger> mip_use_;
+  // The latest visibility list read back (the deficit's list on the frames in between); empty before the first.
+  std::vector<stream::StreamCandidate> last_list_;
+  bool have_list_ = false;
   // Seed 000 §3.4: s and b for each cycle from the measured frame latencies (docs/controller.md).
   std::unique_ptr<stream::AdaptiveController> controller_;
   std::unique_ptr<stream::StreamClient> client_;

@@ -9,6 +9,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <thread>
 
 #include "renderer.hpp"
@@ -139,10 +140,12 @@ Status Renderer::render_frame(uint64_t index, bool last) {
 
   // 5. The streaming cycle (Algorithm 1), on the list this frame read back.
   if (rec.read_back_list) {
+    last_list_ = read_candidates();
+    have_list_ = true;
     if (cfg_.render.blocking_loads) {
-      TS_TRY(load_fully(read_candidates(), false));  // the next frame draws every named texture complete
+      TS_TRY(load_fully(last_list_, false));  // the next frame draws every named texture complete
     } else {
-      start_cycle();
+      start_cycle(last_list_);
     }
   }
   if (first) first_frame_stage("cycle");
@@ -158,12 +161,18 @@ Status Renderer::render_frame(uint64_t index, bool last) {
                         static_cast<double>(stack_->cache().stats().bytes_uploaded - uploaded_before));
   tell_states();
 
-  // 7. The frame's record (frames.csv) and, with render.write_every_frames, its PNG: not the run's time.
+  // 7. The frame's record (frames.csv) and, with render.write_every_frames, its PNG: not the run's time. The
+  //    mip deficit is the latest list's against what is resident now, after the events of step 6: the
+  //    residency the next frame draws with.
   const auto measure_start = Clock::now();
+  StreamQuality quality;
+  quality.list_fresh = rec.read_back_list;
+  quality.mip_deficit = have_list_ ? mip_use_->observe(last_list_) : std::numeric_limits<double>::quiet_NaN();
   FrameCapture& capture = stack_->capture();
   const auto pixels = record_.compares() ? capture.pixels().first(size_t{capture.width()} * capture.height() * 4)
                                          : std::span<const std::byte>{};
-  auto frame = record_.add(index, time_s, pose, latency_ms, ms(*waited), counters(), controller_readout(), pixels);
+  auto frame =
+      record_.add(index, time_s, pose, latency_ms, ms(*waited), counters(), controller_readout(), quality, pixels);
   if (!frame) return frame.error();
   if (pairs) (*frame)->latency_off_ms = ms(shared + twin_time);
   if (write) {
@@ -191,6 +200,7 @@ FrameCounters Renderer::counters() const {
   c.server_hits = ss.server_ram_cache_hits;
   c.server_misses = ss.server_ram_cache_misses;
   c.in_flight = ss.in_flight;
+  c.wasted_bytes = mip_use_->bytes_wasted();
   return c;
 }
 
@@ -222,6 +232,9 @@ Result<RunSummary> Renderer::finish() {
   s.controller_mode = std::string(choice_name(controller_->params().mode));
   s.controller_rejected_frames = controller_->frames_rejected();
   s.startup_seconds = startup_seconds_;
+  mip_use_->finish();  // mips still resident leave: those never displayed are wasted too
+  s.wasted_bytes = mip_use_->bytes_wasted();
+  s.wasted_bytes_frac = mip_use_->wasted_fraction();
   TS_TRY(cache.write_stats_json(output_dir_ / "cache.json"));  // budget checks, binds, thrash rate
   TS_TRY(record_.finish(output_dir_));
   // Shut the server down and release the device before the validation counts are read: teardown is validated too.

@@ -42,6 +42,9 @@ const std::vector<Column>& columns() {
       {"ssim", &FrameRecord::ssim},
       {"popin_mse", &FrameRecord::popin_mse},
       {"latency_off_ms", &FrameRecord::latency_off_ms},
+      {"list_fresh", nullptr, nullptr, &FrameRecord::list_fresh},
+      {"mip_deficit", &FrameRecord::mip_deficit},
+      {"wasted_bytes", nullptr, &FrameRecord::wasted_bytes},
   };
   return c;
 }

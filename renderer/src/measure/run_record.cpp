@@ -29,7 +29,7 @@ void RunRecord::start(const FrameCounters& totals, Clock::time_point now) {
 
 Result<FrameRecord*> RunRecord::add(uint64_t index, double time_s, const CameraPose& pose, double latency_ms,
                                     double waited_ms, const FrameCounters& totals, const ControllerReadout& controller,
-                                    std::span<const std::byte> pixels) {
+                                    const StreamQuality& quality, std::span<const std::byte> pixels) {
   const auto now = Clock::now();
   latencies_ms_.push_back(latency_ms);
   sum_load_mb_ += controller.load_size_mb;
@@ -54,6 +54,9 @@ Result<FrameRecord*> RunRecord::add(uint64_t index, double time_s, const CameraP
                                     : std::numeric_limits<double>::quiet_NaN();
   prev_ = totals;
   f.in_flight = totals.in_flight;
+  f.wasted_bytes = totals.wasted_bytes;
+  f.list_fresh = quality.list_fresh;
+  f.mip_deficit = quality.mip_deficit;
   f.camera_still = prev_pose_ && same_pose(*prev_pose_, pose);
   prev_pose_ = pose;
   constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();

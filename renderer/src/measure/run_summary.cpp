@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cmath>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <numeric>
@@ -38,6 +39,9 @@ std::string RunSummary::to_json() const {
   j["texture_count"] = texture_count;
   j["streaming_cycles"] = streaming_cycles;
   j["evictions"] = evictions;
+  j["wasted_bytes"] = wasted_bytes;
+  // JSON has no NaN: nothing uploaded is null.
+  j["wasted_bytes_frac"] = std::isfinite(wasted_bytes_frac) ? nlohmann::json(wasted_bytes_frac) : nlohmann::json();
   j["controller"] = {{"mode", controller_mode},
                      {"avg_load_size_mb", avg_load_size_mb},
                      {"avg_mip_bias", avg_mip_bias},
@@ -56,7 +60,7 @@ std::string RunSummary::to_text() const {
       "  device              {}\n"
       "  frames              {}\n"
       "  frame latency       median {:.2f} ms, avg {:.2f} ms, max {:.2f} ms\n"
-      "  streamed            {} mips, {:.2f} MB in {} cycles\n"
+      "  streamed            {} mips, {:.2f} MB in {} cycles ({:.1f} % never displayed)\n"
       "  server RAM hit rate {:.1f} %\n"
       "  protocol errors     {}\n"
       "  server restarts     {}\n"
@@ -65,9 +69,9 @@ std::string RunSummary::to_text() const {
       "  controller          {}: avg s {:.3f} MB, avg b {:.2f}, avg t_w {:.2f} ms, {} load-time-limited frames\n"
       "  output              {}\n",
       device, frames, frame_latency.median_ms, frame_latency.avg_ms, frame_latency.max_ms, mips_streamed, mb_streamed,
-      streaming_cycles, 100.0 * server_ram_hit_rate, protocol_errors, server_restarts, validation_errors,
-      validation_warnings, textures_resident, texture_count, evictions, controller_mode, avg_load_size_mb, avg_mip_bias,
-      avg_weighted_latency_ms, load_time_limited_frames, output_dir.string());
+      streaming_cycles, 100.0 * wasted_bytes_frac, 100.0 * server_ram_hit_rate, protocol_errors, server_restarts,
+      validation_errors, validation_warnings, textures_resident, texture_count, evictions, controller_mode,
+      avg_load_size_mb, avg_mip_bias, avg_weighted_latency_ms, load_time_limited_frames, output_dir.string());
 }
 
 Status RunSummary::write_json(const std::filesystem::path& file) const {

@@ -1,10 +1,27 @@
 #pragma once
 // Per-frame measurements of one texstream-render run (issue 8), written as <output_dir>/frames.csv next to
 // summary.json and read back by texstream-bench path. One row per frame; the column names are the contract
-// between the two (kFrameLogColumns), so both sides use this one file.
+// between the two (frame_log_columns()), so both sides use this one file.
 //
 // Quantities that a frame does not have are NaN in memory and an empty field in the file: image error
-// without render.reference_dir, pop-in while the camera moves.
+// without render.reference_dir, pop-in while the camera moves, the mip deficit before the first visibility
+// list.
+//
+// Columns, in file order (frame_log_columns(); a unit test keeps this list equal to it), each the field of
+// FrameRecord that says what it holds:
+//   frame, time_s, wall_s, latency_ms, waited_ms, tw_ms, load_size_mb, mip_bias, mips, bytes, bound_pages,
+//   server_hit_rate, in_flight, camera_still, mse, psnr_db, ssim, popin_mse, latency_off_ms, list_fresh,
+//   mip_deficit, wasted_bytes
+//
+// The stream-quality columns (docs/design/stream_metrics.md):
+//   mip_deficit   Σ W·max(0, displayed − wanted) / Σ W over the textures of the latest visibility list read
+//                 back (this frame's when list_fresh, else the last one read; W = the list's weight, wanted =
+//                 its desired level without the mip bias), displayed = max(wanted, finest resident level), or
+//                 the texture's level count when nothing is resident. Residency is taken at the END of the
+//                 frame, after its uploads were published: the state the NEXT frame draws with.
+//   wasted_bytes  running total of the bytes of streamed mips that have left the cache (evicted or replaced)
+//                 without ever having been displayed while resident; mips still resident at the end of the
+//                 run are added in summary.json only (wasted_bytes, wasted_bytes_frac).
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -34,6 +51,9 @@ struct FrameRecord {
   double ssim = 0;
   double popin_mse = 0;       // MSE to the previous frame while the camera is still (NaN otherwise)
   double latency_off_ms = 0;  // render.feedback_pairs: the same frame drawn without feedback (NaN otherwise)
+  bool list_fresh = false;    // the frame read the visibility list back (a streaming cycle started from it)
+  double mip_deficit = 0;     // weighted mip deficit, levels (above; NaN before the first list)
+  uint64_t wasted_bytes = 0;  // bytes of mips that left the cache never displayed, all frames so far (above)
 };
 
 // Column names, in file order.

@@ -20,14 +20,21 @@
 
 namespace texstream::render {
 
-// Running totals as a frame ends; the record turns them into the frame's share.
+// Running totals and levels as a frame ends; the record turns the totals into the frame's share.
 struct FrameCounters {
   uint64_t mips_uploaded = 0;   // texture cache: mips published, all frames
   uint64_t bytes_uploaded = 0;  // and their bytes
   uint64_t bound_pages = 0;     // sparse pages bound now
   uint64_t server_hits = 0;     // server RAM cache hits and misses, all frames
   uint64_t server_misses = 0;
-  uint64_t in_flight = 0;  // requests outstanding now
+  uint64_t in_flight = 0;     // requests outstanding now
+  uint64_t wasted_bytes = 0;  // mips that left the cache never displayed, all frames (written as is)
+};
+
+// What the view got of its mips as the frame ends (frame_log.hpp, docs/design/stream_metrics.md).
+struct StreamQuality {
+  bool list_fresh = false;  // this frame read the visibility list back
+  double mip_deficit = 0;   // weighted mip deficit of the latest list (NaN: no list read yet)
 };
 
 // The adaptive controller's outputs after the frame (seed 000 §3.4): for the next cycle.
@@ -54,11 +61,11 @@ class RunRecord {
   void count_load_time_limited() { ++load_time_limited_frames_; }
 
   // Adds frame `index` at virtual time `time_s`, seen from `pose`: its latency and lock-step wait, its
-  // share of `totals`, the controller's outputs, and (compares()) its pixels. Returns its record, for the
-  // fields only some runs have (latency_off_ms).
+  // share of `totals`, the controller's outputs, the stream quality, and (compares()) its pixels. Returns its
+  // record, for the fields only some runs have (latency_off_ms).
   Result<FrameRecord*> add(uint64_t index, double time_s, const CameraPose& pose, double latency_ms, double waited_ms,
                            const FrameCounters& totals, const ControllerReadout& controller,
-                           std::span<const std::byte> pixels = {});
+                           const StreamQuality& quality, std::span<const std::byte> pixels = {});
 
   // The latency of the last frame added (0 before the first).
   double last_latency_ms() const { return latencies_ms_.empty() ? 0.0 : latencies_ms_.back(); }

@@ -33,6 +33,10 @@ struct RunSummary {
   uint64_t texture_count = 0;
   uint64_t streaming_cycles = 0;
   uint64_t evictions = 0;
+  // Streamed mips never displayed while resident (MipUseLedger, docs/design/stream_metrics.md): their bytes,
+  // and those ÷ every byte uploaded (render.preload_all included; NaN when nothing was uploaded).
+  uint64_t wasted_bytes = 0;
+  double wasted_bytes_frac = 0;
   // Adaptive controller (seed 000 §3.4): per-frame averages of its outputs and of t_w.
   std::string controller_mode;
   double avg_load_size_mb = 0;              // s, 10^6 bytes

@@ -1,0 +1,60 @@
+#pragma once
+// Which streamed mips the view ever used (issue 25, "skip what is not needed"; docs/design/stream_metrics.md).
+// Mirrors the cache's residency from its events (the same TextureEvents TextureStates hears) and, once a
+// frame, the latest visibility list: a resident mip is *displayed* in a frame when its texture is in the list
+// and it is a level the texture is sampled at, floor(d) or, for a fractional d, ceil(d) too (trilinear reads
+// both), with d = the wanted level clamped to the resident run [finest, coarsest]. A mip's bytes are *wasted*
+// when it leaves the cache (evicted, replaced by a second upload of the same level, or still resident at
+// finish()) without ever having been displayed while resident.
+//
+// Its residency also gives the frame's weighted mip deficit (mip_deficit.hpp), so both measures see exactly
+// what the shader samples: the run of resident levels ending at the coarsest, as TextureCache::publish.
+//
+// Cost: apply() is O(events), observe() O(list), finish() O(textures); memory 8 bytes per texture besides
+// the shapes. Single-threaded: the frame loop alone calls it.
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "texstream/common/ids.hpp"
+#include "texstream/protocol/completion_check.hpp"
+#include "texstream/stream/mip_deficit.hpp"
+#include "texstream/stream/texture_states.hpp"
+
+namespace texstream::stream {
+
+class MipUseLedger {
+ public:
+  // `shapes`: the scene's texture table, indexed by texture id (a mip's bytes are mip_bytes of its shape).
+  explicit MipUseLedger(std::vector<TextureShape> shapes);
+
+  // The cache's events, oldest first: kCommitted makes the mip resident and counts its bytes as uploaded,
+  // kInvalidated takes every resident mip of the texture out. Other kinds and unknown textures change nothing.
+  void apply(std::span<const TextureEvent> events);
+  // The weighted mip deficit of `list` against what is resident now; marks the mips the list samples now as
+  // displayed.
+  double observe(std::span<const StreamCandidate> list);
+  // The run ends: every mip still resident leaves (wasted if never displayed). Residency is empty after it.
+  void finish();
+
+  ResidentLevels levels(TextureId texture) const;  // nothing resident for an unknown texture
+  uint64_t bytes_uploaded() const { return bytes_uploaded_; }
+  uint64_t bytes_wasted() const { return bytes_wasted_; }  // of mips that have left so far
+  // bytes_wasted() / bytes_uploaded(); NaN before any upload.
+  double wasted_fraction() const;
+
+ private:
+  struct Use {
+    uint32_t resident = 0;   // bit L: mip L resident (as TextureCache's mask)
+    uint32_t displayed = 0;  // bit L: the resident copy of mip L has been displayed
+  };
+  // Mips in `leaving` (a subset of the resident mask) leave the cache.
+  void leave(uint32_t texture, uint32_t leaving);
+
+  std::vector<TextureShape> shapes_;
+  std::vector<Use> uses_;
+  uint64_t bytes_uploaded_ = 0;
+  uint64_t bytes_wasted_ = 0;
+};
+
+}  // namespace texstream::stream
