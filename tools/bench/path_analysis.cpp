@@ -90,7 +90,7 @@ TimeToDetail time_to_detail(const std::vector<render::FrameRecord>& frames, doub
   for (const render::FrameRecord& f : frames) {
     if (f.time_s < cut_s || f.time_s >= segment_end_s) continue;
     list_since_cut = list_since_cut || f.list_fresh;
-    if (list_since_cut && std::isfinite(f.mip_deficit) && f.mip_deficit <= kZeroDeficit) {
+    if (list_since_cut && std::isfinite(f.mip_deficit) && f.mip_deficit <= kDetailDeficit) {
       d.deficit_s = f.time_s + frame_time_s - cut_s;  // frame f + 1 draws the residency f ended with
       break;
     }

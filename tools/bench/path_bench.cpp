@@ -8,17 +8,19 @@
 //   reference   render.preload_all: every mip of every texture resident before frame 0, lock-step, every
 //               frame written, no Eq. 8 blending (a plain mipmapped texture path) — the ground truth the
 //               others are compared with (render.reference_dir)
-//   resident    the same all-resident renderer in real time: the "no streaming" latency; it must reproduce
-//               the reference exactly
-//   resident_blend   all resident with Eq. 8 blending: the error of the blending alone
-//   ours        the configuration as given (adaptive controller, Eq. 8 blending)
-//   baseline    the seed's baseline: controller.mode = none, stream.colormap_blend = false
-//   blocking    render.blocking_loads: each visible texture's whole chain before drawing (seed 002 §2)
+//   ours        the configuration as given (default: controller.mode = auto, stream.blend = converge)
 //   inprocess   ours with the server on a thread of the renderer (prices the process boundary)
-//   alpha_*/beta_*   seed 000 Tables 3-6
+//   resident_blend   all resident with the configured blend: must reproduce the reference (converge)
+//   baseline    the seed's baseline: controller.mode = none, stream.colormap_blend = false
+//   seed        the seed's method: controller.mode = seed (Eq. 4-7, α), stream.blend = seed (Eq. 8)
+//   full run only:
+//   resident    all resident, no blending: the "no streaming" latency; must reproduce the reference
+//   resident_seed_blend   all resident with Eq. 8: the seed blend's own error floor
+//   blocking    render.blocking_loads: each visible texture's whole chain before drawing (seed 002 §2)
+//   alpha_*     seed mode around the configured α (seed 000 Table 3); beta_*: ours with β = 0, 2, 4
 //   lockstep_a/b     lock-step, fixed load size: run twice, every per-frame column must be bit-equal
 //
-// --quick: a 4 s section of the path around its first cut, 256x144, one α and one β besides ours; under 60 s
+// --quick: a 4 s section of the path around its first cut, 256x144, no sweeps; under 60 s
 // on the 2-core lavapipe machine. Ends with `summary: lockstep_identical=... max_latency_ratio=...
 // popin_ratio=... integrated_error_ratio=... streaming_overhead=... process_boundary_cost=...
 // time_to_detail_ratio=... mip_deficit_ratio=... p99_latency_ratio=... resident_blend_psnr_db=...
@@ -42,6 +44,7 @@
 #include "path_runner.hpp"
 #include "texstream/common/camera_path.hpp"
 #include "texstream/common/config.hpp"
+#include "texstream/common/config_choice.hpp"
 #include "texstream/render/measure/frame_log.hpp"
 #include "texstream/render/scene/scene_data.hpp"
 
@@ -212,36 +215,42 @@ int run_path(const PathArgs& args) {
   runs.push_back(make("reference", "reference", "reference (all resident, lock-step)", reference_sets()));
   runs.back().measured = false;
   runs.push_back(make("ours", "baseline",
-                      "ours (as configured: α = " + fmt_num(alpha_ms) +
-                          " ms, β = " + fmt_num(base_config->controller.beta) + ", Eq. 8 blend)",
+                      "ours (as configured: controller " +
+                          std::string(choice_name(base_config->controller.mode)) + ", β = " +
+                          fmt_num(base_config->controller.beta) + ", blend " +
+                          std::string(choice_name(base_config->stream.blend)) + ")",
                       {}));
   // Ratios are taken between neighbours in run order (ours, in-process, resident, baseline), so slow drifts
   // of a shared machine's load affect both sides alike.
   runs.push_back(make("inprocess", "baseline", "ours, server in a thread (no process boundary)", {}, true));
-  // The all-resident renderer without and with Eq. 8: the first must reproduce the reference exactly (a check
-  // of the reference itself), the second shows the error the blending makes on its own (it mixes in the
-  // colormap by the displayed level even when every mip is resident, seed 000 Eq. 8).
-  runs.push_back(make("resident_blend", "baseline", "all textures resident, Eq. 8 blend (the blending's own error)",
+  // All resident with the configured blend: it must reproduce the reference (the converging blend is exact
+  // at the wanted level); with the seed's Eq. 8 it keeps an error floor of its own (full run only).
+  runs.push_back(make("resident_blend", "baseline", "all textures resident, configured blend (must match the reference)",
                       {"render.preload_all=true"}));
-  runs.push_back(make("resident", "baseline", "all textures resident (no streaming, no blending)",
-                      {"render.preload_all=true", "stream.colormap_blend=false"}));
   runs.push_back(make("baseline", "baseline", "seed baseline (no adaptive streaming, no colour blending)",
                       {"controller.mode=none", "stream.colormap_blend=false"}));
-  runs.push_back(
-      make("blocking", "baseline", "blocking loads (whole chains before drawing)", {"render.blocking_loads=true"}));
-  // Seed 000 Table 3 sweeps α = 12, 14, 16, 18 ms around its chosen 16 ms: the same ratios around the
-  // configured α (0.75, 0.875, [1], 1.125), since a sensible α depends on the device (§4.3).
-  std::vector<double> alphas;
-  for (double f : res.quick ? std::vector<double>{0.75} : std::vector<double>{0.75, 0.875, 1.125})
-    alphas.push_back(std::round(alpha_ms * f * 10) / 10);
-  const std::vector<double> betas = res.quick ? std::vector<double>{0} : std::vector<double>{0, 2, 4};
-  for (double a : alphas) {
-    runs.push_back(make(fmt_name("alpha_", a), "alpha", "α = " + fmt_num(a) + " ms",
-                        {"controller.mode=adaptive", "controller.alpha_ms=" + fmt_num(a), "controller.beta=8"}));
-  }
-  for (double b : betas) {
-    runs.push_back(make(fmt_name("beta_", b), "beta", "β = " + fmt_num(b),
-                        {"controller.mode=adaptive", "controller.beta=" + fmt_num(b)}));
+  // The seed's method as published: Eq. 4-7 with the configured α, Eq. 8 blending (seed 000 §3.4, §3.7).
+  runs.push_back(make("seed", "baseline", "seed method (Eq. 4-7, α = " + fmt_num(alpha_ms) + " ms, Eq. 8 blend)",
+                      {"controller.mode=seed", "stream.blend=seed"}));
+  if (!res.quick) {
+    runs.push_back(make("resident", "baseline", "all textures resident (no streaming, no blending)",
+                        {"render.preload_all=true", "stream.colormap_blend=false"}));
+    runs.push_back(make("resident_seed_blend", "baseline",
+                        "all textures resident, Eq. 8 blend (the seed blend's own error)",
+                        {"render.preload_all=true", "stream.blend=seed"}));
+    runs.push_back(
+        make("blocking", "baseline", "blocking loads (whole chains before drawing)", {"render.blocking_loads=true"}));
+    // Seed 000 Table 3 sweeps α = 12, 14, 16, 18 ms around its chosen 16 ms: the same ratios around the
+    // configured α (0.75, 0.875, [1], 1.125) in mode seed, since a sensible α depends on the device (§4.3);
+    // β (0, 2, 4; 8 is ours) in the configured mode.
+    for (double f : {0.75, 0.875, 1.125}) {
+      const double a = std::round(alpha_ms * f * 10) / 10;
+      runs.push_back(make(fmt_name("alpha_", a), "alpha", "seed mode, α = " + fmt_num(a) + " ms",
+                          {"controller.mode=seed", "stream.blend=seed", "controller.alpha_ms=" + fmt_num(a)}));
+    }
+    for (double b : {0.0, 2.0, 4.0}) {
+      runs.push_back(make(fmt_name("beta_", b), "beta", "ours, β = " + fmt_num(b), {"controller.beta=" + fmt_num(b)}));
+    }
   }
   const std::vector<std::string> lockstep{"render.lockstep=true", "controller.mode=fixed",
                                           "controller.fixed_load_mb=" + fmt_num(kLockstepLoadMb),
