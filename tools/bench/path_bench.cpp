@@ -122,6 +122,8 @@ struct PathArgs {
   bool quick = false;
   bool keep_frames = false;
   std::string scene, path, out, config, size;  // empty: the default
+  unsigned repeat = 1;          // --repeat: ours, baseline and seed this many times, interleaved
+  std::vector<std::string> only;  // --only: run just these configurations (and the reference)
 };
 
 int run_path(const PathArgs& args) {
@@ -264,6 +266,31 @@ int run_path(const PathArgs& args) {
                         {"render.lockstep=true", "controller.mode=none", "stream.colormap_blend=false"}));
   }
 
+  // --repeat: more pairs of the real-time runs whose ratios are the headline, interleaved with the first ones
+  // so a drift of the machine's load meets every configuration alike.
+  for (unsigned k = 2; k <= args.repeat; ++k) {
+    for (const char* name : {"ours", "baseline", "seed"}) {
+      const ConfigRun* first = res.find(name);
+      if (!first) continue;
+      ConfigRun again = *first;
+      again.name = std::string(name) + "_" + std::to_string(k);
+      again.label = first->label + " (run " + std::to_string(k) + ")";
+      runs.push_back(std::move(again));
+    }
+  }
+  if (!args.only.empty()) {
+    // A repeat ("ours_2") goes with its configuration ("ours").
+    auto configuration = [](const std::string& name) {
+      const size_t u = name.find_last_of('_');
+      const bool repeat = u != std::string::npos && u + 1 < name.size() &&
+                          name.find_first_not_of("0123456789", u + 1) == std::string::npos;
+      return repeat ? name.substr(0, u) : name;
+    };
+    std::erase_if(runs, [&](const ConfigRun& r) {
+      return r.name != "reference" &&
+             std::find(args.only.begin(), args.only.end(), configuration(r.name)) == args.only.end();
+    });
+  }
   std::printf("path bench: %s, %zu frames of %ux%u, %zu configurations, output %s\n", plan.scene.c_str(),
               static_cast<size_t>(std::floor(res.path_duration_s / res.frame_time_s)) + 1, res.width, res.height,
               runs.size(), plan.out.c_str());
@@ -286,18 +313,42 @@ int run_path(const PathArgs& args) {
     return r && r->failure.empty() && r->exit_code == 0 ? &r->analysis : nullptr;
   };
   HeadlineRatios& h = res.ratios;
-  const RunAnalysis *ours = get("ours"), *base = get("baseline"), *resident = get("resident_blend"),
-                    *inproc = get("inprocess");
-  h.max_latency_ratio = ours && base ? headline_ratio(base->latency_ms.max, ours->latency_ms.max) : kNaN;
-  h.popin_ratio = ours && base ? headline_ratio(base->max_popin_mse, ours->max_popin_mse) : kNaN;
-  h.integrated_error_ratio = ours && base ? headline_ratio(base->integrated_mse, ours->integrated_mse) : kNaN;
+  const RunAnalysis *ours = get("ours"), *resident = get("resident_blend"), *inproc = get("inprocess");
+  // baseline ÷ ours (and baseline ÷ seed) per pair of runs made together; the headline is the median.
+  for (unsigned k = 1; k <= args.repeat; ++k) {
+    const std::string suffix = k == 1 ? "" : "_" + std::to_string(k);
+    const RunAnalysis* base = get("baseline" + suffix);
+    for (const char* who : {"ours", "seed"}) {
+      const RunAnalysis* x = get(who + suffix);
+      if (!x || !base) continue;
+      const std::string key = std::string(who) == "ours" ? "" : "seed_";
+      auto add = [&](const std::string& name, double v) { h.per_pair[key + name].push_back(v); };
+      add("max_latency_ratio", headline_ratio(base->latency_ms.max, x->latency_ms.max));
+      add("popin_ratio", headline_ratio(base->max_popin_mse, x->max_popin_mse));
+      add("integrated_error_ratio", headline_ratio(base->integrated_mse, x->integrated_mse));
+      add("time_to_detail_ratio",
+          headline_ratio(median_time_to_detail(base->detail), median_time_to_detail(x->detail)));
+      add("mip_deficit_ratio", headline_ratio(base->integrated_mip_deficit, x->integrated_mip_deficit));
+      add("p99_latency_ratio", headline_ratio(base->p99_latency_ms, x->p99_latency_ms));
+    }
+  }
+  auto median_of = [&](const std::string& key) {
+    auto it = h.per_pair.find(key);
+    if (it == h.per_pair.end()) return kNaN;
+    std::vector<double> known;  // a pair with no comparison (NaN) does not vote
+    for (double v : it->second) {
+      if (!std::isnan(v)) known.push_back(v);
+    }
+    return nearest_rank(known, 0.5);
+  };
+  h.max_latency_ratio = median_of("max_latency_ratio");
+  h.popin_ratio = median_of("popin_ratio");
+  h.integrated_error_ratio = median_of("integrated_error_ratio");
+  h.time_to_detail_ratio = median_of("time_to_detail_ratio");
+  h.mip_deficit_ratio = median_of("mip_deficit_ratio");
+  h.p99_latency_ratio = median_of("p99_latency_ratio");
   h.streaming_overhead = ours && resident ? headline_ratio(ours->latency_ms.median, resident->latency_ms.median) : kNaN;
   h.process_boundary_cost = ours && inproc ? headline_ratio(ours->latency_ms.median, inproc->latency_ms.median) : kNaN;
-  h.time_to_detail_ratio =
-      ours && base ? headline_ratio(median_time_to_detail(base->detail), median_time_to_detail(ours->detail)) : kNaN;
-  h.mip_deficit_ratio =
-      ours && base ? headline_ratio(base->integrated_mip_deficit, ours->integrated_mip_deficit) : kNaN;
-  h.p99_latency_ratio = ours && base ? headline_ratio(base->p99_latency_ms, ours->p99_latency_ms) : kNaN;
   h.resident_blend_psnr_db = resident ? resident->psnr_db.median : kNaN;
   h.wasted_bytes_frac = ours ? res.find("ours")->wasted_bytes_frac : kNaN;
   if (get("lockstep_a") && get("lockstep_b")) {
@@ -360,6 +411,14 @@ std::function<int()> define_path(CLI::App& app) {
   app.add_option("--config", a->config, "renderer configuration (default: the bench's)");
   app.add_option("--size", a->size, "frame size WxH");
   app.add_flag("--keep-frames", a->keep_frames, "keep the runs' frames");
+  app.add_option("--repeat", a->repeat,
+                 "run ours, baseline and seed this many times, interleaved; the ratios are the median over the "
+                 "pairs, the report gives their range")
+      ->check(CLI::Range(1u, 20u));
+  app.add_option("--only", a->only,
+                 "run only these configurations (comma-separated names, e.g. ours,baseline,seed); the reference "
+                 "always runs")
+      ->delimiter(',');
   return [a] { return run_path(*a); };
 }
 

@@ -3,6 +3,7 @@
 // per-frame log gives (path_analysis.hpp), plus the headline ratios. Written as results.json and report.md
 // (path_report.cpp); the plot script reads results.json and the raw per-frame CSVs.
 #include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -39,6 +40,9 @@ struct HeadlineRatios {
   double p99_latency_ratio = 0;       // p99 frame latency
   double resident_blend_psnr_db = 0;  // median PSNR of resident_blend: all resident, the default blend
   double wasted_bytes_frac = 0;       // ours: bytes of mips never displayed ÷ bytes streamed
+  // Every baseline ÷ ours ratio above, one value per pair of runs (--repeat); "seed_<key>": baseline ÷ seed.
+  // The scalar fields are the medians (nearest rank) of these.
+  std::map<std::string, std::vector<double>> per_pair;
 };
 
 struct BenchResults {
