@@ -1,4 +1,5 @@
 // texstream-bench path [--quick] [--scene DIR] [--path FILE] [--out DIR] [--config FILE] [--size WxH] [--keep-frames]
+//                      [--until S] [--repeat N] [--only NAME,...]
 //
 // Run time against image error on one camera path (issue 8; seed 000 §4.1-4.5, seed 004 §4.1). Every
 // configuration is a texstream-render process (texstream-render-inprocess for the in-process loader) over the
@@ -122,6 +123,7 @@ struct PathArgs {
   bool quick = false;
   bool keep_frames = false;
   std::string scene, path, out, config, size;  // empty: the default
+  double until_s = 0;           // --until: the first this many seconds of the path (0: all)
   unsigned repeat = 1;          // --repeat: ours, baseline and seed this many times, interleaved
   std::vector<std::string> only;  // --only: run just these configurations (and the reference)
 };
@@ -178,7 +180,8 @@ int run_path(const PathArgs& args) {
 
   // The path this bench runs: the whole file, or (--quick) the section around its first cut.
   CameraPath bench_path = *path;
-  if (res.quick) bench_path = section_around_first_cut(*path, kQuickBeforeCutS, kQuickAfterCutS);
+  if (args.until_s > 0) bench_path = path_section(bench_path, 0.0, std::min(args.until_s, bench_path.duration_s()));
+  if (res.quick) bench_path = section_around_first_cut(bench_path, kQuickBeforeCutS, kQuickAfterCutS);
   plan.path_file = plan.out / "path.txt";
   {
     std::ofstream f(plan.path_file);
@@ -411,6 +414,8 @@ std::function<int()> define_path(CLI::App& app) {
   app.add_option("--config", a->config, "renderer configuration (default: the bench's)");
   app.add_option("--size", a->size, "frame size WxH");
   app.add_flag("--keep-frames", a->keep_frames, "keep the runs' frames");
+  app.add_option("--until", a->until_s, "run only the first this many seconds of the camera path")
+      ->check(CLI::PositiveNumber);
   app.add_option("--repeat", a->repeat,
                  "run ours, baseline and seed this many times, interleaved; the ratios are the median over the "
                  "pairs, the report gives their range")
