@@ -1,4 +1,5 @@
 // texstream-bench path [--quick] [--scene DIR] [--path FILE] [--out DIR] [--config FILE] [--size WxH] [--keep-frames]
+//                      [--reference preload|lockstep-load]
 //
 // Run time against image error on one camera path (issue 8; seed 000 §4.1-4.5, seed 004 §4.1). Every
 // configuration is a texstream-render process (texstream-render-inprocess for the in-process loader) over the
@@ -7,9 +8,12 @@
 //
 //   reference   render.preload_all: every mip of every texture resident before frame 0, lock-step, every
 //               frame written, no Eq. 8 blending (a plain mipmapped texture path) — the ground truth the
-//               others are compared with (render.reference_dir)
+//               others are compared with (render.reference_dir). A scene that cannot be resident at once
+//               (resident_cache) gets render.load_wanted_before_drawing instead: the same frames, each frame's
+//               mips loaded before it is drawn; --reference forces either
 //   resident    the same all-resident renderer in real time: the "no streaming" latency; it must reproduce
-//               the reference exactly
+//               the reference exactly (with resident_blend, skipped with a note when the scene cannot be
+//               resident)
 //   resident_blend   all resident with Eq. 8 blending: the error of the blending alone
 //   ours        the configuration as given (adaptive controller, Eq. 8 blending)
 //   baseline    the seed's baseline: controller.mode = none, stream.colormap_blend = false
@@ -118,6 +122,7 @@ struct PathArgs {
   bool quick = false;
   bool keep_frames = false;
   std::string scene, path, out, config, size;  // empty: the default
+  std::string reference;  // kReferencePreload, kReferenceLockstepLoad; empty: preload if the scene fits
 };
 
 int run_path(const PathArgs& args) {
@@ -164,11 +169,19 @@ int run_path(const PathArgs& args) {
                  path ? "no keyframes" : path.error().message.c_str());
     return 2;
   }
+  // Reference frames by preload when the scene fits the cache at once, else by loading each frame's mips
+  // before it is drawn (the same frames, docs/design/reference_frames.md).
   const ResidentCache cache = resident_cache(*scene);
-  if (!cache.error.empty()) {
-    std::fprintf(stderr, "path bench: no reference frames possible: %s\n", cache.error.c_str());
+  const bool resident_possible = cache.error.empty();
+  ReferenceMode reference = resident_possible ? ReferenceMode::kPreload : ReferenceMode::kLockstepLoad;
+  if (!args.reference.empty()) {
+    reference = args.reference == kReferencePreload ? ReferenceMode::kPreload : ReferenceMode::kLockstepLoad;
+  }
+  if (reference == ReferenceMode::kPreload && !resident_possible) {
+    std::fprintf(stderr, "path bench: --reference %s is impossible: %s\n", kReferencePreload, cache.error.c_str());
     return 1;
   }
+  res.reference_mode = reference == ReferenceMode::kPreload ? kReferencePreload : kReferenceLockstepLoad;
 
   // The path this bench runs: the whole file, or (--quick) the section around its first cut.
   CameraPath bench_path = *path;
@@ -203,12 +216,20 @@ int run_path(const PathArgs& args) {
   res.path_duration_s = bench_path.duration_s();
   res.cuts_s = cut_times(bench_path);
   plan.common = path_run_sets(plan.scene, plan.path_file, res.frame_time_s, res.width, res.height);
-  const std::vector<std::string> resident_sets = cache.sets();
-  plan.common.insert(plan.common.end(), resident_sets.begin(), resident_sets.end());
+  // Every run gets the cache that holds the whole scene when there is one (so the all-resident runs and the
+  // streaming runs share it); otherwise the configuration's.
+  if (resident_possible) {
+    const std::vector<std::string> resident_sets = cache.sets();
+    plan.common.insert(plan.common.end(), resident_sets.begin(), resident_sets.end());
+  }
 
   // The configurations, in run order. The reference comes first: everything else is measured against it.
   std::vector<ConfigRun>& runs = res.runs;
-  runs.push_back(make("reference", "reference", "reference (all resident, lock-step)", reference_sets()));
+  runs.push_back(make("reference", "reference",
+                      reference == ReferenceMode::kPreload
+                          ? "reference (all resident, lock-step)"
+                          : "reference (each frame's mips loaded before it is drawn, lock-step)",
+                      reference_sets(reference)));
   runs.back().measured = false;
   runs.push_back(make("ours", "baseline",
                       "ours (as configured: α = " + fmt_num(alpha_ms) +
@@ -220,10 +241,15 @@ int run_path(const PathArgs& args) {
   // The all-resident renderer without and with Eq. 8: the first must reproduce the reference exactly (a check
   // of the reference itself), the second shows the error the blending makes on its own (it mixes in the
   // colormap by the displayed level even when every mip is resident, seed 000 Eq. 8).
-  runs.push_back(make("resident_blend", "baseline", "all textures resident, Eq. 8 blend (the blending's own error)",
-                      {"render.preload_all=true"}));
-  runs.push_back(make("resident", "baseline", "all textures resident (no streaming, no blending)",
-                      {"render.preload_all=true", "stream.colormap_blend=false"}));
+  if (resident_possible) {
+    runs.push_back(make("resident_blend", "baseline", "all textures resident, Eq. 8 blend (the blending's own error)",
+                        {"render.preload_all=true"}));
+    runs.push_back(make("resident", "baseline", "all textures resident (no streaming, no blending)",
+                        {"render.preload_all=true", "stream.colormap_blend=false"}));
+  } else {
+    res.notes.push_back("The all-resident runs (resident, resident_blend) were skipped: " + cache.error +
+                        ". Ratios that need them are not measured.");
+  }
   runs.push_back(make("baseline", "baseline", "seed baseline (no adaptive streaming, no colour blending)",
                       {"controller.mode=none", "stream.colormap_blend=false"}));
   runs.push_back(
@@ -338,6 +364,11 @@ std::function<int()> define_path(CLI::App& app) {
   app.add_option("--config", a->config, "renderer configuration (default: the bench's)");
   app.add_option("--size", a->size, "frame size WxH");
   app.add_flag("--keep-frames", a->keep_frames, "keep the runs' frames");
+  app.add_option("--reference", a->reference,
+                 "how the reference frames are made: preload (every texture resident before frame 0) or "
+                 "lockstep-load (each frame's mips loaded before it is drawn); default: preload if the scene fits "
+                 "the cache at once")
+      ->check(CLI::IsMember({kReferencePreload, kReferenceLockstepLoad}));
   return [a] { return run_path(*a); };
 }
 
