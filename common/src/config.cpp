@@ -81,7 +81,8 @@ void visit_keys(Config& c, V&& v) {
     kAny);
   v("render", "pace_frames", c.render.pace_frames, "bool",
     "Real time: frame N starts no earlier than N x frame_time_ms after frame 0, like a display at 1000/frame_time_ms "
-    "Hz, so a fast device does not fly the camera path faster than its speed (ignored in lock-step and window mode)",
+    "Hz, so a fast device does not fly the camera path faster than its speed (ignored in lock-step, with "
+    "render.load_wanted_before_drawing and in window mode)",
     kAny);
   v("render", "camera_path", c.render.camera_path, "path", "Camera path file; empty: <scene>/camera_path.txt", kAny);
   v("render", "output_dir", c.render.output_dir, "path", "Folder for frames and the run summary", kAny);
@@ -111,8 +112,16 @@ void visit_keys(Config& c, V&& v) {
     "Blocking baseline (seed 002 §2): each frame loads the full mip chain of every texture the last visibility list "
     "named before drawing",
     kAny);
+  v("render", "load_wanted_before_drawing", c.render.load_wanted_before_drawing, "bool",
+    "Reference frames for a scene that cannot be resident at once: each frame is first drawn with feedback only "
+    "(every mesh kept, tau = 0), then every mip it samples is loaded down to its wanted level (no load size, no "
+    "bias) and only then is it drawn, so every pixel samples the levels a render.preload_all run samples "
+    "(docs/design/reference_frames.md). The cache must hold one frame's mips (else the run ends naming "
+    "cache.layers and cache.memory_bytes)",
+    kAny);
   v("render", "reference_dir", c.render.reference_dir, "path",
-    "Output folder of a preload_all run of the same path and size; non-empty: each frame's MSE, PSNR and SSIM against "
+    "Output folder of a reference run (render.preload_all or render.load_wanted_before_drawing) of the same path "
+    "and size; non-empty: each frame's MSE, PSNR and SSIM against "
     "its frames/frame_NNNNN.png go to frames.csv",
     kAny);
   v("render", "staging_bytes", c.render.staging_bytes, "bytes", "Host-visible staging ring for uploads into the cache",
@@ -425,6 +434,13 @@ Status Config::validate() const {
   }
   if (render.preload_all && render.blocking_loads) {
     return bad("render.preload_all", "and render.blocking_loads: choose one (both are baselines of their own)");
+  }
+  if (render.load_wanted_before_drawing) {
+    const char* key = "render.load_wanted_before_drawing";
+    if (render.preload_all) return bad(key, "and render.preload_all: choose one (both make reference frames)");
+    if (render.blocking_loads) return bad(key, "and render.blocking_loads: choose one (each loads before drawing)");
+    if (!render.feedback) return bad(key, "needs render.feedback = true: the frame's mips come from its feedback");
+    if (render.feedback_pairs) return bad(key, "cannot be used with render.feedback_pairs (a real-time measurement)");
   }
   return ok_status();
 }

@@ -73,6 +73,18 @@ TEST(Config, RenderModesThatExcludeEachOtherAreRefused) {
   EXPECT_NE(baselines.find("render.blocking_loads"), std::string::npos) << baselines;
   EXPECT_TRUE(parse_config("", "t", {"render.preload_all=true"}).ok());
   EXPECT_TRUE(parse_config("", "t", {"render.blocking_loads=true"}).ok());
+
+  // render.load_wanted_before_drawing: another way to make reference frames and another load-before-drawing
+  // mode, and it reads what the frame wants from the feedback pass.
+  const std::string wanted = "render.load_wanted_before_drawing=true";
+  for (const char* other : {"render.preload_all=true", "render.blocking_loads=true", "render.feedback=false",
+                            "render.feedback_pairs=true"}) {
+    const std::string e = error_of("", {wanted, other});
+    EXPECT_NE(e.find("'render.load_wanted_before_drawing'"), std::string::npos) << other << ": " << e;
+    const std::string other_key = std::string(other).substr(0, std::string(other).find('='));
+    EXPECT_NE(e.find(other_key), std::string::npos) << other << ": " << e;
+  }
+  EXPECT_TRUE(parse_config("", "t", {wanted}).ok());
 }
 
 // Each fixed-value key reads its names from its enum's one table: a name outside it is refused naming the key

@@ -1,5 +1,6 @@
 // texstream-bench path [--quick] [--scene DIR] [--path FILE] [--out DIR] [--config FILE] [--size WxH] [--keep-frames]
 //                      [--until S] [--repeat N] [--only NAME,...]
+//                      [--reference preload|lockstep-load]
 //
 // Run time against image error on one camera path (issue 8; seed 000 §4.1-4.5, seed 004 §4.1). Every
 // configuration is a texstream-render process (texstream-render-inprocess for the in-process loader) over the
@@ -8,7 +9,9 @@
 //
 //   reference   render.preload_all: every mip of every texture resident before frame 0, lock-step, every
 //               frame written, no Eq. 8 blending (a plain mipmapped texture path) — the ground truth the
-//               others are compared with (render.reference_dir)
+//               others are compared with (render.reference_dir). A scene that cannot be resident at once
+//               (resident_cache) gets render.load_wanted_before_drawing instead: the same frames, each frame's
+//               mips loaded before it is drawn; --reference forces either
 //   ours        the configuration as given (default: controller.mode = auto, stream.blend = converge)
 //   inprocess   ours with the server on a thread of the renderer (prices the process boundary)
 //   resident_blend   all resident with the configured blend: must reproduce the reference (converge)
@@ -126,6 +129,7 @@ struct PathArgs {
   double until_s = 0;           // --until: the first this many seconds of the path (0: all)
   unsigned repeat = 1;          // --repeat: ours, baseline and seed this many times, interleaved
   std::vector<std::string> only;  // --only: run just these configurations (and the reference)
+  std::string reference;  // kReferencePreload, kReferenceLockstepLoad; empty: preload if the scene fits
 };
 
 int run_path(const PathArgs& args) {
@@ -172,11 +176,19 @@ int run_path(const PathArgs& args) {
                  path ? "no keyframes" : path.error().message.c_str());
     return 2;
   }
+  // Reference frames by preload when the scene fits the cache at once, else by loading each frame's mips
+  // before it is drawn (the same frames, docs/design/reference_frames.md).
   const ResidentCache cache = resident_cache(*scene);
-  if (!cache.error.empty()) {
-    std::fprintf(stderr, "path bench: no reference frames possible: %s\n", cache.error.c_str());
+  const bool resident_possible = cache.error.empty();
+  ReferenceMode reference = resident_possible ? ReferenceMode::kPreload : ReferenceMode::kLockstepLoad;
+  if (!args.reference.empty()) {
+    reference = args.reference == kReferencePreload ? ReferenceMode::kPreload : ReferenceMode::kLockstepLoad;
+  }
+  if (reference == ReferenceMode::kPreload && !resident_possible) {
+    std::fprintf(stderr, "path bench: --reference %s is impossible: %s\n", kReferencePreload, cache.error.c_str());
     return 1;
   }
+  res.reference_mode = reference == ReferenceMode::kPreload ? kReferencePreload : kReferenceLockstepLoad;
 
   // The path this bench runs: the whole file, or (--quick) the section around its first cut.
   CameraPath bench_path = *path;
@@ -212,12 +224,20 @@ int run_path(const PathArgs& args) {
   res.path_duration_s = bench_path.duration_s();
   res.cuts_s = cut_times(bench_path);
   plan.common = path_run_sets(plan.scene, plan.path_file, res.frame_time_s, res.width, res.height);
-  const std::vector<std::string> resident_sets = cache.sets();
-  plan.common.insert(plan.common.end(), resident_sets.begin(), resident_sets.end());
+  // Every run gets the cache that holds the whole scene when there is one (so the all-resident runs and the
+  // streaming runs share it); otherwise the configuration's.
+  if (resident_possible) {
+    const std::vector<std::string> resident_sets = cache.sets();
+    plan.common.insert(plan.common.end(), resident_sets.begin(), resident_sets.end());
+  }
 
   // The configurations, in run order. The reference comes first: everything else is measured against it.
   std::vector<ConfigRun>& runs = res.runs;
-  runs.push_back(make("reference", "reference", "reference (all resident, lock-step)", reference_sets()));
+  runs.push_back(make("reference", "reference",
+                      reference == ReferenceMode::kPreload
+                          ? "reference (all resident, lock-step)"
+                          : "reference (each frame's mips loaded before it is drawn, lock-step)",
+                      reference_sets(reference)));
   runs.back().measured = false;
   runs.push_back(make("ours", "baseline",
                       "ours (as configured: controller " +
@@ -229,20 +249,29 @@ int run_path(const PathArgs& args) {
   // of a shared machine's load affect both sides alike.
   runs.push_back(make("inprocess", "baseline", "ours, server in a thread (no process boundary)", {}, true));
   // All resident with the configured blend: it must reproduce the reference (the converging blend is exact
-  // at the wanted level); with the seed's Eq. 8 it keeps an error floor of its own (full run only).
-  runs.push_back(make("resident_blend", "baseline", "all textures resident, configured blend (must match the reference)",
-                      {"render.preload_all=true"}));
+  // at the wanted level); with the seed's Eq. 8 it keeps an error floor of its own (full run only). Skipped,
+  // with a note, when the scene cannot be resident at once.
+  if (resident_possible) {
+    runs.push_back(make("resident_blend", "baseline",
+                        "all textures resident, configured blend (must match the reference)",
+                        {"render.preload_all=true"}));
+  } else {
+    res.notes.push_back("The all-resident runs (resident, resident_blend, resident_seed_blend) were skipped: " +
+                        cache.error + ". Ratios that need them are not measured.");
+  }
   runs.push_back(make("baseline", "baseline", "seed baseline (no adaptive streaming, no colour blending)",
                       {"controller.mode=none", "stream.colormap_blend=false"}));
   // The seed's method as published: Eq. 4-7 with the configured α, Eq. 8 blending (seed 000 §3.4, §3.7).
   runs.push_back(make("seed", "baseline", "seed method (Eq. 4-7, α = " + fmt_num(alpha_ms) + " ms, Eq. 8 blend)",
                       {"controller.mode=seed", "stream.blend=seed"}));
-  if (!res.quick) {
+  if (!res.quick && resident_possible) {
     runs.push_back(make("resident", "baseline", "all textures resident (no streaming, no blending)",
                         {"render.preload_all=true", "stream.colormap_blend=false"}));
     runs.push_back(make("resident_seed_blend", "baseline",
                         "all textures resident, Eq. 8 blend (the seed blend's own error)",
                         {"render.preload_all=true", "stream.blend=seed"}));
+  }
+  if (!res.quick) {
     runs.push_back(
         make("blocking", "baseline", "blocking loads (whole chains before drawing)", {"render.blocking_loads=true"}));
     // Seed 000 Table 3 sweeps α = 12, 14, 16, 18 ms around its chosen 16 ms: the same ratios around the
@@ -424,6 +453,11 @@ std::function<int()> define_path(CLI::App& app) {
                  "run only these configurations (comma-separated names, e.g. ours,baseline,seed); the reference "
                  "always runs")
       ->delimiter(',');
+  app.add_option("--reference", a->reference,
+                 "how the reference frames are made: preload (every texture resident before frame 0) or "
+                 "lockstep-load (each frame's mips loaded before it is drawn); default: preload if the scene fits "
+                 "the cache at once")
+      ->check(CLI::IsMember({kReferencePreload, kReferenceLockstepLoad}));
   return [a] { return run_path(*a); };
 }
 

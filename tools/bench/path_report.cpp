@@ -129,6 +129,8 @@ Status write_results_json(const BenchResults& r, const std::filesystem::path& fi
   j["path_file"] = r.path_file.string();
   j["config_file"] = r.config_file.string();
   j["device"] = r.device;
+  j["reference_mode"] = r.reference_mode;
+  j["notes"] = r.notes;
   j["quick"] = r.quick;
   j["width_px"] = r.width;
   j["height_px"] = r.height;
@@ -260,6 +262,13 @@ Status write_report(const BenchResults& r, const std::filesystem::path& file, bo
        "Each "
        "frame is copied to host memory and appended to a spill file at the frame (outside its latency); the "
        "comparison with the reference runs after the last frame, so it never hands the server extra time.\n\n";
+  if (r.reference_mode != "preload") {
+    m += "Reference frames here: `render.load_wanted_before_drawing` instead of the preload (the scene need not be "
+         "resident at once): each frame is drawn once with feedback, every mip it samples is loaded to its wanted "
+         "level, and only then is it drawn; every pixel samples the preload's mip levels "
+         "(docs/design/reference_frames.md).\n\n";
+  }
+  for (const std::string& note : r.notes) m += "**Note:** " + note + "\n\n";
   m += "## Headline\n\n| quantity | value | meaning |\n|---|---:|---|\n";
   m += fmt::format(
       "| lockstep_identical | {} | two lock-step runs: every non-wall-clock per-frame column bit-equal{} |\n",

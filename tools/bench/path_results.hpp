@@ -49,6 +49,8 @@ struct BenchResults {
   std::filesystem::path scene, path_file, out;
   std::filesystem::path config_file;  // --config (default: config/lavapipe.toml); empty: built-in defaults
   std::string device;
+  std::string reference_mode;      // kReferencePreload or kReferenceLockstepLoad (path_runner.hpp)
+  std::vector<std::string> notes;  // what the report must say besides the tables (e.g. runs skipped)
   bool quick = false;
   uint32_t width = 0, height = 0;
   double frame_time_s = 0;

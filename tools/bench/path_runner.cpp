@@ -101,9 +101,9 @@ ResidentCache resident_cache(const render::SceneData& scene) {
   return c;
 }
 
-std::vector<std::string> reference_sets() {
-  return {"render.preload_all=true", "render.lockstep=true", "render.write_every_frames=1", "controller.mode=none",
-          "stream.colormap_blend=false"};
+std::vector<std::string> reference_sets(ReferenceMode mode) {
+  return {mode == ReferenceMode::kPreload ? "render.preload_all=true" : "render.load_wanted_before_drawing=true",
+          "render.lockstep=true", "render.write_every_frames=1", "controller.mode=none", "stream.colormap_blend=false"};
 }
 
 std::vector<std::string> path_run_sets(const fs::path& scene, const fs::path& path_file, double frame_time_s,

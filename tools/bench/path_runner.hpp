@@ -45,9 +45,17 @@ struct ResidentCache {
 };
 ResidentCache resident_cache(const render::SceneData& scene);
 
-// The overrides of the reference run: every mip resident before frame 0, lock-step, every frame written, no
-// Eq. 8 blending (a plain mipmapped texture path): the ground truth (render.reference_dir of the others).
-std::vector<std::string> reference_sets();
+// How the reference frames are made (docs/design/reference_frames.md): every mip of every texture resident
+// before frame 0 (render.preload_all; the scene must fit the cache, ResidentCache), or each frame's sampled
+// mips loaded before it is drawn (render.load_wanted_before_drawing; one frame's mips must fit). Both give the
+// same frames. The names are texstream-bench path's --reference.
+enum class ReferenceMode { kPreload, kLockstepLoad };
+inline constexpr const char* kReferencePreload = "preload";
+inline constexpr const char* kReferenceLockstepLoad = "lockstep-load";
+
+// The overrides of the reference run: the mode's loads, lock-step, every frame written, no Eq. 8 blending (a
+// plain mipmapped texture path): the ground truth (render.reference_dir of the others).
+std::vector<std::string> reference_sets(ReferenceMode mode);
 
 // The --set overrides every run over `path_file` shares: scene, path (whole), frame time and size, no PNGs.
 std::vector<std::string> path_run_sets(const std::filesystem::path& scene, const std::filesystem::path& path_file,

@@ -100,7 +100,7 @@ Fig12Result run_fig12(const Fig12Plan& plan) {
 
   const fs::path bin = self_dir();
   RenderRun ref{bin, plan.config, dir / "reference", common};
-  const std::vector<std::string> ref_sets = reference_sets();
+  const std::vector<std::string> ref_sets = reference_sets(ReferenceMode::kPreload);
   ref.sets.insert(ref.sets.end(), ref_sets.begin(), ref_sets.end());
   const RenderOutcome ref_out = run_renderer(ref);
   if (!ref_out.failure.empty()) {

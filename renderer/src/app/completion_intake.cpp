@@ -1,6 +1,7 @@
 // How completions come into the frame loop and how a streaming cycle starts (renderer.hpp): real time (at
 // most controller.load_time_ms a frame), lock-step (every answer to the previous cycle, in texture order),
-// and whole mip chains (render.preload_all, render.blocking_loads).
+// whole mip chains (render.preload_all, render.blocking_loads) and each frame's wanted levels before it is
+// drawn (render.load_wanted_before_drawing).
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -107,13 +108,19 @@ Status Renderer::upload_now() {
   return stack_->submit(s);
 }
 
-Status Renderer::load_fully(std::vector<stream::StreamCandidate> wanted, bool no_evictions) {
+Status Renderer::load_fully(std::vector<stream::StreamCandidate> wanted, LoadGoal goal) {
   TextureCache& cache = stack_->cache();
-  // Desired level 0 and no bias: Algorithm 1 then refines each texture one level per round, coarsest first,
-  // until its base level is resident (Final). Each round waits for every answer before the next, so the
-  // state machine sees the previous level published first.
-  for (stream::StreamCandidate& c : wanted) c.desired_mip = 0.0f;
+  // No bias, and desired level 0 for whole chains: Algorithm 1 then refines each texture one level per round,
+  // coarsest first, until its base level is resident (Final), or until resident <= desired (Algorithm 1's
+  // own stop: floor(desired) when the chain reaches it). Each round waits for every answer before the next,
+  // so the state machine sees the previous level published first.
+  const bool to_wanted = goal == LoadGoal::kWantedLevels;
+  if (!to_wanted) {
+    for (stream::StreamCandidate& c : wanted) c.desired_mip = 0.0f;
+  }
   const uint64_t evictions_before = cache.stats().evictions;
+  // Layers numbered from here on hold only textures of `wanted` (kWantedLevels' fit check).
+  const uint64_t first_layer_of_load = cache.layers_assigned();
   uint32_t fruitless = 0;
   auto idle_since = Clock::now();
   for (;;) {
@@ -139,7 +146,8 @@ Status Renderer::load_fully(std::vector<stream::StreamCandidate> wanted, bool no
       // requests right now (starting, restarting after a crash): then wait for it, within the timeout.
       const auto incomplete = std::count_if(wanted.begin(), wanted.end(), [&](const stream::StreamCandidate& c) {
         const stream::TextureStateView v = states_->view(c.texture);
-        return !v.broken && v.resident != 0u;
+        // As next_mip's test: a NaN desired level asks for nothing.
+        return !v.broken && (!v.resident || c.desired_mip < static_cast<float>(*v.resident));
       });
       if (incomplete == 0) return ok_status();
       if (Clock::now() - idle_since > kLockstepTimeout) {
@@ -182,8 +190,20 @@ Status Renderer::load_fully(std::vector<stream::StreamCandidate> wanted, bool no
     }
     ordered.flush();
     TS_TRY(upload_now());
-    if (cache.stats().evictions != evictions_before) {
-      if (no_evictions) {
+    if (to_wanted) {
+      // The layers are freed in the order they were assigned, so once one assigned during this load is freed,
+      // every live layer holds textures of `wanted` only and they still did not fit (docs/design/
+      // reference_frames.md). Evictions of older layers are fine: what was wanted in them is loaded again.
+      if (cache.layers_freed() > first_layer_of_load) {
+        return make_error(ErrorCode::kResourceExhausted,
+                          "render.load_wanted_before_drawing: the " + std::to_string(wanted.size()) +
+                              " textures this frame samples do not fit the texture cache at their wanted levels; "
+                              "raise cache.layers (now " +
+                              std::to_string(cfg_.cache.layers) + " of " + std::to_string(cfg_.cache.layer_extent_px) +
+                              " px) or cache.memory_bytes (now " + std::to_string(cfg_.cache.memory_bytes) + ")");
+      }
+    } else if (cache.stats().evictions != evictions_before) {
+      if (goal == LoadGoal::kWholeScene) {
         return make_error(ErrorCode::kResourceExhausted,
                           "render.preload_all: the cache evicted textures while loading the whole scene; raise "
                           "cache.memory_bytes (now " +
@@ -199,6 +219,20 @@ Status Renderer::load_fully(std::vector<stream::StreamCandidate> wanted, bool no
                                                  std::to_string(result.sent.size()) + " requests in the last)");
     }
   }
+}
+
+Status Renderer::load_wanted(const FrameRecording& rec, uint64_t index) {
+  // The frame as it will be drawn, with feedback: the main pass only (meshes entirely outside the viewport are
+  // not drawn in the frame that counts, so their textures need not be resident), every mesh with a fragment
+  // on the list (FramePlanOptions::keep_every_mesh), read back at once.
+  FrameRecording probe = rec;
+  probe.feedback = probe.read_back_list = true;
+  probe.wide_first = probe.draw_count;
+  TS_TRY(stack_->submit({&probe, Uploads::kAll, false, {}}));
+  if (auto st = load_fully(read_candidates(), LoadGoal::kWantedLevels); !st) {
+    return make_error(st.error().code, "frame " + std::to_string(index) + ": " + st.error().message);
+  }
+  return ok_status();
 }
 
 }  // namespace texstream::render

@@ -131,7 +131,7 @@ Status Renderer::preload_all() {
   TextureCache& cache = stack_->cache();
   TS_TRY(cache.prepare_textures(ids));  // every entry, and a format check of every texture, up front
   const auto t0 = Clock::now();
-  TS_TRY(load_fully(std::move(all), true));
+  TS_TRY(load_fully(std::move(all), LoadGoal::kWholeScene));
   spdlog::info("render.preload_all: {} mips ({:.1f} MB) of {} textures resident in {:.2f} s",
                cache.stats().mips_uploaded, static_cast<double>(cache.stats().bytes_uploaded) / 1e6,
                cache.resident_textures(), std::chrono::duration<double>(Clock::now() - t0).count());

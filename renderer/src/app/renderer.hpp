@@ -73,11 +73,22 @@ class Renderer {
   // A streaming cycle (Algorithm 1, LoadTextures) over the compacted list the frame read back.
   void start_cycle(const std::vector<stream::StreamCandidate>& candidates);
   std::vector<stream::StreamCandidate> read_candidates();
-  // Loads the whole mip chain (down to level 0) of every texture in `wanted`, waiting for the server and
-  // uploading as it goes: render.preload_all before frame 0 and render.blocking_loads each frame. With
-  // `no_evictions`, an eviction on the way is an error (the preload must fit the cache); otherwise the load
-  // stops at the first eviction (a visible set larger than the cache cannot be made fully resident).
-  Status load_fully(std::vector<stream::StreamCandidate> wanted, bool no_evictions);
+  // How far load_fully() loads each texture and what an eviction on the way means.
+  enum class LoadGoal : uint8_t {
+    kWholeScene,    // the whole chain (level 0); an eviction is an error: the preload must fit the cache
+    kWholeChains,   // the whole chain; stop at the first eviction (a visible set larger than the cache cannot
+                    // be made fully resident)
+    kWantedLevels,  // down to floor(desired_mip); evicting layers filled before the load is fine (their
+                    // textures are loaded again if wanted), evicting one filled by this load is an error: the
+                    // textures of `wanted` do not fit the cache together
+  };
+  // Loads every texture in `wanted` as far as `goal` says, waiting for the server and uploading as it goes:
+  // render.preload_all before frame 0 (kWholeScene), render.blocking_loads (kWholeChains) and
+  // render.load_wanted_before_drawing (kWantedLevels) each frame.
+  Status load_fully(std::vector<stream::StreamCandidate> wanted, LoadGoal goal);
+  // render.load_wanted_before_drawing: draws frame `index` (`rec`) with feedback only, reads its list back and
+  // loads every texture on it to its wanted level, so the frame drawn next samples resident mips only.
+  Status load_wanted(const FrameRecording& rec, uint64_t index);
   // A submission that only carries the mips committed so far (no drawing, no geometry).
   Status upload_now();
   // Hands what the cache learnt (published, rejected, failed mips; evictions) to the texture states and the

@@ -49,7 +49,8 @@ Result<RunSummary> Renderer::run() {
   // render.pace_frames: the camera path advances frame_time_ms per frame, so without pacing a device that
   // draws a frame in 0.5 ms flies the path 60x faster than real time and the streaming never keeps up. The
   // wait is not part of the frame's latency (render_frame measures from its own start).
-  const bool pace = cfg_.render.pace_frames && !cfg_.render.lockstep && !interactive_;
+  const bool pace =
+      cfg_.render.pace_frames && !cfg_.render.lockstep && !cfg_.render.load_wanted_before_drawing && !interactive_;
   const auto frame_period =
       std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double, std::milli>(cfg_.render.frame_time_ms));
   for (uint64_t i = 0; i < frames && !(interactive_ && interactive_->closed()); ++i) {
@@ -71,8 +72,10 @@ Status Renderer::render_frame(uint64_t index, bool last) {
 
   // 1. What the frame draws: broad phase, viewport split, unsampled meshes dropped, new meshes made
   //    resident, draw lists and frame constants (frame_plan.hpp).
+  const bool load_wanted_first = cfg_.render.load_wanted_before_drawing;
   FramePlanOptions plan_options;
   if (first) plan_options.step = frame0_step;
+  plan_options.keep_every_mesh = load_wanted_first;
   auto plan = plan_frame(*stack_, cam, cfg_, plan_options);
   if (!plan) return plan.error();
   FrameRecording& rec = plan->rec;
@@ -80,14 +83,23 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   // 2. The completions that arrived since the last frame, into the staging ring.
   auto waited = take_completions();
   if (!waited) return waited.error();
+  // 2b. render.load_wanted_before_drawing (reference frames): the frame is drawn once with feedback, every mip
+  //     it samples is loaded, and only then drawn below, without feedback. Like the lock-step wait, not frame
+  //     latency: a real-time run has no such pass (docs/design/reference_frames.md).
+  if (load_wanted_first) {
+    const auto l0 = Clock::now();
+    TS_TRY(load_wanted(rec, index));
+    *waited += Clock::now() - l0;
+  }
 
   // 3. Only a frame that starts a streaming cycle has its compacted list read; any other frame's list would
   //    be reset unseen by the next frame's compaction. So the metadata writes, the wide pass and the
   //    compaction run on exactly those frames, and the frames in between draw only the picture
   //    (render.feedback = false: never, so no streaming cycle either).
   const uint64_t in_flight = client_->stats().in_flight;
-  rec.read_back_list = cfg_.render.feedback && static_cast<double>(in_flight) <=
-                                                   kCycleOutstandingFraction * static_cast<double>(last_cycle_sent_);
+  rec.read_back_list =
+      cfg_.render.feedback && !load_wanted_first &&
+      static_cast<double>(in_flight) <= kCycleOutstandingFraction * static_cast<double>(last_cycle_sent_);
   rec.feedback = rec.read_back_list;
   const bool write = last || (cfg_.render.write_every_frames > 0 &&
                               index % static_cast<uint64_t>(cfg_.render.write_every_frames) == 0);
@@ -143,7 +155,12 @@ Status Renderer::render_frame(uint64_t index, bool last) {
     last_list_ = read_candidates();
     have_list_ = true;
     if (cfg_.render.blocking_loads) {
+<<<<<<< HEAD
       TS_TRY(load_fully(last_list_, false));  // the next frame draws every named texture complete
+=======
+      // The next frame draws every named texture complete.
+      TS_TRY(load_fully(read_candidates(), LoadGoal::kWholeChains));
+>>>>>>> hB
     } else {
       start_cycle(last_list_);
     }

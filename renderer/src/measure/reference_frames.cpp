@@ -23,9 +23,10 @@ fs::path ReferenceFrames::frame_file(const fs::path& run_dir, uint64_t index) {
 Result<ReferenceFrames> ReferenceFrames::open(const fs::path& run_dir, uint32_t width, uint32_t height) {
   std::error_code ec;
   if (!fs::exists(frame_file(run_dir, 0), ec)) {
-    return make_error(ErrorCode::kNotFound, "render.reference_dir '" + run_dir.string() + "': no " +
-                                                frame_file(run_dir, 0).string() +
-                                                " (render it with render.preload_all = true, write_every_frames = 1)");
+    return make_error(
+        ErrorCode::kNotFound,
+        "render.reference_dir '" + run_dir.string() + "': no " + frame_file(run_dir, 0).string() +
+            " (render it with render.preload_all or render.load_wanted_before_drawing = true, write_every_frames = 1)");
   }
   ReferenceFrames r;
   r.dir_ = run_dir;

@@ -157,7 +157,10 @@ struct RenderConfig {
   bool feedback_pairs = false;  // measurement: each frame also drawn without feedback (latency_off_ms)
   bool preload_all = false;     // load every mip of every texture before frame 0: no streaming (reference frames)
   bool blocking_loads = false;  // each frame loads the full chain of every visible texture before drawing
-  std::string reference_dir;    // a preload_all run's output folder: per-frame MSE/PSNR/SSIM against its frames
+  // Reference frames without the scene resident: each frame is first drawn with feedback only, then every mip it
+  // samples is loaded (down to floor of its wanted level, no budget, no bias), then it is drawn for real.
+  bool load_wanted_before_drawing = false;
+  std::string reference_dir;  // a reference run's output folder: per-frame MSE/PSNR/SSIM against its frames
 };
 
 struct StreamConfig {

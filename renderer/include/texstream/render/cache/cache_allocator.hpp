@@ -45,6 +45,10 @@ class CacheAllocator {
   uint64_t resident_textures() const { return placed_.size(); }
   uint64_t layers_recycled() const { return recycled_; }
   uint32_t live_layers() const { return static_cast<uint32_t>(assignments_ - oldest_); }
+  // Layers are numbered in the order they are assigned (0, 1, ...); layer number k is live while
+  // layers_freed() <= k < layers_assigned(), since they are freed in the same order.
+  uint64_t layers_assigned() const { return assignments_; }
+  uint64_t layers_freed() const { return oldest_; }
 
  private:
   struct Layer {

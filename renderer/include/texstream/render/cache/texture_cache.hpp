@@ -124,6 +124,10 @@ class TextureCache final : public stream::MipSink {
   uint32_t layer_extent() const { return options_.layer_extent; }
   uint64_t resident_textures() const;
   const TextureCacheStats& stats() const { return stats_; }
+  // The allocator's layer numbering (CacheAllocator::layers_assigned): a layer assigned after a mark and freed
+  // since means the textures placed after the mark alone outgrew the cache.
+  uint64_t layers_assigned() const { return allocator_.layers_assigned(); }
+  uint64_t layers_freed() const { return allocator_.layers_freed(); }
   const SparseBindStats& bind_stats() const { return sparse_->stats(); }
   const PageTableStats& page_stats() const { return pages_->stats(); }
   uint64_t page_bytes() const { return sparse_->page_bytes(); }

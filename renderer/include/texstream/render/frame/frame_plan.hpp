@@ -18,6 +18,9 @@ namespace texstream::render {
 struct FramePlanOptions {
   bool drop_unsampled = true;        // BroadPhase::drop_unsampled (false: draw every mesh the frusta keep)
   BroadPhaseStats* stats = nullptr;  // the broad phase's counters, if wanted
+  // The compaction keeps every mesh with a fragment (τ = 0 instead of stream.tau): a list that names every
+  // texture the frame samples (render.load_wanted_before_drawing).
+  bool keep_every_mesh = false;
   // "broad_phase", "make_resident", "texture_entries", "draw_list", each as it ends.
   StepHook step;
 };

@@ -1,7 +1,7 @@
 #pragma once
 // The reference frames of a camera path (DESIGN "Determinism and measurement"): the frames a
-// render.preload_all run wrote (render.write_every_frames = 1), read back one by one to measure a streamed
-// run of the same path, frame size and frame time against them.
+// render.preload_all or render.load_wanted_before_drawing run wrote (render.write_every_frames = 1), read back
+// one by one to measure a streamed run of the same path, frame size and frame time against them.
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>

@@ -1,0 +1,147 @@
+// Reference frames without the scene resident (render.load_wanted_before_drawing, docs/design/
+// reference_frames.md): on a generated city over its whole camera path (four cuts), with a cache that holds each
+// frame's mips but not the scene, every frame must match render.preload_all's: the displayed mip level of every
+// pixel exactly (render.debug_view = mip), the colours within a tolerance (below). Two runs must be
+// byte-identical (lock-step), and a cache too small for one frame must end the run naming the keys to raise.
+#include <gtest/gtest.h>
+#include <stb_image_write.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "process_test_support.hpp"
+#include "texstream/render/measure/image_metrics.hpp"
+#include "texstream/render/measure/reference_frames.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+const fs::path kBin = TEXSTREAM_BIN_DIR;
+using texstream::test::slurp;
+
+// The colour tolerance against the preload: 60 dB is an MSE of 0.065 (at most ~1 channel value in 15 one step
+// off). What differs is where each texture sits in the cache, not what is resident (the mip view is checked
+// exactly): the texel address adds the region's origin in float (one-step differences; measured here ≥ 89 dB),
+// and scene.frag, at a level where a side of the texture is below one texel, reads part of the texel row next
+// to the region (larger steps on a few pixels; default city: lowest 59.6 dB over its whole path). Two preload
+// runs with different cache.layer_extent_px differ the same way (docs/design/reference_frames.md).
+constexpr double kMinPsnrDb = 60.0;
+constexpr uint32_t kWidth = 320, kHeight = 180;
+
+// Each render run: the scene's whole path at 1 s per frame (53 frames), lock-step, every frame written, no
+// Eq. 8 blending, controller off: what texstream-bench path's reference run sets (path_runner.cpp).
+std::string render_cmd(const fs::path& dir, const fs::path& out, const std::string& sets) {
+  return (kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
+         " --set render.output_dir=" + out.string() + " --set render.width_px=" + std::to_string(kWidth) +
+         " --set render.height_px=" + std::to_string(kHeight) +
+         " --set render.frames=0 --set render.frame_time_ms=1000 --set render.lockstep=true" +
+         " --set render.write_every_frames=1 --set controller.mode=none --set stream.colormap_blend=false" + sets;
+}
+
+nlohmann::json run_render(const fs::path& dir, const std::string& name, const std::string& sets) {
+  const fs::path log = dir / (name + ".log");
+  EXPECT_EQ(texstream::test::run_logged(render_cmd(dir, dir / name, sets), log), 0) << slurp(log);
+  return nlohmann::json::parse(slurp(dir / name / "summary.json"), nullptr, false);
+}
+
+// Writes frame `index` of both runs and their difference (x8) next to them, for a failure message.
+std::string write_diff(const fs::path& dir, uint64_t index, const texstream::render::RgbaView& actual,
+                       const texstream::render::RgbaView& expected) {
+  std::vector<unsigned char> diff(size_t{kWidth} * kHeight * 4, 255);
+  const auto* a = reinterpret_cast<const unsigned char*>(actual.pixels.data());
+  const auto* e = reinterpret_cast<const unsigned char*>(expected.pixels.data());
+  for (size_t i = 0; i < diff.size(); ++i) {
+    if (i % 4 != 3) diff[i] = static_cast<unsigned char>(std::min(255, std::abs(int{a[i]} - int{e[i]}) * 8));
+  }
+  const fs::path d = dir / ("frame_" + std::to_string(index) + "_diff_x8.png");
+  stbi_write_png(d.c_str(), kWidth, kHeight, 4, diff.data(), kWidth * 4);
+  return "  actual:   " + texstream::render::ReferenceFrames::frame_file(dir / "wanted", index).string() +
+         "\n  expected: " + texstream::render::ReferenceFrames::frame_file(dir / "preload", index).string() +
+         "\n  diff x8:  " + d.string();
+}
+
+}  // namespace
+
+TEST(RenderReference, LoadingEachFramesWantedMipsGivesThePreloadFramesWithASmallCache) {
+  const fs::path dir = texstream::test::fresh_dir("texstream_render_it_", "reference");
+  ASSERT_EQ(texstream::test::run_logged((kBin / "texstream-gen").string() + " --out " + (dir / "scene").string() +
+                                            " --textures 300 --seed 11 --threads 2",
+                                        dir / "gen.log"),
+            0)
+      << slurp(dir / "gen.log");
+
+  // The preload: the default cache (512 layers) holds all 300 textures.
+  const auto preload = run_render(dir, "preload", " --set render.preload_all=true");
+  ASSERT_TRUE(preload.is_object());
+  // 20 layers of 512 px: each frame's mips fit (a view of this city samples up to ~100 textures), the scene's do
+  // not, so the run evicts and loads textures again as the views change; with validation on.
+  const std::string small_cache = " --set render.load_wanted_before_drawing=true --set cache.layers=20";
+  const auto wanted = run_render(dir, "wanted", small_cache + " --set render.validation=true");
+  ASSERT_TRUE(wanted.is_object());
+  EXPECT_EQ(wanted["frames"], preload["frames"]);
+  EXPECT_GT(wanted["evictions"].get<int>(), 0) << "the cache was meant to be smaller than the scene";
+  EXPECT_LT(wanted["textures_resident"].get<int>(), wanted["texture_count"].get<int>());
+  EXPECT_EQ(wanted["validation_errors"].get<int>(), 0);
+  EXPECT_EQ(wanted["protocol_errors"].get<int>(), 0);
+
+  const auto frames = preload["frames"].get<uint64_t>();
+  auto expected = texstream::render::ReferenceFrames::open(dir / "preload", kWidth, kHeight);
+  auto actual = texstream::render::ReferenceFrames::open(dir / "wanted", kWidth, kHeight);
+  ASSERT_TRUE(expected.ok() && actual.ok());
+  double min_psnr = texstream::render::kPsnrCapDb;
+  uint64_t identical = 0;
+  bool failed = false;
+  for (uint64_t i = 0; i < frames; ++i) {
+    auto e = expected->frame(i);
+    auto a = actual->frame(i);
+    ASSERT_TRUE(e.ok() && a.ok()) << "frame " << i;
+    auto err = texstream::render::compare_images(*a, *e);
+    ASSERT_TRUE(err.ok()) << err.error().message;
+    min_psnr = std::min(min_psnr, err->psnr_db);
+    identical += err->mse == 0 ? 1 : 0;
+    if (err->psnr_db < kMinPsnrDb && !failed) {
+      failed = true;
+      ADD_FAILURE() << "frame " << i << ": PSNR " << err->psnr_db << " dB against the preload (at least " << kMinPsnrDb
+                    << ")\n"
+                    << write_diff(dir, i, *a, *e);
+    }
+  }
+  std::printf("load_wanted_before_drawing vs preload_all: %llu frames, %llu identical, lowest PSNR %.1f dB\n",
+              static_cast<unsigned long long>(frames), static_cast<unsigned long long>(identical), min_psnr);
+
+  // What differs is placement only: the level each pixel samples (the shader's lod after its clamp to the
+  // resident range) is the preload's, byte for byte.
+  run_render(dir, "preload_mip", " --set render.preload_all=true --set render.debug_view=mip");
+  run_render(dir, "wanted_mip", small_cache + " --set render.debug_view=mip");
+  for (uint64_t i = 0; i < frames; ++i) {
+    const fs::path f = texstream::render::ReferenceFrames::frame_file(dir / "wanted_mip", i);
+    EXPECT_TRUE(slurp(f) == slurp(texstream::render::ReferenceFrames::frame_file(dir / "preload_mip", i)))
+        << f << ": the displayed mip levels differ from the preload's";
+  }
+
+  // Lock-step: a second run (without validation) writes the same bytes.
+  const auto again = run_render(dir, "again", small_cache);
+  EXPECT_EQ(again["mips_streamed"], wanted["mips_streamed"]);
+  for (uint64_t i = 0; i < frames; ++i) {
+    const fs::path f = texstream::render::ReferenceFrames::frame_file(dir / "wanted", i);
+    EXPECT_TRUE(slurp(f) == slurp(texstream::render::ReferenceFrames::frame_file(dir / "again", i)))
+        << f.filename() << " differs between two runs";
+  }
+
+  // 16 layers cannot hold the first view's textures: the run ends at frame 0 naming the keys.
+  const fs::path log = dir / "too_small.log";
+  const int rc = texstream::test::run_logged(
+      render_cmd(dir, dir / "too_small", " --set render.load_wanted_before_drawing=true --set cache.layers=16"), log);
+  EXPECT_NE(rc, 0);
+  const std::string text = slurp(log);
+  for (const char* s : {"frame 0", "render.load_wanted_before_drawing", "cache.layers", "cache.memory_bytes"}) {
+    EXPECT_NE(text.find(s), std::string::npos) << s << " missing in:\n" << text;
+  }
+  if (!HasFailure()) fs::remove_all(dir);
+}
