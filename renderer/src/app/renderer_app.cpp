@@ -155,12 +155,8 @@ Status Renderer::render_frame(uint64_t index, bool last) {
     last_list_ = read_candidates();
     have_list_ = true;
     if (cfg_.render.blocking_loads) {
-<<<<<<< HEAD
-      TS_TRY(load_fully(last_list_, false));  // the next frame draws every named texture complete
-=======
       // The next frame draws every named texture complete.
-      TS_TRY(load_fully(read_candidates(), LoadGoal::kWholeChains));
->>>>>>> hB
+      TS_TRY(load_fully(last_list_, LoadGoal::kWholeChains));
     } else {
       start_cycle(last_list_);
     }
