@@ -224,7 +224,7 @@ bool AdaptiveController::on_frame(double dt, double bytes) {
             "load size %g outside [%g, %g]", s.s_bytes, params_.s_min_bytes, params_.s_max_bytes);
   TS_ASSERT(s.b >= 0.0 && s.b <= params_.beta, "mip bias %g outside [0, %g]", s.b, params_.beta);
   TS_ASSERT(s.l >= 0.0 && s.l <= 1.0, "load factor %g outside [0, 1]", s.l);
-  if (params_.mode == ControllerMode::kAuto) headroom_.on_frame(dt, bytes, s.t_w, s.t_b);
+  if (params_.mode == ControllerMode::kAuto) headroom_.on_frame(dt, bytes);
   return true;
 }
 

@@ -34,12 +34,14 @@ TEST(HeadroomTarget, TwiceTheLatencyWithoutStreamingWithinItsFloorAndCap) {
 }
 
 TEST(HeadroomTerms, GrowHoldAndCut) {
-  // f = 10 ms, T = 20 ms, growth line f + 0.75 (T - f) = 17.5 ms: ×2 at f, ×2^(room) on the way.
-  EXPECT_DOUBLE_EQ(H::load_factor(0.010, 0.010, 0.020), 2.0);
-  EXPECT_DOUBLE_EQ(H::load_factor(0.01375, 0.010, 0.020), std::exp2(0.5));
-  EXPECT_DOUBLE_EQ(H::load_factor(0.018, 0.010, 0.020), 1.0);       // 17.5..20 ms: hold
-  EXPECT_DOUBLE_EQ(H::load_factor(0.030, 0.010, 0.020), 16.0 / 81);  // 1.5 T: (2/3)^4
-  EXPECT_EQ(H::load_factor(0.040, 0.010, 0.020), 0.0);               // a stutter: s_min
+  // f = 10 ms, T = 20 ms, growth line f + 0.75 (T - f) = 17.5 ms: ×4 at f, ×4^(room) on the way, by this
+  // frame's latency (t_w, Eq. 5, may still carry an earlier spike: then ×2^(room/2)).
+  EXPECT_DOUBLE_EQ(H::load_factor(0.010, 0.010, 0.010, 0.020), 4.0);
+  EXPECT_DOUBLE_EQ(H::load_factor(0.01375, 0.01375, 0.010, 0.020), 2.0);
+  EXPECT_DOUBLE_EQ(H::load_factor(0.019, 0.010, 0.010, 0.020), std::exp2(0.5));  // t_w in the hold band
+  EXPECT_DOUBLE_EQ(H::load_factor(0.018, 0.018, 0.010, 0.020), 1.0);             // 17.5..20 ms: hold
+  EXPECT_DOUBLE_EQ(H::load_factor(0.030, 0.030, 0.010, 0.020), 16.0 / 81);       // 1.5 T: (2/3)^4
+  EXPECT_EQ(H::load_factor(0.040, 0.040, 0.010, 0.020), 0.0);                    // a stutter: s_min
   EXPECT_EQ(H::bias(8, 0.020, 0.020), 0.0);
   EXPECT_DOUBLE_EQ(H::bias(8, 0.030, 0.020), 4.0);  // halfway between T and 2T
   EXPECT_EQ(H::bias(8, 0.050, 0.020), 8.0);
@@ -113,7 +115,7 @@ TEST(HeadroomController, FindsTheLatencyWithoutStreamingUnderUploads) {
   EXPECT_NEAR(h.f_s, 0.010, 1e-6);
   EXPECT_NEAR(h.k_s_per_mb, 0.001, 1e-6);
   EXPECT_NEAR(c.target_s(), 0.020, 1e-6);
-  EXPECT_LE(worst_late, 0.020 * 1.1);  // in steady state within 10 % of the target
+  EXPECT_LE(worst_late, 0.020 * 1.1);   // in steady state within 10 % of the target
   EXPECT_GT(c.load_size_bytes(), 5e6);  // and streaming goes on
 }
 

@@ -126,9 +126,9 @@ struct PathArgs {
   bool quick = false;
   bool keep_frames = false;
   std::string scene, path, out, config, size;  // empty: the default
-  double until_s = 0;           // --until: the first this many seconds of the path (0: all)
-  unsigned repeat = 1;          // --repeat: ours, baseline and seed this many times, interleaved
-  std::vector<std::string> only;  // --only: run just these configurations (and the reference)
+  double until_s = 0;                          // --until: the first this many seconds of the path (0: all)
+  unsigned repeat = 1;                         // --repeat: ours, baseline and seed this many times, interleaved
+  std::vector<std::string> only;               // --only: run just these configurations (and the reference)
   std::string reference;  // kReferencePreload, kReferenceLockstepLoad; empty: preload if the scene fits
 };
 
@@ -240,9 +240,8 @@ int run_path(const PathArgs& args) {
                       reference_sets(reference)));
   runs.back().measured = false;
   runs.push_back(make("ours", "baseline",
-                      "ours (as configured: controller " +
-                          std::string(choice_name(base_config->controller.mode)) + ", β = " +
-                          fmt_num(base_config->controller.beta) + ", blend " +
+                      "ours (as configured: controller " + std::string(choice_name(base_config->controller.mode)) +
+                          ", β = " + fmt_num(base_config->controller.beta) + ", blend " +
                           std::string(choice_name(base_config->stream.blend)) + ")",
                       {}));
   // Ratios are taken between neighbours in run order (ours, in-process, resident, baseline), so slow drifts

@@ -252,7 +252,8 @@ Status write_report(const BenchResults& r, const std::filesystem::path& file, bo
        "over the textures of the latest visibility list (W its weight, wanted its desired level without the bias, "
        "displayed the finest resident level or the wanted one if coarser; the level count with nothing resident), "
        "on the residency the next frame draws; ∫mip deficit dt sums it × frame time. Time to detail after a cut: "
-       "the virtual time until the first frame drawn with deficit ≤ 0.1 levels (on a list read after the cut), and until PSNR "
+       "the virtual time until the first frame drawn with deficit ≤ 0.1 levels (on a list read after the cut), and "
+       "until PSNR "
        "is within 0.5 dB of the settled PSNR (the target in brackets), \"never\" when not within the segment. "
        "Never displayed: bytes of streamed mips that were never sampled at the wanted (or coarsest resident) level "
        "while resident ÷ bytes streamed (docs/design/stream_metrics.md). Transfer rates are sampled in windows of "
@@ -289,7 +290,8 @@ Status write_report(const BenchResults& r, const std::filesystem::path& file, bo
   m += fmt::format("| process_boundary_cost | {} | median frame latency, two processes ÷ server in a thread |\n",
                    cell(h.process_boundary_cost, 3));
   m += fmt::format(
-      "| time_to_detail_ratio | {} | median over cuts of the time until the mip deficit is ≤ 0.1 levels, seed baseline ÷ ours "
+      "| time_to_detail_ratio | {} | median over cuts of the time until the mip deficit is ≤ 0.1 levels, seed baseline "
+      "÷ ours "
       "(a \"never\" counts as longest) |\n",
       cell(h.time_to_detail_ratio));
   m += fmt::format("| mip_deficit_ratio | {} | ∫ weighted mip deficit dt, seed baseline ÷ ours |\n",

@@ -8,12 +8,14 @@
 //           the same window (seed 000 §4.3: "α about twice the latency without streaming"). A user's
 //           controller.target_ms caps T, but never below 1.25 f: a renderer slower than the cap is not
 //           pinned at s_min (the seed's limitation, issue 25).
-//   s       grows up to ×2 per frame while t_w < f + 0.75 (T − f) (slower as t_w nears that line); is cut by
-//           (T / t_w)^4 as soon as t_w > T, and to s_min at t_w >= 2 T (t_w: Eq. 5, which takes a spike in the
-//           frame it happens); holds in between. s stays below the model's budget (line − f) / k: where
-//           uploads cost frame time a pause does not bank a full-size burst for the next cut.
-//   b       β · smoothstep(1, 2, t_b / T), t_b = Eq. 7's mean of the last 5 t_w: no bias unless the latency
+//   s       grows up to ×4 per frame while this frame's Δt is below the line f + 0.75 (T − f) (×4 at f, ×1 at the
+//           line); is cut by (T / t_w)^4 as soon as t_w > T, and to s_min at t_w >= 2 T (t_w: Eq. 5, which takes a
+//           spike in the frame it happens); holds in between. s stays below the model's budget (line − f) / k:
+//           where uploads cost frame time a pause does not bank a full-size burst for the next cut. k counts
+//           only when uploads explain the latencies (correlation >= 0.5), else it is 0 (a GPU).
+//   b       β · smoothstep(1, 2, t_b / T), t_b = the mean of the last 5 latencies: no bias unless the latency
 //           stays above the target for several frames even after s was cut.
+//   The first frame (start-up: pipelines, first geometry) is not streaming and is left out of all of it.
 //
 // Pure (no clock, no I/O), deterministic, single owner. Inputs that are NaN, infinite, negative or absurd
 // are rejected by the caller (AdaptiveController::on_frame) before they reach it.
@@ -33,25 +35,31 @@ struct HeadroomParams {
 
 class HeadroomController {
  public:
-  static constexpr size_t kWindow = 64;                // frames in the plant estimate (~1 s at 60 Hz)
-  static constexpr size_t kMinFitFrames = 8;           // fewer: no slope, f = the window's minimum
-  static constexpr double kTargetFactor = 2.0;         // T = 2 f (seed 000 §4.3)
-  static constexpr double kCapHeadroom = 1.25;         // a cap never brings T below 1.25 f
-  static constexpr double kFloorShare = 0.5;           // f >= half the quickest frame (a bad slope's limit)
-  static constexpr double kGrowBelow = 0.75;           // s grows while t_w < f + 0.75 (T - f)
-  static constexpr double kMinSpreadMb = 0.5;          // k is refitted only when the window's uploads span this
-  static constexpr double kStutterRatio = 2.0;         // t_w >= 2 T: s = s_min at once
+  static constexpr size_t kWindow = 64;                      // frames in the plant estimate (~1 s at 60 Hz)
+  static constexpr size_t kMinFitFrames = 8;                 // fewer: no slope, f = the window's minimum
+  static constexpr double kTargetFactor = 2.0;               // T = 2 f (seed 000 §4.3)
+  static constexpr double kCapHeadroom = 1.25;               // a cap never brings T below 1.25 f
+  static constexpr double kFloorShare = 0.5;                 // f >= half the quickest frame (a bad slope's limit)
+  static constexpr double kGrowBelow = 0.75;                 // s grows while t_w < f + 0.75 (T - f)
+  static constexpr double kMinSpreadMb = 0.5;                // k is refitted only when the window's uploads span this
+  static constexpr double kMinCorrelation = 0.5;             // and k > 0 only when uploads explain the latencies
+  static constexpr double kGrowthDoublings = 2.0;            // s ×4 per frame at full room
+  static constexpr size_t kBiasFrames = 5;                   // b from the mean of the last 5 latencies
+  static constexpr double kStutterRatio = 2.0;               // t_w >= 2 T: s = s_min at once
   static constexpr double kBiasFrom = 1.0, kBiasFull = 2.0;  // t_b / T where b starts and reaches β
-  static constexpr double kMinTargetS = 1e-6;          // T never 0 (a ratio's denominator)
-  static constexpr double kBytesPerUnit = 1e6;         // the fit works in MB (keeps its sums small)
+  static constexpr double kMinTargetS = 1e-6;                // T never 0 (a ratio's denominator)
+  static constexpr double kBytesPerUnit = 1e6;               // the fit works in MB (keeps its sums small)
 
   struct State {
-    double f_s = 0;          // frame latency without streaming work (estimate)
-    double k_s_per_mb = 0;   // latency per uploaded MB (least squares over the window, >= 0)
-    double budget_bytes = 0; // (growth line - f) / k: the upload one frame has room for; s_max when k = 0
-    double target_s = 0;     // T
-    double s_bytes = 0;      // load size
-    double b = 0;            // mip bias
+    double f_s = 0;                    // frame latency without streaming work (estimate)
+    double k_s_per_mb = 0;             // latency per uploaded MB (least squares over the window, >= 0)
+    double budget_bytes = 0;           // (growth line - f) / k: the upload one frame has room for; s_max when k = 0
+    double target_s = 0;               // T
+    double s_bytes = 0;                // load size
+    double b = 0;                      // mip bias
+    double t_b_s = 0;                  // mean of the last kBiasFrames latencies
+    double t_w_s = 0;                  // Eq. 5's weighted maximum latency, from the first frame after start-up
+    bool started = false;              // the first (start-up) frame has been seen
     std::array<double, kWindow> dt{};  // the last frames: latency (s) and bytes uploaded (MB)
     std::array<double, kWindow> mb{};
     size_t next = 0;
@@ -61,9 +69,9 @@ class HeadroomController {
 
   explicit HeadroomController(const HeadroomParams& p);
 
-  // One accepted frame: its latency Δt (s), the bytes uploaded in it, and the seed's t_w and t_b after it
-  // (Eq. 5 and 7, computed by AdaptiveController). Contract: all finite and >= 0.
-  void on_frame(double dt_s, double bytes, double t_w_s, double t_b_s);
+  // One accepted frame: its latency Δt (s) and the bytes uploaded in it. Contract: both finite and >= 0. The
+  // first frame only marks the start.
+  void on_frame(double dt_s, double bytes);
 
   double load_size_bytes() const { return state_.s_bytes; }
   double mip_bias() const { return state_.b; }
@@ -75,8 +83,8 @@ class HeadroomController {
   // T from f and the parameters.
   static double target(double f_s, const HeadroomParams& p);
   // The factor s is multiplied by for a frame: growth, hold (1) or cut.
-  static double load_factor(double t_w_s, double f_s, double target_s);
-  // b from t_b and T.
+  static double load_factor(double t_w_s, double dt_s, double f_s, double target_s);
+  // b from the mean of the last latencies and T.
   static double bias(double beta, double t_b_s, double target_s);
 
  private:
