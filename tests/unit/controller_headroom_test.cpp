@@ -35,10 +35,11 @@ TEST(HeadroomTarget, TwiceTheLatencyWithoutStreamingWithinItsFloorAndCap) {
 
 TEST(HeadroomTerms, GrowHoldAndCut) {
   // f = 10 ms, T = 20 ms, growth line f + 0.75 (T - f) = 17.5 ms: ×4 at f, ×4^(room) on the way, by this
-  // frame's latency (t_w, Eq. 5, may still carry an earlier spike: then ×2^(room/2)).
+  // frame's latency; ×2^(room/2) while t_w (Eq. 5) still carries a spike above the line.
   EXPECT_DOUBLE_EQ(H::load_factor(0.010, 0.010, 0.010, 0.020), 4.0);
   EXPECT_DOUBLE_EQ(H::load_factor(0.01375, 0.01375, 0.010, 0.020), 2.0);
-  EXPECT_DOUBLE_EQ(H::load_factor(0.019, 0.010, 0.010, 0.020), std::exp2(0.5));  // t_w in the hold band
+  EXPECT_DOUBLE_EQ(H::load_factor(0.019, 0.010, 0.010, 0.020), std::exp2(0.5));
+  EXPECT_DOUBLE_EQ(H::load_factor(0.030, 0.010, 0.010, 0.020), std::exp2(0.5));  // t_w over T, frame fine
   EXPECT_DOUBLE_EQ(H::load_factor(0.018, 0.018, 0.010, 0.020), 1.0);             // 17.5..20 ms: hold
   EXPECT_DOUBLE_EQ(H::load_factor(0.030, 0.030, 0.010, 0.020), 16.0 / 81);       // 1.5 T: (2/3)^4
   EXPECT_EQ(H::load_factor(0.040, 0.040, 0.010, 0.020), 0.0);                    // a stutter: s_min

@@ -8,11 +8,11 @@
 //           the same window (seed 000 §4.3: "α about twice the latency without streaming"). A user's
 //           controller.target_ms caps T, but never below 1.25 f: a renderer slower than the cap is not
 //           pinned at s_min (the seed's limitation, issue 25).
-//   s       grows up to ×4 per frame while this frame's Δt is below the line f + 0.75 (T − f) (×4 at f, ×1 at the
-//           line); is cut by (T / t_w)^4 as soon as t_w > T, and to s_min at t_w >= 2 T (t_w: Eq. 5, which takes a
-//           spike in the frame it happens); holds in between. s stays below the model's budget (line − f) / k:
-//           where uploads cost frame time a pause does not bank a full-size burst for the next cut. k counts
-//           only when uploads explain the latencies (correlation >= 0.5), else it is 0 (a GPU).
+//   s       starts at s_max; is cut by (T / Δt)^4 when this frame's Δt > T, and to s_min at Δt >= 2 T; grows up
+//           to ×4 per frame while Δt is below the line f + 0.75 (T − f) (×4 at f, ×1 at the line; gently while
+//           Eq. 5's t_w still remembers a spike above the line); holds in between. s stays below the model's
+//           budget (line − f) / k: where uploads cost frame time a pause does not bank a full-size burst for
+//           the next cut. k counts only when uploads explain the latencies (correlation >= 0.5), else 0.
 //   b       β · smoothstep(1, 2, t_b / T), t_b = the mean of the last 5 latencies: no bias unless the latency
 //           stays above the target for several frames even after s was cut.
 //   The first frame (start-up: pipelines, first geometry) is not streaming and is left out of all of it.
