@@ -391,6 +391,8 @@ int run_path(const PathArgs& args) {
     } else {
       h.lockstep_difference = (a ? b.error() : a.error()).message;
     }
+  } else if (!res.find("lockstep_a") || !res.find("lockstep_b")) {
+    h.lockstep_difference = "not run (--only)";
   } else {
     h.lockstep_difference = "a lock-step run failed";
   }
