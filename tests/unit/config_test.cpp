@@ -95,7 +95,7 @@ TEST(Config, AChoiceKeyTakesOnlyItsNames) {
     const char* bad;
     const char* allowed;
   };
-  for (const Case& c : {Case{"controller.mode", "sometimes", "adaptive, none or fixed"},
+  for (const Case& c : {Case{"controller.mode", "sometimes", "auto, seed, adaptive, none or fixed"},
                         Case{"render.debug_view", "depth", "none, mip, weight or mesh_id"},
                         Case{"cache.format", "dxt5", "auto, rgba8 or bc1"},
                         Case{"server.log_level", "loud", "trace, debug, info, warn or error"},
@@ -141,7 +141,7 @@ TEST(Config, AChoiceKeyIsDocumentedFromItsTable) {
   EXPECT_EQ(choice_docs<CacheFormat>(), "auto (the scene's), rgba8 or bc1");
   const std::string doc = config_reference_markdown();
   EXPECT_NE(doc.find("Texel format of the GPU cache: auto (the scene's), rgba8 or bc1"), std::string::npos);
-  EXPECT_NE(doc.find("| `controller.mode` | string | name | `\"adaptive\"` | adaptive, none or fixed |"),
+  EXPECT_NE(doc.find("| `controller.mode` | string | name | `\"auto\"` | auto, seed, adaptive, none or fixed |"),
             std::string::npos);
   EXPECT_EQ(cache_texel_format(CacheFormat::kAuto, TexelFormat::kBc1), TexelFormat::kBc1);
   EXPECT_EQ(cache_texel_format(CacheFormat::kRgba8, TexelFormat::kBc1), TexelFormat::kRgba8);
