@@ -110,7 +110,7 @@ void main() {
       sum += textureLod(cache_image, vec3(st, float(tex.placement.x)), lod).rgb;
     }
     vec3 sampled = sum / float(taps);
-    // The colour placeholder c = (1 - M / M_max) c_s + (M / M_max) c_o (seed 000 Eq. 8). stream.blend = seed:
+    // Colormap blend c = (1 - M / M_max) c_s + (M / M_max) c_o (seed 000 Eq. 8). stream.blend = seed:
     // M = the displayed level, as written (a far texture stays part colormap for good). converge: M = the levels
     // still missing, displayed - the level sampled with everything resident, so a texture at its wanted level is
     // drawn exactly as the reference draws it (docs/design/blend.md).

@@ -9,16 +9,6 @@
 
 namespace texstream::stream {
 
-namespace {
-
-double smoothstep01(double t) {
-  if (!(t > 0.0)) return 0.0;  // also NaN
-  if (t >= 1.0) return 1.0;
-  return std::min(t * t * (3.0 - 2.0 * t), 1.0);
-}
-
-}  // namespace
-
 HeadroomController::HeadroomController(const HeadroomParams& p) : params_(p) {
   // Start at s_max: nothing says yet that streaming costs frame time, and the first cycles ask mostly for 4x4
   // mips (a few bytes each). Starting at s_min cost 5 frames of ramp on an H200 (300 K city: ∫MSE 6 % above
@@ -52,7 +42,8 @@ double HeadroomController::load_factor(double t_w_s, double dt_s, double f_s, do
 }
 
 double HeadroomController::bias(double beta, double t_b_s, double target_s) {
-  return beta * smoothstep01((t_b_s / target_s - kBiasFrom) / (kBiasFull - kBiasFrom));
+  // The seed's smoothstep (Eq. 7's), over t_b / T from kBiasFrom to kBiasFull.
+  return beta * AdaptiveController::smoothstep(kBiasFrom, kBiasFull, t_b_s / target_s);
 }
 
 void HeadroomController::fit() {

@@ -78,6 +78,27 @@ def fig6(frames, label, cuts, file):
     plt.close(fig)
 
 
+def over_time(runs, frames, cuts, key, ylabel, ybottom, legend_loc, measured_only, file):
+    """One frames.csv column over path time for the baseline-group and lock-step runs, cuts marked."""
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    for r in runs:
+        if (measured_only and not r["measured"]) or r["group"] not in ("baseline", "lockstep") \
+                or r["name"] == "lockstep_b":
+            continue
+        fr = frames[r["name"]]
+        if fr and key in fr[0]:  # older frames.csv files lack newer columns
+            ax.plot([f["time_s"] for f in fr], [f[key] for f in fr], lw=1.0, label=r["label"])
+    for x in cuts:
+        ax.axvline(x, color="grey", ls=":", lw=0.8)
+    ax.set_xlabel("path time (s)")
+    ax.set_ylabel(ylabel)
+    ax.set_ylim(bottom=ybottom)
+    ax.legend(fontsize=7, loc=legend_loc)
+    fig.tight_layout()
+    fig.savefig(file, dpi=110)
+    plt.close(fig)
+
+
 def main():
     if len(sys.argv) != 2:
         print(__doc__, file=sys.stderr)
@@ -95,39 +116,10 @@ def main():
             label = next(r["label"] for r in runs if r["name"] == name)
             fig6(frames[name], label, cuts, os.path.join(out, "plots", f"fig6_{name}.png"))
 
-    fig, ax = plt.subplots(figsize=(9, 4.5))
-    for r in runs:
-        if not r["measured"] or r["group"] not in ("baseline", "lockstep") or r["name"] == "lockstep_b":
-            continue
-        fr = frames[r["name"]]
-        ax.plot([f["time_s"] for f in fr], [f["psnr_db"] for f in fr], lw=1.0, label=r["label"])
-    for x in cuts:
-        ax.axvline(x, color="grey", ls=":", lw=0.8)
-    ax.set_xlabel("path time (s)")
-    ax.set_ylabel("PSNR against the reference (dB)")
-    ax.set_ylim(bottom=10)
-    ax.legend(fontsize=7, loc="lower right")
-    fig.tight_layout()
-    fig.savefig(os.path.join(out, "plots", "error_over_time.png"), dpi=110)
-    plt.close(fig)
-
-    fig, ax = plt.subplots(figsize=(9, 4.5))
-    for r in runs:
-        if r["group"] not in ("baseline", "lockstep") or r["name"] == "lockstep_b":
-            continue
-        fr = frames[r["name"]]
-        # Older frames.csv files have no mip_deficit column: skip them.
-        if fr and "mip_deficit" in fr[0]:
-            ax.plot([f["time_s"] for f in fr], [f["mip_deficit"] for f in fr], lw=1.0, label=r["label"])
-    for x in cuts:
-        ax.axvline(x, color="grey", ls=":", lw=0.8)
-    ax.set_xlabel("path time (s)")
-    ax.set_ylabel("weighted mip deficit (levels)")
-    ax.set_ylim(bottom=0)
-    ax.legend(fontsize=7, loc="upper right")
-    fig.tight_layout()
-    fig.savefig(os.path.join(out, "plots", "mip_deficit.png"), dpi=110)
-    plt.close(fig)
+    over_time(runs, frames, cuts, "psnr_db", "PSNR against the reference (dB)", 10, "lower right", True,
+              os.path.join(out, "plots", "error_over_time.png"))
+    over_time(runs, frames, cuts, "mip_deficit", "weighted mip deficit (levels)", 0, "upper right", False,
+              os.path.join(out, "plots", "mip_deficit.png"))
 
     # Run time against error, p95 and p99 frame latency: one point per configuration (ours, the seed's method,
     # the baseline, blocking loads, the α / β sweeps, repeats), the Pareto front through the non-dominated ones.

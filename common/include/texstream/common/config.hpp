@@ -49,7 +49,7 @@ struct ChoiceTable<DebugView> {
                                                                    {DebugView::kMeshId, "mesh_id", ""}}};
 };
 
-// How the colour placeholder is blended with the sampled colour (stream.blend; docs/design/blend.md).
+// How the City Colormap colour is blended with the sampled colour (stream.blend; docs/design/blend.md).
 enum class BlendMode : uint8_t {
   kConverge,  // by the levels still missing: (displayed - wanted) / M_max; 0 once the wanted level is resident
   kSeed,      // seed 000 Eq. 8: by the displayed level, M / M_max (never 0 for a texture seen from afar)
