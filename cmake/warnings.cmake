@@ -19,8 +19,9 @@ if(TEXSTREAM_SANITIZE)
   endif()
   # Sanitizer instrumentation makes GCC 12 report -Wmaybe-uninitialized inside libstdc++ (std::regex,
   # std::function) and, with TSan, -Wnull-dereference inside basic_string.h: false positives that the normal
-  # build does not show. Keep them visible, not fatal.
-  target_compile_options(texstream_warnings INTERFACE ${_san_flags} -fno-omit-frame-pointer -g
+  # build does not show. Keep them visible, not fatal. Debug info is the build type's (a `-g` here overrode
+  # the CI stages' -g1 and cost 20 % of their compile time; docs/design/ci_time.md).
+  target_compile_options(texstream_warnings INTERFACE ${_san_flags} -fno-omit-frame-pointer
                          -Wno-error=maybe-uninitialized -Wno-error=null-dereference)
   target_link_options(texstream_warnings INTERFACE ${_san_flags})
 endif()
