@@ -57,6 +57,40 @@ vec3 mesh_id_colour(uint mesh) {
   return vec3(float(code & 0xffu), float((code >> 8) & 0xffu), float(code >> 16)) / 255.0;
 }
 
+#ifndef WIDE_PASS
+// The texture's colour at sampling level `lod` (resident), N taps along the footprint's major axis, with the
+// colormap blend of stream.blend.
+vec3 shade_at(TextureGpu tex, AnisoLod s, float lod, vec2 major, vec2 extent, float mip_max, vec3 colormap) {
+  // Keep every tap half a texel inside the region at the coarser of the two levels trilinear reads, so
+  // filtering never reaches a neighbouring texture in the same layer.
+  vec2 level_extent = max(extent / exp2(ceil(lod)), vec2(1.0));
+  vec2 lo = 0.5 / level_extent;
+  vec2 hi = 1.0 - lo;
+  float inv_layer = 1.0 / float(frame.cache.x);
+  int taps = int(s.taps);
+  vec3 sum = vec3(0.0);
+  for (int i = 0; i < taps; ++i) {
+    float t = (float(i) + 0.5) / float(taps) - 0.5;
+    vec2 uv = clamp(in_uv + major * t, lo, hi);
+    vec2 st = (vec2(tex.region.xy) + uv * extent) * inv_layer;
+    sum += textureLod(cache_image, vec3(st, float(tex.placement.x)), lod).rgb;
+  }
+  vec3 sampled = sum / float(taps);
+  // Colormap blend c = (1 - M / M_max) c_s + (M / M_max) c_o (seed 000 Eq. 8). stream.blend = seed:
+  // M = the displayed level, as written (a far texture stays part colormap for good). converge(_linear): M = the
+  // levels still missing, displayed - the level sampled with everything resident, so a texture at its wanted
+  // level is drawn exactly as the reference; converge squares M / M_max (less error; docs/design/blend.md).
+  float blend = 0.0;
+  if ((frame.flags.x & kFlagColormapBlend) != 0u && mip_max > 0.0) {
+    bool seed = (frame.flags.x & kFlagBlendSeed) != 0u;
+    float m = seed ? lod : max(lod - clamp(s.lod, 0.0, mip_max), 0.0);
+    blend = m / mip_max;
+    if (!seed && (frame.flags.x & kFlagBlendLinear) == 0u) blend *= blend;
+  }
+  return mix(sampled, colormap, blend);
+}
+#endif
+
 void main() {
   MeshGpu mesh = meshes[in_mesh];
   TextureGpu tex = textures[mesh.texture_id];
@@ -95,31 +129,16 @@ void main() {
     displayed = lod;
 #ifndef WIDE_PASS
     vec2 major = (length(dx) >= length(dy) ? dx : dy) / max(extent, vec2(1.0));
-    // Keep every tap half a texel inside the region at the coarser of the two levels trilinear reads, so
-    // filtering never reaches a neighbouring texture in the same layer.
-    vec2 level_extent = max(extent / exp2(ceil(lod)), vec2(1.0));
-    vec2 lo = 0.5 / level_extent;
-    vec2 hi = 1.0 - lo;
-    float inv_layer = 1.0 / float(frame.cache.x);
-    int taps = int(s.taps);
-    vec3 sum = vec3(0.0);
-    for (int i = 0; i < taps; ++i) {
-      float t = (float(i) + 0.5) / float(taps) - 0.5;
-      vec2 uv = clamp(in_uv + major * t, lo, hi);
-      vec2 st = (vec2(tex.region.xy) + uv * extent) * inv_layer;
-      sum += textureLod(cache_image, vec3(st, float(tex.placement.x)), lod).rgb;
+    colour = shade_at(tex, s, lod, major, extent, mip_max, colormap);
+    // stream.fade_ms: a level that arrived lately fades in, colour.z (1 -> 0) of the way back to the picture of
+    // the finest level before it (colour.y), or to the colormap after a first level (docs/design/blend.md).
+    float fade = uintBitsToFloat(tex.colour.z);
+    if (fade > 0.0) {
+      vec3 before = tex.colour.y == kNotResident
+                        ? colormap
+                        : shade_at(tex, s, clamp(s.lod, float(tex.colour.y), coarsest), major, extent, mip_max, colormap);
+      colour = mix(colour, before, fade);
     }
-    vec3 sampled = sum / float(taps);
-    // Colormap blend c = (1 - M / M_max) c_s + (M / M_max) c_o (seed 000 Eq. 8). stream.blend = seed:
-    // M = the displayed level, as written (a far texture stays part colormap for good). converge: M = the levels
-    // still missing, displayed - the level sampled with everything resident, so a texture at its wanted level is
-    // drawn exactly as the reference draws it (docs/design/blend.md).
-    float blend = 0.0;
-    if ((frame.flags.x & kFlagColormapBlend) != 0u && mip_max > 0.0) {
-      float m = (frame.flags.x & kFlagBlendSeed) != 0u ? lod : max(lod - clamp(s.lod, 0.0, mip_max), 0.0);
-      blend = m / mip_max;
-    }
-    colour = mix(sampled, colormap, blend);
 #endif
   }
 

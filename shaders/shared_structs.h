@@ -54,6 +54,7 @@ TS_CONST kFlagColormapBlend = 1u;  // colormap blending (config stream.colormap_
 TS_CONST kFlagLighting = 2u;       // headlight shading; off gives the plain texel colour
 TS_CONST kFlagFeedback = 4u;       // write visibility metadata (config render.feedback)
 TS_CONST kFlagBlendSeed = 8u;      // blend by Eq. 8 as written (stream.blend = seed), else by the missing levels
+TS_CONST kFlagBlendLinear = 16u;   // by the missing fraction (converge_linear), else by its square (converge)
 TS_CONST kCompactWorkgroupSize = 64u;
 // meta_reduce.comp: one invocation per run of kMetaReduceRun pixels of a row, kMetaReduceGroup per workgroup.
 TS_CONST kMetaReduceRun = 16u;
@@ -112,7 +113,8 @@ struct TextureGpu {
   uvec4 placement;      // x: cache layer, y: finest resident mip (kNotResident: none), z: coarsest resident mip,
                         // w: mip count of the texture
   uvec4 region;         // x, y: region origin in the layer at mip 0 (px); z, w: texture width, height (px)
-  uvec4 colour;         // x: City Colormap RGBA8 (sRGB, R in the low byte), y, z, w: 0
+  uvec4 colour;         // x: City Colormap RGBA8 (sRGB, R in the low byte), y: the level a fade starts from
+                        // (kNotResident: the colormap), z: float bits of the fade left (1 -> 0), w: 0
 };
 
 struct MeshMeta {

@@ -138,6 +138,10 @@ void visit_keys(Config& c, V&& v) {
   v("stream", "colormap_blend", c.stream.colormap_blend, "bool",
     "Blend sampled colour with the City Colormap while finer mips arrive (false: sample directly)", kAny);
   v("stream", "blend", c.stream.blend, "name", "How the colormap is blended in:", kAny);
+  v("stream", "fade_ms", c.stream.fade_ms, "ms",
+    "A newly resident finer level fades in from the one before it (a first level from the colormap) over this "
+    "much path time; 0 shows it at once (render.load_wanted_before_drawing: always 0)",
+    Range{0, 1e5});
   v("stream", "foreground_distance_m", c.stream.foreground_distance_m, "m",
     "Eq. 2 distance weight: w_d = (1 - min(depth / this, 1))^4 (the seed's c_w normalised to metres)",
     Range{1e-3, 1e7});

@@ -103,7 +103,11 @@ ResidentCache resident_cache(const render::SceneData& scene) {
 
 std::vector<std::string> reference_sets(ReferenceMode mode) {
   return {mode == ReferenceMode::kPreload ? "render.preload_all=true" : "render.load_wanted_before_drawing=true",
-          "render.lockstep=true", "render.write_every_frames=1", "controller.mode=none", "stream.colormap_blend=false"};
+          "render.lockstep=true",
+          "render.write_every_frames=1",
+          "controller.mode=none",
+          "stream.colormap_blend=false",
+          "stream.fade_ms=0"};
 }
 
 std::vector<std::string> path_run_sets(const fs::path& scene, const fs::path& path_file, double frame_time_s,

@@ -26,6 +26,8 @@ Result<RenderStackOptions> stack_options(const Config& cfg, TexelFormat format) 
   so.cache.layers = static_cast<uint32_t>(cfg.cache.layers);
   so.cache.staging_bytes = static_cast<uint64_t>(cfg.render.staging_bytes);
   so.cache.memory_bytes = static_cast<uint64_t>(cfg.cache.memory_bytes);
+  // Reference frames show each frame's wanted mips: nothing fades there.
+  so.cache.fade_s = cfg.render.load_wanted_before_drawing ? 0.0 : cfg.stream.fade_ms / 1e3;
   auto passes = scene_passes_options(cfg);
   if (!passes) return passes.error();
   so.passes = *passes;

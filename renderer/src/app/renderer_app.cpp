@@ -130,7 +130,9 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   if (twin_first) TS_TRY(draw_twin());
 
   // 4. Draw: the uploads, the passes and, for a written or measured frame, the colour capture (the copy is
-  //    part of every measured configuration alike, so ratios between them are unaffected).
+  //    part of every measured configuration alike, so ratios between them are unaffected). Fades (stream.fade_ms)
+  //    advance by the path's time per frame, so lock-step runs fade alike.
+  stack_->cache().advance_fades(first ? 0.0 : cfg_.render.frame_time_ms / 1e3);
   const auto own_start = Clock::now();
   TS_TRY(stack_->submit({&rec, Uploads::kAll, write || record_.compares(), first ? frame0_step : StepHook{}}));
   if (first) {

@@ -40,7 +40,8 @@ TextureCache::TextureCache(const TextureCacheOptions& options, const SceneData& 
       allocator_(options.layer_extent, options.layers),
       residency_(scene.texture_records().size()),
       unplaceable_logged_(scene.texture_records().size(), false),
-      entry_written_(scene.texture_records().size(), false) {}
+      entry_written_(scene.texture_records().size(), false),
+      fades_(options.fade_s, scene.texture_records().size()) {}
 
 Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& ctx, const TextureCacheOptions& options,
                                                            const SceneData& scene) {
@@ -126,7 +127,7 @@ Status TextureCache::prepare_texture(uint32_t texture) {
   t = gpu::TextureGpu{};
   t.placement = {0, gpu::kNotResident, 0, r.mip_count};
   t.region = {0, 0, r.width, r.height};
-  t.colour = {scene_.colours()[texture], 0, 0, 0};
+  t.colour = {scene_.colours()[texture], gpu::kNotResident, 0, 0};
   entry_written_[texture] = true;
   return ok_status();
 }
@@ -165,7 +166,10 @@ void TextureCache::evict(TextureId texture) {
   ++r.epoch;
   r.evicted_before = true;
   ++stats_.evictions;
-  table_.as<gpu::TextureGpu>()[texture.value].placement.y = gpu::kNotResident;
+  gpu::TextureGpu& t = table_.as<gpu::TextureGpu>()[texture.value];
+  const uint32_t before = t.placement.y;
+  t.placement.y = gpu::kNotResident;
+  fades_.on_publish(texture.value, t, before);  // no fade survives an eviction
   // Its pages: the submissions up to last_serial_ may still sample them, so they are unbound after those.
   for (uint32_t mip = 0; r.bound != 0; ++mip) {
     if (!(r.bound & (1u << mip))) continue;
@@ -371,8 +375,10 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
 void TextureCache::publish(TextureId texture) {
   const uint32_t mask = residency_[texture.value].mask;
   auto& t = table_.as<gpu::TextureGpu>()[texture.value];
+  const uint32_t before = t.placement.y;
   if (mask == 0) {
     t.placement.y = gpu::kNotResident;
+    fades_.on_publish(texture.value, t, before);
     return;
   }
   // The shader samples a contiguous range [finest, coarsest]: the run of resident levels that ends at the
@@ -382,6 +388,11 @@ void TextureCache::publish(TextureId texture) {
   while (finest > 0 && (mask & (1u << (finest - 1)))) --finest;
   t.placement.y = finest;
   t.placement.z = coarsest;
+  fades_.on_publish(texture.value, t, before);
+}
+
+void TextureCache::advance_fades(double dt_s) {
+  fades_.advance(dt_s, std::span(table_.as<gpu::TextureGpu>(), scene_.texture_records().size()));
 }
 
 void TextureCache::on_submission_complete(uint64_t serial) {

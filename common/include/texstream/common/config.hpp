@@ -51,13 +51,16 @@ struct ChoiceTable<DebugView> {
 
 // How the City Colormap colour is blended with the sampled colour (stream.blend; docs/design/blend.md).
 enum class BlendMode : uint8_t {
-  kConverge,  // by the levels still missing: (displayed - wanted) / M_max; 0 once the wanted level is resident
-  kSeed,      // seed 000 Eq. 8: by the displayed level, M / M_max (never 0 for a texture seen from afar)
+  kConverge,        // by the square of the missing fraction ((displayed - wanted) / M_max)^2; 0 once resident
+  kConvergeLinear,  // by the missing fraction itself: smoother, but costs more error while levels arrive
+  kSeed,            // seed 000 Eq. 8: by the displayed level, M / M_max (never 0 for a texture seen from afar)
 };
 template <>
 struct ChoiceTable<BlendMode> {
-  static constexpr std::array<ChoiceEntry<BlendMode>, 2> kEntries{
-      {{BlendMode::kConverge, "converge", "by the levels still missing; exact once the wanted level is resident"},
+  static constexpr std::array<ChoiceEntry<BlendMode>, 3> kEntries{
+      {{BlendMode::kConverge, "converge",
+        "by the square of the fraction of levels still missing; exact once the wanted level is resident"},
+       {BlendMode::kConvergeLinear, "converge_linear", "by the fraction of levels still missing"},
        {BlendMode::kSeed, "seed", "seed 000 Eq. 8, by the displayed level"}}};
 };
 
@@ -170,6 +173,7 @@ struct StreamConfig {
   int64_t max_mips_per_cycle = 512;        // upload budget per streaming cycle
   bool colormap_blend = true;              // colormap blended in while mips arrive; false samples directly
   BlendMode blend = BlendMode::kConverge;  // how (colormap_blend = true)
+  double fade_ms = 0;                      // a newly resident level fades in over this much path time; 0: at once
   double foreground_distance_m = 500;      // Eq. 2: w_d falls from 1 at the camera to 0 at this view depth
 };
 

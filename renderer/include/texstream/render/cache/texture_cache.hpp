@@ -34,6 +34,7 @@
 #include "texstream/common/result.hpp"
 #include "texstream/common/texel_format.hpp"
 #include "texstream/render/cache/cache_allocator.hpp"
+#include "texstream/render/cache/mip_fades.hpp"
 #include "texstream/render/cache/sparse_memory.hpp"
 #include "texstream/render/cache/sparse_page_table.hpp"
 #include "texstream/render/cache/staging_ring.hpp"
@@ -53,6 +54,7 @@ struct TextureCacheOptions {
   uint32_t layers = 64;                      // cache.layers
   uint64_t staging_bytes = 32ull << 20;      // host-visible staging ring
   uint64_t memory_bytes = 128ull << 20;      // cache.memory_bytes: GPU memory for bound pages (and mip tail)
+  double fade_s = 0;  // stream.fade_ms: a finer level (or a first level) fades in over this long; 0 = at once
 };
 
 struct TextureCacheStats {
@@ -114,6 +116,9 @@ class TextureCache final : public stream::MipSink {
   BindWait bind_wait() const { return bind_wait_; }
   // Submission `serial` (and every earlier one) has completed: publish what it copied.
   void on_submission_complete(uint64_t serial);
+  // Advances the fades (stream.fade_ms) by `dt_s` of path time; call once per frame before drawing it. Levels
+  // published before the first call show at once (a preload is no pop-in). docs/design/blend.md.
+  void advance_fades(double dt_s);
   // What the texture state machine must hear since the last call, oldest first (TextureStates::apply).
   std::vector<stream::TextureEvent> take_events() { return std::exchange(events_, {}); }
 
@@ -189,6 +194,7 @@ class TextureCache final : public stream::MipSink {
   std::deque<Copy> in_flight_;  // recorded, submission not yet complete
   std::vector<bool> unplaceable_logged_;
   std::vector<bool> entry_written_;  // prepare_texture wrote the texture's table entry
+  MipFades fades_;
   TextureCacheStats stats_;
 };
 
