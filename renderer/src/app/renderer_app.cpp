@@ -240,6 +240,7 @@ Result<RunSummary> Renderer::finish() {
   s.server_ram_hit_rate = lookups ? static_cast<double>(ss.server_ram_cache_hits) / static_cast<double>(lookups) : 0.0;
   s.protocol_errors = ss.protocol_errors;
   s.server_restarts = ss.server_restarts;
+  s.stream_json = stream::stream_stats_json(ss, client_->ipc_time()).dump();
   s.textures_resident = cache.resident_textures();
   s.texture_count = scene_.texture_records().size();
   s.streaming_cycles = cycles_;

@@ -32,6 +32,7 @@ std::string RunSummary::to_json() const {
   j["mb_streamed"] = mb_streamed;
   j["server_ram_cache_hit_rate"] = server_ram_hit_rate;
   j["protocol_errors"] = protocol_errors;
+  if (!stream_json.empty()) j["stream"] = nlohmann::json::parse(stream_json, nullptr, false);
   j["server_restarts"] = server_restarts;
   j["validation_errors"] = validation_errors;
   j["validation_warnings"] = validation_warnings;

@@ -20,7 +20,7 @@
 #include "chaos_camera_path.hpp"
 #include "child_process.hpp"
 #include "image_psnr.hpp"
-#include "stats_file.hpp"
+#include "texstream/stream/stream_stats.hpp"
 
 namespace texstream::chaos {
 
@@ -81,6 +81,15 @@ std::optional<pid_t> server_of(pid_t renderer) {
   for (const ProcInfo& p : children_of(renderer))
     if (p.comm == kServerComm) return p.pid;
   return std::nullopt;
+}
+
+// The renderer's $TEXSTREAM_STREAM_STATS file, read by the fields that wrote it (stream_stats.hpp).
+Result<stream::StreamStatsText> read_stream_stats(const fs::path& file) {
+  std::ifstream in(file);
+  if (!in) return make_error(ErrorCode::kNotFound, "no stream statistics file '" + file.string() + "'");
+  std::ostringstream text;
+  text << in.rdbuf();
+  return stream::parse_stream_stats(text.str(), file.string());
 }
 
 std::string segment_needle(const std::string& segment) { return std::string("--segment\0", 10) + segment + '\0'; }
@@ -372,24 +381,24 @@ ChaosResult run_chaos(const ChaosOptions& o) {
     res.notes += "renderer " + exit->describe() + "; ";
     ++res.renderer_crashes;
   }
-  if (auto st = StatsFile::load(runner.stats_file("chaos"))) {
-    res.ipc_p9999_us = st->number("ipc_p9999_us");
-    res.ipc_max_us = st->number("ipc_max_us");
-    res.ipc_frames = static_cast<uint64_t>(st->number("ipc_frames"));
-    res.bad_payloads = static_cast<uint64_t>(st->number("payload_checksum_failures"));
-    res.payloads_ok = static_cast<uint64_t>(st->number("completions_ok"));
-    res.protocol_errors = static_cast<uint64_t>(st->number("protocol_errors"));
-    res.unserved_after_restart = static_cast<uint64_t>(st->number("unserved_after_restart"));
-    res.lost_resent = static_cast<uint64_t>(st->number("lost_resent"));
-    res.server_deaths = static_cast<uint64_t>(st->number("server_deaths"));
+  if (auto st = read_stream_stats(runner.stats_file("chaos"))) {
+    const stream::StreamStats& ss = st->stats;
+    res.ipc_p9999_us = st->ipc.p9999_us;
+    res.ipc_max_us = st->ipc.max_us;
+    res.ipc_frames = static_cast<uint64_t>(st->ipc.frames);
+    res.bad_payloads = ss.payload_checksum_failures;
+    res.payloads_ok = ss.completions_ok;
+    res.protocol_errors = ss.protocol_errors;
+    res.unserved_after_restart = ss.unserved_after_restart;
+    res.lost_resent = ss.lost_resent;
+    res.server_deaths = ss.server_deaths;
     log("stream client: " + std::to_string(res.payloads_ok) + " payloads consumed, checksum verified; " +
         std::to_string(res.bad_payloads) + " checksum failures; " + std::to_string(res.protocol_errors) +
         " protocol errors; " + std::to_string(res.server_deaths) + " server deaths seen; " +
-        std::to_string(res.lost_resent) + " lost requests re-sent, " + fmt_num(st->number("lost_answered_in_time"), 0) +
-        " answered within 2 s; IPC per frame p50 " + fmt_num(st->number("ipc_p50_us")) + " us, p99 " +
-        fmt_num(st->number("ipc_p99_us")) + " us, p99.99 " + fmt_num(res.ipc_p9999_us) + " us, max " +
-        fmt_num(res.ipc_max_us) + " us over " + std::to_string(res.ipc_frames) + " frames (" +
-        fmt_num(st->number("ipc_frames_over_1ms"), 0) + " over 1 ms)");
+        std::to_string(res.lost_resent) + " lost requests re-sent, " + std::to_string(ss.lost_answered_in_time) +
+        " answered within 2 s; IPC per frame p50 " + fmt_num(st->ipc.p50_us) + " us, p99 " + fmt_num(st->ipc.p99_us) +
+        " us, p99.99 " + fmt_num(res.ipc_p9999_us) + " us, max " + fmt_num(res.ipc_max_us) + " us over " +
+        std::to_string(res.ipc_frames) + " frames (" + fmt_num(st->ipc.frames_over_1ms, 0) + " over 1 ms)");
   } else {
     res.notes += st.error().message + "; ";
     ++res.renderer_crashes;

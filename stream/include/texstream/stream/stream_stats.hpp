@@ -1,11 +1,16 @@
 #pragma once
-// What StreamClient counts and how it prints it: StreamStats, the IPC time per frame, and the `key value`
-// text that texstream-chaos reads ($TEXSTREAM_STREAM_STATS).
+// What StreamClient counts and how it prints it: StreamStats, the IPC time per frame, and one list of their
+// fields (kStreamCounters, kIpcFields) from which the `key value` text ($TEXSTREAM_STREAM_STATS), the "stream"
+// object of summary.json and texstream-chaos's reading of the text are all made.
+#include <array>
 #include <cstddef>
 #include <cstdint>
+#include <nlohmann/json.hpp>
 #include <string>
+#include <string_view>
 
 #include "texstream/common/latency_histogram.hpp"
+#include "texstream/common/result.hpp"
 #include "texstream/protocol/records.hpp"
 
 namespace texstream::stream {
@@ -80,7 +85,80 @@ struct StreamStats {
   StreamServerState server_state = StreamServerState::kExternal;
 };
 
-// `key value` lines: every StreamStats counter and the IPC-time quantiles.
+// The IPC time per frame as printed: frames, total and quantiles (IpcTimeHistogram's figures).
+struct IpcSummary {
+  double frames = 0;
+  double total_ms = 0;
+  double p50_us = 0;
+  double p99_us = 0;
+  double p999_us = 0;
+  double p9999_us = 0;
+  double max_us = 0;
+  double frames_over_1ms = 0;
+  static IpcSummary of(const IpcTimeHistogram& h);
+};
+
+// The one list of the counters that are printed, by name. completions_failed (a sum over the statuses) and
+// server_state (a name) are the two lines not in it; a new counter is one line here.
+struct StreamCounterField {
+  std::string_view name;
+  uint64_t StreamStats::*member;
+};
+inline constexpr std::array<StreamCounterField, 26> kStreamCounters{{
+    {"requests_sent", &StreamStats::requests_sent},
+    {"releases_sent", &StreamStats::releases_sent},
+    {"completions_ok", &StreamStats::completions_ok},
+    {"completions_rejected", &StreamStats::completions_rejected},
+    {"payload_checksum_failures", &StreamStats::payload_checksum_failures},
+    {"requests_lost", &StreamStats::requests_lost},
+    {"requests_timed_out", &StreamStats::requests_timed_out},
+    {"bytes_received", &StreamStats::bytes_received},
+    {"protocol_errors", &StreamStats::protocol_errors},
+    {"server_restarts", &StreamStats::server_restarts},
+    {"server_deaths", &StreamStats::server_deaths},
+    {"server_crashes", &StreamStats::server_crashes},
+    {"server_deaths_before_attach", &StreamStats::server_deaths_before_attach},
+    {"server_refusals_before_attach", &StreamStats::server_refusals_before_attach},
+    {"crash_signal_deaths", &StreamStats::crash_signal_deaths},
+    {"textures_quarantined", &StreamStats::textures_quarantined},
+    {"lost_resent", &StreamStats::lost_resent},
+    {"lost_answered_in_time", &StreamStats::lost_answered_in_time},
+    {"unserved_after_restart", &StreamStats::unserved_after_restart},
+    {"in_flight", &StreamStats::in_flight},
+    {"slots_held", &StreamStats::slots_held},
+    {"releases_queued", &StreamStats::releases_queued},
+    {"server_ram_cache_hits", &StreamStats::server_ram_cache_hits},
+    {"server_ram_cache_misses", &StreamStats::server_ram_cache_misses},
+    {"server_bytes_read", &StreamStats::server_bytes_read},
+    {"server_requests_cancelled", &StreamStats::server_requests_cancelled},
+}};
+struct IpcField {
+  std::string_view name;
+  double IpcSummary::*member;
+};
+inline constexpr std::array<IpcField, 8> kIpcFields{{
+    {"ipc_frames", &IpcSummary::frames},
+    {"ipc_total_ms", &IpcSummary::total_ms},
+    {"ipc_p50_us", &IpcSummary::p50_us},
+    {"ipc_p99_us", &IpcSummary::p99_us},
+    {"ipc_p999_us", &IpcSummary::p999_us},
+    {"ipc_p9999_us", &IpcSummary::p9999_us},
+    {"ipc_max_us", &IpcSummary::max_us},
+    {"ipc_frames_over_1ms", &IpcSummary::frames_over_1ms},
+}};
+
+// `key value` lines: every field of the lists above, completions_failed and server_state.
 std::string format_stream_stats(const StreamStats& s, const IpcTimeHistogram& ipc_time);
+// The same fields as one JSON object (summary.json's "stream").
+nlohmann::json stream_stats_json(const StreamStats& s, const IpcTimeHistogram& ipc_time);
+
+// format_stream_stats's text read back (texstream-chaos): the fields by the same lists. A line whose key is not
+// in them, or whose value is not a number where one belongs, is an error naming `source` and the line.
+struct StreamStatsText {
+  StreamStats stats;  // completions_failed[0] holds the printed sum
+  IpcSummary ipc;
+  std::string server_state;
+};
+Result<StreamStatsText> parse_stream_stats(std::string_view text, const std::string& source);
 
 }  // namespace texstream::stream

@@ -8,8 +8,8 @@
 #include <span>
 #include <vector>
 
-#include "texstream/render/vulkan/zeroed_array.hpp"
 #include "texstream/render/scene/gpu_structs.hpp"
+#include "texstream/render/vulkan/zeroed_array.hpp"
 
 namespace texstream::render {
 

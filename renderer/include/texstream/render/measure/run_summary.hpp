@@ -26,6 +26,7 @@ struct RunSummary {
   double mb_streamed = 0;          // 10^6 bytes of those
   double server_ram_hit_rate = 0;  // server RAM cache hits / (hits + misses); 0 when nothing was asked
   uint64_t protocol_errors = 0;
+  std::string stream_json;  // the stream client's counters as a JSON object (stream_stats_json); empty: none
   uint64_t server_restarts = 0;
   uint64_t validation_errors = 0;
   uint64_t validation_warnings = 0;
