@@ -7,16 +7,13 @@ namespace texstream::render {
 
 void MipFades::on_publish(uint32_t texture, gpu::TextureGpu& t, uint32_t before) {
   const uint32_t finest = t.placement.y;
-  const bool refined = finest != gpu::kNotResident && (before == gpu::kNotResident || finest < before);
-  if (!started_ || fade_s_ <= 0 || !refined) {
-    // Evicted, coarser, or no fading: what is resident shows at once (a finer level staying resident while a
-    // coarser one arrives keeps its fade).
-    if (!started_ || fade_s_ <= 0 || finest == gpu::kNotResident || finest > before) {
-      t.colour.y = gpu::kNotResident;
-      t.colour.z = 0;
-    }
+  // Evicted, coarser, or no fading: what is resident shows at once.
+  if (!started_ || fade_s_ <= 0 || finest == gpu::kNotResident || (before != gpu::kNotResident && finest > before)) {
+    t.colour.y = gpu::kNotResident;
+    t.colour.z = 0;
     return;
   }
+  if (finest == before) return;  // a coarser level under the same finest one: any fade goes on
   // A level arriving mid-fade: past half way the level that was fading in becomes the one faded from; before
   // that the old one stays and the fade goes on. Either way no frame jumps by more than half a level's change.
   if (std::bit_cast<float>(t.colour.z) <= 0.5f) {

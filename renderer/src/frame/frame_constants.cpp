@@ -39,11 +39,12 @@ gpu::FrameUniforms frame_uniforms(const Camera& cam, const Config& cfg, uint32_t
   fu.params = {a_m, std::max(1.0f, std::floor(a_m / 2.0f)), static_cast<float>(cfg.stream.foreground_distance_m),
                static_cast<float>(cfg.render.headlight_ambient)};
   const double tau_fixed = std::min(cfg.stream.tau * gpu::kWeightFixedScale, 4294967295.0);
-  const uint32_t blend = !cfg.stream.colormap_blend             ? 0u
-                         : cfg.stream.blend == BlendMode::kSeed ? gpu::kFlagColormapBlend | gpu::kFlagBlendSeed
-                         : cfg.stream.blend == BlendMode::kConvergeLinear
-                             ? gpu::kFlagColormapBlend | gpu::kFlagBlendLinear
-                             : gpu::kFlagColormapBlend;
+  uint32_t blend = 0;  // stream.colormap_blend = false: sampled colour only
+  if (cfg.stream.colormap_blend) {
+    blend = gpu::kFlagColormapBlend;
+    if (cfg.stream.blend == BlendMode::kSeed) blend |= gpu::kFlagBlendSeed;
+    if (cfg.stream.blend == BlendMode::kConvergeLinear) blend |= gpu::kFlagBlendLinear;
+  }
   fu.flags = {blend | gpu::kFlagLighting, mesh_count, static_cast<uint32_t>(std::ceil(tau_fixed)), compact_capacity};
   fu.cache = {cache_layer_extent, cache_mips, 0, 0};
   return fu;
