@@ -11,6 +11,8 @@
 #include <sstream>
 #include <string>
 
+#include "texstream/common/syscall_count.hpp"
+
 namespace texstream {
 
 namespace {
@@ -74,11 +76,13 @@ PidWatch& PidWatch::operator=(PidWatch&& o) noexcept {
 bool PidWatch::dead() const {
   if (fd_ < 0) return true;
   pollfd p{fd_, POLLIN, 0};
+  count_syscall(Syscall::kPoll);
   const int r = ::poll(&p, 1, 0);
   return r > 0 && (p.revents & (POLLIN | POLLHUP | POLLERR)) != 0;
 }
 
 void futex_wake_all(ShmAtomic<uint32_t>& word) {
+  count_syscall(Syscall::kFutexWake);
   syscall(SYS_futex, reinterpret_cast<uint32_t*>(&word.v), FUTEX_WAKE, INT_MAX, nullptr, nullptr, 0);
 }
 
@@ -86,6 +90,7 @@ void futex_wait(ShmAtomic<uint32_t>& word, uint32_t expected, std::chrono::micro
   timespec ts{};
   ts.tv_sec = static_cast<time_t>(timeout.count() / 1000000);
   ts.tv_nsec = static_cast<long>((timeout.count() % 1000000) * 1000);
+  count_syscall(Syscall::kFutexWait);
   syscall(SYS_futex, reinterpret_cast<uint32_t*>(&word.v), FUTEX_WAIT, expected, &ts, nullptr, 0);
 }
 

@@ -270,7 +270,7 @@ void Segment::reset_after_server_death() {
   // relaxed: published by the release-store of `pid` below.
   for (auto* w : {&b.attached, &b.sleeping, &b.refused_by}) w->v.store(0, std::memory_order_relaxed);
   for (auto* w : {&b.start_time, &b.heartbeat, &b.completions, &b.requests_received, &b.requests_cancelled,
-                  &b.ram_cache_hits, &b.ram_cache_misses, &b.bytes_read}) {
+                  &b.ram_cache_hits, &b.ram_cache_misses, &b.bytes_read, &b.syscalls}) {
     w->v.store(0, std::memory_order_relaxed);
   }
   for (auto& w : b.loading) w.v.store(0, std::memory_order_relaxed);

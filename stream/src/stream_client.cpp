@@ -15,6 +15,7 @@
 
 #include "texstream/common/contract.hpp"
 #include "texstream/common/memory_info.hpp"
+#include "texstream/common/syscall_count.hpp"
 #include "texstream/common/texel_format.hpp"
 #include "texstream/protocol/checksum.hpp"
 #include "texstream/protocol/liveness.hpp"
@@ -301,6 +302,7 @@ void StreamClient::on_server_gone(MipSink& sink, const std::string& why) {
   past_misses_ += sb.ram_cache_misses.v.load(std::memory_order_relaxed);
   past_bytes_read_ += sb.bytes_read.v.load(std::memory_order_relaxed);
   past_cancelled_ += sb.requests_cancelled.v.load(std::memory_order_relaxed);
+  past_syscalls_ += sb.syscalls.v.load(std::memory_order_relaxed);
 
   // Everything in flight is lost; the state machine asks again (kCancelled is retried, never counted).
   std::vector<uint64_t> lost;
@@ -359,6 +361,11 @@ void StreamClient::supervise(MipSink& sink) {
   expire_requests(sink, now());
   SupervisorHooks hooks(*this, sink);
   supervisor_->supervise(now(), ring_broken, !in_flight_.empty(), hooks);
+}
+
+void StreamClient::wait_for_completions(std::chrono::microseconds timeout) {
+  // No server attached: nobody rings the bell, and the wait is the plain sleep it replaced.
+  endpoint_.wait_for_completions(timeout);
 }
 
 void StreamClient::poll(MipSink& renderer_sink, size_t max_mips) {
@@ -569,6 +576,8 @@ StreamStats StreamClient::stats() const {
   s.server_ram_cache_misses = past_misses_ + sb.ram_cache_misses.v.load(std::memory_order_relaxed);
   s.server_bytes_read = past_bytes_read_ + sb.bytes_read.v.load(std::memory_order_relaxed);
   s.server_requests_cancelled = past_cancelled_ + sb.requests_cancelled.v.load(std::memory_order_relaxed);
+  s.server_syscalls = past_syscalls_ + sb.syscalls.v.load(std::memory_order_relaxed);
+  s.syscalls = process_syscalls().total();
   s.unserved_after_restart += overdue_lost(now());
   s.server_deaths = supervisor_->server_deaths();
   s.server_deaths_before_attach = supervisor_->server_deaths_before_attach();

@@ -28,7 +28,10 @@ TEST(ProtocolLayout, RecordSizesAndOffsets) {
   EXPECT_EQ(offsetof(RingControl, read_pos), 64u);
   EXPECT_EQ(offsetof(SegmentHeader, texture_count), 160u);  // version 3: the renderer's texture table
   EXPECT_EQ(offsetof(SegmentHeader, texture_table_fingerprint), 168u);
-  EXPECT_EQ(kLayoutVersion, 3u);
+  EXPECT_EQ(offsetof(RendererBlock, waiting), 36u);  // version 4: the completion bell
+  EXPECT_EQ(offsetof(ServerBlock, syscalls), 112u);
+  EXPECT_EQ(offsetof(ServerBlock, completion_bell), 120u);
+  EXPECT_EQ(kLayoutVersion, 4u);
 }
 
 TEST(ProtocolLayout, ComputedLayoutIsAlignedAndDisjoint) {

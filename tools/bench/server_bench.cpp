@@ -47,6 +47,7 @@
 #include "bench_util.hpp"
 #include "texstream/common/camera_path.hpp"
 #include "texstream/common/config.hpp"
+#include "texstream/common/cpu_relax.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/renderer_endpoint.hpp"
@@ -237,6 +238,7 @@ class Harness {
 
   // The doorbell after a batch of pushes (the renderer's protocol: bump, then wake a sleeping server).
   void ring() { endpoint_.ring(); }
+  void wait_for_completions(std::chrono::microseconds timeout) { endpoint_.wait_for_completions(timeout); }
 
   // Pops every completion now waiting; calls on(c) for each, then hands kOk slots back. Returns how many.
   template <class F>
@@ -280,6 +282,10 @@ struct StreamResult {
 // polling cost per frame). Off for the throughput phases, which do not report it: two clock reads per poll
 // were ~1/5 of the bench thread's own samples in the hit phase (perf), time the server then waited for the
 // next requests and slot releases (the dispatcher yielded ~18 % of its samples).
+// Polls that find nothing spin this long before the client sleeps on the completion bell: a miss takes
+// ~3-30 us, and a sleep costs the server a futex wake per publish (one per texture when it was 64 polls).
+constexpr uint64_t kClientSpinNs = 50'000;
+
 StreamResult stream(Harness& h, const std::vector<Request>& requests, uint32_t window, uint64_t generation,
                     bool record_latency, bool record_poll_cost = false) {
   StreamResult out;
@@ -287,7 +293,7 @@ StreamResult stream(Harness& h, const std::vector<Request>& requests, uint32_t w
   size_t next = 0;
   uint32_t outstanding = 0;
   const uint64_t t0 = now_ns();
-  uint32_t idle = 0;
+  uint64_t idle_since = 0;  // when polls began to find nothing (0: the last found something)
   while (next < requests.size() || outstanding > 0) {
     while (next < requests.size() && outstanding < window) {
       const Request& r = requests[next];
@@ -319,9 +325,16 @@ StreamResult stream(Harness& h, const std::vector<Request>& requests, uint32_t w
     });
     if (got > 0) {
       if (record_poll_cost) out.poll_us.push_back(static_cast<double>(now_ns() - p0) / 1e3);
-      idle = 0;
-    } else if (++idle > 64) {
-      std::this_thread::yield();  // 2 cores shared with the server's dispatcher and workers
+      idle_since = 0;
+    } else if (idle_since == 0) {
+      idle_since = now_ns();
+    } else if (now_ns() - idle_since > kClientSpinNs) {
+      // As the renderer waits in lock-step frames and preloads: on the completion bell, which costs no system
+      // call on either side while completions flow (a yield loop here was ~32,000 sched_yield per round).
+      h.wait_for_completions(std::chrono::milliseconds(1));
+      idle_since = 0;
+    } else {
+      cpu_relax();
     }
   }
   out.seconds = static_cast<double>(now_ns() - t0) / 1e9;

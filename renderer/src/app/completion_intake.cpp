@@ -57,7 +57,7 @@ Result<Renderer::Clock::duration> Renderer::take_completions() {
                                                  " requests still unanswered after " +
                                                  std::to_string(kLockstepTimeout.count()) + " s");
     }
-    std::this_thread::sleep_for(std::chrono::microseconds(200));
+    client_->wait_for_completions(std::chrono::microseconds(200));
   }
   ordered.flush();  // the whole frame's arrivals, in (texture, mip) order
   const Clock::duration waited = Clock::now() - wait_start;
@@ -185,7 +185,7 @@ Status Renderer::load_fully(std::vector<stream::StreamCandidate> wanted, LoadGoa
                                                    " s while loading "
                                                    "whole mip chains");
       } else if (client_->stats().in_flight > 0) {
-        std::this_thread::sleep_for(std::chrono::microseconds(200));
+        client_->wait_for_completions(std::chrono::microseconds(200));
       }
     }
     ordered.flush();

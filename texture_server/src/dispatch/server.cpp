@@ -10,6 +10,7 @@
 #include <cmath>
 #include <thread>
 
+#include "texstream/common/cpu_relax.hpp"
 #include "texstream/protocol/checksum.hpp"
 #include "texstream/protocol/doorbell.hpp"
 #include "texstream/server/storage/rate_limited_storage.hpp"
@@ -47,14 +48,14 @@ constexpr uint32_t kInlineMissesPerPass = 4;
 // copies the rest of a batch (publishing only at the end of a pass of 32 hits left it idle meanwhile).
 constexpr uint32_t kPublishBatch = 8;
 
-// After a busy pass, poll this long (yielding the core) before sleeping on the futex: a renderer streaming
+// After a busy pass, poll this long (spinning, no system call) before sleeping on the futex: a renderer streaming
 // a batch pushes again within microseconds, and a futex sleep + wake costs two syscalls and a context switch
 // per batch. Bounded so an idle server costs nothing.
 constexpr std::chrono::microseconds kSpinBeforeSleep{50};
 
-// A busy loop asks the kernel whether the renderer is alive (a poll() on its pidfd) at most this often; an
-// idle pass always asks. One syscall per pass was one per handful of hits (texstream-bench server: passes
-// take 2–20 µs). 1 ms is nothing against the 9–75 ms it takes to notice a death anyway.
+// The loop asks the kernel whether the renderer is alive (a poll() on its pidfd) at most this often, busy or
+// idle (a pass after a sleep longer than this asks at once). One syscall per pass was one per handful of hits
+// (texstream-bench server: passes take 2–20 µs). 1 ms is nothing against the 9–75 ms it takes to notice a death anyway.
 constexpr uint64_t kLivenessCheckNs = 1'000'000;
 
 // Remote loads that may wait for a remote-fetch worker. They hold no staging slot and live at most until the
@@ -191,13 +192,13 @@ Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const S
       [this](const LoadJob& job) {
         return loader_.load(job.request, job.record, job.slot, segment_.slot(job.slot), /*local_only=*/true);
       },
-      wake, loading.subspan(first_worker_word, local_words));
+      wake, loading.subspan(first_worker_word, local_words), &stats_.syscalls);
   remote_workers_ = std::make_unique<WorkerPool>(
       static_cast<uint32_t>(config.remote_fetches_in_flight),
       [this](const LoadJob& job) {
         return loader_.load(job.request, job.record, job.slot, segment_.slot(job.slot), /*local_only=*/false);
       },
-      wake, loading.subspan(first_worker_word + local_words));
+      wake, loading.subspan(first_worker_word + local_words), &stats_.syscalls);
 }
 
 Server::~Server() {
@@ -212,6 +213,7 @@ Server::~Server() {
 }
 
 RunOutcome Server::run(const std::atomic<bool>& stop, std::atomic<bool>* print_stats) {
+  const SyscallAccount account(stats_.syscalls);  // this thread's kernel crossings are the server's
   ServerBlock& block = segment_.server_block();
   RendererBlock& renderer = segment_.renderer_block();
   const int self = static_cast<int>(::getpid());
@@ -242,11 +244,10 @@ RunOutcome Server::run(const std::atomic<bool>& stop, std::atomic<bool>* print_s
   }
 
   uint64_t last_liveness_check = 0;
-  bool was_idle = true;
   while (outcome == RunOutcome::kStopped && !stop.load(std::memory_order_relaxed)) {
     block.heartbeat.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: progress counter, no data behind it
     pass_now_ns_ = steady_now_ns();
-    if (was_idle || pass_now_ns_ - last_liveness_check >= kLivenessCheckNs) {
+    if (pass_now_ns_ - last_liveness_check >= kLivenessCheckNs) {
       last_liveness_check = pass_now_ns_;
       loader_.log_left_out_timeouts();
       if (watch.dead()) {
@@ -273,7 +274,6 @@ RunOutcome Server::run(const std::atomic<bool>& stop, std::atomic<bool>* print_s
     if (print_stats && print_stats->exchange(false, std::memory_order_relaxed)) {
       spdlog::info("statistics (SIGUSR1):\n{}", stats_report());
     }
-    was_idle = !busy;
     if (!busy) idle_wait();
   }
   block.attached.v.store(0, std::memory_order_release);  // pairs with the renderer's acquire-load
@@ -289,6 +289,8 @@ void Server::update_gauges() {
   stats_.pending.set(scheduler_.size());
   stats_.in_flight.set(loads_in_flight_);
   stats_.overflow.set(overflow_.size());
+  // relaxed: statistic; the dispatcher is the block's only writer.
+  segment_.server_block().syscalls.v.store(stats_.syscalls.total(), std::memory_order_relaxed);
 }
 
 void Server::record_latency(LatencyHistogram& histogram, uint64_t received_ns) {
@@ -573,6 +575,7 @@ void Server::publish_completions() {
   }
   if (unpublished_completions_ == 0) return;
   completions_.publish();
+  CompletionBell(segment_).ring();          // wakes a renderer thread only if one waits for completions
   fault_point(FaultPoint::kAfterRingPush);  // published, statistics not yet counted
   // relaxed: statistic
   segment_.server_block().completions.v.fetch_add(unpublished_completions_, std::memory_order_relaxed);
@@ -597,13 +600,14 @@ bool Server::flush_completions() {
 }
 
 void Server::idle_wait() {
-  // Spin briefly first (see kSpinBeforeSleep); any new request or worker result ends the spin.
-  // (Tried: the first 10 µs without yielding, a PAUSE loop: hit p99 latency rose from ~15 to ~26 µs in 3 of
-  // 4 paired texstream-bench runs — with the renderer on the same core, the spin kept it from running.)
+  // Spin briefly first (see kSpinBeforeSleep); any new request or worker result ends the spin. A pause loop,
+  // not sched_yield: a yield is a system call (~1.4 us on a paravirtualised guest, 35 per idle 50 us), and the
+  // renderer no longer spins beside us (it waits on the completion bell, doorbell.hpp). docs/design/syscalls.md.
   const auto spin_end = std::chrono::steady_clock::now() + kSpinBeforeSleep;
-  while (std::chrono::steady_clock::now() < spin_end) {
+  for (uint32_t i = 0;; ++i) {
     if (requests_.size() > 0 || workers_->results_ready() || remote_workers_->results_ready()) return;
-    std::this_thread::yield();
+    if ((i & 15) == 15 && std::chrono::steady_clock::now() >= spin_end) break;
+    cpu_relax();
   }
   const auto idle = std::chrono::microseconds(static_cast<int64_t>(config_.idle_wait_ms * 1000.0));
   // Loads in flight or completions waiting for ring space: nap briefly (workers also wake us).

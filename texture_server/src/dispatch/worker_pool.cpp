@@ -3,8 +3,11 @@
 namespace texstream::server {
 
 WorkerPool::WorkerPool(uint32_t threads, Work work, std::function<void()> on_result,
-                       std::span<ShmAtomic<uint32_t>> loading)
-    : work_(std::move(work)), loading_(loading), on_result_(std::move(on_result)) {
+                       std::span<ShmAtomic<uint32_t>> loading, SyscallCounter* syscalls)
+    : work_(std::move(work)),
+      loading_(loading),
+      on_result_(std::move(on_result)),
+      syscalls_(syscalls != nullptr ? syscalls : &process_syscalls()) {
   results_.reserve(64);
   threads_.reserve(threads);
   for (uint32_t i = 0; i < threads; ++i) threads_.emplace_back([this, i] { worker_main(i); });
@@ -21,11 +24,17 @@ WorkerPool::~WorkerPool() {
 }
 
 void WorkerPool::submit(const LoadJob& job) {
+  bool wake = false;
   {
     std::lock_guard lock(mutex_);
     jobs_.push_back(job);
+    wake = idle_ > 0;
   }
-  cv_.notify_one();
+  // Only a blocked worker needs the futex wake; a busy one takes the job when it looks again.
+  if (wake) {
+    count_syscall(Syscall::kFutexWake);
+    cv_.notify_one();
+  }
 }
 
 void WorkerPool::take_results(std::vector<LoadResult>& out) {
@@ -42,12 +51,18 @@ void WorkerPool::take_results(std::vector<LoadResult>& out) {
 }
 
 void WorkerPool::worker_main(uint32_t index) {
+  const SyscallAccount account(*syscalls_);
   ShmAtomic<uint32_t>* const loading = index < loading_.size() ? &loading_[index] : nullptr;
   for (;;) {
     LoadJob job;
     {
       std::unique_lock lock(mutex_);
-      cv_.wait(lock, [this] { return stopping_ || !jobs_.empty(); });
+      while (!stopping_ && jobs_.empty()) {
+        ++idle_;
+        count_syscall(Syscall::kFutexWait);
+        cv_.wait(lock);
+        --idle_;
+      }
       if (stopping_) return;
       job = jobs_.front();
       jobs_.pop_front();

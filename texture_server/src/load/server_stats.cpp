@@ -48,6 +48,9 @@ std::string format_stats(const ServerStats& s, const MipCacheStats& c) {
   out += fmt::format("queues (now/max): pending {}/{}, loads in flight {}/{}, completions waiting {}/{}\n",
                      get(s.pending.now), get(s.pending.max), get(s.in_flight.now), get(s.in_flight.max),
                      get(s.overflow.now), get(s.overflow.max));
+  const uint64_t served = get(s.hits_ok) + get(s.loads_ok);
+  out += fmt::format("system calls (dispatcher and workers): {}; {:.3f} per served mip\n", s.syscalls.describe(),
+                     served == 0 ? 0.0 : static_cast<double>(s.syscalls.total()) / static_cast<double>(served));
   for (const auto& [name, h] :
        {std::pair<const char*, const LatencyHistogram*>{"hit", &s.hit_latency}, {"miss", &s.miss_latency}}) {
     out += fmt::format(

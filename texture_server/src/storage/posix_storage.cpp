@@ -10,6 +10,8 @@
 #include <cstring>
 #include <string>
 
+#include "texstream/common/syscall_count.hpp"
+
 namespace texstream::server {
 
 namespace {
@@ -21,7 +23,10 @@ class PosixFile final : public StorageFile {
   // The path as text, for error messages only: a std::filesystem::path copy also copies its list of
   // components (an allocation per component), once per file opened.
   PosixFile(int fd, std::string path) : fd_(fd), path_(std::move(path)) {}
-  ~PosixFile() override { ::close(fd_); }
+  ~PosixFile() override {
+    count_syscall(Syscall::kClose);
+    ::close(fd_);
+  }
   PosixFile(const PosixFile&) = delete;
   PosixFile& operator=(const PosixFile&) = delete;
 
@@ -29,6 +34,7 @@ class PosixFile final : public StorageFile {
     uint64_t done = 0;
     // pread may return fewer bytes than asked (signals, some file systems): loop until all, EOF or error.
     while (done < out.size()) {
+      count_syscall(Syscall::kRead);
       const ssize_t n = ::pread(fd_, out.data() + done, out.size() - done, static_cast<off_t>(offset + done));
       if (n < 0) {
         if (errno == EINTR) continue;
@@ -53,6 +59,7 @@ class PosixFile final : public StorageFile {
     uint64_t done = 0;
     size_t first = 0;  // the first part not completely read yet
     while (done < total) {
+      count_syscall(Syscall::kRead);
       const ssize_t n =
           ::preadv(fd_, iov.data() + first, static_cast<int>(parts.size() - first), static_cast<off_t>(offset + done));
       if (n < 0) {
@@ -74,6 +81,7 @@ class PosixFile final : public StorageFile {
 
   Result<uint64_t> size() override {
     struct stat st {};
+    count_syscall(Syscall::kStat);
     if (::fstat(fd_, &st) != 0) {
       return make_error(ErrorCode::kIo, "cannot stat '" + path_ + "': " + std::strerror(errno));
     }
@@ -123,6 +131,7 @@ int PosixStorage::directory_fd(std::string_view dir) {
   int fd;
   do {
     // O_PATH: only a handle for openat(), no read permission on the directory needed.
+    count_syscall(Syscall::kOpen);
     fd = ::open(name.c_str(), O_PATH | O_DIRECTORY | O_CLOEXEC);
   } while (fd < 0 && errno == EINTR);
   if (fd < 0) return -1;
@@ -148,12 +157,14 @@ Result<std::unique_ptr<StorageFile>> PosixStorage::open_text(const std::string& 
   constexpr int kFlags = O_RDONLY | O_CLOEXEC | O_NONBLOCK;
   int fd;
   do {
+    count_syscall(Syscall::kOpen);
     fd = dir >= 0 ? ::openat(dir, full.c_str() + slash + 1, kFlags) : ::open(full.c_str(), kFlags);
   } while (fd < 0 && errno == EINTR);
   if (fd < 0 && dir >= 0 && errno == ENOENT) {
     // The kept descriptor names the directory as it was when first kept: if it has been replaced since (a
     // scene folder swapped in place), the path may exist in the new one. Only a miss pays this second open.
     do {
+      count_syscall(Syscall::kOpen);
       fd = ::open(full.c_str(), kFlags);
     } while (fd < 0 && errno == EINTR);
   }

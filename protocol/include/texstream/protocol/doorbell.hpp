@@ -69,4 +69,44 @@ class Doorbell {
   ShmAtomic<uint32_t>* sleeping_;
 };
 
+// The completion bell: the same handshake the other way round, for a renderer thread that has nothing to do
+// until completions arrive (a lock-step frame, a preload, texstream-bench server's client). Words:
+// ServerBlock::completion_bell, only the server writes (bumped after publishing completions);
+// RendererBlock::waiting, only the renderer writes (1 while it waits on the bell). A server that publishes
+// while nobody waits makes no system call (issue 29: no per-record wake, no yield loop).
+//   server ring():    (publish completions: ring release) ; A: bell += 1 ; B: load waiting ; == 1 → FUTEX_WAKE
+//   renderer wait():  C: waiting = 1 ; D: seen = load bell ; nothing to take → FUTEX_WAIT(bell, seen) ; 0
+// The argument is the doorbell's, with the roles swapped.
+class CompletionBell {
+ public:
+  explicit CompletionBell(Segment& segment) : CompletionBell(segment.renderer_block(), segment.server_block()) {}
+  CompletionBell(RendererBlock& renderer, ServerBlock& server)
+      : word_(&server.completion_bell), waiting_(&renderer.waiting) {}
+
+  // Server process, dispatcher thread, after publishing completions: the server's half (A, B).
+  void ring() {
+    // seq_cst (A): pairs with the renderer's seq_cst load of the word (D); releases the published records.
+    word_->v.fetch_add(1, std::memory_order_seq_cst);
+    // seq_cst (B): pairs with the renderer's seq_cst store of waiting = 1 (C).
+    if (waiting_->v.load(std::memory_order_seq_cst) == 1) futex_wake_all(*word_);
+  }
+
+  // Renderer process, the thread that polls: waits at most `timeout` unless `has_work()`, asked after
+  // `waiting` is published, finds a completion (the renderer's half, C and D).
+  template <class HasWork>
+  void wait(std::chrono::microseconds timeout, HasWork&& has_work) {
+    // seq_cst (C): pairs with the server's seq_cst load of waiting (B).
+    waiting_->v.store(1, std::memory_order_seq_cst);
+    // seq_cst (D): pairs with the server's seq_cst bump (A).
+    const uint32_t seen = word_->v.load(std::memory_order_seq_cst);
+    if (!has_work()) futex_wait(*word_, seen, timeout);
+    // relaxed: a 1 seen late costs the server one needless FUTEX_WAKE, nothing more.
+    waiting_->v.store(0, std::memory_order_relaxed);
+  }
+
+ private:
+  ShmAtomic<uint32_t>* word_;
+  ShmAtomic<uint32_t>* waiting_;
+};
+
 }  // namespace texstream

@@ -7,9 +7,11 @@
 // (completion_check.hpp). Slot ownership is the caller's: release() only carries a slot back to the server.
 //
 // Renderer process, one thread: the one that makes every call (the rings are single-producer, single-consumer).
+#include <chrono>
 #include <cstdint>
 #include <deque>
 #include <optional>
+#include <thread>
 
 #include "texstream/common/ids.hpp"
 #include "texstream/protocol/doorbell.hpp"
@@ -27,7 +29,8 @@ class RendererEndpoint {
   explicit RendererEndpoint(Segment& segment)
       : requests_(segment.request_producer()),
         completions_(segment.completion_consumer()),
-        doorbell_(Doorbell(segment)) {}
+        doorbell_(Doorbell(segment)),
+        bell_(CompletionBell(segment)) {}
 
   // Pushes a kLoad; false when the request ring is full (or broken: ring_broken()). Visible to the server at
   // once; the server is woken by the next ring().
@@ -71,6 +74,17 @@ class RendererEndpoint {
   // The next completion, an untrusted copy; nullopt when none waits or the server's position is impossible.
   std::optional<CompletionRecord> poll() { return completions_.try_pop(); }
 
+  // Blocks at most `timeout` until the server publishes a completion (at once if one waits): for a caller
+  // with nothing else to do. Costs no system call when one is already there; a server that publishes while
+  // nobody waits makes none either (CompletionBell).
+  void wait_for_completions(std::chrono::microseconds timeout) {
+    if (!bell_) {
+      std::this_thread::sleep_for(timeout);
+      return;
+    }
+    bell_->wait(timeout, [this] { return completions_.size() > 0 || completions_broken(); });
+  }
+
   // Request-ring records free now (0 when the server's position is impossible).
   uint32_t request_free_space() const { return requests_.free_space(); }
   uint64_t request_position() const { return requests_.position(); }
@@ -84,6 +98,7 @@ class RendererEndpoint {
   SpscRingProducer<RequestRecord> requests_;
   SpscRingConsumer<CompletionRecord> completions_;
   std::optional<Doorbell> doorbell_;  // empty only in a default-constructed endpoint
+  std::optional<CompletionBell> bell_;
   std::deque<SlotIndex> releases_;
   bool pushed_ = false;  // a record pushed since the last ring()
 };

@@ -19,7 +19,8 @@
 namespace texstream {
 
 inline constexpr uint64_t kSegmentMagic = 0x314d525453584554ull;  // "TEXSTRM1" read little-endian
-inline constexpr uint32_t kLayoutVersion = 3;  // 2: ServerBlock.loading; 3: the header's texture table
+// 2: ServerBlock.loading; 3: the header's texture table; 4: the completion bell, ServerBlock.syscalls
+inline constexpr uint32_t kLayoutVersion = 4;
 inline constexpr uint64_t kSegmentHeaderBytes = 4096;
 inline constexpr uint64_t kSlotAlignment = 4096;
 inline constexpr uint32_t kCompilerIdBytes = 64;
@@ -60,19 +61,20 @@ static_assert(offsetof(SegmentHeader, texture_table_fingerprint) == 168);
 
 // Written by the renderer only.
 struct alignas(64) RendererBlock {
-  ShmAtomic<uint32_t> ready;       // 1 once the header and rings are initialised (release-stored last)
-  uint32_t pid;                    // set before `ready`
-  uint64_t start_time;             // /proc/<pid>/stat start time (clock ticks since boot): pid + this = identity
-  ShmAtomic<uint64_t> heartbeat;   // bumped once per frame: progress, not time
-  ShmAtomic<uint64_t> generation;  // the newest streaming cycle
-  ShmAtomic<uint32_t> doorbell;    // futex word: bumped after pushing requests
-  uint32_t reserved0;
+  ShmAtomic<uint32_t> ready;         // 1 once the header and rings are initialised (release-stored last)
+  uint32_t pid;                      // set before `ready`
+  uint64_t start_time;               // /proc/<pid>/stat start time (clock ticks since boot): pid + this = identity
+  ShmAtomic<uint64_t> heartbeat;     // bumped once per frame: progress, not time
+  ShmAtomic<uint64_t> generation;    // the newest streaming cycle
+  ShmAtomic<uint32_t> doorbell;      // futex word: bumped after pushing requests
+  ShmAtomic<uint32_t> waiting;       // 1 while waiting on ServerBlock::completion_bell (the server then wakes it)
   ShmAtomic<uint64_t> server_epoch;  // epoch the current server was spawned for
   uint64_t reserved1[2];
 };
 static_assert(sizeof(RendererBlock) == 64);
 static_assert(offsetof(RendererBlock, heartbeat) == 16);
 static_assert(offsetof(RendererBlock, doorbell) == 32);
+static_assert(offsetof(RendererBlock, waiting) == 36);
 
 // Load workers whose current texture the ServerBlock records (ServerBlock::loading): the default server
 // runs 2 (config.hpp), the words fill the block's spare 32 bytes.
@@ -101,12 +103,16 @@ struct alignas(64) ServerBlock {
   // after the server died by a crash signal, before it resets the block: a texture being loaded during two
   // crashes is quarantined (stream_client.hpp).
   ShmAtomic<uint32_t> loading[kLoadingWords];
-  uint64_t reserved1[2];
+  ShmAtomic<uint64_t> syscalls;         // kernel crossings of the dispatcher and the workers (statistic)
+  ShmAtomic<uint32_t> completion_bell;  // futex word: bumped after publishing completions (doorbell.hpp)
+  uint32_t reserved1;
 };
 static_assert(sizeof(ServerBlock) == 128);
 static_assert(offsetof(ServerBlock, heartbeat) == 16);
 static_assert(offsetof(ServerBlock, completions) == 32);
 static_assert(offsetof(ServerBlock, loading) == 80);
+static_assert(offsetof(ServerBlock, syscalls) == 112);
+static_assert(offsetof(ServerBlock, completion_bell) == 120);
 
 struct SegmentParams {
   uint32_t request_capacity = 1024;

@@ -117,6 +117,10 @@ class StreamClient {
   // (reap, watchdog, restart), then takes completions off the ring and hands at most `max_mips` payloads
   // to `sink` (statuses without payload are not counted against it).
   void poll(MipSink& sink, size_t max_mips);
+  // For a caller with nothing to do until completions arrive (lock-step frames, preloads): blocks at most
+  // `timeout`, returns at once when one waits (the completion bell: no system call on either side while
+  // completions flow). Then poll().
+  void wait_for_completions(std::chrono::microseconds timeout);
 
   StreamStats stats() const;
   const IpcTimeHistogram& ipc_time() const { return ipc_time_; }
@@ -197,7 +201,7 @@ class StreamClient {
   uint32_t release_reserve_ = 0;           // request-ring records kept free for releases
   StreamStats stats_;
   // ServerBlock counters of servers that have died (the block is zeroed by the reset).
-  uint64_t past_hits_ = 0, past_misses_ = 0, past_bytes_read_ = 0, past_cancelled_ = 0;
+  uint64_t past_hits_ = 0, past_misses_ = 0, past_bytes_read_ = 0, past_cancelled_ = 0, past_syscalls_ = 0;
   std::unordered_map<uint64_t, Lost> lost_;
   IpcTimeHistogram ipc_time_;
   uint64_t frame_ipc_ns_ = 0;  // the open frame's client time so far

@@ -82,6 +82,9 @@ struct StreamStats {
   uint64_t server_ram_cache_misses = 0;
   uint64_t server_bytes_read = 0;
   uint64_t server_requests_cancelled = 0;
+  uint64_t server_syscalls = 0;  // the server's dispatcher and workers (ServerBlock::syscalls)
+  // This process's kernel crossings made by our code (syscall_count.hpp): per frame with ipc_frames.
+  uint64_t syscalls = 0;
   StreamServerState server_state = StreamServerState::kExternal;
 };
 
@@ -104,7 +107,7 @@ struct StreamCounterField {
   std::string_view name;
   uint64_t StreamStats::*member;
 };
-inline constexpr std::array<StreamCounterField, 26> kStreamCounters{{
+inline constexpr std::array<StreamCounterField, 28> kStreamCounters{{
     {"requests_sent", &StreamStats::requests_sent},
     {"releases_sent", &StreamStats::releases_sent},
     {"completions_ok", &StreamStats::completions_ok},
@@ -131,6 +134,8 @@ inline constexpr std::array<StreamCounterField, 26> kStreamCounters{{
     {"server_ram_cache_misses", &StreamStats::server_ram_cache_misses},
     {"server_bytes_read", &StreamStats::server_bytes_read},
     {"server_requests_cancelled", &StreamStats::server_requests_cancelled},
+    {"server_syscalls", &StreamStats::server_syscalls},
+    {"syscalls", &StreamStats::syscalls},
 }};
 struct IpcField {
   std::string_view name;

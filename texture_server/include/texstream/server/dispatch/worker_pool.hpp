@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "texstream/common/scene_format.hpp"
+#include "texstream/common/syscall_count.hpp"
 #include "texstream/protocol/records.hpp"
 #include "texstream/protocol/shm_atomic.hpp"
 #include "texstream/server/dispatch/request_scheduler.hpp"
@@ -40,8 +41,10 @@ class WorkerPool {
   // `on_result` runs on the worker thread after each result is queued (the server wakes its dispatcher).
   // `loading` (ServerBlock::loading, or part of it): worker i stores its job's texture id + 1 in loading[i]
   // while the job runs and 0 after, so that the renderer can tell which texture a crashed server was
-  // loading; workers beyond loading.size() are not recorded.
-  WorkerPool(uint32_t threads, Work work, std::function<void()> on_result, std::span<ShmAtomic<uint32_t>> loading = {});
+  // loading; workers beyond loading.size() are not recorded. The workers count their kernel crossings into
+  // `syscalls` (the process's counter when null).
+  WorkerPool(uint32_t threads, Work work, std::function<void()> on_result, std::span<ShmAtomic<uint32_t>> loading = {},
+             SyscallCounter* syscalls = nullptr);
   ~WorkerPool();  // finishes the jobs already started, drops the others, joins
   WorkerPool(const WorkerPool&) = delete;
   WorkerPool& operator=(const WorkerPool&) = delete;
@@ -65,6 +68,8 @@ class WorkerPool {
   std::deque<LoadJob> jobs_;
   std::vector<LoadResult> results_;
   bool stopping_ = false;
+  uint32_t idle_ = 0;  // workers blocked in cv_.wait (under mutex_): a notify wakes one only then
+  SyscallCounter* syscalls_;
   std::atomic<uint32_t> ready_{0};  // results_.size(), readable without the lock
   std::vector<std::thread> threads_;
 };

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "texstream/common/latency_histogram.hpp"
+#include "texstream/common/syscall_count.hpp"
 #include "texstream/server/cache/mip_cache.hpp"
 
 namespace texstream::server {
@@ -44,6 +45,8 @@ struct ServerStats {
   // Recorded by the dispatcher alone (record_one_writer()).
   LatencyHistogram hit_latency;   // request taken off the ring → completion pushed, RAM-cache hits
   LatencyHistogram miss_latency;  // the same for loads from storage
+  // Kernel crossings of the dispatcher and the workers (issue 29): per served mip in the report.
+  SyscallCounter syscalls;
 
   void add(std::atomic<uint64_t>& counter, uint64_t v) { counter.fetch_add(v, std::memory_order_relaxed); }
   // add() for a counter only one thread ever writes (the dispatcher's per-hit counters): a plain load and
