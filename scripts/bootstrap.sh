@@ -12,7 +12,7 @@ PACKAGES=(
   libopenimageio-dev openimageio-tools
   libboost-dev
   libtomlplusplus-dev libcli11-dev libspdlog-dev libfmt-dev nlohmann-json3-dev
-  libtbb-dev libxxhash-dev libcurl4-openssl-dev libstb-dev
+  libtbb-dev libxxhash-dev libcurl4-openssl-dev libstb-dev liburing-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   xvfb xauth
   nginx python3-matplotlib

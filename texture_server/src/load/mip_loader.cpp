@@ -226,7 +226,8 @@ bool MipLoader::serves_raw(TextureId texture, TexelFormat format) const {
                                        : e->dds->encoding == scene::DdsEncoding::kBc1;
 }
 
-bool MipLoader::open_texture(const LoadRequest& request, Opened& opened, CompletionRecord& error) {
+bool MipLoader::open_texture(const LoadRequest& request, Opened& opened, CompletionRecord& error,
+                             bool after_lazy_probe) {
   // A remembered file first: one open, no probing of the other suffixes.
   if (std::optional<TextureFileEntry> known = index_.find(request.texture)) {
     if (std::optional<OpenTextureFile> kept = files_.take(request.texture)) {
@@ -236,7 +237,7 @@ bool MipLoader::open_texture(const LoadRequest& request, Opened& opened, Complet
       return true;
     }
     opened.path = texture_file_path_text(scene_dir_, request.texture, known->kind);
-    Result<std::unique_ptr<StorageFile>> f = storage_.open_text(opened.path);
+    Result<std::unique_ptr<StorageFile>> f = storage_.open_lazy(opened.path);
     if (f.ok()) {
       opened.entry = *known;
       opened.file = std::move(f).value();
@@ -245,15 +246,19 @@ bool MipLoader::open_texture(const LoadRequest& request, Opened& opened, Complet
     index_.forget(request.texture);  // gone or renamed since: probe again below
   }
   files_.take(request.texture);  // not remembered (forgotten after a failure): a kept file is stale, close it
-  std::string tried;
-  for (TextureFileKind kind : kTextureFileKinds) {
+  std::string tried = after_lazy_probe ? suffix_of(kTextureFileKinds[0]) : "";
+  for (size_t k = after_lazy_probe ? 1 : 0; k < kTextureFileKinds.size(); ++k) {
+    const TextureFileKind kind = kTextureFileKinds[k];
     std::string path = texture_file_path_text(scene_dir_, request.texture, kind);
-    Result<std::unique_ptr<StorageFile>> f = storage_.open_text(path);
+    // The first suffix (what nearly every scene has) lazily: its first read opens it, in one io_uring
+    // submission with the read and the close (issue 29); a miss there probes the rest the ordinary way.
+    Result<std::unique_ptr<StorageFile>> f = k == 0 ? storage_.open_lazy(path) : storage_.open_text(path);
     if (f.ok()) {
       opened.path = std::move(path);
       opened.entry = TextureFileEntry{kind, std::nullopt};
       opened.file = std::move(f).value();
-      index_.remember(request.texture, opened.entry);
+      opened.lazy_probe = opened.file->lazy();
+      if (!opened.lazy_probe) index_.remember(request.texture, opened.entry);
       return true;
     }
     if (f.error().code != ErrorCode::kNotFound) {
@@ -265,6 +270,14 @@ bool MipLoader::open_texture(const LoadRequest& request, Opened& opened, Complet
   error = fail(request, CompletionStatus::kNotFound, scene::texture_path(scene_dir_, request.texture),
                "no texture file (tried " + tried + ")");
   return false;
+}
+
+CompletionStatus MipLoader::read_failed(const LoadRequest& request, Opened& opened, const Error& error) {
+  if (opened.lazy_probe && error.code == ErrorCode::kNotFound) {
+    opened.probe_missed = true;
+    return CompletionStatus::kNotFound;
+  }
+  return fail_status(request, read_status(error.code), opened.path, error.message);
 }
 
 CompletionStatus MipLoader::read_tail(const LoadRequest& request, const scene::TextureRecord& record, Opened& opened,
@@ -337,7 +350,7 @@ CompletionStatus MipLoader::read_tail(const LoadRequest& request, const scene::T
   Result<uint64_t> got = opened.file->read_scatter_at(std::span(parts).first(count), offset);
   if (!got.ok()) {
     tail.mips.clear();
-    return fail_status(request, read_status(got.error().code), opened.path, got.error().message);
+    return read_failed(request, opened, got.error());
   }
   count_read(*got);
   if (guessed) {
@@ -381,7 +394,7 @@ CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::Te
       std::array<std::byte, scene::kDdsMaxHeaderBytes> header{};
       if (local_only && !opened.file->local(0, header.size())) return CompletionStatus::kUnfilled;
       Result<uint64_t> got = opened.file->read_at(header, 0);
-      if (!got.ok()) return fail_status(request, read_status(got.error().code), path, got.error().message);
+      if (!got.ok()) return read_failed(request, opened, got.error());
       count_read(*got);
       Result<scene::DdsLayout> layout = scene::parse_dds_layout(std::span(header).first(*got), path);
       if (!layout.ok()) return fail_status(request, CompletionStatus::kCorrupt, path, layout.error().message);
@@ -421,7 +434,7 @@ CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::Te
       const uint64_t offset = dds.mip_offset(level);
       if (local_only && !opened.file->local(offset, target.size())) return CompletionStatus::kUnfilled;
       Result<uint64_t> got = opened.file->read_at(target, offset);
-      if (!got.ok()) return fail_status(request, read_status(got.error().code), path, got.error().message);
+      if (!got.ok()) return read_failed(request, opened, got.error());
       count_read(*got);
       if (*got != target.size()) {
         index_.forget(request.texture);  // the file may have been replaced: look again next time
@@ -479,7 +492,17 @@ CompletionRecord MipLoader::load(const LoadRequest& request, const scene::Textur
     tail->mips.clear();
     tail->cached_levels = 0;
   }
-  const CompletionStatus status = read_mip(request, record, opened, target, local_only, tail, wanted_levels);
+  CompletionStatus status = read_mip(request, record, opened, target, local_only, tail, wanted_levels);
+  if (opened.probe_missed) {
+    // The first suffix, opened lazily, is not there: the others, the ordinary way, then the read again.
+    opened = Opened{};
+    if (!open_texture(request, opened, error, /*after_lazy_probe=*/true)) return error;
+    if (tail) {
+      tail->mips.clear();
+      tail->cached_levels = 0;
+    }
+    status = read_mip(request, record, opened, target, local_only, tail, wanted_levels);
+  }
   if (status == CompletionStatus::kUnfilled) {  // nothing was read: the file is as good as before
     files_.give_back(request.texture, OpenTextureFile{std::move(opened.path), std::move(opened.file)});
     return make_completion(request, status);

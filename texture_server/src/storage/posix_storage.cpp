@@ -11,6 +11,7 @@
 #include <string>
 
 #include "texstream/common/syscall_count.hpp"
+#include "texstream/server/storage/uring_reader.hpp"
 
 namespace texstream::server {
 
@@ -113,6 +114,96 @@ class PosixFile final : public StorageFile {
 };
 
 }  // namespace
+
+// See PosixStorage::open_lazy. `dir` is the storage's kept descriptor of the file's directory (-1: by the
+// full path); the storage outlives its files.
+class LazyPosixFile final : public StorageFile {
+ public:
+  LazyPosixFile(PosixStorage& storage, int dir, std::string path, size_t name_at)
+      : storage_(storage), dir_(dir), path_(std::move(path)), name_at_(name_at) {}
+
+  Result<uint64_t> read_at(std::span<std::byte> out, uint64_t offset) override {
+    const std::span<std::byte> parts[1] = {out};
+    return read_scatter_at(parts, offset);
+  }
+
+  Result<uint64_t> read_scatter_at(std::span<const std::span<std::byte>> parts, uint64_t offset) override {
+    uint64_t total = 0;
+    for (const auto& p : parts) total += p.size();
+    uint64_t done = 0;
+    if (!opened_ && parts.size() <= PosixFile::kMaxScatterParts) {
+      if (UringReader* uring = UringReader::for_this_thread()) {
+        std::array<iovec, PosixFile::kMaxScatterParts> iov{};
+        for (size_t i = 0; i < parts.size(); ++i) iov[i] = iovec{parts[i].data(), parts[i].size()};
+        const UringRead r =
+            dir_ >= 0
+                ? uring->open_read_close(dir_, path_.c_str() + name_at_, std::span(iov).first(parts.size()), offset)
+                : uring->open_read_close(AT_FDCWD, path_.c_str(), std::span(iov).first(parts.size()), offset);
+        if (r.outcome == UringRead::Outcome::kOpenFailed && dir_ < 0) return open_error(r.error);
+        if (r.outcome == UringRead::Outcome::kOk) {
+          if (r.bytes == total) return total;
+          done = r.bytes;  // short: the end of the file, or only part was cached; the ordinary way goes on
+        }
+        // kOpenFailed through the kept directory, kWouldBlock, kFailed: the ordinary way says what it is.
+      }
+    }
+    if (!file_) {
+      Result<std::unique_ptr<StorageFile>> f = storage_.open_text(path_);
+      if (!f.ok()) return f.error();
+      file_ = std::move(f).value();
+      opened_ = true;
+    }
+    if (done == 0) return file_->read_scatter_at(parts, offset);
+    // The rest of a short read: the parts from `done` on.
+    std::array<std::span<std::byte>, PosixFile::kMaxScatterParts> rest{};
+    size_t n = 0;
+    uint64_t skip = done;
+    for (const auto& p : parts) {
+      if (skip >= p.size()) {
+        skip -= p.size();
+        continue;
+      }
+      rest[n++] = p.subspan(skip);
+      skip = 0;
+    }
+    Result<uint64_t> more = file_->read_scatter_at(std::span(rest).first(n), offset + done);
+    if (!more.ok()) return more.error();
+    return done + *more;
+  }
+
+  bool lazy() const override { return !opened_; }
+
+  Result<uint64_t> size() override {
+    if (!file_) {
+      Result<std::unique_ptr<StorageFile>> f = storage_.open_text(path_);
+      if (!f.ok()) return f.error();
+      file_ = std::move(f).value();
+      opened_ = true;
+    }
+    return file_->size();
+  }
+
+ private:
+  Error open_error(int err) const {
+    const ErrorCode code = (err == ENOENT || err == ENOTDIR) ? ErrorCode::kNotFound : ErrorCode::kIo;
+    return Error{code, "cannot open '" + path_ + "': " + std::strerror(err)};
+  }
+
+  PosixStorage& storage_;
+  int dir_;
+  std::string path_;
+  size_t name_at_;
+  std::unique_ptr<StorageFile> file_;  // opened the ordinary way (no io_uring, or a read it could not do)
+  bool opened_ = false;
+};
+
+Result<std::unique_ptr<StorageFile>> PosixStorage::open_lazy(const std::string& full) {
+  if (UringReader::for_this_thread() == nullptr) return open_text(full);
+  const size_t slash = full.rfind('/');
+  const bool has_dir = slash != std::string::npos && slash > 0 && slash + 1 < full.size();
+  const int dir = has_dir ? directory_fd(std::string_view(full).substr(0, slash)) : -1;
+  return std::unique_ptr<StorageFile>(new LazyPosixFile(*this, dir, full, dir >= 0 ? slash + 1 : 0));
+}
 
 PosixStorage::~PosixStorage() {
   for (const auto& [dir, fd] : dirs_) ::close(fd);

@@ -106,10 +106,16 @@ class MipLoader {
     std::string path;  // as text (Storage::open_text)
     TextureFileEntry entry;
     std::unique_ptr<StorageFile> file;
+    // The first suffix, opened lazily (Storage::open_lazy) before the texture's file was known: a read that
+    // finds no such file sets probe_missed instead of failing, and load() probes the other suffixes.
+    bool lazy_probe = false;
+    bool probe_missed = false;
   };
   // Finds and opens the texture's file (or takes it from files_); on failure returns the error completion in
-  // `error`.
-  bool open_texture(const LoadRequest& request, Opened& opened, CompletionRecord& error);
+  // `error`. `after_lazy_probe`: the first suffix was tried lazily and is not there.
+  bool open_texture(const LoadRequest& request, Opened& opened, CompletionRecord& error, bool after_lazy_probe = false);
+  // A failed read: with a lazy probe's "no such file", marks it (no warning, no count); otherwise fail_status.
+  CompletionStatus read_failed(const LoadRequest& request, Opened& opened, const Error& error);
   // Reads (or decodes) the mip into `target`; returns kOk or the failure's status (already logged).
   // With `tail` (read_tail, see load()): may read the coarse tail around the mip too; its other mips come
   // back in `tail` (checksummed by the caller, who inserts them).

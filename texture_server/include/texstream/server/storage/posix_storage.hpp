@@ -31,6 +31,10 @@ class PosixStorage final : public Storage {
 
   Result<std::unique_ptr<StorageFile>> open(const std::filesystem::path& path) override;
   Result<std::unique_ptr<StorageFile>> open_text(const std::string& path) override;
+  // A file opened by its first read, which with io_uring (UringReader) opens, reads and closes it in one
+  // submission; every read does so again, so a kept file holds no descriptor. Without io_uring, or for what
+  // the page cache cannot give at once, the file is opened the ordinary way and reads with pread.
+  Result<std::unique_ptr<StorageFile>> open_lazy(const std::string& path) override;
   size_t directories_kept() const;
 
  private:

@@ -42,6 +42,8 @@ class StorageFile {
   // so the server runs them on its bounded remote-fetch workers, never on the workers that serve local reads
   // (seed 002 §3.2: access time is bimodal; a slow fetch must not hold up a fast hit).
   virtual bool remote() const { return false; }
+  // Opened by its first read (Storage::open_lazy): "no such file" comes from a read as kNotFound.
+  virtual bool lazy() const { return false; }
   // True when read_at(offset, bytes) would be answered on this machine (a local file, a disk-cache entry)
   // without waiting for a remote origin. A hint: the read may still go remote (an entry evicted meanwhile).
   virtual bool local(uint64_t offset, uint64_t bytes) {
@@ -64,6 +66,10 @@ class Storage {
   virtual Result<std::unique_ptr<StorageFile>> open_text(const std::string& path) {
     return open(std::filesystem::path(path));
   }
+  // open_text() for a caller that can take "no such file" from the first read instead of from the open
+  // (kNotFound there): PosixStorage then opens, reads and closes in one io_uring submission (uring_reader.hpp)
+  // and makes no system call here. This default opens at once.
+  virtual Result<std::unique_ptr<StorageFile>> open_lazy(const std::string& path) { return open_text(path); }
   // Makes reads in progress (a slow http transfer, a retry back-off, an emulated stall) end soon with an
   // error, and new ones fail at once, until resume(): a server that stops joins its remote-fetch workers
   // without waiting out storage.request_timeout_ms, and the process may serve the next renderer after
