@@ -600,14 +600,30 @@ bool Server::flush_completions() {
 }
 
 void Server::idle_wait() {
-  // Spin briefly first (see kSpinBeforeSleep); any new request or worker result ends the spin. A pause loop,
-  // not sched_yield: a yield is a system call (~1.4 us on a paravirtualised guest, 35 per idle 50 us), and the
-  // renderer no longer spins beside us (it waits on the completion bell, doorbell.hpp). docs/design/syscalls.md.
-  const auto spin_end = std::chrono::steady_clock::now() + kSpinBeforeSleep;
-  for (uint32_t i = 0;; ++i) {
-    if (requests_.size() > 0 || workers_->results_ready() || remote_workers_->results_ready()) return;
-    if ((i & 15) == 15 && std::chrono::steady_clock::now() >= spin_end) break;
-    cpu_relax();
+  // Adaptive spin (docs/design/syscalls.md): while the recent gaps were shorter than kSpinBeforeSleep (a
+  // renderer or bench streaming batch after batch), a pause loop without system calls catches the next request
+  // and saves the futex sleep and wake; while they were longer (a renderer that asks once per frame), it sleeps
+  // at once. A spin on every gap took the core from the renderer on 2 cores (texstream-chaos: IPC per frame
+  // p99 80 -> 180 us), and a sched_yield loop was ~35 system calls per gap.
+  const auto has_work = [this] {
+    return requests_.size() > 0 || workers_->results_ready() || remote_workers_->results_ready();
+  };
+  constexpr uint64_t kSpinNs = std::chrono::duration_cast<std::chrono::nanoseconds>(kSpinBeforeSleep).count();
+  const uint64_t start = steady_now_ns();
+  const auto learn = [this, start] {
+    // Capped, so that a long idle spell is forgotten within ~5 short gaps once streaming starts again.
+    const uint64_t gap = std::min<uint64_t>(steady_now_ns() - start, 4 * kSpinNs);
+    idle_gap_ns_ = idle_gap_ns_ - idle_gap_ns_ / 4 + gap / 4;  // moving average over ~4 gaps
+  };
+  if (idle_gap_ns_ < kSpinNs) {
+    for (uint32_t i = 1;; ++i) {
+      if (has_work()) {
+        learn();
+        return;
+      }
+      if (i % 16 == 0 && steady_now_ns() - start >= kSpinNs) break;
+      cpu_relax();
+    }
   }
   const auto idle = std::chrono::microseconds(static_cast<int64_t>(config_.idle_wait_ms * 1000.0));
   // Loads in flight or completions waiting for ring space: nap briefly (workers also wake us).
@@ -617,9 +633,8 @@ void Server::idle_wait() {
                                                : idle;
   // The server's half of the doorbell (doorbell.hpp): the ring and the workers' results are re-checked after
   // `sleeping` is published, so neither a push nor a result can slip in unseen.
-  Doorbell(segment_).sleep(timeout, [this] {
-    return requests_.size() > 0 || workers_->results_ready() || remote_workers_->results_ready();
-  });
+  Doorbell(segment_).sleep(timeout, has_work);
+  learn();
 }
 
 }  // namespace texstream::server

@@ -5,14 +5,21 @@
 
 #include <atomic>
 #include <cerrno>
+#include <cstdlib>
 #include <memory>
+#include <string_view>
 
 #include "texstream/common/syscall_count.hpp"
 
 namespace texstream::server {
 
 namespace {
-std::atomic<bool> g_enabled{true};
+// TEXSTREAM_IO_URING=0 switches it off for the process (a comparison, or a kernel whose io_uring misbehaves).
+bool enabled_at_start() {
+  const char* v = std::getenv("TEXSTREAM_IO_URING");
+  return v == nullptr || std::string_view(v) != "0";
+}
+std::atomic<bool> g_enabled{enabled_at_start()};
 // The one direct-descriptor slot a chain uses: opened, read and closed within one submission.
 constexpr unsigned kSlot = 0;
 constexpr unsigned kEntries = 8;

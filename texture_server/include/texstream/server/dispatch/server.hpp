@@ -140,9 +140,12 @@ class Server {
   bool publish_each_completion_ = false;        // fault injection: publish per record (kAfterRingPush)
   std::vector<LoadRequest> cancelled_scratch_;  // reused each iteration: no allocation when warm
   std::vector<LoadResult> results_scratch_;
-  std::vector<MipKey> drained_keys_;               // the loads of the pass's drained batch (MipCache::prefetch_index)
-  std::vector<uint64_t> hits_unrecorded_;          // receive times of hits served, latency not yet recorded
-  uint64_t pass_now_ns_ = 0;                       // steady clock at the start of the loop's current pass
+  std::vector<MipKey> drained_keys_;       // the loads of the pass's drained batch (MipCache::prefetch_index)
+  std::vector<uint64_t> hits_unrecorded_;  // receive times of hits served, latency not yet recorded
+  uint64_t pass_now_ns_ = 0;               // steady clock at the start of the loop's current pass
+  // How long the dispatcher's recent idle gaps lasted until work came (moving average, ns): idle_wait() spins
+  // only while it is below kSpinBeforeSleep, i.e. while a spin is likely to find the next request.
+  uint64_t idle_gap_ns_ = 0;
   ShmAtomic<uint32_t>* inline_loading_ = nullptr;  // the dispatcher's crash-attribution word (null: no inline loads)
   std::vector<bool> inline_ok_;                    // per texture: may be loaded inline (not remote, not slow)
   uint64_t clock_generation_ = 0;                  // last generation forwarded to the cache policy (Eq. 4 clock)
