@@ -82,7 +82,7 @@ class RendererEndpoint {
       std::this_thread::sleep_for(timeout);
       return;
     }
-    bell_->wait(timeout, [this] { return completions_.size() > 0 || completions_broken(); });
+    bell_->sleep(timeout, [this] { return completions_.size() > 0 || completions_broken(); });
   }
 
   // Request-ring records free now (0 when the server's position is impossible).
