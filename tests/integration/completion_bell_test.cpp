@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "../support/patience.hpp"
+#include "../support/unique_name.hpp"
 #include "texstream/common/syscall_count.hpp"
 #include "texstream/protocol/doorbell.hpp"
 #include "texstream/protocol/renderer_endpoint.hpp"
@@ -19,12 +20,10 @@
 namespace texstream {
 namespace {
 
+using test::unique_name;
+
 using test::kHangAfter;
 using test::promptly;
-
-std::string unique_name(const char* what) {
-  return "texstream-test-" + std::string(what) + "-" + std::to_string(getpid());
-}
 
 CompletionRecord record(uint32_t texture) {
   CompletionRecord c{};
@@ -100,10 +99,9 @@ TEST(CompletionBell, NoSystemCallWhileNobodyWaitsOrACompletionIsThere) {
   CompletionBell server_side(seg);
   for (uint32_t i = 0; i < 1000; ++i) server_side.ring();  // nobody waits: no wake
   ASSERT_TRUE(producer.try_push(record(1)));
-  // A completion already waits: the wait returns at once, without the futex.
-  const auto t0 = std::chrono::steady_clock::now();
+  // A completion already waits: the wait returns without the futex (a futex wait would be counted, and
+  // would sleep for kHangAfter).
   renderer.wait_for_completions(std::chrono::duration_cast<std::chrono::microseconds>(kHangAfter));
-  EXPECT_LT(std::chrono::steady_clock::now() - t0, promptly(std::chrono::milliseconds(500)));
   EXPECT_EQ(counted.total(), 0u) << counted.describe();
   EXPECT_EQ(seg.renderer_block().waiting.v.load(), 0u);
 }

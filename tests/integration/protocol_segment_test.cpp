@@ -15,18 +15,17 @@
 
 #include "../support/forked_child.hpp"
 #include "../support/patience.hpp"
+#include "../support/unique_name.hpp"
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
 
 namespace texstream {
 namespace {
 
+using test::unique_name;
+
 using test::kHangAfter;
 using test::promptly;
-
-std::string unique_name(const char* what) {
-  return "texstream-test-" + std::string(what) + "-" + std::to_string(getpid());
-}
 
 // A child that creates the segment `name` and sleeps until killed: a renderer that can be SIGKILLed, leaving
 // its segment behind. Its Segment is leaked on purpose: its destructor would remove the name.

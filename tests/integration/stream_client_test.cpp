@@ -24,6 +24,7 @@
 
 #include "../support/forked_child.hpp"
 #include "../support/patience.hpp"
+#include "../support/unique_name.hpp"
 #include "texstream/protocol/checksum.hpp"
 #include "texstream/protocol/liveness.hpp"
 #include "texstream/protocol/segment.hpp"
@@ -31,6 +32,8 @@
 
 namespace texstream {
 namespace {
+
+using test::unique_name;
 
 using namespace std::chrono_literals;
 
@@ -44,11 +47,6 @@ uint64_t shape_bytes(const TextureShape& s, uint32_t mip) { return mip_bytes(s.f
 
 std::byte pattern(uint32_t texture, uint32_t mip, uint64_t i) {
   return static_cast<std::byte>((texture * 31u + mip * 7u + i * 13u + (i >> 8)) & 0xffu);
-}
-
-std::string unique_name(const char* what) {
-  static std::atomic<int> n{0};
-  return "texstream-test-" + std::string(what) + "-" + std::to_string(::getpid()) + "-" + std::to_string(n++);
 }
 
 Config small_config(const std::string& segment) {

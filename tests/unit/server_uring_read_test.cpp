@@ -44,29 +44,36 @@ class UringRead : public ::testing::TestWithParam<bool> {
     t.join();
   }
 
+  std::unique_ptr<StorageFile> open_a(PosixStorage& storage) {
+    auto f = storage.open_lazy((dir_ / "a.dds").string());
+    EXPECT_TRUE(f.ok());
+    return f.ok() ? std::move(f).value() : nullptr;
+  }
+
   fs::path dir_;
   std::vector<std::byte> bytes_;
 };
 
 TEST_P(UringRead, ScatterReadEqualsTheFileInOneCrossingWithIoUring) {
   on_new_thread([&] {
-    if (GetParam() && !UringReader::available()) GTEST_SKIP() << "io_uring unavailable here";
+    // Where the kernel refuses io_uring the lazy file must read the ordinary way, with the same bytes.
+    const bool uring = GetParam() && UringReader::available();
     PosixStorage storage;
-    auto f = storage.open_lazy((dir_ / "a.dds").string());
-    ASSERT_TRUE(f.ok());
+    const std::unique_ptr<StorageFile> f = open_a(storage);
+    ASSERT_NE(f, nullptr);
     std::vector<std::byte> a(1000), b(30'000), c(5);
     const std::array<std::span<std::byte>, 3> parts{a, b, c};
     SyscallCounter counted;
     {
       const SyscallAccount account(counted);
-      Result<uint64_t> got = f.value()->read_scatter_at(parts, 777);
+      Result<uint64_t> got = f->read_scatter_at(parts, 777);
       ASSERT_TRUE(got.ok()) << got.error().message;
       EXPECT_EQ(*got, a.size() + b.size() + c.size());
     }
     EXPECT_EQ(std::memcmp(a.data(), bytes_.data() + 777, a.size()), 0);
     EXPECT_EQ(std::memcmp(b.data(), bytes_.data() + 777 + a.size(), b.size()), 0);
     EXPECT_EQ(std::memcmp(c.data(), bytes_.data() + 777 + a.size() + b.size(), c.size()), 0);
-    if (GetParam()) {
+    if (uring) {
       EXPECT_EQ(counted.total(), 1u) << counted.describe();  // open + read + close: one io_uring_enter
       EXPECT_EQ(counted.of(Syscall::kIoUring), 1u);
     } else {
@@ -79,14 +86,14 @@ TEST_P(UringRead, ScatterReadEqualsTheFileInOneCrossingWithIoUring) {
 TEST_P(UringRead, AReadPastTheEndReturnsWhatIsThere) {
   on_new_thread([&] {
     PosixStorage storage;
-    auto f = storage.open_lazy((dir_ / "a.dds").string());
-    ASSERT_TRUE(f.ok());
+    const std::unique_ptr<StorageFile> f = open_a(storage);
+    ASSERT_NE(f, nullptr);
     std::vector<std::byte> out(5000);
-    Result<uint64_t> got = f.value()->read_at(out, bytes_.size() - 1234);
+    Result<uint64_t> got = f->read_at(out, bytes_.size() - 1234);
     ASSERT_TRUE(got.ok());
     EXPECT_EQ(*got, 1234u);
     EXPECT_EQ(std::memcmp(out.data(), bytes_.data() + bytes_.size() - 1234, 1234), 0);
-    got = f.value()->read_at(out, bytes_.size() + 10);
+    got = f->read_at(out, bytes_.size() + 10);
     ASSERT_TRUE(got.ok());
     EXPECT_EQ(*got, 0u);
   });
@@ -117,9 +124,7 @@ TEST_P(UringRead, AFifoInAFilesPlaceIsRefusedWithoutBlocking) {
     auto f = storage.open_lazy(fifo.string());
     ASSERT_TRUE(f.ok());
     std::vector<std::byte> out(64);
-    const auto t0 = std::chrono::steady_clock::now();
-    Result<uint64_t> got = f.value()->read_at(out, 0);
-    EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(5));
+    Result<uint64_t> got = f.value()->read_at(out, 0);  // a read that blocked would hang here (ctest times out)
     ASSERT_FALSE(got.ok());
     EXPECT_EQ(got.error().code, ErrorCode::kNotAFile) << got.error().message;
   });
@@ -128,15 +133,15 @@ TEST_P(UringRead, AFifoInAFilesPlaceIsRefusedWithoutBlocking) {
 TEST_P(UringRead, AFileReplacedBetweenReadsIsReadAsItIsNow) {
   on_new_thread([&] {
     PosixStorage storage;
-    auto f = storage.open_lazy((dir_ / "a.dds").string());
-    ASSERT_TRUE(f.ok());
+    const std::unique_ptr<StorageFile> f = open_a(storage);
+    ASSERT_NE(f, nullptr);
     std::vector<std::byte> out(16);
-    ASSERT_TRUE(f.value()->read_at(out, 0).ok());
+    ASSERT_TRUE(f->read_at(out, 0).ok());
     if (!GetParam()) return;  // an open descriptor reads the file it opened: that is the ordinary way's contract
     // Each io_uring read opens the path again: a file swapped in place is read as it is now.
     std::ofstream(dir_ / "b.tmp", std::ios::binary).write("0123456789abcdef", 16);
     fs::rename(dir_ / "b.tmp", dir_ / "a.dds");
-    ASSERT_TRUE(f.value()->read_at(out, 0).ok());
+    ASSERT_TRUE(f->read_at(out, 0).ok());
     EXPECT_EQ(std::memcmp(out.data(), "0123456789abcdef", 16), 0);
   });
 }

@@ -131,7 +131,7 @@ class LazyPosixFile final : public StorageFile {
     uint64_t total = 0;
     for (const auto& p : parts) total += p.size();
     uint64_t done = 0;
-    if (!opened_ && parts.size() <= PosixFile::kMaxScatterParts) {
+    if (!file_ && parts.size() <= PosixFile::kMaxScatterParts) {
       if (UringReader* uring = UringReader::for_this_thread()) {
         std::array<iovec, PosixFile::kMaxScatterParts> iov{};
         for (size_t i = 0; i < parts.size(); ++i) iov[i] = iovec{parts[i].data(), parts[i].size()};
@@ -147,12 +147,7 @@ class LazyPosixFile final : public StorageFile {
         // kOpenFailed through the kept directory, kWouldBlock, kFailed: the ordinary way says what it is.
       }
     }
-    if (!file_) {
-      Result<std::unique_ptr<StorageFile>> f = storage_.open_text(path_);
-      if (!f.ok()) return f.error();
-      file_ = std::move(f).value();
-      opened_ = true;
-    }
+    if (const Status opened = open_ordinary(); !opened.ok()) return opened.error();
     if (done == 0) return file_->read_scatter_at(parts, offset);
     // The rest of a short read: the parts from `done` on.
     std::array<std::span<std::byte>, PosixFile::kMaxScatterParts> rest{};
@@ -171,19 +166,23 @@ class LazyPosixFile final : public StorageFile {
     return done + *more;
   }
 
-  bool lazy() const override { return !opened_; }
+  bool lazy() const override { return file_ == nullptr; }
 
   Result<uint64_t> size() override {
-    if (!file_) {
-      Result<std::unique_ptr<StorageFile>> f = storage_.open_text(path_);
-      if (!f.ok()) return f.error();
-      file_ = std::move(f).value();
-      opened_ = true;
-    }
+    if (const Status opened = open_ordinary(); !opened.ok()) return opened.error();
     return file_->size();
   }
 
  private:
+  // Opens file_ the ordinary way, once (open_text's errors as they are).
+  Status open_ordinary() {
+    if (file_) return ok_status();
+    Result<std::unique_ptr<StorageFile>> f = storage_.open_text(path_);
+    if (!f.ok()) return f.error();
+    file_ = std::move(f).value();
+    return ok_status();
+  }
+
   Error open_error(int err) const {
     const ErrorCode code = (err == ENOENT || err == ENOTDIR) ? ErrorCode::kNotFound : ErrorCode::kIo;
     return Error{code, "cannot open '" + path_ + "': " + std::strerror(err)};
@@ -194,7 +193,6 @@ class LazyPosixFile final : public StorageFile {
   std::string path_;
   size_t name_at_;
   std::unique_ptr<StorageFile> file_;  // opened the ordinary way (no io_uring, or a read it could not do)
-  bool opened_ = false;
 };
 
 Result<std::unique_ptr<StorageFile>> PosixStorage::open_lazy(const std::string& full) {

@@ -45,11 +45,9 @@ UringReader* UringReader::for_this_thread() {
   return reader.get();
 }
 
-bool UringReader::available(const char** why) {
+bool UringReader::available() {
   UringReader r;
-  const bool ok = r.init();
-  if (why != nullptr) *why = ok ? "" : "io_uring_queue_init or a sparse file table failed (old kernel or forbidden)";
-  return ok;
+  return r.init();
 }
 
 bool UringReader::init() {
