@@ -165,14 +165,17 @@ void visit_keys(Config& c, V&& v) {
   v("controller", "fixed_load_mb", c.controller.fixed_load_mb, "MB", "mode = fixed: load size s", Range{0.001, 1e5});
   v("controller", "fixed_bias", c.controller.fixed_bias, "levels", "mode = fixed: mip bias b", Range{0, 16});
   v("cache", "format", c.cache.format, "name", "Texel format of the GPU cache:", kAny);
+  v("cache", "eviction", c.cache.eviction, "name", "Placement and eviction in the cache:", kAny);
   v("cache", "layer_extent_px", c.cache.layer_extent_px, "px",
-    "Side of one cache layer = the largest texture extent it holds (power of two)", Range{4, 16384});
+    "Side of one cache layer (power of two), the largest texture extent it holds; 0 = chosen at start from the "
+    "device's limits, the budget and the scene's largest texture (docs/design/cache_budget.md)",
+    Range{0, 32768});
   v("cache", "layers", c.cache.layers, "layers",
-    "Array layers of the sparse cache image; they cost address space only (lavapipe: 2 GiB, ~1.4 MB per 512² RGBA8 "
-    "layer), cache.memory_bytes bounds memory. Too few layers recycle textures long before memory is full",
-    Range{1, 2048});
+    "Array layers of the sparse cache image; they cost address space only (lavapipe: 2 GiB), cache.memory_bytes "
+    "bounds memory; 0 = up to 64x the budget, as the device's sparse address space allows",
+    Range{0, 2048});
   v("cache", "memory_bytes", c.cache.memory_bytes, "bytes",
-    "GPU memory for the cache's bound sparse pages (and mip tail); the oldest layer is evicted when full",
+    "GPU memory for the cache's bound sparse pages (and mip tail); when full, cache.eviction decides what goes",
     Range{1 << 20, 1ll << 40});
   v("storage", "origin", c.storage.origin, "path/URL",
     "Where texture files come from: empty = scene.dir; a folder; or an http(s):// base URL (textures/... fetched with "
@@ -388,7 +391,8 @@ Status Config::validate() const {
   if (!is_pow2(protocol.request_ring_capacity)) return bad("protocol.request_ring_capacity", "must be a power of two");
   if (!is_pow2(protocol.completion_ring_capacity))
     return bad("protocol.completion_ring_capacity", "must be a power of two");
-  if (!is_pow2(cache.layer_extent_px)) return bad("cache.layer_extent_px", "must be a power of two");
+  if (cache.layer_extent_px != 0 && !is_pow2(cache.layer_extent_px))
+    return bad("cache.layer_extent_px", "must be 0 (auto) or a power of two");
   if (render.staging_bytes < protocol.staging_slot_bytes) {
     return bad("render.staging_bytes", "must hold at least one staging slot (protocol.staging_slot_bytes)");
   }
@@ -410,13 +414,6 @@ Status Config::validate() const {
   if (render.near_m >= render.far_m) return bad("render.near_m", "must be less than render.far_m");
   if (render.offscreen_fov_y_deg < render.fov_y_deg) {
     return bad("render.offscreen_fov_y_deg", "must be at least render.fov_y_deg");
-  }
-  // The largest mip a layer can hold must fit one staging slot (4 bytes per texel is the worst case).
-  const int64_t largest_mip = cache.layer_extent_px * cache.layer_extent_px * 4;
-  if (protocol.staging_slot_bytes < largest_mip) {
-    return bad("protocol.staging_slot_bytes",
-               std::to_string(protocol.staging_slot_bytes) + " cannot hold a " + std::to_string(cache.layer_extent_px) +
-                   "² RGBA8 mip (" + std::to_string(largest_mip) + " bytes); raise it or lower cache.layer_extent_px");
   }
   if (stream.max_requests_in_flight > protocol.request_ring_capacity) {
     return bad("stream.max_requests_in_flight", "must not exceed protocol.request_ring_capacity");

@@ -61,6 +61,7 @@ void MipUseLedger::apply(std::span<const TextureEvent> events) {
         break;
       case TextureEvent::Kind::kFailed:
       case TextureEvent::Kind::kRejected:
+      case TextureEvent::Kind::kNoRoom:
         break;  // nothing was uploaded
     }
   }

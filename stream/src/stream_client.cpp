@@ -165,6 +165,23 @@ Result<std::unique_ptr<StreamClient>> StreamClient::start(const Config& config, 
   if (!config.protocol.segment_name.empty() && Segment::remove_if_stale(name)) {
     spdlog::info("removed the stale shared segment '{}' of a dead renderer", name);
   }
+  // A level larger than a staging slot can never be sent: say so once, naming the first such texture, instead
+  // of leaving it flat colour without a word (the server refuses each request for it).
+  {
+    uint64_t too_large = 0, first = 0, first_bytes = 0;
+    for (size_t i = 0; i < c->shapes_.size(); ++i) {
+      const TextureShape& t = c->shapes_[i];
+      const uint64_t bytes = mip_bytes(t.format, t.width, t.height, 0);
+      if (bytes <= static_cast<uint64_t>(config.protocol.staging_slot_bytes)) continue;
+      if (too_large++ == 0) first = i, first_bytes = bytes;
+    }
+    if (too_large) {
+      spdlog::warn(
+          "stream client: {} textures have levels larger than protocol.staging_slot_bytes = {} (the first: "
+          "texture {} of {}, level 0 is {} bytes); those levels are never loaded: raise the key",
+          too_large, config.protocol.staging_slot_bytes, first, (scene_dir / "textures.bin").string(), first_bytes);
+    }
+  }
   // config.validate() and the key ranges bound these (powers of two, 1..16384 slots, <= 64 MiB a slot).
   SegmentParams params;
   params.request_capacity = static_cast<uint32_t>(config.protocol.request_ring_capacity);

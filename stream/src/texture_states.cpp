@@ -145,6 +145,14 @@ bool TextureStates::on_rejected(TextureId texture, MipLevel mip) {
   return true;
 }
 
+bool TextureStates::on_no_room(TextureId texture, MipLevel mip) {
+  if (!contains(texture)) return false;
+  State& s = states_[texture.value];
+  if (s.pending == kNone || s.pending != mip.value) return false;
+  roll_back(s);
+  return true;
+}
+
 void TextureStates::invalidate(TextureId texture) {
   if (!contains(texture)) return;
   State& s = states_[texture.value];
@@ -199,6 +207,9 @@ void TextureStates::apply(std::span<const TextureEvent> events) {
         break;
       case TextureEvent::Kind::kInvalidated:
         invalidate(e.texture);
+        break;
+      case TextureEvent::Kind::kNoRoom:
+        on_no_room(e.texture, e.mip);
         break;
     }
   }

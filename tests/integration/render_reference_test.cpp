@@ -79,9 +79,10 @@ TEST(RenderReference, LoadingEachFramesWantedMipsGivesThePreloadFramesWithASmall
   // The preload: the default cache (512 layers) holds all 300 textures.
   const auto preload = run_render(dir, "preload", " --set render.preload_all=true");
   ASSERT_TRUE(preload.is_object());
-  // 20 layers of 512 px: each frame's mips fit (a view of this city samples up to ~100 textures), the scene's do
-  // not, so the run evicts and loads textures again as the views change; with validation on.
-  const std::string small_cache = " --set render.load_wanted_before_drawing=true --set cache.layers=20";
+  // 2.25 MiB (36 pages of 64 KiB): each frame's mips fit (a view of this city at 320x180 samples up to ~120
+  // textures, most at coarse levels: the largest frame needs 2-2.25 MiB), the whole path's do not (2.4 MiB
+  // without evictions), so the run evicts and loads textures again as the views change; with validation on.
+  const std::string small_cache = " --set render.load_wanted_before_drawing=true --set cache.memory_bytes=2359296";
   const auto wanted = run_render(dir, "wanted", small_cache + " --set render.validation=true");
   ASSERT_TRUE(wanted.is_object());
   EXPECT_EQ(wanted["frames"], preload["frames"]);
@@ -134,13 +135,16 @@ TEST(RenderReference, LoadingEachFramesWantedMipsGivesThePreloadFramesWithASmall
         << f.filename() << " differs between two runs";
   }
 
-  // 16 layers cannot hold the first view's textures: the run ends at frame 0 naming the keys.
+  // 1.75 MiB holds the largest texture (28 pages with every level) but not every view's: the run ends at the
+  // first frame that does not fit, naming the keys.
   const fs::path log = dir / "too_small.log";
   const int rc = texstream::test::run_logged(
-      render_cmd(dir, dir / "too_small", " --set render.load_wanted_before_drawing=true --set cache.layers=16"), log);
+      render_cmd(dir, dir / "too_small",
+                 " --set render.load_wanted_before_drawing=true --set cache.memory_bytes=1835008"),
+      log);
   EXPECT_NE(rc, 0);
   const std::string text = slurp(log);
-  for (const char* s : {"frame 0", "render.load_wanted_before_drawing", "cache.layers", "cache.memory_bytes"}) {
+  for (const char* s : {"frame ", "render.load_wanted_before_drawing", "do not fit", "cache.memory_bytes"}) {
     EXPECT_NE(text.find(s), std::string::npos) << s << " missing in:\n" << text;
   }
   if (!HasFailure()) fs::remove_all(dir);

@@ -8,12 +8,16 @@
 
 using texstream::render::PageBindOp;
 using texstream::render::PageGeometry;
+using texstream::render::PageRect;
 using texstream::render::SparsePageTable;
 
 namespace {
 
 // lavapipe's RGBA8 page: 64 KiB = 128 x 128 texels; a 512 layer has levels 512 .. 1 (10 levels), no mip tail.
 PageGeometry rgba8_512(uint32_t layers = 4) { return PageGeometry{512, 10, layers, 128, 128, 10}; }
+
+// A square region: what the seed's ring binds.
+PageRect sq(uint32_t layer, uint32_t x, uint32_t y, uint32_t extent) { return PageRect{layer, x, y, extent, extent}; }
 
 size_t count(const std::vector<PageBindOp>& ops, bool bind) {
   return static_cast<size_t>(
@@ -22,36 +26,49 @@ size_t count(const std::vector<PageBindOp>& ops, bool bind) {
 
 }  // namespace
 
+TEST(SparsePageTable, ANonSquareRectangleCountsItsOwnPagesOnly) {
+  const PageGeometry g = rgba8_512();
+  // 512 x 128 at the top of a layer: one row of 4 pages, not the 16 of its 512² square.
+  EXPECT_EQ(SparsePageTable::pages_of_region(g, PageRect{0, 0, 0, 512, 128}, 0), 4u);
+  EXPECT_EQ(SparsePageTable::pages_of_region(g, PageRect{0, 0, 0, 128, 512}, 0), 4u);
+  EXPECT_EQ(SparsePageTable::pages_of_region(g, PageRect{0, 0, 0, 512, 128}, 2), 1u);
+  SparsePageTable t(g, 8);
+  ASSERT_TRUE(t.acquire(PageRect{0, 0, 0, 512, 128}, 0));
+  ASSERT_TRUE(t.acquire(PageRect{0, 0, 128, 512, 128}, 0));  // the next row: 4 new pages, 8 in all
+  EXPECT_FALSE(t.acquire(PageRect{0, 0, 256, 128, 128}, 0));
+  EXPECT_EQ(t.take_batch().size(), 8u);
+}
+
 TEST(SparsePageTable, PagesOfARegionShrinkWithTheLevelButNeverBelowOne) {
   const PageGeometry g = rgba8_512();
-  EXPECT_EQ(SparsePageTable::pages_of_region(g, 0, 0, 512, 0), 16u);  // 4 x 4 pages
-  EXPECT_EQ(SparsePageTable::pages_of_region(g, 0, 0, 512, 1), 4u);
-  EXPECT_EQ(SparsePageTable::pages_of_region(g, 0, 0, 512, 2), 1u);
-  EXPECT_EQ(SparsePageTable::pages_of_region(g, 0, 0, 512, 9), 1u);  // 1 x 1 level: a page of its own
-  EXPECT_EQ(SparsePageTable::pages_of_region(g, 256, 256, 256, 0), 4u);
-  EXPECT_EQ(SparsePageTable::pages_of_region(g, 64, 0, 64, 0), 1u);
+  EXPECT_EQ(SparsePageTable::pages_of_region(g, sq(0, 0, 0, 512), 0), 16u);  // 4 x 4 pages
+  EXPECT_EQ(SparsePageTable::pages_of_region(g, sq(0, 0, 0, 512), 1), 4u);
+  EXPECT_EQ(SparsePageTable::pages_of_region(g, sq(0, 0, 0, 512), 2), 1u);
+  EXPECT_EQ(SparsePageTable::pages_of_region(g, sq(0, 0, 0, 512), 9), 1u);  // 1 x 1 level: a page of its own
+  EXPECT_EQ(SparsePageTable::pages_of_region(g, sq(0, 256, 256, 256), 0), 4u);
+  EXPECT_EQ(SparsePageTable::pages_of_region(g, sq(0, 64, 0, 64), 0), 1u);
   // BC1 pages (512 x 256 texels) are not square.
   const PageGeometry bc1{512, 10, 1, 512, 256, 10};
-  EXPECT_EQ(SparsePageTable::pages_of_region(bc1, 0, 0, 512, 0), 2u);
-  EXPECT_EQ(SparsePageTable::pages_of_region(bc1, 0, 256, 256, 0), 1u);
+  EXPECT_EQ(SparsePageTable::pages_of_region(bc1, sq(0, 0, 0, 512), 0), 2u);
+  EXPECT_EQ(SparsePageTable::pages_of_region(bc1, sq(0, 0, 256, 256), 0), 1u);
   // Levels in a mip tail are bound at start-up, not per region.
   const PageGeometry tail{512, 10, 1, 128, 128, 3};
-  EXPECT_EQ(SparsePageTable::pages_of_region(tail, 0, 0, 512, 3), 0u);
+  EXPECT_EQ(SparsePageTable::pages_of_region(tail, sq(0, 0, 0, 512), 3), 0u);
 }
 
 TEST(SparsePageTable, SmallRegionsShareOnePageBoundOnce) {
   SparsePageTable t(rgba8_512(), 64);
   // 16 textures of extent 128 in one 512 layer: at mip 0 each has its own page; from mip 2 (32 px) four
   // regions' levels (x0 = 0, 32, 64, 96 at mip 2) fall into the same page column.
-  for (uint32_t i = 0; i < 16; ++i) ASSERT_TRUE(t.acquire(0, (i % 4) * 128, (i / 4) * 128, 128, 2));
+  for (uint32_t i = 0; i < 16; ++i) ASSERT_TRUE(t.acquire(sq(0, (i % 4) * 128, (i / 4) * 128, 128), 2));
   auto batch = t.take_batch();
   EXPECT_EQ(count(batch, true), 1u);  // level 2 of the layer is 128 x 128: one page for all 16
   EXPECT_EQ(t.stats().pages_shared, 15u);
   EXPECT_EQ(t.bound_pages(), 1u);
   // Releasing 15 keeps it bound; the last release retires it, and it unbinds only after the serial completes.
-  for (uint32_t i = 0; i < 15; ++i) t.release(0, (i % 4) * 128, (i / 4) * 128, 128, 2, /*serial=*/7);
+  for (uint32_t i = 0; i < 15; ++i) t.release(sq(0, (i % 4) * 128, (i / 4) * 128, 128), 2, /*serial=*/7);
   EXPECT_EQ(t.reclaim(100), 0u);
-  t.release(0, 3 * 128, 3 * 128, 128, 2, /*serial=*/7);
+  t.release(sq(0, 3 * 128, 3 * 128, 128), 2, /*serial=*/7);
   EXPECT_EQ(t.reclaim(6), 0u);  // submission 7 may still sample it
   EXPECT_TRUE(t.take_batch().empty());
   EXPECT_EQ(t.bound_pages(), 1u);
@@ -65,20 +82,20 @@ TEST(SparsePageTable, SmallRegionsShareOnePageBoundOnce) {
 
 TEST(SparsePageTable, AcquireBeyondTheSlotsFailsAndChangesNothing) {
   SparsePageTable t(rgba8_512(), 20);
-  ASSERT_TRUE(t.acquire(0, 0, 0, 512, 0));  // 16 pages
+  ASSERT_TRUE(t.acquire(sq(0, 0, 0, 512), 0));  // 16 pages
   EXPECT_EQ(t.free_slots(), 4u);
-  EXPECT_FALSE(t.acquire(1, 0, 0, 512, 0));  // 16 more do not fit
+  EXPECT_FALSE(t.acquire(sq(1, 0, 0, 512), 0));  // 16 more do not fit
   EXPECT_EQ(t.free_slots(), 4u);
   EXPECT_EQ(t.stats().acquire_failures, 1u);
-  EXPECT_TRUE(t.acquire(1, 0, 0, 512, 1));  // 4 fit
+  EXPECT_TRUE(t.acquire(sq(1, 0, 0, 512), 1));  // 4 fit
   EXPECT_EQ(t.free_slots(), 0u);
   EXPECT_EQ(t.take_batch().size(), 20u);
   EXPECT_LE(t.bound_pages(), t.slot_count());
   // Freeing the first texture's level 0 makes room again once its serial completes.
-  t.release(0, 0, 0, 512, 0, 3);
-  EXPECT_FALSE(t.acquire(2, 0, 0, 512, 0));
+  t.release(sq(0, 0, 0, 512), 0, 3);
+  EXPECT_FALSE(t.acquire(sq(2, 0, 0, 512), 0));
   EXPECT_EQ(t.reclaim(3), 16u);
-  EXPECT_TRUE(t.acquire(2, 0, 0, 512, 0));
+  EXPECT_TRUE(t.acquire(sq(2, 0, 0, 512), 0));
   auto batch = t.take_batch();
   EXPECT_EQ(count(batch, false), 16u);
   EXPECT_EQ(count(batch, true), 16u);
@@ -87,11 +104,11 @@ TEST(SparsePageTable, AcquireBeyondTheSlotsFailsAndChangesNothing) {
 
 TEST(SparsePageTable, UnbindAndRebindOfOneLocationInABatchIsOneBind) {
   SparsePageTable t(rgba8_512(), 8);
-  ASSERT_TRUE(t.acquire(0, 0, 0, 128, 0));
+  ASSERT_TRUE(t.acquire(sq(0, 0, 0, 128), 0));
   ASSERT_EQ(t.take_batch().size(), 1u);
-  t.release(0, 0, 0, 128, 0, 1);
+  t.release(sq(0, 0, 0, 128), 0, 1);
   ASSERT_EQ(t.reclaim(1), 1u);
-  ASSERT_TRUE(t.acquire(0, 0, 0, 64, 0));  // a new texture in the recycled layer, same page
+  ASSERT_TRUE(t.acquire(sq(0, 0, 0, 64), 0));  // a new texture in the recycled layer, same page
   auto batch = t.take_batch();
   ASSERT_EQ(batch.size(), 1u);
   EXPECT_TRUE(batch[0].bind);
@@ -100,8 +117,8 @@ TEST(SparsePageTable, UnbindAndRebindOfOneLocationInABatchIsOneBind) {
 
 TEST(SparsePageTable, PageBoundAndFreedBeforeItsBatchNeverReachesTheDevice) {
   SparsePageTable t(rgba8_512(), 8);
-  ASSERT_TRUE(t.acquire(0, 0, 0, 128, 0));
-  t.release(0, 0, 0, 128, 0, 0);
+  ASSERT_TRUE(t.acquire(sq(0, 0, 0, 128), 0));
+  t.release(sq(0, 0, 0, 128), 0, 0);
   ASSERT_EQ(t.reclaim(0), 1u);
   EXPECT_TRUE(t.take_batch().empty());
   EXPECT_EQ(t.bound_pages(), 0u);
@@ -110,10 +127,10 @@ TEST(SparsePageTable, PageBoundAndFreedBeforeItsBatchNeverReachesTheDevice) {
 
 TEST(SparsePageTable, RetiredPageTakenAgainIsRevivedWithoutABind) {
   SparsePageTable t(rgba8_512(), 8);
-  ASSERT_TRUE(t.acquire(0, 0, 0, 128, 0));
+  ASSERT_TRUE(t.acquire(sq(0, 0, 0, 128), 0));
   ASSERT_EQ(t.take_batch().size(), 1u);
-  t.release(0, 0, 0, 128, 0, 5);
-  ASSERT_TRUE(t.acquire(0, 0, 0, 128, 0));  // before serial 5 completed: same slot, no new bind
+  t.release(sq(0, 0, 0, 128), 0, 5);
+  ASSERT_TRUE(t.acquire(sq(0, 0, 0, 128), 0));  // before serial 5 completed: same slot, no new bind
   EXPECT_TRUE(t.take_batch().empty());
   EXPECT_EQ(t.stats().pages_revived, 1u);
   EXPECT_EQ(t.reclaim(100), 0u);  // referenced again: not unbound
@@ -140,10 +157,10 @@ TEST(SparsePageTable, RandomWorkloadNeverExceedsTheSlots) {
       const uint32_t per_row = 512 / extent;
       const uint32_t idx = next() % (per_row * per_row);
       Held h{next() % 8, (idx % per_row) * extent, (idx / per_row) * extent, extent, next() % 10};
-      if (t.acquire(h.layer, h.x, h.y, h.extent, h.mip)) held.push_back(h);
+      if (t.acquire(sq(h.layer, h.x, h.y, h.extent), h.mip)) held.push_back(h);
     } else {
       const size_t i = next() % held.size();
-      t.release(held[i].layer, held[i].x, held[i].y, held[i].extent, held[i].mip, serial);
+      t.release(sq(held[i].layer, held[i].x, held[i].y, held[i].extent), held[i].mip, serial);
       held.erase(held.begin() + static_cast<long>(i));
     }
     if (step % 7 == 0) {
@@ -153,7 +170,7 @@ TEST(SparsePageTable, RandomWorkloadNeverExceedsTheSlots) {
       ASSERT_LE(t.bound_pages(), t.slot_count());
     }
   }
-  for (const Held& h : held) t.release(h.layer, h.x, h.y, h.extent, h.mip, serial);
+  for (const Held& h : held) t.release(sq(h.layer, h.x, h.y, h.extent), h.mip, serial);
   t.reclaim(serial);
   t.take_batch();
   EXPECT_EQ(t.bound_pages(), 0u);

@@ -77,6 +77,7 @@ std::vector<stream::StreamCandidate> Renderer::read_candidates() {
   const auto candidates = build_candidates(stack_->scene_gpu().read_back_entries(), scene_.mesh_records().size(),
                                            scene_.texture_records().size(), &skipped);
   if (skipped) spdlog::warn("visibility list: {} entries with a bad mesh id skipped", skipped);
+  stack_->cache().touch(candidates);  // what this cycle shows is not evicted (cache.eviction = lru)
   return candidates;
 }
 
@@ -119,8 +120,8 @@ Status Renderer::load_fully(std::vector<stream::StreamCandidate> wanted, LoadGoa
     for (stream::StreamCandidate& c : wanted) c.desired_mip = 0.0f;
   }
   const uint64_t evictions_before = cache.stats().evictions;
-  // Layers numbered from here on hold only textures of `wanted` (kWantedLevels' fit check).
-  const uint64_t first_layer_of_load = cache.layers_assigned();
+  // What is placed from here on is `wanted` only (kWantedLevels' fit check).
+  const TextureCache::FitMark fit = cache.fit_mark();
   uint32_t fruitless = 0;
   auto idle_since = Clock::now();
   for (;;) {
@@ -191,18 +192,22 @@ Status Renderer::load_fully(std::vector<stream::StreamCandidate> wanted, LoadGoa
     ordered.flush();
     TS_TRY(upload_now());
     if (to_wanted) {
-      // The layers are freed in the order they were assigned, so once one assigned during this load is freed,
-      // every live layer holds textures of `wanted` only and they still did not fit (docs/design/
-      // reference_frames.md). Evictions of older layers are fine: what was wanted in them is loaded again.
-      if (cache.layers_freed() > first_layer_of_load) {
-        return make_error(ErrorCode::kResourceExhausted,
-                          "render.load_wanted_before_drawing: the " + std::to_string(wanted.size()) +
-                              " textures this frame samples do not fit the texture cache at their wanted levels; "
-                              "raise cache.layers (now " +
-                              std::to_string(cfg_.cache.layers) + " of " + std::to_string(cfg_.cache.layer_extent_px) +
-                              " px) or cache.memory_bytes (now " + std::to_string(cfg_.cache.memory_bytes) + ")");
+      // ring: layers go in the order they were assigned, so once one assigned during this load is freed, every
+      // live layer holds textures of `wanted` only and they still did not fit; lru: a copy was refused because
+      // everything that could go was wanted (docs/design/reference_frames.md). Evictions of textures not wanted
+      // are fine.
+      if (cache.outgrown_since(fit)) {
+        return make_error(
+            ErrorCode::kResourceExhausted,
+            "render.load_wanted_before_drawing: the " + std::to_string(wanted.size()) +
+                " textures this frame samples do not fit the texture cache at their wanted levels; "
+                "raise cache.memory_bytes (now " +
+                std::to_string(cfg_.cache.memory_bytes) + ")" +
+                (cache.eviction() == CacheEviction::kRing ? " or cache.layers (now " + std::to_string(cache.layers()) +
+                                                                " of " + std::to_string(cache.layer_extent()) + " px)"
+                                                          : ""));
       }
-    } else if (cache.stats().evictions != evictions_before) {
+    } else if (cache.stats().evictions != evictions_before || cache.outgrown_since(fit)) {
       if (goal == LoadGoal::kWholeScene) {
         return make_error(ErrorCode::kResourceExhausted,
                           "render.preload_all: the cache evicted textures while loading the whole scene; raise "

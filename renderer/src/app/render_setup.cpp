@@ -22,6 +22,7 @@ Result<RenderStackOptions> stack_options(const Config& cfg, TexelFormat format) 
   so.vulkan.validation = cfg.render.validation;
   so.vulkan.need_bc1 = format == TexelFormat::kBc1;
   so.cache.format = format;
+  so.cache.eviction = cfg.cache.eviction;
   so.cache.layer_extent = static_cast<uint32_t>(cfg.cache.layer_extent_px);
   so.cache.layers = static_cast<uint32_t>(cfg.cache.layers);
   so.cache.staging_bytes = static_cast<uint64_t>(cfg.render.staging_bytes);

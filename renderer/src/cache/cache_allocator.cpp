@@ -76,6 +76,7 @@ Result<CacheRegion> CacheAllocator::allocate(TextureId texture, uint32_t width, 
   r.origin_x = (r.index % per_row) * extent;
   r.origin_y = (r.index / per_row) * extent;
   r.extent = extent;
+  r.width = r.height = extent;
   l.textures.push_back(texture);
   if (l.next_index >= capacity) open_.erase(extent);  // full: the next texture of this extent opens a new layer
   placed_.emplace(texture, r);

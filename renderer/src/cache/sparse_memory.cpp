@@ -119,19 +119,12 @@ Result<std::unique_ptr<SparseMemory>> SparseMemory::create(const VulkanContext& 
                         (r.formatProperties.aspectMask & VK_IMAGE_ASPECT_METADATA_BIT);
     m->tail_bytes_ += single ? r.imageMipTailSize : r.imageMipTailSize * info.layers;
   }
-  const uint64_t one_region = [&] {
-    uint64_t pages = 0;
-    for (uint32_t l = 0; l < info.mip_levels; ++l)
-      pages += SparsePageTable::pages_of_region(m->geometry_, 0, 0, info.extent, l);
-    return pages * m->page_bytes_;
-  }();
-  if (info.memory_bytes < m->tail_bytes_ + one_region) {
-    return make_error(ErrorCode::kInvalidArgument,
-                      "cache.memory_bytes = " + std::to_string(info.memory_bytes) + " cannot hold one " +
-                          std::to_string(info.extent) + "² texture with all its levels (" +
-                          std::to_string(m->tail_bytes_ + one_region) + " bytes with " +
-                          std::to_string(m->page_bytes_) + "-byte pages" + (m->tail_bytes_ ? " and the mip tail" : "") +
-                          "); raise it or lower cache.layer_extent_px");
+  // The texture cache checks that its largest texture fits (TextureCache::create); here only that the budget
+  // leaves pages after the mip tail.
+  if (info.memory_bytes < m->tail_bytes_ + m->page_bytes_) {
+    return make_error(ErrorCode::kInvalidArgument, "cache.memory_bytes = " + std::to_string(info.memory_bytes) +
+                                                       " does not cover the mip tail of the cache image (" +
+                                                       std::to_string(m->tail_bytes_) + " bytes) and one page");
   }
   const uint64_t pages = (info.memory_bytes - m->tail_bytes_) / m->page_bytes_;
   m->slot_count_ = static_cast<uint32_t>(std::min<uint64_t>(pages, UINT32_MAX));

@@ -29,37 +29,35 @@ PageLocation SparsePageTable::location(uint64_t k) const {
 }
 
 template <class F>
-void SparsePageTable::for_each_page(uint32_t layer, uint32_t origin_x, uint32_t origin_y, uint32_t extent, uint32_t mip,
-                                    F&& f) const {
-  TS_ASSERT(layer < geometry_.layers && mip < geometry_.mip_levels, "page of layer %u mip %u outside the image", layer,
-            mip);
+void SparsePageTable::for_each_page(const PageRect& r, uint32_t mip, F&& f) const {
+  TS_ASSERT(r.layer < geometry_.layers && mip < geometry_.mip_levels, "page of layer %u mip %u outside the image",
+            r.layer, mip);
   if (mip >= geometry_.tail_first_level) return;  // the mip tail is bound for good at start-up
-  const uint32_t x0 = origin_x >> mip, y0 = origin_y >> mip;
-  const uint32_t side = std::max(extent >> mip, 1u);
+  const uint32_t x0 = r.x >> mip, y0 = r.y >> mip;
+  const uint32_t w = std::max(r.width >> mip, r.block), h = std::max(r.height >> mip, r.block);
   const uint32_t gw = geometry_.granularity_w, gh = geometry_.granularity_h;
-  for (uint32_t py = y0 / gh; py <= (y0 + side - 1) / gh; ++py)
-    for (uint32_t px = x0 / gw; px <= (x0 + side - 1) / gw; ++px) f(key(layer, mip, px, py));
+  for (uint32_t py = y0 / gh; py <= (y0 + h - 1) / gh; ++py)
+    for (uint32_t px = x0 / gw; px <= (x0 + w - 1) / gw; ++px) f(key(r.layer, mip, px, py));
 }
 
-uint32_t SparsePageTable::pages_of_region(const PageGeometry& g, uint32_t origin_x, uint32_t origin_y, uint32_t extent,
-                                          uint32_t mip) {
+uint32_t SparsePageTable::pages_of_region(const PageGeometry& g, const PageRect& r, uint32_t mip) {
   if (mip >= g.tail_first_level) return 0;
-  const uint32_t x0 = origin_x >> mip, y0 = origin_y >> mip;
-  const uint32_t side = std::max(extent >> mip, 1u);
-  const uint32_t cols = (x0 + side - 1) / g.granularity_w - x0 / g.granularity_w + 1;
-  const uint32_t rows = (y0 + side - 1) / g.granularity_h - y0 / g.granularity_h + 1;
+  const uint32_t x0 = r.x >> mip, y0 = r.y >> mip;
+  const uint32_t w = std::max(r.width >> mip, r.block), h = std::max(r.height >> mip, r.block);
+  const uint32_t cols = (x0 + w - 1) / g.granularity_w - x0 / g.granularity_w + 1;
+  const uint32_t rows = (y0 + h - 1) / g.granularity_h - y0 / g.granularity_h + 1;
   return cols * rows;
 }
 
-bool SparsePageTable::acquire(uint32_t layer, uint32_t origin_x, uint32_t origin_y, uint32_t extent, uint32_t mip) {
+bool SparsePageTable::acquire(const PageRect& rect, uint32_t mip) {
   // Count first, so that a refusal leaves everything as it was.
   uint32_t needed = 0;
-  for_each_page(layer, origin_x, origin_y, extent, mip, [&](uint64_t k) { needed += pages_.count(k) == 0; });
+  for_each_page(rect, mip, [&](uint64_t k) { needed += pages_.count(k) == 0; });
   if (needed > free_.size()) {
     ++stats_.acquire_failures;
     return false;
   }
-  for_each_page(layer, origin_x, origin_y, extent, mip, [&](uint64_t k) {
+  for_each_page(rect, mip, [&](uint64_t k) {
     auto [it, inserted] = pages_.try_emplace(k);
     Page& p = it->second;
     if (inserted) {
@@ -79,9 +77,8 @@ bool SparsePageTable::acquire(uint32_t layer, uint32_t origin_x, uint32_t origin
   return true;
 }
 
-void SparsePageTable::release(uint32_t layer, uint32_t origin_x, uint32_t origin_y, uint32_t extent, uint32_t mip,
-                              uint64_t serial) {
-  for_each_page(layer, origin_x, origin_y, extent, mip, [&](uint64_t k) {
+void SparsePageTable::release(const PageRect& rect, uint32_t mip, uint64_t serial) {
+  for_each_page(rect, mip, [&](uint64_t k) {
     auto it = pages_.find(k);
     TS_ASSERT(it != pages_.end() && it->second.refs > 0, "release of a page that holds no reference");
     Page& p = it->second;

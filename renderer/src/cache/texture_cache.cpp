@@ -8,6 +8,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "texstream/render/cache/cache_geometry.hpp"
 #include "texstream/render/scene/gpu_structs.hpp"
 #include "texstream/render/scene/scene_data.hpp"
 #include "texstream/render/vulkan/one_shot.hpp"
@@ -37,7 +38,6 @@ TextureCache::TextureCache(const TextureCacheOptions& options, const SceneData& 
     : options_(options),
       scene_(scene),
       ring_(options.staging_bytes),
-      allocator_(options.layer_extent, options.layers),
       residency_(scene.texture_records().size()),
       unplaceable_logged_(scene.texture_records().size(), false),
       entry_written_(scene.texture_records().size(), false),
@@ -46,7 +46,7 @@ TextureCache::TextureCache(const TextureCacheOptions& options, const SceneData& 
 Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& ctx, const TextureCacheOptions& options,
                                                            const SceneData& scene) {
   const auto t0 = std::chrono::steady_clock::now();
-  if (options.layer_extent == 0 || (options.layer_extent & (options.layer_extent - 1)) != 0) {
+  if (options.layer_extent != 0 && (options.layer_extent & (options.layer_extent - 1)) != 0) {
     return make_error(ErrorCode::kInvalidArgument,
                       "cache.layer_extent_px = " + std::to_string(options.layer_extent) + " is not a power of two");
   }
@@ -55,23 +55,74 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
                                                        " exceeds the device's maxImageArrayLayers " +
                                                        std::to_string(ctx.properties().limits.maxImageArrayLayers));
   }
-  std::unique_ptr<TextureCache> c(new TextureCache(options, scene));
-  c->mip_levels_ = floor_log2(options.layer_extent) + 1;
+  // One pass over the records (mapped): the stream client makes the same pass for its texture table.
+  uint32_t largest = 1;
+  const scene::TextureRecord* widest = nullptr;  // the largest by area: its pages must fit the budget
+  for (const scene::TextureRecord& r : scene.texture_records()) {
+    largest = std::max({largest, r.width, r.height});
+    if (!widest || uint64_t{r.width} * r.height > uint64_t{widest->width} * widest->height) widest = &r;
+  }
+  CacheGeometryInputs gi;
+  gi.eviction = options.eviction;
+  gi.format = options.format;
+  gi.layer_extent = options.layer_extent;
+  gi.layers = options.layers;
+  gi.memory_bytes = options.memory_bytes;
+  gi.largest_texture = largest;
+  const VkPhysicalDeviceLimits& limits = ctx.properties().limits;
+  gi.max_image_dimension = limits.maxImageDimension2D;
+  gi.max_array_layers = limits.maxImageArrayLayers;
+  gi.sparse_address_space = limits.sparseAddressSpaceSize;
+  auto geometry = choose_cache_geometry(gi);
+  if (!geometry) return geometry.error();
+  TextureCacheOptions resolved = options;
+  resolved.layer_extent = geometry->layer_extent;
+  resolved.layers = geometry->layers;
+  std::unique_ptr<TextureCache> c(new TextureCache(resolved, scene));
+  c->geometry_layers_ = geometry->layers;
+  if (options.eviction == CacheEviction::kRing) {
+    c->layer_ring_.emplace(geometry->layer_extent, geometry->layers);
+  } else {
+    c->tree_.emplace(geometry->layer_extent, geometry->layers, block_size(options.format));
+  }
+  c->mip_levels_ = floor_log2(geometry->layer_extent) + 1;
   SparseImageInfo info;
   info.format = cache_vk_format(options.format);
-  info.extent = options.layer_extent;
+  info.extent = geometry->layer_extent;
   info.mip_levels = c->mip_levels_;
-  info.layers = options.layers;
+  info.layers = geometry->layers;
   info.memory_bytes = options.memory_bytes;
   auto sparse = SparseMemory::create(ctx, info);
   if (!sparse) return sparse.error();
   c->sparse_ = std::move(*sparse);
   c->pages_ = std::make_unique<SparsePageTable>(c->sparse_->geometry(), c->sparse_->slot_count());
-  spdlog::info("texture cache: sparse {} layers of {}px, {} KiB pages of {}x{} texels, {} page slots ({} MiB budget{})",
-               options.layers, options.layer_extent, c->sparse_->page_bytes() >> 10,
-               c->sparse_->geometry().granularity_w, c->sparse_->geometry().granularity_h, c->sparse_->slot_count(),
-               options.memory_bytes >> 20,
-               c->sparse_->tail_bytes() ? fmt::format(", {} KiB mip tail", c->sparse_->tail_bytes() >> 10) : "");
+  if (widest && widest->width <= geometry->layer_extent && widest->height <= geometry->layer_extent) {
+    const auto [rw, rh] = QuadtreeAllocator::rect_of(widest->width, widest->height, block_size(options.format));
+    const PageRect rect{0,
+                        0,
+                        0,
+                        resolved.eviction == CacheEviction::kRing ? std::max(rw, rh) : rw,
+                        resolved.eviction == CacheEviction::kRing ? std::max(rw, rh) : rh,
+                        block_size(options.format)};
+    uint64_t pages = 0;
+    for (uint32_t l = 0; l < c->mip_levels_; ++l)
+      pages += SparsePageTable::pages_of_region(c->sparse_->geometry(), rect, l);
+    if (pages > c->sparse_->slot_count()) {
+      return make_error(ErrorCode::kInvalidArgument,
+                        "cache.memory_bytes = " + std::to_string(options.memory_bytes) + " cannot hold the scene's " +
+                            std::to_string(widest->width) + "x" + std::to_string(widest->height) +
+                            " texture with all its levels (" + std::to_string(pages) + " pages of " +
+                            std::to_string(c->sparse_->page_bytes()) + " bytes" +
+                            (c->sparse_->tail_bytes() ? " besides the mip tail" : "") + "); raise it");
+    }
+  }
+  spdlog::info(
+      "texture cache: {} eviction, sparse {} layers of {}px ({} MiB of address space), {} KiB pages of {}x{} "
+      "texels, {} page slots ({} MiB budget{})",
+      choice_name(options.eviction), geometry->layers, geometry->layer_extent, c->sparse_->image_bytes() >> 20,
+      c->sparse_->page_bytes() >> 10, c->sparse_->geometry().granularity_w, c->sparse_->geometry().granularity_h,
+      c->sparse_->slot_count(), options.memory_bytes >> 20,
+      c->sparse_->tail_bytes() ? fmt::format(", {} KiB mip tail", c->sparse_->tail_bytes() >> 10) : "");
 
   auto staging =
       GpuBuffer::create(ctx, options.staging_bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, MemoryUse::kHostVisible);
@@ -88,7 +139,7 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
 
   // Every level of every layer starts in the layout the shader reads; copies move it to TRANSFER_DST and back.
   VkImage img = c->sparse_->image();
-  const uint32_t levels = c->mip_levels_, layers = options.layers;
+  const uint32_t levels = c->mip_levels_, layers = geometry->layers;
   TS_TRY(run_one_shot(ctx, [&](VkCommandBuffer cmd) {
     VkImageMemoryBarrier b{};
     b.sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER;
@@ -160,6 +211,7 @@ void TextureCache::failed(TextureId texture, MipLevel mip, CompletionStatus stat
 }
 
 void TextureCache::evict(TextureId texture) {
+  note_eviction();
   Residency& r = residency_[texture.value];
   if (r.mask != 0) --resident_count_;
   r.mask = 0;
@@ -174,7 +226,11 @@ void TextureCache::evict(TextureId texture) {
   for (uint32_t mip = 0; r.bound != 0; ++mip) {
     if (!(r.bound & (1u << mip))) continue;
     r.bound &= ~(1u << mip);
-    pages_->release(r.region.layer, r.region.origin_x, r.region.origin_y, r.region.extent, mip, last_serial_);
+    pages_->release(page_rect(r.region), mip, last_serial_);
+  }
+  if (tree_) {
+    tree_->free(texture);
+    lru_unlink(texture.value);
   }
   // Copies not yet recorded would write into a region that now belongs to another texture: drop them.
   auto drop = [&](const Copy& c) {
@@ -186,6 +242,113 @@ void TextureCache::evict(TextureId texture) {
   std::erase_if(queued_, drop);
   std::erase_if(ready_, drop);
   events_.push_back({stream::TextureEvent::Kind::kInvalidated, texture});
+}
+
+std::optional<CacheRegion> TextureCache::region_of(TextureId texture) const {
+  return layer_ring_ ? layer_ring_->find(texture) : tree_->find(texture);
+}
+
+PageRect TextureCache::page_rect(const CacheRegion& r) const {
+  return PageRect{r.layer, r.origin_x, r.origin_y, r.width, r.height, block_size(options_.format)};
+}
+
+void TextureCache::note_eviction() {
+  if (stats_.evictions == 0) stats_.first_eviction_bytes = held_bytes();
+}
+
+uint64_t TextureCache::held_bytes() const {
+  return uint64_t{pages_->slot_count() - pages_->free_slots()} * sparse_->page_bytes() + sparse_->tail_bytes();
+}
+
+Result<std::optional<CacheRegion>> TextureCache::place(TextureId texture, uint32_t width, uint32_t height) {
+  if (layer_ring_) {
+    std::vector<TextureId> evicted;
+    // BC1 regions are at least one block wide so that the 4x4 level (one block) has a region of its own.
+    auto placed = layer_ring_->allocate(texture, std::max(width, block_size(options_.format)), height, evicted);
+    evict_all(evicted);
+    if (!placed) return placed.error();
+    return std::optional<CacheRegion>(*placed);
+  }
+  if (!tree_->fits(width, height)) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      "texture " + std::to_string(texture.value) + " (" + std::to_string(width) + "x" +
+                          std::to_string(height) + ") does not fit a cache layer of " +
+                          std::to_string(options_.layer_extent) + " px (cache.layer_extent_px)");
+  }
+  for (;;) {
+    if (auto r = tree_->allocate(texture, width, height)) {
+      Residency& res = residency_[texture.value];
+      res.used_cycle = use_cycle_;
+      lru_append(texture.value);
+      return std::optional<CacheRegion>(*r);
+    }
+    // No free square large enough: the address space, not the memory, is short. Free by use, as for memory.
+    const std::optional<TextureId> victim = lru_victim(texture);
+    if (!victim) return std::optional<CacheRegion>();
+    ++stats_.address_evictions;
+    evict(*victim);
+  }
+}
+
+std::optional<TextureId> TextureCache::lru_victim(TextureId keep) const {
+  // The list is in order of last use, so if its head was used this cycle, every texture was.
+  for (uint32_t t = lru_head_; t != 0; t = residency_[t - 1].lru_next) {
+    const Residency& r = residency_[t - 1];
+    if (r.used_cycle == use_cycle_) return std::nullopt;
+    if (t - 1 != keep.value) return TextureId(t - 1);
+  }
+  return std::nullopt;
+}
+
+void TextureCache::lru_unlink(uint32_t texture) {
+  Residency& r = residency_[texture];
+  if (!r.listed) return;
+  if (r.lru_prev)
+    residency_[r.lru_prev - 1].lru_next = r.lru_next;
+  else
+    lru_head_ = r.lru_next;
+  if (r.lru_next)
+    residency_[r.lru_next - 1].lru_prev = r.lru_prev;
+  else
+    lru_tail_ = r.lru_prev;
+  r.lru_prev = r.lru_next = 0;
+  r.listed = false;
+}
+
+void TextureCache::lru_append(uint32_t texture) {
+  Residency& r = residency_[texture];
+  TS_ASSERT(!r.listed, "texture %u listed twice", texture);
+  r.lru_prev = lru_tail_;
+  r.lru_next = 0;
+  if (lru_tail_)
+    residency_[lru_tail_ - 1].lru_next = texture + 1;
+  else
+    lru_head_ = texture + 1;
+  lru_tail_ = texture + 1;
+  r.listed = true;
+}
+
+void TextureCache::touch(std::span<const stream::StreamCandidate> used) {
+  ++use_cycle_;
+  if (!tree_) return;
+  for (const stream::StreamCandidate& c : used) {
+    if (c.texture.value >= scene_.texture_records().size()) continue;
+    Residency& r = residency_[c.texture.value];
+    r.used_cycle = use_cycle_;
+    if (r.listed) {  // to the back: most recently used
+      lru_unlink(c.texture.value);
+      lru_append(c.texture.value);
+    }
+  }
+}
+
+TextureCache::FitMark TextureCache::fit_mark() const {
+  return FitMark{layer_ring_ ? layer_ring_->layers_assigned() : 0, stats_.space_refusals};
+}
+
+bool TextureCache::outgrown_since(const FitMark& mark) const {
+  if (layer_ring_) return layer_ring_->layers_freed() > mark.layers_assigned;
+  return stats_.space_refusals > mark.space_refusals;
 }
 
 void TextureCache::evict_all(const std::vector<TextureId>& textures) {
@@ -215,13 +378,15 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
   TS_ASSERT(mip.value < rec.mip_count && data.size() == mip_bytes(options_.format, rec.width, rec.height, mip.value),
             "commit of texture %u mip %u with %zu bytes", texture.value, mip.value, data.size());
 
-  auto region = allocator_.find(texture);
+  auto region = region_of(texture);
   if (!region) {
-    std::vector<TextureId> evicted;
-    // BC1 regions are at least one block wide so that the 4x4 level (one block) has a region of its own.
-    const uint32_t w = std::max(rec.width, block_size(options_.format));
-    auto placed = allocator_.allocate(texture, w, rec.height, evicted);
-    evict_all(evicted);
+    auto placed = place(texture, rec.width, rec.height);
+    if (placed && !*placed) {  // lru: everything that could go is in use this cycle
+      release_staging(alloc);
+      ++stats_.space_refusals;
+      events_.push_back({stream::TextureEvent::Kind::kNoRoom, texture, mip});
+      return;
+    }
     if (!placed) {
       if (!unplaceable_logged_[texture.value]) {
         spdlog::warn("texture cache: {}", placed.error().message);
@@ -232,7 +397,7 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
       events_.push_back({stream::TextureEvent::Kind::kFailed, texture, mip, CompletionStatus::kNotFound});
       return;
     }
-    region = *placed;
+    region = **placed;
     ++stats_.texture_loads;
     if (residency_[texture.value].evicted_before) ++stats_.texture_reloads;
     auto& t = table_.as<gpu::TextureGpu>()[texture.value];
@@ -254,21 +419,32 @@ bool TextureCache::bind_pages_for(const Copy& c) {
   if (r.epoch != c.epoch) return false;
   if (r.bound & (1u << c.mip)) return true;
   while (true) {
-    const auto region = allocator_.find(c.texture);
+    const auto region = region_of(c.texture);
     if (!region || r.epoch != c.epoch) return false;  // evicted while making room
-    if (pages_->acquire(region->layer, region->origin_x, region->origin_y, region->extent, c.mip)) {
+    if (pages_->acquire(page_rect(*region), c.mip)) {
       TS_ASSERT(r.bound == 0 || (r.region.layer == region->layer && r.region.index == region->index),
                 "texture %u bound in two regions", c.texture.value);
       r.region = *region;
       r.bound |= 1u << c.mip;
       return true;
     }
-    // Seed §3.6: when the cache is full, the oldest layer goes. Its pages retire at last_serial_, which has
-    // completed by now in the renderer's one-frame-in-flight loop, so reclaim() frees their slots at once.
-    std::vector<TextureId> evicted;
-    if (!allocator_.evict_oldest(evicted)) return false;
-    ++stats_.budget_evicted_layers;
-    evict_all(evicted);
+    // The evicted pages retire at last_serial_, which has completed by now in the renderer's
+    // one-frame-in-flight loop, so reclaim() frees their slots at once.
+    if (layer_ring_) {
+      // Seed §3.6: when the cache is full, the oldest layer goes.
+      std::vector<TextureId> evicted;
+      if (!layer_ring_->evict_oldest(evicted)) return false;
+      ++stats_.budget_evicted_layers;
+      evict_all(evicted);
+    } else {
+      const std::optional<TextureId> victim = lru_victim(c.texture);
+      if (!victim) {
+        ++stats_.space_refusals;
+        events_.push_back({stream::TextureEvent::Kind::kNoRoom, c.texture, MipLevel(c.mip)});
+        return false;
+      }
+      evict(*victim);
+    }
     pages_->reclaim(completed_serial_);
   }
 }
@@ -322,7 +498,7 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
   b.sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER;
   b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
   b.image = sparse_->image();
-  b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, mip_levels_, 0, options_.layers};
+  b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, mip_levels_, 0, geometry_layers_};
   // Earlier frames' fragment shaders read the image; the copies must wait for them (write-after-read).
   b.srcAccessMask = VK_ACCESS_SHADER_READ_BIT;
   b.dstAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
@@ -336,7 +512,7 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
   const uint32_t block = block_size(options_.format);
   for (Copy& c : ready_) {
     const scene::TextureRecord& rec = scene_.texture_records()[c.texture.value];
-    const auto region = allocator_.find(c.texture);
+    const auto region = region_of(c.texture);
     TS_ASSERT(region.has_value(), "queued copy of texture %u without a region", c.texture.value);
     const Extent2D e = mip_extent(rec.width, rec.height, c.mip);
     VkBufferImageCopy r{};
@@ -452,7 +628,17 @@ Status TextureCache::write_stats_json(const std::filesystem::path& file) const {
   j["mips_dropped"] = stats_.mips_dropped;
   j["evictions"] = stats_.evictions;
   j["budget_evicted_layers"] = stats_.budget_evicted_layers;
-  j["layers_recycled"] = allocator_.layers_recycled();
+  j["layers_recycled"] = layer_ring_ ? layer_ring_->layers_recycled() : 0;
+  j["eviction"] = std::string(choice_name(options_.eviction));
+  j["layer_extent"] = options_.layer_extent;
+  j["layers"] = geometry_layers_;
+  j["addressable_bytes"] = addressable_bytes();
+  j["space_refusals"] = stats_.space_refusals;
+  j["address_evictions"] = stats_.address_evictions;
+  j["first_eviction_bytes"] = stats_.first_eviction_bytes;
+  j["fill_at_first_eviction"] =
+      stats_.evictions ? static_cast<double>(stats_.first_eviction_bytes) / static_cast<double>(options_.memory_bytes)
+                       : 0.0;
   j["texture_loads"] = stats_.texture_loads;
   j["texture_reloads"] = stats_.texture_reloads;
   j["thrash_rate"] = stats_.texture_loads

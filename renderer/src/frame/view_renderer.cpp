@@ -17,6 +17,7 @@ namespace {
 using Clock = std::chrono::steady_clock;
 // Nothing is streamed here: a small cache image is enough to give the shaders (and the LOD probe) a texture.
 constexpr uint32_t kCacheLayers = 2;
+constexpr uint32_t kCacheLayerExtent = 512;
 constexpr uint64_t kStagingBytes = 1u << 20;
 
 // Inverse of kMeshIdHashMul modulo 2^24 (Newton's iteration x <- x (2 - a x) doubles the correct low bits).
@@ -69,7 +70,8 @@ Result<std::unique_ptr<ViewRenderer>> ViewRenderer::create(const Config& cfg, Sc
   so.vulkan.validation = cfg.render.validation;
   so.vulkan.need_bc1 = m.scene.manifest.texture_format == TexelFormat::kBc1;
   so.cache.format = m.scene.manifest.texture_format;
-  so.cache.layer_extent = static_cast<uint32_t>(cfg.cache.layer_extent_px);
+  so.cache.layer_extent =
+      cfg.cache.layer_extent_px ? static_cast<uint32_t>(cfg.cache.layer_extent_px) : kCacheLayerExtent;
   so.cache.layers = kCacheLayers;
   so.cache.staging_bytes = kStagingBytes;
   so.stage_geometry = options.stage_geometry;

@@ -191,10 +191,21 @@ struct ControllerConfig {
   double fixed_bias = 0;          // mode = fixed: mip bias b
 };
 
+enum class CacheEviction : uint8_t { kLru, kRing };  // cache.eviction
+template <>
+struct ChoiceTable<CacheEviction> {
+  static constexpr std::array<ChoiceEntry<CacheEviction>, 2> kEntries{
+      {{CacheEviction::kLru, "lru",
+        "textures of any size share layers (2D buddy allocator); when memory or address space is short, the "
+        "texture seen longest ago goes, never one the current cycle uses"},
+       {CacheEviction::kRing, "ring", "seed 000 §3.6: one texture size per layer, the oldest layer goes"}}};
+};
+
 struct CacheConfig {
   CacheFormat format = CacheFormat::kAuto;  // the texel format of the GPU cache
-  int64_t layer_extent_px = 512;            // side of one cache layer; the largest texture extent it can hold
-  int64_t layers = 512;  // array layers of the sparse cache image: virtual space only; memory_bytes bounds memory
+  CacheEviction eviction = CacheEviction::kLru;
+  int64_t layer_extent_px = 0;         // side of one cache layer (0: from the device, the budget and the scene)
+  int64_t layers = 0;                  // array layers of the sparse cache image (0: from the device and the budget)
   int64_t memory_bytes = 128ll << 20;  // GPU memory the cache's bound sparse pages may use (never exceeded)
 };
 

@@ -101,6 +101,7 @@ struct TextureEvent {
     kFailed,       // on_failed(texture, mip, status)
     kRejected,     // on_rejected(texture, mip)
     kInvalidated,  // invalidate(texture)
+    kNoRoom,       // on_no_room(texture, mip)
   };
   Kind kind;
   TextureId texture;
@@ -136,6 +137,9 @@ class TextureStates {
   bool on_failed(TextureId texture, MipLevel mip, CompletionStatus status);
   // The payload of `mip` arrived but was rejected (checksum or size mismatch). Rolls back and counts.
   bool on_rejected(TextureId texture, MipLevel mip);
+  // The cache had no room for the pending mip (everything it could evict is in use this cycle): rolled back
+  // like a rejection, but not the texture's fault, so it is asked again later and never marked broken.
+  bool on_no_room(TextureId texture, MipLevel mip);
   // The cache evicted the texture (seed 000 §3.6: its layer was reused): back to Initial, nothing resident,
   // nothing pending (a late answer to the old request is then refused by on_committed). Broken stays broken.
   void invalidate(TextureId texture);

@@ -23,6 +23,10 @@ struct CacheRegion {
   uint32_t origin_x = 0;  // texels at mip 0
   uint32_t origin_y = 0;
   uint32_t extent = 0;  // side of the square region at mip 0
+  // The rectangle the texture's texels take at mip 0 (its pages are bound under this): the whole square for
+  // the seed's ring, pow2(w) x pow2(h) for QuadtreeAllocator.
+  uint32_t width = 0;
+  uint32_t height = 0;
 };
 
 class CacheAllocator {

@@ -45,6 +45,17 @@ struct PageLocation {
   uint32_t y = 0;
 };
 
+// A texture's rectangle in the image at mip 0 (CacheRegion's layer, origin, width, height). At level L it
+// covers max(width >> L, block) x max(height >> L, block): a level of a BC1 texture is whole 4x4 blocks.
+struct PageRect {
+  uint32_t layer = 0;
+  uint32_t x = 0;
+  uint32_t y = 0;
+  uint32_t width = 0;
+  uint32_t height = 0;
+  uint32_t block = 1;
+};
+
 struct PageBindOp {
   PageLocation page;
   bool bind = false;  // false: unbind
@@ -63,17 +74,16 @@ class SparsePageTable {
  public:
   SparsePageTable(const PageGeometry& geometry, uint32_t slot_count);
 
-  // Pages of the square region (origin, extent at mip 0) at `mip`: the extent shrinks with the level and is
+  // Pages of the rectangle (origin, width x height at mip 0) at `mip`: each side shrinks with the level and is
   // at least one texel. Zero for levels in the mip tail.
-  static uint32_t pages_of_region(const PageGeometry& g, uint32_t origin_x, uint32_t origin_y, uint32_t extent,
-                                  uint32_t mip);
+  static uint32_t pages_of_region(const PageGeometry& g, const PageRect& rect, uint32_t mip);
 
-  // Takes one reference on every page the region covers at `mip`. False (nothing changed) when the free slots
-  // cannot back the pages that would be new.
-  bool acquire(uint32_t layer, uint32_t origin_x, uint32_t origin_y, uint32_t extent, uint32_t mip);
+  // Takes one reference on every page the rectangle covers at `mip`. False (nothing changed) when the free
+  // slots cannot back the pages that would be new.
+  bool acquire(const PageRect& rect, uint32_t mip);
   // Drops the references acquire() took. Pages reaching zero retire: submissions up to `serial` may still
   // read them, so they are unbound (and their slots reused) by reclaim() once `serial` has completed.
-  void release(uint32_t layer, uint32_t origin_x, uint32_t origin_y, uint32_t extent, uint32_t mip, uint64_t serial);
+  void release(const PageRect& rect, uint32_t mip, uint64_t serial);
   // Submissions up to `completed_serial` are done: retired pages older than that are queued for unbinding and
   // their slots become free. Returns the number of slots freed.
   uint32_t reclaim(uint64_t completed_serial);
@@ -101,9 +111,9 @@ class SparsePageTable {
   };
   uint64_t key(uint32_t layer, uint32_t mip, uint32_t x, uint32_t y) const;
   PageLocation location(uint64_t key) const;
-  // Calls f(key) for every page of the region at `mip`.
+  // Calls f(key) for every page of the rectangle at `mip`.
   template <class F>
-  void for_each_page(uint32_t layer, uint32_t origin_x, uint32_t origin_y, uint32_t extent, uint32_t mip, F&& f) const;
+  void for_each_page(const PageRect& rect, uint32_t mip, F&& f) const;
 
   PageGeometry geometry_;
   uint32_t slot_count_;

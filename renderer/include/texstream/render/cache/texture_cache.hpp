@@ -1,20 +1,26 @@
 #pragma once
 // The texture cache (seed 000 §3.6): one sparse partially-resident 2D array image (SparseMemory), textures
-// placed in square regions by CacheAllocator (one maximum extent per layer, layers in ring order), filled from
-// a host-visible staging ring that StreamClient copies validated payloads into (this class is its MipSink).
+// placed in regions of its layers, filled from a host-visible staging ring that StreamClient copies validated
+// payloads into (this class is its MipSink). The image's shape comes from the device's limits and the budget
+// (cache_geometry.hpp), so that cache.memory_bytes is the cache's only limit (docs/design/cache_budget.md).
 //
-// Residency, per texture and mip: the pages under the texture's region at that level are bound (reference-
-// counted: small regions share pages, SparsePageTable) in the frame that first copies into that level, by
-// one vkQueueBindSparse for the whole frame; the frame's submission waits on bind_wait() before its copies.
-// A mip becomes visible to the shader (TextureGpu: [finest, coarsest] resident) and to the texture state
-// machine (a kCommitted event) only after the GPU copy that wrote it has completed; staging space is reused only
-// then. So the shader, which clamps every sample to that range, never reads an unbound page.
+// Residency, per texture and mip: the pages under the texture's rectangle at that level are bound
+// (reference-counted: small regions share pages, SparsePageTable) in the frame that first copies into that
+// level, by one vkQueueBindSparse for the whole frame; the frame's submission waits on bind_wait() before its
+// copies. A mip becomes visible to the shader (TextureGpu: [finest, coarsest] resident) and to the texture
+// state machine (a kCommitted event) only after the GPU copy that wrote it has completed; staging space is
+// reused only then. So the shader, which clamps every sample to that range, never reads an unbound page.
 //
-// Budget (cache.memory_bytes): bound pages x page size never exceed it. When a frame's copies need more
-// pages than are free, the oldest layer is evicted (seed §3.6's ring order; its textures go back to Initial
-// through a kInvalidated event) until they fit. An evicted texture is hidden at once (the table entry is
-// host-visible and read by the next submission only); its pages are unbound only after every submission that
-// could have sampled them has completed.
+// Placement and eviction (cache.eviction):
+// * lru (default): QuadtreeAllocator packs textures of every size into shared layers; a non-square texture
+//   binds about its own bytes. When the pages of a copy do not fit the budget, or no region is free, the
+//   texture used longest ago is evicted — never one used in the current cycle (touch()): a view whose working
+//   set fits the budget never evicts what it shows. If nothing can go, the copy is dropped (kNoRoom: asked
+//   again later) and counted in space_refusals.
+// * ring (seed §3.6): CacheAllocator, one texture size per layer, layers in ring order; the oldest layer goes.
+// An evicted texture is hidden at once (the table entry is host-visible and read by the next submission only)
+// and goes back to Initial through a kInvalidated event; its pages are unbound only after every submission
+// that could have sampled them has completed.
 //
 // The cache does not touch the texture state machine: what it learns (a mip published, rejected or failed, a
 // texture evicted) is queued as TextureEvents, in order, and the frame loop hands them over (take_events).
@@ -27,6 +33,7 @@
 #include <deque>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <unordered_map>
 #include <utility>
 #include <vector>
@@ -35,6 +42,7 @@
 #include "texstream/common/texel_format.hpp"
 #include "texstream/render/cache/cache_allocator.hpp"
 #include "texstream/render/cache/mip_fades.hpp"
+#include "texstream/render/cache/quadtree_allocator.hpp"
 #include "texstream/render/cache/sparse_memory.hpp"
 #include "texstream/render/cache/sparse_page_table.hpp"
 #include "texstream/render/cache/staging_ring.hpp"
@@ -49,11 +57,12 @@ class VulkanContext;
 struct SceneData;
 
 struct TextureCacheOptions {
-  TexelFormat format = TexelFormat::kRgba8;  // cache.format; every scene texture must have it
-  uint32_t layer_extent = 512;               // cache.layer_extent_px, a power of two
-  uint32_t layers = 64;                      // cache.layers
-  uint64_t staging_bytes = 32ull << 20;      // host-visible staging ring
-  uint64_t memory_bytes = 128ull << 20;      // cache.memory_bytes: GPU memory for bound pages (and mip tail)
+  TexelFormat format = TexelFormat::kRgba8;      // cache.format; every scene texture must have it
+  CacheEviction eviction = CacheEviction::kLru;  // cache.eviction
+  uint32_t layer_extent = 0;                     // cache.layer_extent_px, a power of two; 0: chosen (cache_geometry)
+  uint32_t layers = 0;                           // cache.layers; 0: chosen
+  uint64_t staging_bytes = 32ull << 20;          // host-visible staging ring
+  uint64_t memory_bytes = 128ull << 20;          // cache.memory_bytes: GPU memory for bound pages (and mip tail)
   double fade_s = 0;  // stream.fade_ms: a finer level (or a first level) fades in over this long; 0 = at once
 };
 
@@ -62,6 +71,9 @@ struct TextureCacheStats {
   uint64_t bytes_uploaded = 0;
   uint64_t mips_dropped = 0;            // committed, but the texture was evicted before its copy was recorded or done
   uint64_t evictions = 0;               // textures invalidated by layer recycling or the memory budget
+  uint64_t space_refusals = 0;          // lru: copies dropped because everything evictable was in use this cycle
+  uint64_t address_evictions = 0;       // lru: of the evictions, those for address space (no free region)
+  uint64_t first_eviction_bytes = 0;    // memory in use (page slots held + mip tail) when the first eviction came
   uint64_t staging_full = 0;            // reserve() answered "no room now"
   uint64_t budget_evicted_layers = 0;   // layers evicted because the pages of a frame's copies did not fit
   uint64_t frames = 0;                  // on_submission_complete calls (one per frame)
@@ -129,10 +141,19 @@ class TextureCache final : public stream::MipSink {
   uint32_t layer_extent() const { return options_.layer_extent; }
   uint64_t resident_textures() const;
   const TextureCacheStats& stats() const { return stats_; }
-  // The allocator's layer numbering (CacheAllocator::layers_assigned): a layer assigned after a mark and freed
-  // since means the textures placed after the mark alone outgrew the cache.
-  uint64_t layers_assigned() const { return allocator_.layers_assigned(); }
-  uint64_t layers_freed() const { return allocator_.layers_freed(); }
+  // The textures of the current cycle (the frame's visibility list, or what a load wants): none of them is
+  // evicted until the next call. Textures placed since the last call count as used too.
+  void touch(std::span<const stream::StreamCandidate> used);
+  // Whether the textures used since a mark alone outgrew the cache: ring, a layer assigned after the mark was
+  // freed (layers go in assignment order); lru, a copy was refused for lack of room.
+  struct FitMark {
+    uint64_t layers_assigned = 0;
+    uint64_t space_refusals = 0;
+  };
+  FitMark fit_mark() const;
+  bool outgrown_since(const FitMark& mark) const;
+  uint32_t layers() const { return geometry_layers_; }
+  CacheEviction eviction() const { return options_.eviction; }
   const SparseBindStats& bind_stats() const { return sparse_->stats(); }
   const PageTableStats& page_stats() const { return pages_->stats(); }
   uint64_t page_bytes() const { return sparse_->page_bytes(); }
@@ -140,6 +161,10 @@ class TextureCache final : public stream::MipSink {
   // Bytes bound now: pages x page size + the mip tail. Never above memory_budget().
   uint64_t bound_bytes() const { return pages_->bound_pages() * sparse_->page_bytes() + sparse_->tail_bytes(); }
   const PageGeometry& page_geometry() const { return sparse_->geometry(); }
+  // Bytes the image can address with every level (the sparse image's size): what could be bound at most.
+  uint64_t addressable_bytes() const { return sparse_->image_bytes(); }
+  // Bytes held now: page slots in use (bound, or retired and not yet unbound) + the mip tail.
+  uint64_t held_bytes() const;
   // cache.json next to summary.json: the statistics above, the bind counts and the budget checks.
   Status write_stats_json(const std::filesystem::path& file) const;
 
@@ -150,6 +175,11 @@ class TextureCache final : public stream::MipSink {
     uint32_t epoch = 0;  // bumped on eviction: copies of an older epoch publish nothing
     bool evicted_before = false;
     CacheRegion region;  // valid while `bound` != 0 (the allocator forgets it when the layer goes)
+    // lru: the use list, oldest first (texture id + 1; 0 = none), for textures holding a region.
+    uint32_t lru_prev = 0;
+    uint32_t lru_next = 0;
+    uint32_t used_cycle = 0;  // the touch() cycle that last used it
+    bool listed = false;
   };
   struct Copy {
     TextureId texture;
@@ -162,6 +192,16 @@ class TextureCache final : public stream::MipSink {
   TextureCache(const TextureCacheOptions& options, const SceneData& scene);
   void evict(TextureId texture);
   void evict_all(const std::vector<TextureId>& textures);
+  std::optional<CacheRegion> region_of(TextureId texture) const;
+  // A region for the texture's first mip: ring (recycling layers) or lru (evicting by use). nullopt + kNoRoom
+  // event when lru has nothing to evict; an error when the texture can never be placed.
+  Result<std::optional<CacheRegion>> place(TextureId texture, uint32_t width, uint32_t height);
+  // lru: the texture used longest ago, unless it was used in the current cycle or is `keep`.
+  std::optional<TextureId> lru_victim(TextureId keep) const;
+  void lru_unlink(uint32_t texture);
+  void lru_append(uint32_t texture);
+  PageRect page_rect(const CacheRegion& r) const;
+  void note_eviction();
   // Takes the page references of copy `c`, evicting oldest layers while the budget is short. False when
   // the copy's own texture was evicted on the way (the copy is then dropped).
   bool bind_pages_for(const Copy& c);
@@ -181,7 +221,11 @@ class TextureCache final : public stream::MipSink {
   GpuBuffer staging_;
   GpuBuffer table_;  // gpu::TextureGpu[texture_count], host-visible
   StagingRing ring_;
-  CacheAllocator allocator_;
+  std::optional<CacheAllocator> layer_ring_;  // cache.eviction = ring
+  std::optional<QuadtreeAllocator> tree_;     // cache.eviction = lru
+  uint32_t geometry_layers_ = 0;
+  uint32_t lru_head_ = 0, lru_tail_ = 0;  // texture id + 1; 0 = empty
+  uint32_t use_cycle_ = 1;
   ZeroedArray<Residency> residency_;  // per texture; all-zero = not resident (created in O(1), see zeroed_array.hpp)
   uint64_t resident_count_ = 0;       // textures with a non-zero mask
   std::vector<UploadTraceFrame> trace_;
