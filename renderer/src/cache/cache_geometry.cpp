@@ -27,7 +27,8 @@ Result<CacheGeometry> choose_cache_geometry(const CacheGeometryInputs& in) {
   if (in.layer_extent != 0) {
     g.layer_extent = in.layer_extent;
     if (g.layer_extent > device_side) {
-      return bad("cache.layer_extent_px", std::to_string(g.layer_extent) + " exceeds the device's maxImageDimension2D " +
+      return bad("cache.layer_extent_px", std::to_string(g.layer_extent) +
+                                              " exceeds the device's maxImageDimension2D " +
                                               std::to_string(in.max_image_dimension));
     }
   } else if (in.eviction == CacheEviction::kRing) {
@@ -37,7 +38,8 @@ Result<CacheGeometry> choose_cache_geometry(const CacheGeometryInputs& in) {
     // target; never below what the scene needs.
     const uint64_t count = std::max(in.layers, 1u);
     g.layer_extent = std::min(kLruLayerCap, device_side);
-    while (g.layer_extent > needed && cache_layer_bytes(in.format, g.layer_extent) * count > target) g.layer_extent /= 2;
+    while (g.layer_extent > needed && cache_layer_bytes(in.format, g.layer_extent) * count > target)
+      g.layer_extent /= 2;
   }
   if (in.largest_texture > g.layer_extent && in.layer_extent == 0) {
     return bad("cache.layer_extent_px", "the scene's largest texture (" + std::to_string(in.largest_texture) +

@@ -24,12 +24,12 @@ namespace texstream::render {
 struct CacheGeometryInputs {
   CacheEviction eviction = CacheEviction::kLru;
   TexelFormat format = TexelFormat::kRgba8;
-  uint32_t layer_extent = 0;  // cache.layer_extent_px; 0: choose
-  uint32_t layers = 0;        // cache.layers; 0: choose
-  uint64_t memory_bytes = 0;  // cache.memory_bytes
-  uint32_t largest_texture = 1;    // max(width, height) over the scene's textures
-  uint32_t max_image_dimension = 0;  // VkPhysicalDeviceLimits::maxImageDimension2D
-  uint32_t max_array_layers = 0;     // maxImageArrayLayers
+  uint32_t layer_extent = 0;          // cache.layer_extent_px; 0: choose
+  uint32_t layers = 0;                // cache.layers; 0: choose
+  uint64_t memory_bytes = 0;          // cache.memory_bytes
+  uint32_t largest_texture = 1;       // max(width, height) over the scene's textures
+  uint32_t max_image_dimension = 0;   // VkPhysicalDeviceLimits::maxImageDimension2D
+  uint32_t max_array_layers = 0;      // maxImageArrayLayers
   uint64_t sparse_address_space = 0;  // sparseAddressSpaceSize
 };
 

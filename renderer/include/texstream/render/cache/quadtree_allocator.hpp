@@ -67,8 +67,8 @@ class QuadtreeAllocator {
   uint32_t layer_extent_;
   uint32_t layers_;
   uint32_t min_side_;
-  uint32_t levels_;                            // level of a min_side square + 1
-  std::vector<std::set<uint64_t>> free_;       // per level: key(layer, morton)
+  uint32_t levels_;                       // level of a min_side square + 1
+  std::vector<std::set<uint64_t>> free_;  // per level: key(layer, morton)
   std::unordered_map<TextureId, Placement> placed_;
   uint64_t used_texels_ = 0;
 };
