@@ -7,8 +7,12 @@
 namespace texstream::render {
 
 uint64_t cache_layer_bytes(TexelFormat format, uint32_t extent) {
+  // Each level of each layer starts on a sparse block (64 KiB on lavapipe and the GPUs we know): a 512² RGBA8
+  // layer is 1.81 MiB, not the 1.33 MiB of its texels (lavapipe reports 1.75 MiB).
+  constexpr uint64_t kBlock = 64u << 10;
   uint64_t total = 0;
-  for (uint32_t level = 0; (extent >> level) > 0; ++level) total += mip_bytes(format, extent, extent, level);
+  for (uint32_t level = 0; (extent >> level) > 0; ++level)
+    total += (mip_bytes(format, extent, extent, level) + kBlock - 1) / kBlock * kBlock;
   return total;
 }
 
@@ -34,12 +38,19 @@ Result<CacheGeometry> choose_cache_geometry(const CacheGeometryInputs& in) {
   } else if (in.eviction == CacheEviction::kRing) {
     g.layer_extent = std::min(needed, device_side);  // seed §3.6: a layer is one texture of the largest size
   } else {
-    // The largest side up to the cap whose layers (in.layers of them when the user set the count) fit the
-    // target; never below what the scene needs.
-    const uint64_t count = std::max(in.layers, 1u);
-    g.layer_extent = std::min(kLruLayerCap, device_side);
-    while (g.layer_extent > needed && cache_layer_bytes(in.format, g.layer_extent) * count > target)
-      g.layer_extent /= 2;
+    // The side (up to the cap, never below what the scene needs) whose layers address the most, up to the
+    // target: on lavapipe (2 GiB) a 1.5 GiB RGBA8 budget gets 5 layers of 8 K (1.8 GiB), where one 16 K layer
+    // (1.4 GiB) would address less than the budget. Near-ties go to the larger side (fewer layers).
+    uint64_t best = 0;
+    for (uint32_t side = std::min(kLruLayerCap, device_side); side >= needed && side >= 4; side /= 2) {
+      const uint64_t bytes = cache_layer_bytes(in.format, side);
+      uint64_t count =
+          in.layers ? in.layers : std::clamp<uint64_t>(target / bytes, 1, std::max(in.max_array_layers, 1u));
+      if (count * bytes > space) continue;
+      const uint64_t total = std::min(count * bytes, target);
+      if (total > best + best / 16) best = total, g.layer_extent = side;  // a smaller side must gain > 1/16
+    }
+    if (g.layer_extent == 0) g.layer_extent = std::min(needed, device_side);  // nothing fits: reported below
   }
   if (in.largest_texture > g.layer_extent && in.layer_extent == 0) {
     return bad("cache.layer_extent_px", "the scene's largest texture (" + std::to_string(in.largest_texture) +

@@ -45,7 +45,7 @@ inline constexpr uint64_t kAddressPerBudget = 64;
 // coordinates in a layer stay exact to ~1/1000 texel in the shader's float arithmetic.
 inline constexpr uint32_t kLruLayerCap = 16384;
 
-// Bytes of one layer of side `extent` with its whole mip chain (the 4/3 of a full chain, rounded up).
+// Bytes of one layer of side `extent` with its whole mip chain, each level padded to a 64 KiB sparse block.
 uint64_t cache_layer_bytes(TexelFormat format, uint32_t extent);
 
 // Errors name the key to change: a scene texture larger than any layer the device can address.
