@@ -1,6 +1,7 @@
 #include "texstream/common/config.hpp"
 
 #include <toml++/toml.h>
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
@@ -36,7 +37,9 @@ void visit_keys(Config& c, V&& v) {
   v("protocol", "staging_slot_count", c.protocol.staging_slot_count, "slots",
     "Staging slots: bound the mips in flight between the processes", Range{1, 16384});
   v("protocol", "staging_slot_bytes", c.protocol.staging_slot_bytes, "bytes",
-    "Bytes per staging slot; must hold the largest mip", Range{4096, 64 << 20});
+    "Bytes per staging slot; a level larger than a slot is never loaded. 0 = the scene's largest mip (at least "
+    "64 KiB; the slot count is then lowered to keep the pool within 512 MiB)",
+    Range{0, 64 << 20});
   v("protocol", "heartbeat_timeout_ms", c.protocol.heartbeat_timeout_ms, "ms",
     "A peer whose progress heartbeat stalls this long is treated as hung", Range{10, 600000});
 
@@ -384,6 +387,17 @@ bool is_pow2(int64_t v) { return v > 0 && (v & (v - 1)) == 0; }
 
 }  // namespace
 
+StagingShape effective_staging(const ProtocolConfig& protocol, uint64_t largest_mip_bytes) {
+  constexpr uint64_t kMaxSlotBytes = 64ull << 20;  // the segment's limit (protocol/segment_layout.hpp)
+  StagingShape s{static_cast<uint64_t>(protocol.staging_slot_count),
+                 static_cast<uint64_t>(protocol.staging_slot_bytes)};
+  if (s.slot_bytes != 0) return s;
+  s.slot_bytes = std::clamp<uint64_t>((largest_mip_bytes + 4095) / 4096 * 4096, kMinAutoSlotBytes, kMaxSlotBytes);
+  s.slot_count =
+      std::clamp<uint64_t>(kMaxAutoStagingBytes / s.slot_bytes, std::min<uint64_t>(4, s.slot_count), s.slot_count);
+  return s;
+}
+
 Status Config::validate() const {
   auto bad = [](const std::string& key, const std::string& msg) {
     return make_error(ErrorCode::kInvalidArgument, "config: key '" + key + "': " + msg);
@@ -393,6 +407,8 @@ Status Config::validate() const {
     return bad("protocol.completion_ring_capacity", "must be a power of two");
   if (cache.layer_extent_px != 0 && !is_pow2(cache.layer_extent_px))
     return bad("cache.layer_extent_px", "must be 0 (auto) or a power of two");
+  if (protocol.staging_slot_bytes != 0 && protocol.staging_slot_bytes < 4096)
+    return bad("protocol.staging_slot_bytes", "must be 0 (auto) or at least 4096");
   if (render.staging_bytes < protocol.staging_slot_bytes) {
     return bad("render.staging_bytes", "must hold at least one staging slot (protocol.staging_slot_bytes)");
   }

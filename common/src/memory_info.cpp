@@ -133,17 +133,18 @@ MemoryInfo read_memory_info(const std::filesystem::path& sys_root, const std::fi
 }
 
 uint64_t server_memory_bytes(const Config& config) {
-  return static_cast<uint64_t>(config.server.ram_cache_bytes) +
-         static_cast<uint64_t>(config.protocol.staging_slot_count) *
-             static_cast<uint64_t>(config.protocol.staging_slot_bytes) +
+  // Auto slots (staging_slot_bytes = 0) count their smallest size here: the renderer checks again with the
+  // scene's real slot size (StreamClient::start) before it starts a server.
+  const StagingShape staging = effective_staging(config.protocol, 0);
+  return static_cast<uint64_t>(config.server.ram_cache_bytes) + staging.slot_count * staging.slot_bytes +
          kServerOverheadBytes;
 }
 
 Status check_server_memory(const Config& config, const MemoryInfo& memory) {
   const uint64_t need = server_memory_bytes(config);
   if (memory.limit == kUnknown || need <= memory.limit) return ok_status();
-  const uint64_t staging = static_cast<uint64_t>(config.protocol.staging_slot_count) *
-                           static_cast<uint64_t>(config.protocol.staging_slot_bytes);
+  const StagingShape shape = effective_staging(config.protocol, 0);
+  const uint64_t staging = shape.slot_count * shape.slot_bytes;
   return make_error(ErrorCode::kInvalidArgument,
                     "config: key 'server.ram_cache_bytes': the server needs " + std::to_string(need) +
                         " bytes (a RAM cache of " + std::to_string(config.server.ram_cache_bytes) +

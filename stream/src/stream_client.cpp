@@ -145,13 +145,37 @@ Result<std::unique_ptr<StreamClient>> StreamClient::start(const Config& config, 
   c->options_ = std::move(options);
   c->shapes_ = std::move(shapes);
 
+  // The staging slots: protocol.staging_slot_bytes, or (0) sized for the scene's largest mip. A level larger
+  // than a slot can never be sent: said once, naming the first such texture, instead of leaving it flat colour
+  // without a word (the server refuses each request for it).
+  {
+    uint64_t largest = 0;
+    for (const TextureShape& t : c->shapes_) largest = std::max(largest, mip_bytes(t.format, t.width, t.height, 0));
+    const StagingShape staging = effective_staging(config.protocol, largest);
+    c->config_.protocol.staging_slot_count = static_cast<int64_t>(staging.slot_count);
+    c->config_.protocol.staging_slot_bytes = static_cast<int64_t>(staging.slot_bytes);
+    uint64_t too_large = 0, first = 0, first_bytes = 0;
+    for (size_t i = 0; i < c->shapes_.size() && largest > staging.slot_bytes; ++i) {
+      const TextureShape& t = c->shapes_[i];
+      const uint64_t bytes = mip_bytes(t.format, t.width, t.height, 0);
+      if (bytes <= staging.slot_bytes) continue;
+      if (too_large++ == 0) first = i, first_bytes = bytes;
+    }
+    if (too_large) {
+      spdlog::warn(
+          "stream client: {} textures have levels larger than a staging slot ({} bytes, "
+          "protocol.staging_slot_bytes; the first: texture {} of {}, level 0 is {} bytes); those levels are "
+          "never loaded: raise the key",
+          too_large, staging.slot_bytes, first, (scene_dir / "textures.bin").string(), first_bytes);
+    }
+  }
   std::filesystem::path executable;
   if (c->options_.spawn_server) {
     auto exe = resolve_server_executable(config);
     if (!exe) return exe.error();
     executable = *exe;
     // The server would refuse it at start (exit 2), and be spawned again and again: said once, here.
-    TS_TRY(check_server_memory(config, read_memory_info()));
+    TS_TRY(check_server_memory(c->config_, read_memory_info()));
   }
 
   // Segments of renderers that died without cleaning up (pid + start time no longer alive).
@@ -165,29 +189,12 @@ Result<std::unique_ptr<StreamClient>> StreamClient::start(const Config& config, 
   if (!config.protocol.segment_name.empty() && Segment::remove_if_stale(name)) {
     spdlog::info("removed the stale shared segment '{}' of a dead renderer", name);
   }
-  // A level larger than a staging slot can never be sent: say so once, naming the first such texture, instead
-  // of leaving it flat colour without a word (the server refuses each request for it).
-  {
-    uint64_t too_large = 0, first = 0, first_bytes = 0;
-    for (size_t i = 0; i < c->shapes_.size(); ++i) {
-      const TextureShape& t = c->shapes_[i];
-      const uint64_t bytes = mip_bytes(t.format, t.width, t.height, 0);
-      if (bytes <= static_cast<uint64_t>(config.protocol.staging_slot_bytes)) continue;
-      if (too_large++ == 0) first = i, first_bytes = bytes;
-    }
-    if (too_large) {
-      spdlog::warn(
-          "stream client: {} textures have levels larger than protocol.staging_slot_bytes = {} (the first: "
-          "texture {} of {}, level 0 is {} bytes); those levels are never loaded: raise the key",
-          too_large, config.protocol.staging_slot_bytes, first, (scene_dir / "textures.bin").string(), first_bytes);
-    }
-  }
   // config.validate() and the key ranges bound these (powers of two, 1..16384 slots, <= 64 MiB a slot).
   SegmentParams params;
   params.request_capacity = static_cast<uint32_t>(config.protocol.request_ring_capacity);
   params.completion_capacity = static_cast<uint32_t>(config.protocol.completion_ring_capacity);
-  params.slot_count = static_cast<uint32_t>(config.protocol.staging_slot_count);
-  params.slot_bytes = static_cast<uint64_t>(config.protocol.staging_slot_bytes);
+  params.slot_count = static_cast<uint32_t>(c->config_.protocol.staging_slot_count);
+  params.slot_bytes = static_cast<uint64_t>(c->config_.protocol.staging_slot_bytes);
   params.texture_count = c->shapes_.size();
   params.texture_table_fingerprint = kTextureTableSeed;
   for (const TextureShape& t : c->shapes_) {

@@ -1,10 +1,12 @@
 // THE key image test. A scene written with the scene_format writers holds one quad that faces a still camera
-// and covers a known 256 x 256 pixel rectangle, textured with a 256 x 256 RGBA8 DDS of a known pattern. After
-// texstream-render has streamed the texture from the real texstream-server down to its finest mip, the quad's
-// pixels in the last PNG must equal the texture's mip 0 resampled to the rectangle (1:1 here), within
-// mean abs error < 4/255 and PSNR > 30 dB. Lighting is exactly 1 for a camera-facing quad and Eq. 8 gives the
-// colormap no weight at mip 0, so neither may change a texel. On failure, actual, expected and diff PNGs are
-// written next to the test output and their paths printed.
+// and covers a known rectangle of pixels, textured with an RGBA8 DDS of a known pattern. After texstream-render
+// has streamed the texture from the real texstream-server down to the level the rectangle shows 1:1, the quad's
+// pixels in the last PNG must equal that level resampled to the rectangle, within mean abs error < 4/255 and
+// PSNR > 30 dB. Two cases: 256² shown at mip 0; 2048 x 1024 shown at mip 2 (512 x 256 pixels) with the default
+// profile: a non-square texture four times the old layer side whose level is twice the old 1 MiB staging slot
+// (issue 26: any texture the device samples fits, with the defaults). Lighting is exactly 1 for a camera-facing quad
+// and Eq. 8 gives the colormap no weight at mip 0, so neither may change a texel. On failure, actual, expected and diff
+// PNGs are written next to the test output and their paths printed.
 #include <gtest/gtest.h>
 
 #include <sys/wait.h>
@@ -34,87 +36,104 @@ namespace {
 const fs::path kBin = TEXSTREAM_BIN_DIR;
 using texstream::test::slurp;
 int run(const std::string& cmd, const fs::path& log) { return texstream::test::run_logged(cmd, log); }
-constexpr uint32_t kTex = 256;  // texture side
 constexpr int kWidth = 960, kHeight = 540;
 constexpr double kFovY = 60.0;
 constexpr double kDistance = 100.0;                                  // camera to quad, metres
-constexpr double kRectPx = 256.0;                                    // the quad's side on screen: one pixel per texel
 constexpr double kCamX = 392000.0, kCamY = 5820000.0, kCamZ = 50.0;  // map coordinates: large offsets on purpose
 
 struct Rgba {
   uint8_t r, g, b, a;
 };
 
-// Pattern: red = x, green = y (smooth gradients), blue = a 32-texel checker (sharp edges every 32 texels).
+// A texture of tex_w x tex_h texels shown at `level`: the quad covers (tex_w >> level) x (tex_h >> level) pixels.
+struct QuadCase {
+  const char* name;
+  uint32_t tex_w, tex_h, level;
+  double rect_w() const { return static_cast<double>(tex_w >> level); }
+  double rect_h() const { return static_cast<double>(tex_h >> level); }
+};
+
+struct Level {
+  uint32_t w, h;
+  std::vector<Rgba> texels;
+};
+
+// Pattern: red = x, green = y (smooth gradients, wrapping every 256), blue = a 32-texel checker (sharp edges).
 Rgba texel(uint32_t x, uint32_t y) {
   const bool dark = ((x / 32) + (y / 32)) % 2 == 0;
   return {static_cast<uint8_t>(x), static_cast<uint8_t>(y), static_cast<uint8_t>(dark ? 40 : 220), 255};
 }
 
-std::vector<std::vector<Rgba>> mip_chain() {
-  std::vector<std::vector<Rgba>> mips;
-  std::vector<Rgba> level(kTex * kTex);
-  for (uint32_t y = 0; y < kTex; ++y)
-    for (uint32_t x = 0; x < kTex; ++x) level[y * kTex + x] = texel(x, y);
-  mips.push_back(level);
-  for (uint32_t side = kTex / 2; side >= 1; side /= 2) {
-    const auto& prev = mips.back();
-    std::vector<Rgba> next(side * side);
-    for (uint32_t y = 0; y < side; ++y)
-      for (uint32_t x = 0; x < side; ++x) {
-        int sum[4] = {0, 0, 0, 0};
+// Box-filtered chain down to 1 x 1 (a side at 1 stays 1).
+std::vector<Level> mip_chain(uint32_t tex_w, uint32_t tex_h) {
+  std::vector<Level> mips;
+  Level l0{tex_w, tex_h, std::vector<Rgba>(size_t{tex_w} * tex_h)};
+  for (uint32_t y = 0; y < tex_h; ++y)
+    for (uint32_t x = 0; x < tex_w; ++x) l0.texels[size_t{y} * tex_w + x] = texel(x, y);
+  mips.push_back(std::move(l0));
+  while (mips.back().w > 1 || mips.back().h > 1) {
+    const Level& prev = mips.back();
+    Level next{std::max(prev.w / 2, 1u), std::max(prev.h / 2, 1u), {}};
+    next.texels.resize(size_t{next.w} * next.h);
+    for (uint32_t y = 0; y < next.h; ++y)
+      for (uint32_t x = 0; x < next.w; ++x) {
+        int sum[4] = {0, 0, 0, 0}, n = 0;
         for (uint32_t dy = 0; dy < 2; ++dy)
           for (uint32_t dx = 0; dx < 2; ++dx) {
-            const Rgba& p = prev[(2 * y + dy) * side * 2 + 2 * x + dx];
-            sum[0] += p.r, sum[1] += p.g, sum[2] += p.b, sum[3] += p.a;
+            const uint32_t px = std::min(2 * x + dx, prev.w - 1), py = std::min(2 * y + dy, prev.h - 1);
+            const Rgba& p = prev.texels[size_t{py} * prev.w + px];
+            sum[0] += p.r, sum[1] += p.g, sum[2] += p.b, sum[3] += p.a, ++n;
           }
-        next[y * side + x] = {static_cast<uint8_t>(sum[0] / 4), static_cast<uint8_t>(sum[1] / 4),
-                              static_cast<uint8_t>(sum[2] / 4), static_cast<uint8_t>(sum[3] / 4)};
+        next.texels[size_t{y} * next.w + x] = {static_cast<uint8_t>(sum[0] / n), static_cast<uint8_t>(sum[1] / n),
+                                               static_cast<uint8_t>(sum[2] / n), static_cast<uint8_t>(sum[3] / n)};
       }
-    mips.push_back(next);
+    mips.push_back(std::move(next));
   }
   return mips;
 }
 
 double focal_px() { return (kHeight / 2.0) / std::tan(kFovY * M_PI / 360.0); }
 
-void write_scene(const fs::path& dir) {
-  const double half = kDistance * (kRectPx / 2.0) / focal_px();  // quad half-size in metres
-  const auto h = static_cast<float>(half);
+void write_scene(const fs::path& dir, const QuadCase& q) {
+  const double half_w = kDistance * (q.rect_w() / 2.0) / focal_px();  // quad half-size in metres
+  const double half_h = kDistance * (q.rect_h() / 2.0) / focal_px();
+  const auto hw = static_cast<float>(half_w), hh = static_cast<float>(half_h);
   scene::MeshData md;
   scene::MeshRecord m{};
   m.origin[0] = kCamX;
   m.origin[1] = kCamY + kDistance;  // straight ahead of a camera looking north
   m.origin[2] = kCamZ;
-  m.bounds_min[0] = -h, m.bounds_min[1] = 0, m.bounds_min[2] = -h;
-  m.bounds_max[0] = h, m.bounds_max[1] = 0, m.bounds_max[2] = h;
+  m.bounds_min[0] = -hw, m.bounds_min[1] = 0, m.bounds_min[2] = -hh;
+  m.bounds_max[0] = hw, m.bounds_max[1] = 0, m.bounds_max[2] = hh;
   m.vertex_count = 4;
   m.index_count = 6;
   m.texture_id = 0;
   md.meshes.push_back(m);
   // Normal towards the camera; uv (0, 0) at the top-left corner as seen: texture row 0 at the top.
-  md.vertices = {{{-h, 0, h}, {0, -1, 0}, {0, 0}},
-                 {{h, 0, h}, {0, -1, 0}, {1, 0}},
-                 {{h, 0, -h}, {0, -1, 0}, {1, 1}},
-                 {{-h, 0, -h}, {0, -1, 0}, {0, 1}}};
+  md.vertices = {{{-hw, 0, hh}, {0, -1, 0}, {0, 0}},
+                 {{hw, 0, hh}, {0, -1, 0}, {1, 0}},
+                 {{hw, 0, -hh}, {0, -1, 0}, {1, 1}},
+                 {{-hw, 0, -hh}, {0, -1, 0}, {0, 1}}};
   md.indices = {0, 1, 2, 0, 2, 3};
   ASSERT_TRUE(scene::write_meshes(dir, md).ok());
 
-  const uint32_t mips = full_mip_count(kTex, kTex);
-  const scene::TextureRecord rec{kTex, kTex, mips, static_cast<uint32_t>(TexelFormat::kRgba8)};
+  const uint32_t mips = full_mip_count(q.tex_w, q.tex_h);
+  const scene::TextureRecord rec{q.tex_w, q.tex_h, mips, static_cast<uint32_t>(TexelFormat::kRgba8)};
   ASSERT_TRUE(scene::write_texture_table(dir, std::span(&rec, 1)).ok());
-  const auto chain = mip_chain();
-  const Rgba avg = chain.back()[0];
+  const auto chain = mip_chain(q.tex_w, q.tex_h);
+  ASSERT_EQ(chain.size(), mips);
+  const Rgba avg = chain.back().texels[0];
   const uint32_t colour = avg.r | (avg.g << 8) | (avg.b << 16) | (255u << 24);
   ASSERT_TRUE(scene::write_colormap(dir, std::span(&colour, 1)).ok());
 
   const fs::path dds = scene::texture_path(dir, TextureId(0));
   fs::create_directories(dds.parent_path());
   std::ofstream out(dds, std::ios::binary);
-  const auto header = scene::make_dds_header(TexelFormat::kRgba8, kTex, kTex, mips);
+  const auto header = scene::make_dds_header(TexelFormat::kRgba8, q.tex_w, q.tex_h, mips);
   out.write(reinterpret_cast<const char*>(header.data()), header.size());
   for (const auto& level : chain)
-    out.write(reinterpret_cast<const char*>(level.data()), static_cast<std::streamsize>(level.size() * 4));
+    out.write(reinterpret_cast<const char*>(level.texels.data()),
+              static_cast<std::streamsize>(level.texels.size() * 4));
   ASSERT_TRUE(out.good());
   out.close();
 
@@ -127,21 +146,21 @@ void write_scene(const fs::path& dir) {
   man.texture_count = 1;
   man.texture_format = TexelFormat::kRgba8;
   man.origin = {kCamX, kCamY, kCamZ};
-  man.bounds_min = {kCamX - half, kCamY + kDistance, kCamZ - half};
-  man.bounds_max = {kCamX + half, kCamY + kDistance, kCamZ + half};
+  man.bounds_min = {kCamX - half_w, kCamY + kDistance, kCamZ - half_h};
+  man.bounds_max = {kCamX + half_w, kCamY + kDistance, kCamZ + half_h};
   ASSERT_TRUE(scene::write_manifest(dir, man).ok());
 }
 
-// Bilinear sample of mip 0 at texel coordinates (tx, ty) (texel centres at +0.5), edges clamped.
-std::array<double, 3> sample(const std::vector<Rgba>& mip0, double tx, double ty) {
-  const double fx = std::clamp(tx - 0.5, 0.0, kTex - 1.0), fy = std::clamp(ty - 0.5, 0.0, kTex - 1.0);
+// Bilinear sample of a level at texel coordinates (tx, ty) (texel centres at +0.5), edges clamped.
+std::array<double, 3> sample(const Level& l, double tx, double ty) {
+  const double fx = std::clamp(tx - 0.5, 0.0, l.w - 1.0), fy = std::clamp(ty - 0.5, 0.0, l.h - 1.0);
   const auto x0 = static_cast<uint32_t>(fx), y0 = static_cast<uint32_t>(fy);
-  const uint32_t x1 = std::min(x0 + 1, kTex - 1), y1 = std::min(y0 + 1, kTex - 1);
+  const uint32_t x1 = std::min(x0 + 1, l.w - 1), y1 = std::min(y0 + 1, l.h - 1);
   const double ax = fx - x0, ay = fy - y0;
   std::array<double, 3> out{};
   for (int c = 0; c < 3; ++c) {
     auto ch = [&](uint32_t x, uint32_t y) {
-      const Rgba& p = mip0[y * kTex + x];
+      const Rgba& p = l.texels[size_t{y} * l.w + x];
       return static_cast<double>(c == 0 ? p.r : c == 1 ? p.g : p.b);
     };
     out[c] = (1 - ay) * ((1 - ax) * ch(x0, y0) + ax * ch(x1, y0)) + ay * ((1 - ax) * ch(x0, y1) + ax * ch(x1, y1));
@@ -149,13 +168,17 @@ std::array<double, 3> sample(const std::vector<Rgba>& mip0, double tx, double ty
   return out;
 }
 
+class RenderQuadImage : public ::testing::TestWithParam<QuadCase> {};
+
 }  // namespace
 
-TEST(RenderQuadImage, FinestMipMatchesTheTextureOnScreen) {
-  const fs::path dir = fs::temp_directory_path() / ("texstream_render_quad_" + std::to_string(::getpid()));
+TEST_P(RenderQuadImage, TheLevelShownMatchesTheTextureOnScreen) {
+  const QuadCase q = GetParam();
+  const fs::path dir =
+      fs::temp_directory_path() / ("texstream_render_quad_" + std::string(q.name) + "_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   fs::create_directories(dir / "scene");
-  write_scene(dir / "scene");
+  write_scene(dir / "scene", q);
   if (HasFatalFailure()) return;
 
   const fs::path out = dir / "out";
@@ -179,19 +202,20 @@ TEST(RenderQuadImage, FinestMipMatchesTheTextureOnScreen) {
   ASSERT_EQ(w, kWidth);
   ASSERT_EQ(h, kHeight);
 
-  // Where the quad lands: a camera-facing square of kRectPx pixels centred on the screen.
-  const double x0 = kWidth / 2.0 - kRectPx / 2.0, y0 = kHeight / 2.0 - kRectPx / 2.0;
-  const auto chain = mip_chain();
+  // Where the quad lands: a camera-facing rectangle of rect_w x rect_h pixels centred on the screen.
+  const double x0 = kWidth / 2.0 - q.rect_w() / 2.0, y0 = kHeight / 2.0 - q.rect_h() / 2.0;
+  const auto chain = mip_chain(q.tex_w, q.tex_h);
+  const Level& shown = chain[q.level];
   // One pixel of margin: edge pixels are partly covered / clamped and say nothing about the texels.
-  const int px0 = static_cast<int>(x0) + 1, px1 = static_cast<int>(x0 + kRectPx) - 1;
-  const int py0 = static_cast<int>(y0) + 1, py1 = static_cast<int>(y0 + kRectPx) - 1;
+  const int px0 = static_cast<int>(x0) + 1, px1 = static_cast<int>(x0 + q.rect_w()) - 1;
+  const int py0 = static_cast<int>(y0) + 1, py1 = static_cast<int>(y0 + q.rect_h()) - 1;
   const int rw = px1 - px0, rh = py1 - py0;
   std::vector<unsigned char> actual(rw * rh * 4), expected(rw * rh * 4), diff(rw * rh * 4);
   double abs_sum = 0, sq_sum = 0;
   for (int y = py0; y < py1; ++y)
     for (int x = px0; x < px1; ++x) {
-      const double u = (x + 0.5 - x0) / kRectPx, v = (y + 0.5 - y0) / kRectPx;
-      const auto e = sample(chain[0], u * kTex, v * kTex);
+      const double u = (x + 0.5 - x0) / q.rect_w(), v = (y + 0.5 - y0) / q.rect_h();
+      const auto e = sample(shown, u * shown.w, v * shown.h);
       const unsigned char* a = pixels + (static_cast<size_t>(y) * w + x) * 4;
       const size_t o = (static_cast<size_t>(y - py0) * rw + (x - px0)) * 4;
       for (int c = 0; c < 3; ++c) {
@@ -214,7 +238,8 @@ TEST(RenderQuadImage, FinestMipMatchesTheTextureOnScreen) {
   stbi_image_free(pixels);
   EXPECT_TRUE(background_differs);
 
-  std::printf("quad image: mean abs error %.3f / 255, PSNR %.2f dB over %d x %d pixels\n", mae, psnr, rw, rh);
+  std::printf("quad image %s: mean abs error %.3f / 255, PSNR %.2f dB over %d x %d pixels\n", q.name, mae, psnr, rw,
+              rh);
   const bool pass = mae < 4.0 && psnr > 30.0;
   if (!pass) {
     const fs::path a = dir / "quad_actual.png", e = dir / "quad_expected.png", d = dir / "quad_diff_x8.png";
@@ -228,3 +253,10 @@ TEST(RenderQuadImage, FinestMipMatchesTheTextureOnScreen) {
   }
   fs::remove_all(dir);
 }
+
+namespace {
+INSTANTIATE_TEST_SUITE_P(Textures, RenderQuadImage,
+                         ::testing::Values(QuadCase{"square256_mip0", 256, 256, 0},
+                                           QuadCase{"wide2048x1024_mip2", 2048, 1024, 2}),
+                         [](const auto& p) { return std::string(p.param.name); });
+}  // namespace

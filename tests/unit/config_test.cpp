@@ -236,5 +236,25 @@ TEST(Config, ControlCharactersInStringsRoundTrip) {
   EXPECT_EQ(back->render.camera_path, c.render.camera_path);
 }
 
+// protocol.staging_slot_bytes = 0 sizes the slots for the scene's largest mip; a set value is kept.
+TEST(Config, AutoStagingSlotsHoldTheLargestMip) {
+  ProtocolConfig p;                                                     // 32 slots, auto
+  EXPECT_EQ(effective_staging(p, 1000).slot_bytes, kMinAutoSlotBytes);  // small scenes: 64 KiB
+  EXPECT_EQ(effective_staging(p, 1000).slot_count, 32u);
+  // 2048 x 1024 RGBA8 (8 MiB): 32 slots of 8 MiB = 256 MiB, within the cap.
+  EXPECT_EQ(effective_staging(p, 8u << 20).slot_bytes, 8u << 20);
+  EXPECT_EQ(effective_staging(p, 8u << 20).slot_count, 32u);
+  EXPECT_EQ(effective_staging(p, (8u << 20) + 1).slot_bytes, (8u << 20) + 4096);  // 4 KiB aligned
+  // 4096² RGBA8 (64 MiB): the pool is held to kMaxAutoStagingBytes by fewer slots.
+  const StagingShape big = effective_staging(p, 64u << 20);
+  EXPECT_EQ(big.slot_bytes, 64u << 20);
+  EXPECT_EQ(big.slot_count * big.slot_bytes, kMaxAutoStagingBytes);
+  // Larger than the protocol allows: capped (such levels are then refused, with a warning at start).
+  EXPECT_EQ(effective_staging(p, 1u << 30).slot_bytes, 64u << 20);
+  p.staging_slot_bytes = 4096;
+  EXPECT_EQ(effective_staging(p, 8u << 20).slot_bytes, 4096u);
+  EXPECT_EQ(effective_staging(p, 8u << 20).slot_count, 32u);
+}
+
 }  // namespace
 }  // namespace texstream

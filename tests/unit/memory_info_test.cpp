@@ -91,7 +91,8 @@ TEST_F(FakeRoots, NothingReadableMeansUnknownAndChecksPass) {
 }
 
 TEST(ServerMemory, AServerThatCannotFitIsAConfigErrorNamingTheKeyAndTheLimit) {
-  Config c;  // 32 slots of 1 MiB
+  Config c;
+  c.protocol.staging_slot_bytes = static_cast<int64_t>(kMiB);  // 32 slots of 1 MiB
   MemoryInfo m{1536 * kMiB, "memory cgroup limit (/sys/fs/cgroup/x/memory.max)", 1400 * kMiB};
   c.server.ram_cache_bytes = static_cast<int64_t>(3 * kGiB);
   const Status s = check_server_memory(c, m);

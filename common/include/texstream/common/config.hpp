@@ -119,10 +119,21 @@ struct ProtocolConfig {
   int64_t request_ring_capacity = 1024;  // records, power of two
   int64_t completion_ring_capacity = 1024;
   int64_t staging_slot_count = 32;
-  int64_t staging_slot_bytes = 1 << 20;  // one 512x512 RGBA8 mip
+  int64_t staging_slot_bytes = 0;  // 0: the scene's largest mip (effective_staging)
   double heartbeat_timeout_ms =
       1400;  // hung after this long without progress; + one watchdog poll stays < 1.5 s (issue 9)
 };
+
+// The staging slots a renderer creates: protocol.staging_slot_bytes, or when it is 0 (auto) the scene's
+// largest mip (`largest_mip_bytes`), 4 KiB aligned, at least kMinAutoSlotBytes, at most the protocol's 64 MiB;
+// with auto slots the count is lowered so that the pool stays within kMaxAutoStagingBytes (at least 4 slots).
+struct StagingShape {
+  uint64_t slot_count = 0;
+  uint64_t slot_bytes = 0;
+};
+inline constexpr uint64_t kMinAutoSlotBytes = 64u << 10;
+inline constexpr uint64_t kMaxAutoStagingBytes = 512ull << 20;
+StagingShape effective_staging(const ProtocolConfig& protocol, uint64_t largest_mip_bytes);
 
 struct ServerConfig {
   bool spawn = true;           // false: no child; a standalone texstream-server serves segment_name
