@@ -39,7 +39,7 @@ Result<CacheGeometry> choose_cache_geometry(const CacheGeometryInputs& in) {
     g.layer_extent = std::min(needed, device_side);  // seed §3.6: a layer is one texture of the largest size
   } else {
     // The side (up to the cap, never below what the scene needs) whose layers address the most, up to the
-    // target: on lavapipe (2 GiB) a 1.5 GiB RGBA8 budget gets 5 layers of 8 K (1.8 GiB), where one 16 K layer
+    // target: on lavapipe (2 GiB) a 1.5 GiB RGBA8 budget gets 22 layers of 4 K (1.8 GiB), where one 16 K layer
     // (1.4 GiB) would address less than the budget. Near-ties go to the larger side (fewer layers).
     uint64_t best = 0;
     for (uint32_t side = std::min(kLruLayerCap, device_side); side >= needed && side >= 4; side /= 2) {
