@@ -155,6 +155,37 @@ Result<std::unique_ptr<SparseMemory>> SparseMemory::create(const VulkanContext& 
   return m;
 }
 
+Result<uint64_t> SparseMemory::tail_bytes_per_layer(const VulkanContext& ctx, VkFormat format, uint32_t extent,
+                                                    uint32_t mip_levels) {
+  VkImageCreateInfo ici{};
+  ici.sType = VK_STRUCTURE_TYPE_IMAGE_CREATE_INFO;
+  ici.flags = VK_IMAGE_CREATE_SPARSE_BINDING_BIT | VK_IMAGE_CREATE_SPARSE_RESIDENCY_BIT;
+  ici.imageType = VK_IMAGE_TYPE_2D;
+  ici.format = format;
+  ici.extent = {extent, extent, 1};
+  ici.mipLevels = mip_levels;
+  ici.arrayLayers = 1;
+  ici.samples = VK_SAMPLE_COUNT_1_BIT;
+  ici.tiling = VK_IMAGE_TILING_OPTIMAL;
+  ici.usage = kUsage;
+  ici.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
+  ici.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+  VkImage image = VK_NULL_HANDLE;
+  TS_VK_TRY(vkCreateImage(ctx.device(), &ici, nullptr, &image));
+  UniqueImage owner(ctx.device(), image);
+  uint32_t n = 0;
+  vkGetImageSparseMemoryRequirements(ctx.device(), image, &n, nullptr);
+  std::vector<VkSparseImageMemoryRequirements> reqs(n);
+  vkGetImageSparseMemoryRequirements(ctx.device(), image, &n, reqs.data());
+  uint64_t bytes = 0;
+  for (const auto& r : reqs) {
+    const bool metadata = r.formatProperties.aspectMask & VK_IMAGE_ASPECT_METADATA_BIT;
+    const bool single = (r.formatProperties.flags & VK_SPARSE_IMAGE_FORMAT_SINGLE_MIPTAIL_BIT) || metadata;
+    if (r.imageMipTailFirstLod < mip_levels && !single) bytes += r.imageMipTailSize;
+  }
+  return bytes;
+}
+
 Status SparseMemory::bind_tail(const std::vector<VkSparseImageMemoryRequirements>& reqs) {
   VkMemoryAllocateInfo ai{};
   ai.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;

@@ -75,6 +75,17 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
   gi.sparse_address_space = limits.sparseAddressSpaceSize;
   auto geometry = choose_cache_geometry(gi);
   if (!geometry) return geometry.error();
+  if (options.layers == 0 && geometry->layers > 1) {
+    // A device with a mip tail per layer (NVIDIA: 64 KiB) pays it for every layer out of the budget: the
+    // automatic layer count keeps the tails within a quarter of it (the seed's ring, with many small layers,
+    // would otherwise spend the budget on tails; docs/design/cache_budget.md).
+    auto tail = SparseMemory::tail_bytes_per_layer(ctx, cache_vk_format(options.format), geometry->layer_extent,
+                                                   floor_log2(geometry->layer_extent) + 1);
+    if (!tail) return tail.error();
+    if (*tail > 0 && *tail * geometry->layers > options.memory_bytes / 4) {
+      geometry->layers = static_cast<uint32_t>(std::max<uint64_t>(options.memory_bytes / 4 / *tail, 1));
+    }
+  }
   TextureCacheOptions resolved = options;
   resolved.layer_extent = geometry->layer_extent;
   resolved.layers = geometry->layers;

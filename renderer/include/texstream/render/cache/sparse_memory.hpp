@@ -52,6 +52,10 @@ class SparseMemory {
   static constexpr uint64_t kBlockBytes = 16ull << 20;
 
   static Result<std::unique_ptr<SparseMemory>> create(const VulkanContext& ctx, const SparseImageInfo& info);
+  // Bytes of mip tail each layer of such an image costs on this device (0: none, or one tail for the whole
+  // image), from a one-layer image that is never bound: the cache keeps the tail a small part of its budget.
+  static Result<uint64_t> tail_bytes_per_layer(const VulkanContext& ctx, VkFormat format, uint32_t extent,
+                                               uint32_t mip_levels);
   ~SparseMemory();
   SparseMemory(const SparseMemory&) = delete;
   SparseMemory& operator=(const SparseMemory&) = delete;
