@@ -59,6 +59,9 @@ void MipUseLedger::apply(std::span<const TextureEvent> events) {
       case TextureEvent::Kind::kInvalidated:
         leave(t, uses_[t].resident);
         break;
+      case TextureEvent::Kind::kTrimmed:
+        if (e.mip.value < kMaxLevels) leave(t, uses_[t].resident & ((1u << e.mip.value) - 1));
+        break;
       case TextureEvent::Kind::kFailed:
       case TextureEvent::Kind::kRejected:
       case TextureEvent::Kind::kNoRoom:

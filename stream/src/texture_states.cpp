@@ -153,6 +153,14 @@ bool TextureStates::on_no_room(TextureId texture, MipLevel mip) {
   return true;
 }
 
+void TextureStates::on_trimmed(TextureId texture, MipLevel finest) {
+  if (!contains(texture)) return;
+  State& s = states_[texture.value];
+  if (s.resident == kNone || s.resident >= finest.value) return;
+  s.resident = finest.value;
+  if (s.pending == kNone) s.phase = finest.value == 0 ? TexturePhase::kFinal : TexturePhase::kActive;
+}
+
 void TextureStates::invalidate(TextureId texture) {
   if (!contains(texture)) return;
   State& s = states_[texture.value];
@@ -210,6 +218,9 @@ void TextureStates::apply(std::span<const TextureEvent> events) {
         break;
       case TextureEvent::Kind::kNoRoom:
         on_no_room(e.texture, e.mip);
+        break;
+      case TextureEvent::Kind::kTrimmed:
+        on_trimmed(e.texture, e.mip);
         break;
     }
   }

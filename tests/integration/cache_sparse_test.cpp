@@ -97,6 +97,42 @@ INSTANTIATE_TEST_SUITE_P(Formats, CacheThrash,
                          ::testing::Combine(::testing::Values("rgba8", "bc1"), ::testing::Values("lru", "ring")),
                          [](const auto& p) { return std::get<0>(p.param) + "_" + std::get<1>(p.param); });
 
+// Close to the facades, then a cut to a high view of the same street with a 1 MiB budget, far below the high
+// view's working set: textures still in view after the cut hold finer levels than they now want, and with
+// nothing unused left to evict the cache drops those levels (TextureCache::trim_one) instead of only refusing
+// copies; with validation on, the budget never exceeded, and the run completes.
+TEST(CacheBudget, AViewThatZoomsOutDropsLevelsItNoLongerWants) {
+  const fs::path dir = fresh_dir("trim");
+  const fs::path scene = make_scene(dir, "bc1", 600);
+  std::ifstream in(scene / "camera_path.txt");
+  std::string line;
+  double t = 0, x = 0, y = 0, z = 0, yaw = 0, pitch = 0;
+  while (std::getline(in, line) && (line.empty() || line[0] == '#')) {
+  }
+  std::istringstream(line) >> t >> x >> y >> z >> yaw >> pitch;
+  std::ofstream path(dir / "zoom_out.txt");
+  path << std::fixed << "0 " << x << " " << y << " 6 " << yaw << " 0\n3 " << x << " " << y << " 6 " << yaw << " 0\n3 "
+       << x << " " << y << " 400 " << yaw << " -45\n8 " << x << " " << y << " 400 " << yaw << " -45\n";
+  path.close();
+  const fs::path out = dir / "out";
+  const int rc =
+      run(render_cmd(scene, out,
+                     "--set cache.memory_bytes=1048576 --set render.camera_path=" + (dir / "zoom_out.txt").string() +
+                         " --set render.frames=0 --set render.width_px=640 --set render.height_px=360"
+                         " --set render.lockstep=true --set controller.mode=none"
+                         " --set render.write_every_frames=0 --set render.validation=true"),
+          dir / "render.log");
+  const std::string log = slurp(dir / "render.log");
+  ASSERT_EQ(rc, 0) << log;
+  const auto cache = nlohmann::json::parse(slurp(out / "cache.json"));
+  const auto summary = nlohmann::json::parse(slurp(out / "summary.json"));
+  EXPECT_EQ(summary["validation_errors"].get<int>(), 0) << log;
+  EXPECT_EQ(cache["budget_exceeded_frames"].get<uint64_t>(), 0u);
+  EXPECT_GT(cache["space_refusals"].get<uint64_t>(), 0u) << "the budget was meant to be below the view's";
+  EXPECT_GT(cache["trimmed_levels"].get<uint64_t>(), 0u);
+  fs::remove_all(dir);
+}
+
 TEST(CacheBudget, TooSmallForOneLayerTextureIsANamedError) {
   const fs::path dir = fresh_dir("small");
   const fs::path scene = make_scene(dir, "rgba8", 20);

@@ -356,6 +356,37 @@ TEST(TextureStates, EvictionResetsToInitialAndRefusesTheLateAnswer) {
 
 // The frame loop hands the cache's events over in one list (TextureCache::take_events): the same states as
 // the calls one by one, in the same order.
+// The cache dropped levels finer than the view wants (TextureCache::trim_one): the finest resident level moves
+// up, a Final texture is Active again and refines only when the view asks for finer again.
+TEST(TextureStates, TrimmedLevelsAreRefinedAgainOnlyWhenWanted) {
+  stream::TextureStates s(table());
+  Recorder rec;
+  const std::vector<stream::StreamCandidate> close{cand(T0, 0.0f)};
+  s.run_cycle(close, kHuge, 0, rec.fn());
+  ASSERT_TRUE(s.on_committed(T0, MipLevel(6)));
+  for (uint32_t m = 5;; --m) {
+    ASSERT_EQ(mips_of(s.run_cycle(close, kHuge, 0, rec.fn())), std::vector<uint32_t>{m});
+    ASSERT_TRUE(s.on_committed(T0, MipLevel(m)));
+    if (m == 0) break;
+  }
+  ASSERT_EQ(s.view(T0).phase, stream::TexturePhase::kFinal);
+  s.apply(std::vector<stream::TextureEvent>{{stream::TextureEvent::Kind::kTrimmed, T0, MipLevel(3)}});
+  EXPECT_EQ(s.view(T0).resident, 3u);
+  EXPECT_EQ(s.view(T0).phase, stream::TexturePhase::kActive);
+  // Far (wants 4): nothing to load. A trim to a finer level than resident, or of another texture, changes nothing.
+  const std::vector<stream::StreamCandidate> far{cand(T0, 4.0f)};
+  EXPECT_TRUE(s.run_cycle(far, kHuge, 0, rec.fn()).sent.empty());
+  s.on_trimmed(T0, MipLevel(1));
+  s.on_trimmed(T1, MipLevel(2));
+  EXPECT_EQ(s.view(T0).resident, 3u);
+  EXPECT_FALSE(s.view(T1).resident.has_value());
+  // Close again (wants 1): refines 2, then 1.
+  const std::vector<stream::StreamCandidate> nearer{cand(T0, 1.0f)};
+  ASSERT_EQ(mips_of(s.run_cycle(nearer, kHuge, 0, rec.fn())), std::vector<uint32_t>{2});
+  ASSERT_TRUE(s.on_committed(T0, MipLevel(2)));
+  ASSERT_EQ(mips_of(s.run_cycle(nearer, kHuge, 0, rec.fn())), std::vector<uint32_t>{1});
+}
+
 TEST(TextureStates, ApplyingEventsEqualsTheCallsInOrder) {
   stream::TextureStates direct(table()), applied(table());
   Recorder rec;

@@ -667,11 +667,12 @@ int run_cache(const CacheArgs& args) {
   const double fill_at_first_eviction = tj.value("fill_at_first_eviction", 0.0);
   std::printf(
       "bounds: memory in use at the first eviction %llu B = %.3f of the budget; %llu evictions for address space, "
-      "%llu copies refused (all in use); %llu layers of %llu px, %llu B addressable\n",
+      "%llu levels finer than wanted dropped from textures in view, %llu copies refused (all in use); %llu layers "
+      "of %llu px, %llu B addressable\n",
       (unsigned long long)tj.value("first_eviction_bytes", 0ull), fill_at_first_eviction,
-      (unsigned long long)tj.value("address_evictions", 0ull), (unsigned long long)tj.value("space_refusals", 0ull),
-      (unsigned long long)tj.value("layers", 0ull), (unsigned long long)tj.value("layer_extent", 0ull),
-      (unsigned long long)tj.value("addressable_bytes", 0ull));
+      (unsigned long long)tj.value("address_evictions", 0ull), (unsigned long long)tj.value("trimmed_levels", 0ull),
+      (unsigned long long)tj.value("space_refusals", 0ull), (unsigned long long)tj.value("layers", 0ull),
+      (unsigned long long)tj.value("layer_extent", 0ull), (unsigned long long)tj.value("addressable_bytes", 0ull));
   {
     // The seed's ring at the same budget, same path: its thrash rate beside lru's.
     const fs::path ring_out = c.work / "thrash_ring";

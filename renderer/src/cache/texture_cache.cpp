@@ -341,16 +341,50 @@ void TextureCache::lru_append(uint32_t texture) {
 
 void TextureCache::touch(std::span<const stream::StreamCandidate> used) {
   ++use_cycle_;
+  trimmable_.clear();
   if (!tree_) return;
   for (const stream::StreamCandidate& c : used) {
     if (c.texture.value >= scene_.texture_records().size()) continue;
     Residency& r = residency_[c.texture.value];
     r.used_cycle = use_cycle_;
+    // NaN or below 0: wants the finest level; nothing to trim.
+    r.wanted = c.desired_mip >= 1.0f ? static_cast<uint8_t>(std::min(c.desired_mip, 31.0f)) : 0;
+    if (r.wanted >= 2 && (r.mask & ((1u << (r.wanted - 1)) - 1)) != 0) trimmable_.push_back(c.texture.value);
     if (r.listed) {  // to the back: most recently used
       lru_unlink(c.texture.value);
       lru_append(c.texture.value);
     }
   }
+}
+
+bool TextureCache::trim_one(TextureId keep) {
+  while (!trimmable_.empty()) {
+    const uint32_t t = trimmable_.back();
+    trimmable_.pop_back();
+    Residency& r = residency_[t];
+    if (t == keep.value || r.wanted < 2) continue;
+    // One level of margin below the wanted one, so a view that moves a little does not reload what it drops.
+    const uint32_t surplus = r.mask & ((1u << (r.wanted - 1)) - 1);
+    if (surplus == 0) continue;
+    // A copy of this texture not yet recorded would need its pages as they are: leave it alone.
+    const auto busy = [&](const Copy& c) { return c.texture.value == t; };
+    if (std::any_of(queued_.begin(), queued_.end(), busy) || std::any_of(ready_.begin(), ready_.end(), busy) ||
+        std::any_of(in_flight_.begin(), in_flight_.end(), busy))
+      continue;
+    for (uint32_t bits = surplus; bits != 0; bits &= bits - 1) {
+      const auto mip = static_cast<uint32_t>(std::countr_zero(bits));
+      // The submissions up to last_serial_ may still sample these levels: their pages retire at it.
+      pages_->release(page_rect(r.region), mip, last_serial_);
+      r.bound &= ~(1u << mip);
+      ++stats_.trimmed_levels;
+    }
+    r.mask &= ~surplus;
+    publish(TextureId(t));  // the shader's range starts at the first level kept
+    events_.push_back({stream::TextureEvent::Kind::kTrimmed, TextureId(t),
+                       MipLevel(static_cast<uint32_t>(std::countr_zero(r.mask)))});
+    return true;
+  }
+  return false;
 }
 
 TextureCache::FitMark TextureCache::fit_mark() const {
@@ -449,6 +483,10 @@ bool TextureCache::bind_pages_for(const Copy& c) {
       evict_all(evicted);
     } else {
       const std::optional<TextureId> victim = lru_victim(c.texture);
+      if (!victim && trim_one(c.texture)) {
+        pages_->reclaim(completed_serial_);
+        continue;
+      }
       if (!victim) {
         ++stats_.space_refusals;
         events_.push_back({stream::TextureEvent::Kind::kNoRoom, c.texture, MipLevel(c.mip)});
@@ -645,6 +683,7 @@ Status TextureCache::write_stats_json(const std::filesystem::path& file) const {
   j["layers"] = geometry_layers_;
   j["addressable_bytes"] = addressable_bytes();
   j["space_refusals"] = stats_.space_refusals;
+  j["trimmed_levels"] = stats_.trimmed_levels;
   j["address_evictions"] = stats_.address_evictions;
   j["first_eviction_bytes"] = stats_.first_eviction_bytes;
   j["fill_at_first_eviction"] =

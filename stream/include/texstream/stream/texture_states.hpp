@@ -102,6 +102,7 @@ struct TextureEvent {
     kRejected,     // on_rejected(texture, mip)
     kInvalidated,  // invalidate(texture)
     kNoRoom,       // on_no_room(texture, mip)
+    kTrimmed,      // on_trimmed(texture, mip): levels finer than `mip` were dropped
   };
   Kind kind;
   TextureId texture;
@@ -140,6 +141,9 @@ class TextureStates {
   // The cache had no room for the pending mip (everything it could evict is in use this cycle): rolled back
   // like a rejection, but not the texture's fault, so it is asked again later and never marked broken.
   bool on_no_room(TextureId texture, MipLevel mip);
+  // The cache dropped the resident levels finer than `finest` (finer than the view wants, to make room):
+  // `finest` is now the finest resident level, refined again by Algorithm 1 if the view comes closer.
+  void on_trimmed(TextureId texture, MipLevel finest);
   // The cache evicted the texture (seed 000 §3.6: its layer was reused): back to Initial, nothing resident,
   // nothing pending (a late answer to the old request is then refused by on_committed). Broken stays broken.
   void invalidate(TextureId texture);

@@ -72,6 +72,7 @@ struct TextureCacheStats {
   uint64_t mips_dropped = 0;            // committed, but the texture was evicted before its copy was recorded or done
   uint64_t evictions = 0;               // textures invalidated by layer recycling or the memory budget
   uint64_t space_refusals = 0;          // lru: copies dropped because everything evictable was in use this cycle
+  uint64_t trimmed_levels = 0;          // lru: levels finer than wanted dropped from textures in use, for room
   uint64_t address_evictions = 0;       // lru: of the evictions, those for address space (no free region)
   uint64_t first_eviction_bytes = 0;    // memory in use (page slots held + mip tail) when the first eviction came
   uint64_t staging_full = 0;            // reserve() answered "no room now"
@@ -180,6 +181,7 @@ class TextureCache final : public stream::MipSink {
     uint32_t lru_next = 0;
     uint32_t used_cycle = 0;  // the touch() cycle that last used it
     bool listed = false;
+    uint8_t wanted = 0;  // the finest level the last touch() wanted (floor of the desired level)
   };
   struct Copy {
     TextureId texture;
@@ -199,6 +201,9 @@ class TextureCache final : public stream::MipSink {
   // lru: the texture used longest ago, unless it was used in the current cycle or is `keep`.
   std::optional<TextureId> lru_victim(TextureId keep) const;
   void lru_unlink(uint32_t texture);
+  // lru, when nothing can be evicted: drops the levels of one texture in use that are finer than its wanted
+  // level minus one (a texture seen close before and far now). False when no texture has such levels.
+  bool trim_one(TextureId keep);
   void lru_append(uint32_t texture);
   PageRect page_rect(const CacheRegion& r) const;
   void note_eviction();
@@ -226,6 +231,7 @@ class TextureCache final : public stream::MipSink {
   uint32_t geometry_layers_ = 0;
   uint32_t lru_head_ = 0, lru_tail_ = 0;  // texture id + 1; 0 = empty
   uint32_t use_cycle_ = 1;
+  std::vector<uint32_t> trimmable_;   // textures of the last touch() holding levels finer than they want
   ZeroedArray<Residency> residency_;  // per texture; all-zero = not resident (created in O(1), see zeroed_array.hpp)
   uint64_t resident_count_ = 0;       // textures with a non-zero mask
   std::vector<UploadTraceFrame> trace_;
