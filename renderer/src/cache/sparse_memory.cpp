@@ -23,6 +23,24 @@ bool queue_family_can_bind(const VulkanContext& ctx) {
 
 std::string mib(uint64_t bytes) { return std::to_string(bytes >> 20) + " MiB"; }
 
+// The cache image: a square 2D array, sparse and partially resident, sampled and written by copies.
+VkImageCreateInfo sparse_image_create_info(VkFormat format, uint32_t extent, uint32_t mip_levels, uint32_t layers) {
+  VkImageCreateInfo ici{};
+  ici.sType = VK_STRUCTURE_TYPE_IMAGE_CREATE_INFO;
+  ici.flags = VK_IMAGE_CREATE_SPARSE_BINDING_BIT | VK_IMAGE_CREATE_SPARSE_RESIDENCY_BIT;
+  ici.imageType = VK_IMAGE_TYPE_2D;
+  ici.format = format;
+  ici.extent = {extent, extent, 1};
+  ici.mipLevels = mip_levels;
+  ici.arrayLayers = layers;
+  ici.samples = VK_SAMPLE_COUNT_1_BIT;
+  ici.tiling = VK_IMAGE_TILING_OPTIMAL;
+  ici.usage = kUsage;
+  ici.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
+  ici.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+  return ici;
+}
+
 }  // namespace
 
 SparseMemory::~SparseMemory() = default;
@@ -53,19 +71,7 @@ Result<std::unique_ptr<SparseMemory>> SparseMemory::create(const VulkanContext& 
   m->queue_ = ctx.queue();
   m->info_ = info;
 
-  VkImageCreateInfo ici{};
-  ici.sType = VK_STRUCTURE_TYPE_IMAGE_CREATE_INFO;
-  ici.flags = VK_IMAGE_CREATE_SPARSE_BINDING_BIT | VK_IMAGE_CREATE_SPARSE_RESIDENCY_BIT;
-  ici.imageType = VK_IMAGE_TYPE_2D;
-  ici.format = info.format;
-  ici.extent = {info.extent, info.extent, 1};
-  ici.mipLevels = info.mip_levels;
-  ici.arrayLayers = info.layers;
-  ici.samples = VK_SAMPLE_COUNT_1_BIT;
-  ici.tiling = VK_IMAGE_TILING_OPTIMAL;
-  ici.usage = kUsage;
-  ici.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
-  ici.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+  const VkImageCreateInfo ici = sparse_image_create_info(info.format, info.extent, info.mip_levels, info.layers);
   VkImage image = VK_NULL_HANDLE;
   TS_VK_TRY(vkCreateImage(m->device_, &ici, nullptr, &image));
   m->image_ = UniqueImage(m->device_, image);
@@ -157,19 +163,7 @@ Result<std::unique_ptr<SparseMemory>> SparseMemory::create(const VulkanContext& 
 
 Result<uint64_t> SparseMemory::tail_bytes_per_layer(const VulkanContext& ctx, VkFormat format, uint32_t extent,
                                                     uint32_t mip_levels) {
-  VkImageCreateInfo ici{};
-  ici.sType = VK_STRUCTURE_TYPE_IMAGE_CREATE_INFO;
-  ici.flags = VK_IMAGE_CREATE_SPARSE_BINDING_BIT | VK_IMAGE_CREATE_SPARSE_RESIDENCY_BIT;
-  ici.imageType = VK_IMAGE_TYPE_2D;
-  ici.format = format;
-  ici.extent = {extent, extent, 1};
-  ici.mipLevels = mip_levels;
-  ici.arrayLayers = 1;
-  ici.samples = VK_SAMPLE_COUNT_1_BIT;
-  ici.tiling = VK_IMAGE_TILING_OPTIMAL;
-  ici.usage = kUsage;
-  ici.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
-  ici.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+  const VkImageCreateInfo ici = sparse_image_create_info(format, extent, mip_levels, 1);
   VkImage image = VK_NULL_HANDLE;
   TS_VK_TRY(vkCreateImage(ctx.device(), &ici, nullptr, &image));
   UniqueImage owner(ctx.device(), image);
