@@ -156,7 +156,8 @@ bool TextureStates::on_no_room(TextureId texture, MipLevel mip) {
 void TextureStates::on_trimmed(TextureId texture, MipLevel finest) {
   if (!contains(texture)) return;
   State& s = states_[texture.value];
-  if (s.resident == kNone || s.resident >= finest.value) return;
+  // A level the texture does not have would leave it resident at nothing (the cache always keeps one level).
+  if (s.resident == kNone || s.resident >= finest.value || finest.value >= shapes_[texture.value].mip_count) return;
   s.resident = finest.value;
   if (s.pending == kNone) s.phase = finest.value == 0 ? TexturePhase::kFinal : TexturePhase::kActive;
 }

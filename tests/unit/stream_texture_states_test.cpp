@@ -377,6 +377,7 @@ TEST(TextureStates, TrimmedLevelsAreRefinedAgainOnlyWhenWanted) {
   const std::vector<stream::StreamCandidate> far{cand(T0, 4.0f)};
   EXPECT_TRUE(s.run_cycle(far, kHuge, 0, rec.fn()).sent.empty());
   s.on_trimmed(T0, MipLevel(1));
+  s.on_trimmed(T0, MipLevel(32));  // no such level: ignored
   s.on_trimmed(T1, MipLevel(2));
   EXPECT_EQ(s.view(T0).resident, 3u);
   EXPECT_FALSE(s.view(T1).resident.has_value());

@@ -363,8 +363,10 @@ bool TextureCache::trim_one(TextureId keep) {
     trimmable_.pop_back();
     Residency& r = residency_[t];
     if (t == keep.value || r.wanted < 2) continue;
-    // One level of margin below the wanted one, so a view that moves a little does not reload what it drops.
-    const uint32_t surplus = r.mask & ((1u << (r.wanted - 1)) - 1);
+    // One level of margin below the wanted one, so a view that moves a little does not reload what it drops;
+    // the coarsest resident level always stays (a BC1 texture's coarsest levels may be below its wanted one).
+    const uint32_t coarsest = 1u << (31 - std::countl_zero(r.mask | 1u));
+    const uint32_t surplus = r.mask & ((1u << (r.wanted - 1)) - 1) & ~coarsest;
     if (surplus == 0) continue;
     // A copy of this texture not yet recorded would need its pages as they are: leave it alone.
     const auto busy = [&](const Copy& c) { return c.texture.value == t; };
