@@ -90,7 +90,6 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
   resolved.layer_extent = geometry->layer_extent;
   resolved.layers = geometry->layers;
   std::unique_ptr<TextureCache> c(new TextureCache(resolved, scene));
-  c->geometry_layers_ = geometry->layers;
   if (options.eviction == CacheEviction::kRing) {
     c->layer_ring_.emplace(geometry->layer_extent, geometry->layers);
   } else {
@@ -549,7 +548,7 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
   b.sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER;
   b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
   b.image = sparse_->image();
-  b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, mip_levels_, 0, geometry_layers_};
+  b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, mip_levels_, 0, options_.layers};
   // Earlier frames' fragment shaders read the image; the copies must wait for them (write-after-read).
   b.srcAccessMask = VK_ACCESS_SHADER_READ_BIT;
   b.dstAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
@@ -682,7 +681,7 @@ Status TextureCache::write_stats_json(const std::filesystem::path& file) const {
   j["layers_recycled"] = layer_ring_ ? layer_ring_->layers_recycled() : 0;
   j["eviction"] = std::string(choice_name(options_.eviction));
   j["layer_extent"] = options_.layer_extent;
-  j["layers"] = geometry_layers_;
+  j["layers"] = options_.layers;
   j["addressable_bytes"] = addressable_bytes();
   j["space_refusals"] = stats_.space_refusals;
   j["trimmed_levels"] = stats_.trimmed_levels;

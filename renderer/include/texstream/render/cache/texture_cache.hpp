@@ -153,7 +153,7 @@ class TextureCache final : public stream::MipSink {
   };
   FitMark fit_mark() const;
   bool outgrown_since(const FitMark& mark) const;
-  uint32_t layers() const { return geometry_layers_; }
+  uint32_t layers() const { return options_.layers; }
   CacheEviction eviction() const { return options_.eviction; }
   const SparseBindStats& bind_stats() const { return sparse_->stats(); }
   const PageTableStats& page_stats() const { return pages_->stats(); }
@@ -214,7 +214,7 @@ class TextureCache final : public stream::MipSink {
   Status prepare_texture(uint32_t texture);
   void release_staging(const StagingRing::Allocation& a);
 
-  TextureCacheOptions options_;
+  TextureCacheOptions options_;  // as resolved by create(): layer_extent and layers are the image's, never 0
   const SceneData& scene_;
   std::vector<stream::TextureEvent> events_;  // for the texture state machine, oldest first (take_events)
   uint32_t mip_levels_ = 1;
@@ -228,8 +228,7 @@ class TextureCache final : public stream::MipSink {
   StagingRing ring_;
   std::optional<CacheAllocator> layer_ring_;  // cache.eviction = ring
   std::optional<QuadtreeAllocator> tree_;     // cache.eviction = lru
-  uint32_t geometry_layers_ = 0;
-  uint32_t lru_head_ = 0, lru_tail_ = 0;  // texture id + 1; 0 = empty
+  uint32_t lru_head_ = 0, lru_tail_ = 0;      // texture id + 1; 0 = empty
   uint32_t use_cycle_ = 1;
   std::vector<uint32_t> trimmable_;   // textures of the last touch() holding levels finer than they want
   ZeroedArray<Residency> residency_;  // per texture; all-zero = not resident (created in O(1), see zeroed_array.hpp)
