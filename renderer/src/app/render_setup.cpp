@@ -70,15 +70,6 @@ Status Renderer::set_up() {
   const TexelFormat format = cache_texel_format(cfg_.cache.format, scene_.manifest.texture_format);
   auto options = stack_options(cfg_, format);
   if (!options) return options.error();
-  {
-    // The staging ring holds at least one staging slot's mip (protocol.staging_slot_bytes = 0 sizes the slots
-    // for the scene's largest mip; the stream client makes the same choice).
-    uint64_t largest = 0;
-    for (const TextureShape& t : scene_.shapes())
-      largest = std::max(largest, mip_bytes(t.format, t.width, t.height, 0));
-    options->cache.staging_bytes =
-        std::max(options->cache.staging_bytes, effective_staging(cfg_.protocol, largest).slot_bytes);
-  }
   options->stage = [this](const char* name) { startup_stage(name); };
   if (cfg_.render.window) {
     // The window first: the Vulkan instance needs its extensions. R records the flight next to the frames.

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "texstream/protocol/segment_layout.hpp"
 #include "texstream/render/cache/cache_geometry.hpp"
 #include "texstream/render/scene/gpu_structs.hpp"
 #include "texstream/render/scene/scene_data.hpp"
@@ -89,6 +90,12 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
   TextureCacheOptions resolved = options;
   resolved.layer_extent = geometry->layer_extent;
   resolved.layers = geometry->layers;
+  // The staging ring holds the scene's largest mip (the stream client sizes its slots the same way, with
+  // protocol.staging_slot_bytes = 0); a mip above the protocol's largest slot can never arrive.
+  if (widest) {
+    resolved.staging_bytes = std::max(
+        resolved.staging_bytes, std::min(mip_bytes(options.format, widest->width, widest->height, 0), kMaxSlotBytes));
+  }
   std::unique_ptr<TextureCache> c(new TextureCache(resolved, scene));
   if (options.eviction == CacheEviction::kRing) {
     c->layer_ring_.emplace(geometry->layer_extent, geometry->layers);
@@ -135,7 +142,7 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
       c->sparse_->tail_bytes() ? fmt::format(", {} KiB mip tail", c->sparse_->tail_bytes() >> 10) : "");
 
   auto staging =
-      GpuBuffer::create(ctx, options.staging_bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, MemoryUse::kHostVisible);
+      GpuBuffer::create(ctx, resolved.staging_bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, MemoryUse::kHostVisible);
   if (!staging) return staging.error();
   c->staging_ = std::move(*staging);
 
@@ -260,6 +267,11 @@ std::optional<CacheRegion> TextureCache::region_of(TextureId texture) const {
 
 PageRect TextureCache::page_rect(const CacheRegion& r) const {
   return PageRect{r.layer, r.origin_x, r.origin_y, r.width, r.height, block_size(options_.format)};
+}
+
+void TextureCache::refuse_for_room(TextureId texture, MipLevel mip) {
+  ++stats_.space_refusals;
+  events_.push_back({stream::TextureEvent::Kind::kNoRoom, texture, mip});
 }
 
 void TextureCache::note_eviction() {
@@ -429,8 +441,7 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
     auto placed = place(texture, rec.width, rec.height);
     if (placed && !*placed) {  // lru: everything that could go is in use this cycle
       release_staging(alloc);
-      ++stats_.space_refusals;
-      events_.push_back({stream::TextureEvent::Kind::kNoRoom, texture, mip});
+      refuse_for_room(texture, mip);
       return;
     }
     if (!placed) {
@@ -489,8 +500,7 @@ bool TextureCache::bind_pages_for(const Copy& c) {
         continue;
       }
       if (!victim) {
-        ++stats_.space_refusals;
-        events_.push_back({stream::TextureEvent::Kind::kNoRoom, c.texture, MipLevel(c.mip)});
+        refuse_for_room(c.texture, MipLevel(c.mip));
         return false;
       }
       evict(*victim);

@@ -207,6 +207,8 @@ class TextureCache final : public stream::MipSink {
   void lru_append(uint32_t texture);
   PageRect page_rect(const CacheRegion& r) const;
   void note_eviction();
+  // lru: a copy dropped because everything that could make room is in use (kNoRoom: asked again later).
+  void refuse_for_room(TextureId texture, MipLevel mip);
   // Takes the page references of copy `c`, evicting oldest layers while the budget is short. False when
   // the copy's own texture was evicted on the way (the copy is then dropped).
   bool bind_pages_for(const Copy& c);
