@@ -13,6 +13,7 @@ PACKAGES=(
   libboost-dev
   libtomlplusplus-dev libcli11-dev libspdlog-dev libfmt-dev nlohmann-json3-dev
   libtbb-dev libxxhash-dev libcurl4-openssl-dev libstb-dev liburing-dev
+  libassimp-dev libtinygltf-dev libsquish-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   xvfb xauth
   nginx python3-matplotlib

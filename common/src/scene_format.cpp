@@ -29,6 +29,7 @@ constexpr const char* kManifestFile = "scene.json";
 constexpr const char* kMeshFile = "meshes.bin";
 constexpr const char* kTextureFile = "textures.bin";
 constexpr const char* kColormapFile = "colormap.bin";
+constexpr const char* kSamplingFile = "sampling.bin";
 constexpr const char* kMeshIndexFile = "mesh_index.bin";
 
 // ---- small binary I/O helpers (stdio: one FILE*, large buffer, explicit error checks) ----
@@ -217,18 +218,23 @@ Status check_texture_header(const TextureFileHeader& h, uint64_t size, const std
   return ok_status();
 }
 
-Status check_colormap_header(const ColormapFileHeader& h, uint64_t size, uint64_t expected_count,
-                             const std::string& what) {
-  TS_TRY(check_magic_version(h, kColormapMagic, what));
+// colormap.bin and sampling.bin: a header and one uint32 per texture.
+Status check_per_texture_header(const ColormapFileHeader& h, uint64_t magic, uint64_t size, uint64_t expected_count,
+                                const std::string& what, const char* noun) {
+  TS_TRY(check_magic_version(h, magic, what));
   if (h.texture_count != expected_count)
-    return make_error(ErrorCode::kCorrupt, what + ": holds " + std::to_string(h.texture_count) +
-                                               " colours, the scene has " + std::to_string(expected_count) +
-                                               " textures");
+    return make_error(ErrorCode::kCorrupt, what + ": holds " + std::to_string(h.texture_count) + " " + noun +
+                                               ", the scene has " + std::to_string(expected_count) + " textures");
   const uint64_t body = size - sizeof h;
   if (h.texture_count > body / sizeof(uint32_t) || sizeof h + h.texture_count * sizeof(uint32_t) != size)
     return make_error(ErrorCode::kCorrupt, what + ": size " + std::to_string(size) + " bytes does not hold " +
-                                               std::to_string(h.texture_count) + " colours exactly");
+                                               std::to_string(h.texture_count) + " " + noun + " exactly");
   return ok_status();
+}
+
+Status check_colormap_header(const ColormapFileHeader& h, uint64_t size, uint64_t expected_count,
+                             const std::string& what) {
+  return check_per_texture_header(h, kColormapMagic, size, expected_count, what, "colours");
 }
 
 // The typed array at `offset` of a mapped file (offsets of our formats keep every type aligned, and mmap
@@ -526,6 +532,30 @@ Result<MappedColormap> map_colormap(const fs::path& dir, uint64_t expected_count
   c.file = std::move(*file);
   c.rgba = mapped_array<uint32_t>(c.file, sizeof(ColormapFileHeader), h->texture_count);
   return c;
+}
+
+Status write_sampling(const fs::path& dir, std::span<const uint32_t> flags) {
+  auto out = OutputFile::create(dir / kSamplingFile);
+  if (!out) return out.error();
+  const ColormapFileHeader h{kSamplingMagic, kSceneFormatVersion, 0, flags.size()};
+  out->write(&h, sizeof h);
+  write_array(*out, flags);
+  return out->commit();
+}
+
+Result<MappedSampling> map_sampling(const fs::path& dir, uint64_t expected_count) {
+  auto file = MappedFile::open(dir / kSamplingFile);
+  if (!file) return file.error();
+  auto h = mapped_header<ColormapFileHeader>(*file);
+  if (!h) return h.error();
+  TS_TRY(check_per_texture_header(*h, kSamplingMagic, file->bytes().size(), expected_count, file->what(), "entries"));
+  MappedSampling m;
+  m.file = std::move(*file);
+  m.flags = mapped_array<uint32_t>(m.file, sizeof(ColormapFileHeader), h->texture_count);
+  for (size_t i = 0; i < m.flags.size(); ++i)
+    if (auto bad = sampling_flags_error(m.flags[i]))
+      return make_error(ErrorCode::kCorrupt, m.file.what() + ": texture " + std::to_string(i) + ": " + bad);
+  return m;
 }
 
 // ---------------------------------------------------------------- mesh index (mesh_index.hpp)

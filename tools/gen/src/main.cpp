@@ -8,34 +8,7 @@
 #include <thread>
 
 #include "scene_generator.hpp"
-
-namespace {
-
-// A one-line progress bar on stderr, redrawn at most every 200 ms; called from worker threads.
-class ProgressBar {
- public:
-  void update(uint64_t done, uint64_t total) {
-    std::lock_guard lock(mutex_);
-    const auto now = std::chrono::steady_clock::now();
-    if (done < total && now - last_ < std::chrono::milliseconds(200)) return;
-    last_ = now;
-    const double elapsed = std::chrono::duration<double>(now - start_).count();
-    const double rate = elapsed > 0 ? static_cast<double>(done) / elapsed : 0.0;
-    const int width = 30, filled = static_cast<int>(width * done / std::max<uint64_t>(total, 1));
-    std::fprintf(stderr, "\r[%.*s%*s] %llu/%llu textures  %.0f/s  ETA %.0f s   ", filled,
-                 "##############################", width - filled, "", static_cast<unsigned long long>(done),
-                 static_cast<unsigned long long>(total), rate,
-                 rate > 0 ? static_cast<double>(total - done) / rate : 0.0);
-    if (done >= total) std::fprintf(stderr, "\n");
-  }
-
- private:
-  std::mutex mutex_;
-  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
-  std::chrono::steady_clock::time_point last_{};
-};
-
-}  // namespace
+#include "texstream/common/progress_bar.hpp"
 
 int main(int argc, char** argv) {
   using namespace texstream;

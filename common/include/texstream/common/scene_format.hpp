@@ -6,6 +6,9 @@
 //   <scene>/meshes.bin         MeshFileHeader, MeshRecord[mesh_count], Vertex[vertex_count], uint32 index[index_count]
 //   <scene>/textures.bin       TextureFileHeader, TextureRecord[texture_count]
 //   <scene>/colormap.bin       ColormapFileHeader, uint32 RGBA8[texture_count]   (seed 000 §3.7 City Colormap)
+//   <scene>/sampling.bin       optional: ColormapFileHeader (magic TSSAMP01), uint32 flags[texture_count], how
+//                              each texture is sampled (wrap modes, alpha test; sampling_flags below). Absent:
+//                              every texture clamped and opaque (what texstream-gen scenes are)
 //   <scene>/camera_path.txt    the default fly-through (see camera_path.hpp)
 //   <scene>/mesh_index.bin     optional: the broad phase's quadtree over meshes.bin (mesh_index.hpp)
 //   <scene>/textures/XXX/YYYYYYYY.dds   one DDS per texture, all mips finest first, no DX10 extension:
@@ -29,6 +32,7 @@ inline constexpr uint32_t kSceneFormatVersion = 1;
 inline constexpr uint64_t kMeshMagic = 0x31304853454d5354ull;      // "TSMESH01"
 inline constexpr uint64_t kTextureMagic = 0x3130584554535354ull;   // "TSSTEX01"
 inline constexpr uint64_t kColormapMagic = 0x31304d4c4f435354ull;  // "TSCOLM01"
+inline constexpr uint64_t kSamplingMagic = 0x3130504d41535354ull;  // "TSSAMP01"
 
 struct MeshFileHeader {
   uint64_t magic;
@@ -87,6 +91,26 @@ struct ColormapFileHeader {
   uint64_t texture_count;
 };
 static_assert(sizeof(ColormapFileHeader) == 24);
+
+// sampling.bin's per-texture word: bits 0-1 wrap along u, 2-3 along v (TextureWrap), bit 4 alpha test, bits
+// 8-15 the alpha cutoff in 1/255 (a texel is drawn when alpha >= cutoff). texstream-import writes it.
+enum class TextureWrap : uint32_t { kClamp = 0, kRepeat = 1, kMirror = 2 };
+namespace sampling_flags {
+inline constexpr uint32_t kWrapUShift = 0, kWrapVShift = 2, kWrapMask = 3u, kAlphaTest = 1u << 4, kCutoffShift = 8,
+                          kCutoffMask = 0xffu, kKnownBits = 0xff1fu;
+}  // namespace sampling_flags
+constexpr uint32_t make_sampling_flags(TextureWrap u, TextureWrap v, bool alpha_test, uint32_t cutoff_255) {
+  using namespace sampling_flags;
+  return static_cast<uint32_t>(u) << kWrapUShift | static_cast<uint32_t>(v) << kWrapVShift |
+         (alpha_test ? kAlphaTest : 0u) | (cutoff_255 & kCutoffMask) << kCutoffShift;
+}
+// What is wrong with a word of sampling.bin, or nullptr.
+constexpr const char* sampling_flags_error(uint32_t f) {
+  using namespace sampling_flags;
+  if ((f & ~kKnownBits) != 0) return "unknown bits set in its sampling flags";
+  if (((f >> kWrapUShift) & kWrapMask) > 2 || ((f >> kWrapVShift) & kWrapMask) > 2) return "wrap mode 3 does not exist";
+  return nullptr;
+}
 
 struct Manifest {
   uint32_t format_version = kSceneFormatVersion;
@@ -169,6 +193,14 @@ struct MappedColormap {
 };
 Result<MappedColormap> map_colormap(const std::filesystem::path& dir, uint64_t expected_count);
 Status write_texture_table(const std::filesystem::path& dir, std::span<const TextureRecord> textures);
+
+// sampling.bin, mapped; kNotFound when the scene has none (then every texture is clamped and opaque).
+struct MappedSampling {
+  MappedFile file;
+  std::span<const uint32_t> flags;
+};
+Result<MappedSampling> map_sampling(const std::filesystem::path& dir, uint64_t expected_count);
+Status write_sampling(const std::filesystem::path& dir, std::span<const uint32_t> flags);
 Status write_colormap(const std::filesystem::path& dir, std::span<const uint32_t> rgba);
 
 // <dir>/textures/<id>>12 as 3 hex digits>/<id as 8 hex digits>.dds
