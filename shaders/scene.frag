@@ -27,6 +27,7 @@ layout(early_fragment_tests) in;  // metadata only from fragments that passed th
 #include "colour.glsl"
 
 layout(set = 0, binding = kBindingCache) uniform sampler2DArray cache_image;
+#include "texture_sampling.glsl"
 
 layout(location = 0) in vec2 in_uv;
 layout(location = 1) in vec3 in_normal;
@@ -68,14 +69,23 @@ vec3 shade_at(TextureGpu tex, AnisoLod s, float lod, vec2 major, vec2 extent, fl
   vec2 hi = 1.0 - lo;
   float inv_layer = 1.0 / float(frame.cache.x);
   int taps = int(s.taps);
-  vec3 sum = vec3(0.0);
+  // A texture that repeats or mirrors (sampling.bin) is filtered here, texel by texel, so that its seams wrap
+  // inside the region (texture_sampling.glsl); a clamped one through the sampler, kept inside the region.
+  bool wraps = texture_wraps(tex);
+  vec4 sum = vec4(0.0);
   for (int i = 0; i < taps; ++i) {
     float t = (float(i) + 0.5) / float(taps) - 0.5;
-    vec2 uv = clamp(in_uv + major * t, lo, hi);
-    vec2 st = (vec2(tex.region.xy) + uv * extent) * inv_layer;
-    sum += textureLod(cache_image, vec3(st, float(tex.placement.x)), lod).rgb;
+    if (wraps) {
+      sum += sample_wrapped(tex, in_uv + major * t, lod);
+    } else {
+      vec2 uv = clamp(in_uv + major * t, lo, hi);
+      vec2 st = (vec2(tex.region.xy) + uv * extent) * inv_layer;
+      sum += textureLod(cache_image, vec3(st, float(tex.placement.x)), lod);
+    }
   }
-  vec3 sampled = sum / float(taps);
+  // Alpha-tested textures are stored with premultiplied colour (BC1 punch-through texels are black): dividing by
+  // the filtered alpha keeps the edges of a cut-out from darkening.
+  vec3 sampled = texture_alpha_tested(tex) ? sum.rgb / max(sum.a, 1e-4) : sum.rgb / float(taps);
   // Colormap blend c = (1 - M / M_max) c_s + (M / M_max) c_o (seed 000 Eq. 8). stream.blend = seed:
   // M = the displayed level, as written (a far texture stays part colormap for good). converge(_linear): M = the
   // levels still missing, displayed - the level sampled with everything resident, so a texture at its wanted

@@ -55,6 +55,16 @@ TS_CONST kFlagLighting = 2u;       // headlight shading; off gives the plain tex
 TS_CONST kFlagFeedback = 4u;       // write visibility metadata (config render.feedback)
 TS_CONST kFlagBlendSeed = 8u;      // blend by Eq. 8 as written (stream.blend = seed), else by the missing levels
 TS_CONST kFlagBlendLinear = 16u;   // by the missing fraction (converge_linear), else by its square (converge)
+// TextureGpu.colour.w: how the texture is sampled, scene::sampling_flags as written in sampling.bin (the cache
+// static_asserts that the two agree): wrap along u and v (kWrap*), alpha test with its cutoff in 1/255.
+TS_CONST kSamplingWrapUShift = 0u;
+TS_CONST kSamplingWrapVShift = 2u;
+TS_CONST kSamplingWrapMask = 3u;
+TS_CONST kSamplingAlphaTest = 16u;
+TS_CONST kSamplingCutoffShift = 8u;
+TS_CONST kWrapClamp = 0u;
+TS_CONST kWrapRepeat = 1u;
+TS_CONST kWrapMirror = 2u;
 TS_CONST kCompactWorkgroupSize = 64u;
 // meta_reduce.comp: one invocation per run of kMetaReduceRun pixels of a row, kMetaReduceGroup per workgroup.
 TS_CONST kMetaReduceRun = 16u;
@@ -114,7 +124,8 @@ struct TextureGpu {
                         // w: mip count of the texture
   uvec4 region;         // x, y: region origin in the layer at mip 0 (px); z, w: texture width, height (px)
   uvec4 colour;         // x: City Colormap RGBA8 (sRGB, R in the low byte), y: the level a fade starts from
-                        // (kNotResident: the colormap), z: float bits of the fade left (1 -> 0), w: 0
+                        // (kNotResident: the colormap), z: float bits of the fade left (1 -> 0), w: sampling
+                        // flags (kSampling*: wrap modes, alpha test)
 };
 
 struct MeshMeta {

@@ -18,6 +18,15 @@
 
 namespace texstream::render {
 
+// The shader reads sampling.bin's words as they are (TextureGpu.colour.w).
+static_assert(gpu::kSamplingWrapUShift == scene::sampling_flags::kWrapUShift &&
+              gpu::kSamplingWrapVShift == scene::sampling_flags::kWrapVShift &&
+              gpu::kSamplingWrapMask == scene::sampling_flags::kWrapMask &&
+              gpu::kSamplingAlphaTest == scene::sampling_flags::kAlphaTest &&
+              gpu::kSamplingCutoffShift == scene::sampling_flags::kCutoffShift &&
+              gpu::kWrapRepeat == static_cast<uint32_t>(scene::TextureWrap::kRepeat) &&
+              gpu::kWrapMirror == static_cast<uint32_t>(scene::TextureWrap::kMirror));
+
 namespace {
 
 // vkCmdCopyBufferToImage wants bufferOffset a multiple of the texel block size (4 for RGBA8, 8 for BC1) and of
@@ -195,7 +204,7 @@ Status TextureCache::prepare_texture(uint32_t texture) {
   t = gpu::TextureGpu{};
   t.placement = {0, gpu::kNotResident, 0, r.mip_count};
   t.region = {0, 0, r.width, r.height};
-  t.colour = {scene_.colours()[texture], gpu::kNotResident, 0, 0};
+  t.colour = {scene_.colours()[texture], gpu::kNotResident, 0, scene_.sampling_flags(texture)};
   entry_written_[texture] = true;
   return ok_status();
 }

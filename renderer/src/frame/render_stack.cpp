@@ -48,7 +48,9 @@ Result<std::unique_ptr<RenderStack>> RenderStack::create(const SceneData& scene,
 
   s->compiler_ =
       std::make_unique<ShaderCompiler>(ShaderCompiler::default_source_dir(), ShaderCompiler::default_cache_dir());
-  auto passes = ScenePasses::create(*s->ctx_, *s->compiler_, options.passes, *s->scene_gpu_, *s->cache_);
+  ScenePassesOptions pass_options = options.passes;
+  pass_options.alpha_test = scene.has_alpha_test();
+  auto passes = ScenePasses::create(*s->ctx_, *s->compiler_, pass_options, *s->scene_gpu_, *s->cache_);
   if (!passes) return passes.error();
   s->passes_ = std::move(*passes);
   stage("passes_and_shaders");

@@ -273,7 +273,11 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
 
   auto frag = make_module(ctx, compiler, {"scene.frag", ShaderStage::kFragment, main_defines});
   if (!frag) return frag.error();
-  auto prepass = make_module(ctx, compiler, {"prepass.frag", ShaderStage::kFragment, {}});
+  // Only a scene with alpha-tested textures gets the pre-pass that samples and discards: a shader that may
+  // discard loses early depth writes, which every other scene keeps.
+  std::vector<std::string> prepass_defines;
+  if (options_.alpha_test) prepass_defines.push_back("ALPHA_TEST");
+  auto prepass = make_module(ctx, compiler, {"prepass.frag", ShaderStage::kFragment, prepass_defines});
   if (!prepass) return prepass.error();
   auto wide_frag = make_module(ctx, compiler, {"scene.frag", ShaderStage::kFragment, wide_defines});
   if (!wide_frag) return wide_frag.error();

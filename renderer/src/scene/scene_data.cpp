@@ -46,6 +46,9 @@ Result<SceneData> SceneData::load(const std::filesystem::path& dir) {
   auto colormap = scene::read_colormap(dir, s.textures.size());
   if (!colormap) return colormap.error();
   s.colormap = std::move(*colormap);
+  auto sampling = scene::map_sampling(dir, s.textures.size());
+  if (sampling.ok()) s.sampling.assign(sampling->flags.begin(), sampling->flags.end());
+  else if (sampling.error().code != ErrorCode::kNotFound) return sampling.error();
 
   TS_TRY(check_counts(s, s.meshes.meshes.size(), s.meshes.vertices.size(), s.textures.size()));
   for (size_t i = 0; i < s.meshes.meshes.size(); ++i)
@@ -69,6 +72,9 @@ Result<SceneData> SceneData::open(const std::filesystem::path& dir) {
   auto colormap = scene::map_colormap(dir, mapped->textures.textures.size());
   if (!colormap) return colormap.error();
   mapped->colormap = std::move(*colormap);
+  auto sampling = scene::map_sampling(dir, mapped->textures.textures.size());
+  if (sampling.ok()) mapped->sampling = std::move(*sampling);
+  else if (sampling.error().code != ErrorCode::kNotFound) return sampling.error();
   s.mapped_ = std::move(mapped);
   TS_TRY(check_counts(s, s.mesh_records().size(), s.vertices().size(), s.texture_records().size()));
   return s;
@@ -90,6 +96,18 @@ std::span<const uint32_t> SceneData::colours() const {
   return mapped_ ? mapped_->colormap.rgba : std::span<const uint32_t>(colormap);
 }
 
+uint32_t SceneData::sampling_flags(uint32_t id) const {
+  const std::span<const uint32_t> flags = mapped_ ? mapped_->sampling.flags : std::span<const uint32_t>(sampling);
+  return id < flags.size() ? flags[id] : 0u;
+}
+
+bool SceneData::has_alpha_test() const {
+  const std::span<const uint32_t> flags = mapped_ ? mapped_->sampling.flags : std::span<const uint32_t>(sampling);
+  for (uint32_t f : flags)
+    if (f & scene::sampling_flags::kAlphaTest) return true;
+  return false;
+}
+
 Status SceneData::check_mesh(uint32_t id) const {
   if (!mapped_) return ok_status();
   TS_TRY(mapped_->meshes.check_mesh(id));
@@ -105,6 +123,7 @@ Status SceneData::make_loaded() {
   meshes.indices.assign(indices().begin(), indices().end());
   textures.assign(texture_records().begin(), texture_records().end());
   colormap.assign(colours().begin(), colours().end());
+  sampling.assign(mapped_->sampling.flags.begin(), mapped_->sampling.flags.end());
   mapped_.reset();
   return ok_status();
 }

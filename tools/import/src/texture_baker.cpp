@@ -141,15 +141,17 @@ void keep_coverage(Level& l, double target, float cutoff) {
   for (size_t i = 3; i < l.rgba.size(); i += 4) l.rgba[i] = std::min(1.0f, l.rgba[i] * hi);
 }
 
-// sRGB RGBA8, R in the low byte; with a binary alpha (BC1 punch-through) the cutoff decides each texel.
-std::vector<uint32_t> to_rgba8(const Level& l, bool binary_alpha, float cutoff) {
+// sRGB RGBA8, R in the low byte. An alpha-tested texture keeps premultiplied colour (what BC1 punch-through
+// decodes to: transparent texels are black; scene.frag divides by the filtered alpha); with `binary` alpha (BC1)
+// the cutoff decides each texel.
+std::vector<uint32_t> to_rgba8(const Level& l, bool alpha_test, bool binary, float cutoff) {
   std::vector<uint32_t> out(size_t(l.width) * l.height);
   for (size_t i = 0; i < out.size(); ++i) {
     const float* p = &l.rgba[i * 4];
-    const uint32_t a = binary_alpha ? (p[3] >= cutoff ? 255u : 0u)
-                                    : static_cast<uint32_t>(std::lround(std::clamp(p[3], 0.0f, 1.0f) * 255.0f));
-    out[i] = uint32_t{gen::linear_to_srgb8(p[0])} | uint32_t{gen::linear_to_srgb8(p[1])} << 8 |
-             uint32_t{gen::linear_to_srgb8(p[2])} << 16 | a << 24;
+    const float a = !alpha_test ? 1.0f : binary ? (p[3] >= cutoff ? 1.0f : 0.0f) : std::clamp(p[3], 0.0f, 1.0f);
+    const uint32_t a8 = static_cast<uint32_t>(std::lround(a * 255.0f));
+    out[i] = uint32_t{gen::linear_to_srgb8(p[0] * a)} | uint32_t{gen::linear_to_srgb8(p[1] * a)} << 8 |
+             uint32_t{gen::linear_to_srgb8(p[2] * a)} << 16 | a8 << 24;
   }
   return out;
 }
@@ -202,7 +204,7 @@ Result<BakedTexture> bake_texture(const BakeInput& in, const std::filesystem::pa
       level = downsample(level);
       if (in.alpha_test) keep_coverage(level, coverage0, in.cutoff);
     }
-    const std::vector<uint32_t> texels = to_rgba8(level, in.alpha_test && bc1, in.cutoff);
+    const std::vector<uint32_t> texels = to_rgba8(level, in.alpha_test, bc1, in.cutoff);
     const uint64_t bytes = mip_bytes(in.format, level.width, level.height, 0);
     blocks.assign(bytes, 0);
     if (!bc1) {

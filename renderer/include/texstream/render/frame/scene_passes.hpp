@@ -43,6 +43,7 @@ struct ScenePassesOptions {
   uint32_t wide_width = 240;  // the wide pass only feeds metadata: a quarter of the viewport per axis
   uint32_t wide_height = 135;
   uint32_t debug_view = 0;      // gpu::kDebugView*; any other than none renders into a UNORM target
+  bool alpha_test = false;      // the depth pre-pass samples the cache and discards cut-out texels (prepass.frag)
   bool lod_probe = false;       // main pass compiled with LOD_PROBE: per-pixel metadata level vs textureQueryLod
   float probe_anisotropy = 16;  // A_m of the probe sampler (clamped to the device's maxSamplerAnisotropy)
   bool timestamps = false;      // GPU timestamps around the passes (read_pass_times)

@@ -27,6 +27,7 @@ struct SceneData {
   scene::MeshData meshes;
   std::vector<scene::TextureRecord> textures;
   std::vector<uint32_t> colormap;  // RGBA8 sRGB, one per texture
+  std::vector<uint32_t> sampling;  // sampling.bin's flags, one per texture, or empty: all clamped and opaque
 
   // Reads and cross-checks everything; errors name the file and the record.
   static Result<SceneData> load(const std::filesystem::path& dir);
@@ -39,6 +40,10 @@ struct SceneData {
   std::span<const uint32_t> indices() const;
   std::span<const scene::TextureRecord> texture_records() const;
   std::span<const uint32_t> colours() const;
+  // How texture `id` is sampled (scene::sampling_flags: wrap modes, alpha test); 0 without sampling.bin.
+  uint32_t sampling_flags(uint32_t id) const;
+  // Whether any texture is alpha-tested (the depth pre-pass then samples the cache).
+  bool has_alpha_test() const;
 
   // Mesh `id`'s full check (ranges, finite values, indices, its texture id). Loaded scenes were checked by
   // load() (or built by hand): ok at once.
@@ -56,6 +61,7 @@ struct SceneData {
     scene::MappedMeshes meshes;
     scene::MappedTextureTable textures;
     scene::MappedColormap colormap;
+    scene::MappedSampling sampling;  // empty flags when the scene has no sampling.bin
   };
   std::shared_ptr<const Mapped> mapped_;  // shared: a SceneData is copied into ViewRenderer by value
 };
