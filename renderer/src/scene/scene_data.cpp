@@ -47,8 +47,10 @@ Result<SceneData> SceneData::load(const std::filesystem::path& dir) {
   if (!colormap) return colormap.error();
   s.colormap = std::move(*colormap);
   auto sampling = scene::map_sampling(dir, s.textures.size());
-  if (sampling.ok()) s.sampling.assign(sampling->flags.begin(), sampling->flags.end());
-  else if (sampling.error().code != ErrorCode::kNotFound) return sampling.error();
+  if (sampling.ok())
+    s.sampling.assign(sampling->flags.begin(), sampling->flags.end());
+  else if (sampling.error().code != ErrorCode::kNotFound)
+    return sampling.error();
 
   TS_TRY(check_counts(s, s.meshes.meshes.size(), s.meshes.vertices.size(), s.textures.size()));
   for (size_t i = 0; i < s.meshes.meshes.size(); ++i)
@@ -73,8 +75,10 @@ Result<SceneData> SceneData::open(const std::filesystem::path& dir) {
   if (!colormap) return colormap.error();
   mapped->colormap = std::move(*colormap);
   auto sampling = scene::map_sampling(dir, mapped->textures.textures.size());
-  if (sampling.ok()) mapped->sampling = std::move(*sampling);
-  else if (sampling.error().code != ErrorCode::kNotFound) return sampling.error();
+  if (sampling.ok())
+    mapped->sampling = std::move(*sampling);
+  else if (sampling.error().code != ErrorCode::kNotFound)
+    return sampling.error();
   s.mapped_ = std::move(mapped);
   TS_TRY(check_counts(s, s.mesh_records().size(), s.vertices().size(), s.texture_records().size()));
   return s;

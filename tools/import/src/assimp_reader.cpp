@@ -31,9 +31,9 @@ Result<Model> read_with_assimp(const std::filesystem::path& file) {
   if (!std::filesystem::exists(file)) return make_error(ErrorCode::kNotFound, name + ": no such file");
   Assimp::Importer importer;
   importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE, aiPrimitiveType_POINT | aiPrimitiveType_LINE);
-  const aiScene* s = importer.ReadFile(name, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
-                                                 aiProcess_GenSmoothNormals | aiProcess_FlipUVs |
-                                                 aiProcess_SortByPType | aiProcess_ValidateDataStructure);
+  const aiScene* s =
+      importer.ReadFile(name, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_GenSmoothNormals |
+                                  aiProcess_FlipUVs | aiProcess_SortByPType | aiProcess_ValidateDataStructure);
   if (s == nullptr || (s->mFlags & AI_SCENE_FLAGS_INCOMPLETE) || s->mRootNode == nullptr)
     return make_error(ErrorCode::kCorrupt, name + ": Assimp cannot read it: " + importer.GetErrorString());
 
@@ -73,7 +73,8 @@ Result<Model> read_with_assimp(const std::filesystem::path& file) {
     const aiMaterial* am = s->mMaterials[i];
     Material m;
     aiString mname;
-    m.name = am->Get(AI_MATKEY_NAME, mname) == AI_SUCCESS && mname.length ? mname.C_Str() : "material " + std::to_string(i);
+    m.name =
+        am->Get(AI_MATKEY_NAME, mname) == AI_SUCCESS && mname.length ? mname.C_Str() : "material " + std::to_string(i);
     aiColor4D colour(1, 1, 1, 1);
     if (am->Get(AI_MATKEY_BASE_COLOR, colour) != AI_SUCCESS) am->Get(AI_MATKEY_COLOR_DIFFUSE, colour);
     float opacity = 1.0f;
@@ -106,7 +107,8 @@ Result<Model> read_with_assimp(const std::filesystem::path& file) {
   for (unsigned i = 0; i < s->mNumMeshes; ++i) {
     const aiMesh* am = s->mMeshes[i];
     Primitive p;
-    p.name = name + ": mesh " + std::to_string(i) + (am->mName.length ? " (" + std::string(am->mName.C_Str()) + ")" : "");
+    p.name =
+        name + ": mesh " + std::to_string(i) + (am->mName.length ? " (" + std::string(am->mName.C_Str()) + ")" : "");
     p.material = static_cast<int>(am->mMaterialIndex);
     if (!(am->mPrimitiveTypes & aiPrimitiveType_TRIANGLE) || am->mNumVertices == 0) {
       out.skipped.push_back(p.name + ": no triangles");
@@ -127,7 +129,8 @@ Result<Model> read_with_assimp(const std::filesystem::path& file) {
       }
     }
     for (unsigned f = 0; f < am->mNumFaces; ++f)
-      if (am->mFaces[f].mNumIndices == 3) p.indices.insert(p.indices.end(), am->mFaces[f].mIndices, am->mFaces[f].mIndices + 3);
+      if (am->mFaces[f].mNumIndices == 3)
+        p.indices.insert(p.indices.end(), am->mFaces[f].mIndices, am->mFaces[f].mIndices + 3);
     out.primitives.push_back(std::move(p));
   }
 

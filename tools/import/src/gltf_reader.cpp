@@ -76,7 +76,8 @@ Status read_floats(const tinygltf::Model& m, int index, int components, std::vec
   const tinygltf::BufferView& v = m.bufferViews.at(a.bufferView);
   const tinygltf::Buffer& b = m.buffers.at(v.buffer);
   const int csize = tinygltf::GetComponentSizeInBytes(a.componentType);
-  if (csize <= 0) return make_error(ErrorCode::kCorrupt, what + ": bad component type in accessor " + std::to_string(index));
+  if (csize <= 0)
+    return make_error(ErrorCode::kCorrupt, what + ": bad component type in accessor " + std::to_string(index));
   const size_t stride = v.byteStride ? v.byteStride : static_cast<size_t>(csize * components);
   const size_t start = v.byteOffset + a.byteOffset;
   const size_t need = a.count == 0 ? 0 : start + stride * (a.count - 1) + static_cast<size_t>(csize * components);
@@ -88,8 +89,12 @@ Status read_floats(const tinygltf::Model& m, int index, int components, std::vec
       const uint8_t* q = p + static_cast<size_t>(c * csize);
       float f = 0;
       switch (a.componentType) {
-        case TINYGLTF_COMPONENT_TYPE_FLOAT: std::memcpy(&f, q, 4); break;
-        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: f = a.normalized ? *q / 255.0f : *q; break;
+        case TINYGLTF_COMPONENT_TYPE_FLOAT:
+          std::memcpy(&f, q, 4);
+          break;
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+          f = a.normalized ? *q / 255.0f : *q;
+          break;
         case TINYGLTF_COMPONENT_TYPE_BYTE: {
           const auto s = static_cast<int8_t>(*q);
           f = a.normalized ? std::max(s / 127.0f, -1.0f) : s;
@@ -166,8 +171,10 @@ bool to_triangle_list(int mode, std::vector<uint32_t>& idx) {
   std::vector<uint32_t> out;
   if (mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
     for (size_t i = 2; i < idx.size(); ++i) {
-      if (i % 2 == 0) out.insert(out.end(), {idx[i - 2], idx[i - 1], idx[i]});
-      else out.insert(out.end(), {idx[i - 1], idx[i - 2], idx[i]});
+      if (i % 2 == 0)
+        out.insert(out.end(), {idx[i - 2], idx[i - 1], idx[i]});
+      else
+        out.insert(out.end(), {idx[i - 1], idx[i - 2], idx[i]});
     }
   } else if (mode == TINYGLTF_MODE_TRIANGLE_FAN) {
     for (size_t i = 2; i < idx.size(); ++i) out.insert(out.end(), {idx[0], idx[i - 1], idx[i]});
@@ -236,7 +243,8 @@ Result<Model> read_gltf(const std::filesystem::path& file) {
   std::string err, warn;
   const std::string name = file.string();
   const bool binary = file.extension() == ".glb" || file.extension() == ".GLB";
-  const bool loaded = binary ? loader.LoadBinaryFromFile(&g, &err, &warn, name) : loader.LoadASCIIFromFile(&g, &err, &warn, name);
+  const bool loaded =
+      binary ? loader.LoadBinaryFromFile(&g, &err, &warn, name) : loader.LoadASCIIFromFile(&g, &err, &warn, name);
   if (!loaded) {
     if (!std::filesystem::exists(file)) return make_error(ErrorCode::kNotFound, name + ": no such file");
     return make_error(ErrorCode::kCorrupt, name + ": not a glTF 2.0 file tinygltf can read: " + err);
@@ -293,15 +301,18 @@ Result<Model> read_gltf(const std::filesystem::path& file) {
     if (tex >= 0 && tex < static_cast<int>(g.textures.size())) {
       const tinygltf::Texture& t = g.textures[tex];
       const int src = texture_source(t);
-      if (src >= 0 && src < static_cast<int>(g.images.size())) m.image = src;
-      else out.skipped.push_back(name + ": texture " + std::to_string(tex) + " of " + m.name + " has no image we can read");
+      if (src >= 0 && src < static_cast<int>(g.images.size()))
+        m.image = src;
+      else
+        out.skipped.push_back(name + ": texture " + std::to_string(tex) + " of " + m.name +
+                              " has no image we can read");
       if (t.sampler >= 0 && t.sampler < static_cast<int>(g.samplers.size())) {
         m.wrap_u = wrap_of(g.samplers[t.sampler].wrapS);
         m.wrap_v = wrap_of(g.samplers[t.sampler].wrapT);
       }
       if (pbr.baseColorTexture.texCoord != 0)
-        out.skipped.push_back(name + ": " + m.name + " samples TEXCOORD_" + std::to_string(pbr.baseColorTexture.texCoord) +
-                              "; imported with that set");
+        out.skipped.push_back(name + ": " + m.name + " samples TEXCOORD_" +
+                              std::to_string(pbr.baseColorTexture.texCoord) + "; imported with that set");
     }
     out.materials.push_back(std::move(m));
   }
@@ -327,14 +338,16 @@ Result<Model> read_gltf(const std::filesystem::path& file) {
       const size_t nv = p.positions.size() / 3;
       if (st.ok()) {
         if (auto n = gp.attributes.find("NORMAL"); n != gp.attributes.end()) {
-          if (!read_floats(g, n->second, 3, p.normals, what + " NORMAL").ok() || p.normals.size() != nv * 3) p.normals.clear();
+          if (!read_floats(g, n->second, 3, p.normals, what + " NORMAL").ok() || p.normals.size() != nv * 3)
+            p.normals.clear();
         }
         int set = 0;
         if (p.material >= 0 && p.material < static_cast<int>(g.materials.size()))
           set = g.materials[p.material].pbrMetallicRoughness.baseColorTexture.texCoord;
         if (auto t = gp.attributes.find("TEXCOORD_" + std::to_string(set)); t != gp.attributes.end()) {
           st = read_floats(g, t->second, 2, p.uvs, what + " TEXCOORD_" + std::to_string(set));
-          if (st.ok() && p.uvs.size() != nv * 2) st = make_error(ErrorCode::kCorrupt, what + ": TEXCOORD count differs from POSITION");
+          if (st.ok() && p.uvs.size() != nv * 2)
+            st = make_error(ErrorCode::kCorrupt, what + ": TEXCOORD count differs from POSITION");
         }
       }
       if (st.ok()) st = read_indices(g, gp.indices, nv, p.indices, what);
@@ -371,8 +384,10 @@ Result<Model> read_gltf(const std::filesystem::path& file) {
 
   // Nodes: every node of the default scene (or of every scene when none is named), composed in double.
   std::vector<int> roots;
-  if (g.defaultScene >= 0 && g.defaultScene < static_cast<int>(g.scenes.size())) roots = g.scenes[g.defaultScene].nodes;
-  else if (!g.scenes.empty()) roots = g.scenes[0].nodes;
+  if (g.defaultScene >= 0 && g.defaultScene < static_cast<int>(g.scenes.size()))
+    roots = g.scenes[g.defaultScene].nodes;
+  else if (!g.scenes.empty())
+    roots = g.scenes[0].nodes;
   else
     for (size_t i = 0; i < g.nodes.size(); ++i) roots.push_back(static_cast<int>(i));  // no scene: every node
   const Mat4 identity{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
@@ -387,21 +402,26 @@ Result<Model> read_gltf(const std::filesystem::path& file) {
       continue;
     }
     if (++visited > 64u * g.nodes.size() + 64) {
-      return make_error(ErrorCode::kCorrupt, name + ": the node hierarchy has a cycle (node " + std::to_string(ni) + ")");
+      return make_error(ErrorCode::kCorrupt,
+                        name + ": the node hierarchy has a cycle (node " + std::to_string(ni) + ")");
     }
     const tinygltf::Node& n = g.nodes[ni];
     const Mat4 world = multiply(parent, node_local(n));
     if (n.mesh >= 0 && n.mesh < static_cast<int>(g.meshes.size())) {
       std::vector<Mat4> placements{world};
       // EXT_mesh_gpu_instancing: one placement per TRANSLATION/ROTATION/SCALE element, in the node's frame.
-      if (auto e = n.extensions.find("EXT_mesh_gpu_instancing"); e != n.extensions.end() && e->second.Has("attributes")) {
+      if (auto e = n.extensions.find("EXT_mesh_gpu_instancing");
+          e != n.extensions.end() && e->second.Has("attributes")) {
         const tinygltf::Value& attrs = e->second.Get("attributes");
         std::vector<float> t, r, s;
         const std::string what = name + ": node " + std::to_string(ni) + " EXT_mesh_gpu_instancing";
         Status st = ok_status();
-        if (attrs.Has("TRANSLATION")) st = read_floats(g, attrs.Get("TRANSLATION").GetNumberAsInt(), 3, t, what + " TRANSLATION");
-        if (st.ok() && attrs.Has("ROTATION")) st = read_floats(g, attrs.Get("ROTATION").GetNumberAsInt(), 4, r, what + " ROTATION");
-        if (st.ok() && attrs.Has("SCALE")) st = read_floats(g, attrs.Get("SCALE").GetNumberAsInt(), 3, s, what + " SCALE");
+        if (attrs.Has("TRANSLATION"))
+          st = read_floats(g, attrs.Get("TRANSLATION").GetNumberAsInt(), 3, t, what + " TRANSLATION");
+        if (st.ok() && attrs.Has("ROTATION"))
+          st = read_floats(g, attrs.Get("ROTATION").GetNumberAsInt(), 4, r, what + " ROTATION");
+        if (st.ok() && attrs.Has("SCALE"))
+          st = read_floats(g, attrs.Get("SCALE").GetNumberAsInt(), 3, s, what + " SCALE");
         const size_t count = std::max({t.size() / 3, r.size() / 4, s.size() / 3});
         if (!st.ok()) {
           out.skipped.push_back(st.error().message);
@@ -409,9 +429,12 @@ Result<Model> read_gltf(const std::filesystem::path& file) {
           placements.clear();
           for (size_t k = 0; k < count; ++k) {
             double tt[3] = {0, 0, 0}, qq[4] = {0, 0, 0, 1}, ss[3] = {1, 1, 1};
-            if (k * 3 + 2 < t.size()) for (int c = 0; c < 3; ++c) tt[c] = t[k * 3 + c];
-            if (k * 4 + 3 < r.size()) for (int c = 0; c < 4; ++c) qq[c] = r[k * 4 + c];
-            if (k * 3 + 2 < s.size()) for (int c = 0; c < 3; ++c) ss[c] = s[k * 3 + c];
+            if (k * 3 + 2 < t.size())
+              for (int c = 0; c < 3; ++c) tt[c] = t[k * 3 + c];
+            if (k * 4 + 3 < r.size())
+              for (int c = 0; c < 4; ++c) qq[c] = r[k * 4 + c];
+            if (k * 3 + 2 < s.size())
+              for (int c = 0; c < 3; ++c) ss[c] = s[k * 3 + c];
             placements.push_back(multiply(world, compose(tt, qq, ss)));
           }
         }
@@ -420,9 +443,11 @@ Result<Model> read_gltf(const std::filesystem::path& file) {
         for (int p : mesh_primitives[n.mesh])
           if (p >= 0) out.instances.push_back(Instance{static_cast<uint32_t>(p), m});
     } else if (n.mesh >= 0) {
-      out.skipped.push_back(name + ": node " + std::to_string(ni) + " names mesh " + std::to_string(n.mesh) + ", which does not exist");
+      out.skipped.push_back(name + ": node " + std::to_string(ni) + " names mesh " + std::to_string(n.mesh) +
+                            ", which does not exist");
     }
-    if (n.skin >= 0) out.skipped.push_back(name + ": node " + std::to_string(ni) + " is skinned; drawn in its bind pose");
+    if (n.skin >= 0)
+      out.skipped.push_back(name + ": node " + std::to_string(ni) + " is skinned; drawn in its bind pose");
     for (auto it = n.children.rbegin(); it != n.children.rend(); ++it) stack.emplace_back(*it, world);
   }
   return out;

@@ -18,16 +18,16 @@ enum class Wrap : uint8_t { kClamp = 0, kRepeat = 1, kMirror = 2 };
 enum class AlphaMode : uint8_t { kOpaque, kMask, kBlend };
 
 struct SourceImage {
-  std::string name;             // for messages: the uri, or "<file> image N" for an embedded one
-  std::filesystem::path file;   // an image file on disk, or empty when `bytes` holds it
-  std::vector<uint8_t> bytes;   // an embedded image (glb buffer view, data uri, Assimp embedded texture)
-  std::string extension;        // of an embedded image, from its MIME type (".png", ".jpg", ...)
+  std::string name;            // for messages: the uri, or "<file> image N" for an embedded one
+  std::filesystem::path file;  // an image file on disk, or empty when `bytes` holds it
+  std::vector<uint8_t> bytes;  // an embedded image (glb buffer view, data uri, Assimp embedded texture)
+  std::string extension;       // of an embedded image, from its MIME type (".png", ".jpg", ...)
 };
 
 struct Material {
   std::string name;
-  int image = -1;                                   // SourceImage index, -1: base colour only
-  std::array<float, 4> base_colour{1, 1, 1, 1};      // linear RGBA factor (glTF baseColorFactor)
+  int image = -1;                                // SourceImage index, -1: base colour only
+  std::array<float, 4> base_colour{1, 1, 1, 1};  // linear RGBA factor (glTF baseColorFactor)
   Wrap wrap_u = Wrap::kRepeat;
   Wrap wrap_v = Wrap::kRepeat;
   AlphaMode alpha = AlphaMode::kOpaque;
@@ -41,7 +41,7 @@ struct Primitive {
   std::vector<float> normals;    // xyz, or empty (the builder computes them)
   std::vector<float> uvs;        // uv, top-left origin (v down), or empty (all 0)
   std::vector<uint32_t> indices;
-  int material = -1;             // -1: the default material (white)
+  int material = -1;  // -1: the default material (white)
 };
 
 // One placement of a primitive: the node's world transform, column-major, double (map coordinates).

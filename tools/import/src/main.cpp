@@ -2,9 +2,9 @@
 // read (see scene_builder.hpp and common/scene_format.hpp).
 #include <unistd.h>
 
+#include <sys/resource.h>
 #include <CLI/CLI.hpp>
 #include <cstdio>
-#include <sys/resource.h>
 
 #include "model_readers.hpp"
 #include "scene_builder.hpp"
@@ -34,7 +34,8 @@ int main(int argc, char** argv) {
   app.add_option("--up", up, "The file's up axis (auto: y, as glTF and most OBJ exporters)")
       ->check(CLI::IsMember({"auto", "y", "z"}))
       ->capture_default_str();
-  app.add_option("--max-extent", opt.max_extent, "Largest texture side after baking (px; larger images are scaled down)")
+  app.add_option("--max-extent", opt.max_extent,
+                 "Largest texture side after baking (px; larger images are scaled down)")
       ->check(CLI::Range(1u, kMaxTextureExtent))
       ->capture_default_str();
   app.add_option("--threads", opt.threads, "Baking threads (default: all cores)")->check(CLI::Range(1u, 1024u));
@@ -46,7 +47,8 @@ int main(int argc, char** argv) {
   if (up != "auto") opt.y_up = up == "y";
   opt.format = *texel_format_from_string(format);
   ProgressBar bar("images");
-  if (!quiet && ::isatty(STDERR_FILENO)) opt.progress = [&bar](uint64_t done, uint64_t total) { bar.update(done, total); };
+  if (!quiet && ::isatty(STDERR_FILENO))
+    opt.progress = [&bar](uint64_t done, uint64_t total) { bar.update(done, total); };
 
   auto model = import::read_model(input);
   if (!model.ok()) {
@@ -65,15 +67,17 @@ int main(int argc, char** argv) {
   rusage ru{};
   ::getrusage(RUSAGE_SELF, &ru);
   std::printf("wrote %s\n", std::filesystem::absolute(opt.out).lexically_normal().c_str());
-  std::printf("  meshes     %llu (%llu share another's vertices, %llu with rotation or scale applied), %llu triangles\n",
-              static_cast<unsigned long long>(r.meshes), static_cast<unsigned long long>(r.shared_meshes),
-              static_cast<unsigned long long>(r.baked_meshes), static_cast<unsigned long long>(r.triangles));
-  std::printf("  textures   %llu (%llu images baked, %llu resized to powers of two, %llu flat base colours, %llu alpha-tested, "
-              "%llu repeating), %.1f MB %s\n",
-              static_cast<unsigned long long>(r.textures), static_cast<unsigned long long>(r.images_baked),
-              static_cast<unsigned long long>(r.resized), static_cast<unsigned long long>(r.flat_textures),
-              static_cast<unsigned long long>(r.alpha_tested), static_cast<unsigned long long>(r.repeating),
-              static_cast<double>(r.texture_bytes) / 1e6, format.c_str());
+  std::printf(
+      "  meshes     %llu (%llu share another's vertices, %llu with rotation or scale applied), %llu triangles\n",
+      static_cast<unsigned long long>(r.meshes), static_cast<unsigned long long>(r.shared_meshes),
+      static_cast<unsigned long long>(r.baked_meshes), static_cast<unsigned long long>(r.triangles));
+  std::printf(
+      "  textures   %llu (%llu images baked, %llu resized to powers of two, %llu flat base colours, %llu alpha-tested, "
+      "%llu repeating), %.1f MB %s\n",
+      static_cast<unsigned long long>(r.textures), static_cast<unsigned long long>(r.images_baked),
+      static_cast<unsigned long long>(r.resized), static_cast<unsigned long long>(r.flat_textures),
+      static_cast<unsigned long long>(r.alpha_tested), static_cast<unsigned long long>(r.repeating),
+      static_cast<double>(r.texture_bytes) / 1e6, format.c_str());
   std::printf("  baking     %.2f s, %.1f images/s, peak memory %.0f MB\n", r.bake_seconds,
               r.bake_seconds > 0 ? static_cast<double>(r.images_baked + r.flat_textures) / r.bake_seconds : 0.0,
               static_cast<double>(ru.ru_maxrss) / 1024.0);

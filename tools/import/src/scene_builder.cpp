@@ -49,14 +49,15 @@ bool only_moves(const Mat4& m) {
   return m[3] == 0 && m[7] == 0 && m[11] == 0 && m[15] == 1;
 }
 
-// Inverse transpose of the upper 3x3 (normals), row r column c at [c * 3 + r].
+// Inverse transpose of the upper 3x3 (normals), row r column c at [c * 3 + r]. Rows of m: (a b c), (d e f), (g h i).
 std::array<double, 9> normal_matrix(const Mat4& m) {
   const double a = m[0], b = m[4], c = m[8], d = m[1], e = m[5], f = m[9], g = m[2], h = m[6], i = m[10];
   const double A = e * i - f * h, B = -(d * i - f * g), C = d * h - e * g;
   const double D = -(b * i - c * h), E = a * i - c * g, F = -(a * h - b * g);
   const double G = b * f - c * e, H = -(a * f - c * d), I = a * e - b * d;
-  // inverse = adj^T / det; its transpose = cofactor matrix / det (scale does not matter: normalised later).
-  return {A, B, C, D, E, F, G, H, I};
+  // The inverse transpose is the cofactor matrix over det (scale does not matter: normalised later); stored
+  // column-major like the rest: column 0 is the cofactors' first column.
+  return {A, D, G, B, E, H, C, F, I};
 }
 
 void smooth_normals(const Primitive& p, std::vector<float>& n) {
@@ -102,7 +103,8 @@ Placed place(const Primitive& p, const Mat4& m) {
   const auto nm = normal_matrix(m);
   const size_t nv = p.positions.size() / 3;
   std::vector<std::array<double, 3>> world(nv);
-  double lo[3] = {std::numeric_limits<double>::max(), std::numeric_limits<double>::max(), std::numeric_limits<double>::max()};
+  double lo[3] = {std::numeric_limits<double>::max(), std::numeric_limits<double>::max(),
+                  std::numeric_limits<double>::max()};
   double hi[3] = {-lo[0], -lo[1], -lo[2]};
   for (size_t v = 0; v < nv; ++v) {
     const double x = p.positions[v * 3], y = p.positions[v * 3 + 1], z = p.positions[v * 3 + 2];
@@ -119,7 +121,8 @@ Placed place(const Primitive& p, const Mat4& m) {
     scene::Vertex& o = out.vertices[v];
     for (int r = 0; r < 3; ++r) o.pos[r] = static_cast<float>(world[v][r] - out.origin[r]);
     const float* n = &(*normals)[v * 3];
-    for (int r = 0; r < 3; ++r) o.normal[r] = static_cast<float>(nm[r] * double{n[0]} + nm[3 + r] * double{n[1]} + nm[6 + r] * double{n[2]});
+    for (int r = 0; r < 3; ++r)
+      o.normal[r] = static_cast<float>(nm[r] * double{n[0]} + nm[3 + r] * double{n[1]} + nm[6 + r] * double{n[2]});
     normalise(o.normal);
     o.uv[0] = p.uvs.size() == nv * 2 ? p.uvs[v * 2] : 0.0f;
     o.uv[1] = p.uvs.size() == nv * 2 ? p.uvs[v * 2 + 1] : 0.0f;
@@ -147,13 +150,13 @@ struct TexelKey {
 struct TextureKey {
   TexelKey texels;
   Wrap u, v;
-  bool operator<(const TextureKey& o) const {
-    return std::tie(texels, u, v) < std::tie(o.texels, o.u, o.v);
-  }
+  bool operator<(const TextureKey& o) const { return std::tie(texels, u, v) < std::tie(o.texels, o.u, o.v); }
 };
 
 scene::TextureWrap to_scene(Wrap w) {
-  return w == Wrap::kRepeat ? scene::TextureWrap::kRepeat : w == Wrap::kMirror ? scene::TextureWrap::kMirror : scene::TextureWrap::kClamp;
+  return w == Wrap::kRepeat   ? scene::TextureWrap::kRepeat
+         : w == Wrap::kMirror ? scene::TextureWrap::kMirror
+                              : scene::TextureWrap::kClamp;
 }
 
 // An orbit around the scene's box looking at its centre, a pause, a cut to a closer view and a slow approach:
@@ -254,13 +257,15 @@ Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
                            std::numeric_limits<double>::max()};
   std::array<double, 3> hi{-lo[0], -lo[1], -lo[2]};
   auto append = [&](const Placed& g, const Primitive& p, scene::MeshRecord& r) -> bool {
-    if (meshes.vertices.size() + g.vertices.size() > 0xffffffffull || meshes.indices.size() + p.indices.size() > 0xffffffffull)
+    if (meshes.vertices.size() + g.vertices.size() > 0xffffffffull ||
+        meshes.indices.size() + p.indices.size() > 0xffffffffull)
       return false;
     r.first_vertex = static_cast<uint32_t>(meshes.vertices.size());
     r.vertex_count = static_cast<uint32_t>(g.vertices.size());
     r.first_index = static_cast<uint32_t>(meshes.indices.size());
     r.index_count = static_cast<uint32_t>(p.indices.size());
-    float blo[3] = {std::numeric_limits<float>::max(), std::numeric_limits<float>::max(), std::numeric_limits<float>::max()};
+    float blo[3] = {std::numeric_limits<float>::max(), std::numeric_limits<float>::max(),
+                    std::numeric_limits<float>::max()};
     float bhi[3] = {-blo[0], -blo[1], -blo[2]};
     for (const auto& v : g.vertices)
       for (int a = 0; a < 3; ++a) {
@@ -296,8 +301,12 @@ Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
         Placed local = g;
         for (auto& v : local.vertices)
           for (int a = 0; a < 3; ++a) v.pos[a] = static_cast<float>(static_cast<double>(v.pos[a]) + g.origin[a]);
-        if (!append(local, p, r)) return make_error(ErrorCode::kResourceExhausted, model.source + ": more than 2^32 vertices or indices");
-        shared[inst.primitive] = Shared{r.first_vertex, r.vertex_count, r.first_index, r.index_count,
+        if (!append(local, p, r))
+          return make_error(ErrorCode::kResourceExhausted, model.source + ": more than 2^32 vertices or indices");
+        shared[inst.primitive] = Shared{r.first_vertex,
+                                        r.vertex_count,
+                                        r.first_index,
+                                        r.index_count,
                                         {r.bounds_min[0], r.bounds_min[1], r.bounds_min[2]},
                                         {r.bounds_max[0], r.bounds_max[1], r.bounds_max[2]}};
       } else {
@@ -319,7 +328,8 @@ Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
         report.skipped.push_back(p.name + ": non-finite positions or UVs after its node transform");
         continue;
       }
-      if (!append(g, p, r)) return make_error(ErrorCode::kResourceExhausted, model.source + ": more than 2^32 vertices or indices");
+      if (!append(g, p, r))
+        return make_error(ErrorCode::kResourceExhausted, model.source + ": more than 2^32 vertices or indices");
       for (int a = 0; a < 3; ++a) r.origin[a] = g.origin[a] + opt.origin[a];
       ++report.baked_meshes;
     }
@@ -368,14 +378,17 @@ Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
         bake_errors[t] = r.error().message;
         r = bake_one(t, textures[t].texels, true);  // drawn in its base colour
       }
-      if (r.ok()) baked[t] = *r;
-      else bake_errors[t] += "; and its 1x1 fallback: " + r.error().message;
+      if (r.ok())
+        baked[t] = *r;
+      else
+        bake_errors[t] += "; and its 1x1 fallback: " + r.error().message;
       const size_t d = done.fetch_add(1) + 1;
       if (opt.progress) opt.progress(d, bake_jobs.size());
     }
   };
-  const unsigned n_threads = std::max(1u, std::min<unsigned>(opt.threads ? opt.threads : std::thread::hardware_concurrency(),
-                                                             static_cast<unsigned>(bake_jobs.size())));
+  const unsigned n_threads =
+      std::max(1u, std::min<unsigned>(opt.threads ? opt.threads : std::thread::hardware_concurrency(),
+                                      static_cast<unsigned>(bake_jobs.size())));
   {
     std::vector<std::jthread> pool;
     for (unsigned i = 1; i < n_threads; ++i) pool.emplace_back(worker);
@@ -412,9 +425,9 @@ Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
     table[t] = scene::TextureRecord{b.width, b.height, b.mip_count, static_cast<uint32_t>(opt.format)};
     colormap[t] = b.colormap;
     const TextureKey& k = textures[t];
-    sampling[t] = scene::make_sampling_flags(flat ? scene::TextureWrap::kClamp : to_scene(k.u), flat ? scene::TextureWrap::kClamp : to_scene(k.v),
-                                      k.texels.alpha_test,
-                                      static_cast<uint32_t>(std::lround(std::clamp(k.texels.cutoff, 0.0f, 1.0f) * 255.0f)));
+    sampling[t] = scene::make_sampling_flags(
+        flat ? scene::TextureWrap::kClamp : to_scene(k.u), flat ? scene::TextureWrap::kClamp : to_scene(k.v),
+        k.texels.alpha_test, static_cast<uint32_t>(std::lround(std::clamp(k.texels.cutoff, 0.0f, 1.0f) * 255.0f)));
     report.alpha_tested += k.texels.alpha_test;
     report.repeating += !flat && (k.u != Wrap::kClamp || k.v != Wrap::kClamp);
   }

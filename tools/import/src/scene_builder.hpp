@@ -21,7 +21,7 @@ namespace texstream::import {
 struct ImportOptions {
   std::filesystem::path out;
   std::array<double, 3> origin{0, 0, 0};  // map position (x east, y north, z up, metres) of the file's origin
-  std::optional<bool> y_up;                // overrides the model's own convention
+  std::optional<bool> y_up;               // overrides the model's own convention
   TexelFormat format = TexelFormat::kBc1;
   uint32_t max_extent = 8192;
   unsigned threads = 0;  // 0: every core
@@ -31,16 +31,16 @@ struct ImportOptions {
 
 struct ImportReport {
   uint64_t meshes = 0;
-  uint64_t shared_meshes = 0;   // placements drawn from another mesh's vertices (translation only)
-  uint64_t baked_meshes = 0;    // placements whose rotation or scale was applied to a copy of the vertices
+  uint64_t shared_meshes = 0;  // placements drawn from another mesh's vertices (translation only)
+  uint64_t baked_meshes = 0;   // placements whose rotation or scale was applied to a copy of the vertices
   uint64_t triangles = 0;
   uint64_t textures = 0;
-  uint64_t images_baked = 0;    // decoded and encoded (each once)
-  uint64_t flat_textures = 0;   // 1x1 base-colour textures (no image, or an image that failed)
+  uint64_t images_baked = 0;   // decoded and encoded (each once)
+  uint64_t flat_textures = 0;  // 1x1 base-colour textures (no image, or an image that failed)
   uint64_t alpha_tested = 0;
-  uint64_t repeating = 0;       // textures with a repeat or mirrored wrap
-  uint64_t resized = 0;         // images scaled to powers of two
-  uint64_t texture_bytes = 0;   // DDS bytes written
+  uint64_t repeating = 0;      // textures with a repeat or mirrored wrap
+  uint64_t resized = 0;        // images scaled to powers of two
+  uint64_t texture_bytes = 0;  // DDS bytes written
   double bake_seconds = 0;
   std::vector<std::string> skipped;  // what was not imported, with the reason
 };

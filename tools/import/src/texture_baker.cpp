@@ -44,9 +44,11 @@ Result<Level> decode(const SourceImage& image, const std::filesystem::path& scra
   const OIIO::ImageSpec spec = in->spec();
   const int nch = spec.nchannels;
   if (spec.width <= 0 || spec.height <= 0 || nch <= 0 || spec.depth > 1 ||
-      static_cast<uint64_t>(spec.width) > kMaxTextureExtent * 4ull || static_cast<uint64_t>(spec.height) > kMaxTextureExtent * 4ull)
+      static_cast<uint64_t>(spec.width) > kMaxTextureExtent * 4ull ||
+      static_cast<uint64_t>(spec.height) > kMaxTextureExtent * 4ull)
     return make_error(ErrorCode::kUnsupported, image.name + ": extent " + std::to_string(spec.width) + "x" +
-                                                   std::to_string(spec.height) + "x" + std::to_string(nch) + " channels");
+                                                   std::to_string(spec.height) + "x" + std::to_string(nch) +
+                                                   " channels");
   std::vector<float> px(size_t(spec.width) * spec.height * nch);
   const bool read = in->read_image(0, 0, 0, nch, OIIO::TypeDesc::FLOAT, px.data());
   const std::string why = read ? "" : in->geterror();
@@ -64,9 +66,12 @@ Result<Level> decode(const SourceImage& image, const std::filesystem::path& scra
   for (size_t i = 0; i < size_t(l.width) * l.height; ++i) {
     const float* p = &px[i * nch];
     float c[3];
-    if (nch <= 2) c[0] = c[1] = c[2] = p[0];
-    else for (int k = 0; k < 3; ++k) c[k] = p[k];
-    for (int k = 0; k < 3; ++k) l.rgba[i * 4 + k] = encoded ? srgb_to_linear(std::clamp(c[k], 0.0f, 1.0f)) : std::max(c[k], 0.0f);
+    if (nch <= 2)
+      c[0] = c[1] = c[2] = p[0];
+    else
+      for (int k = 0; k < 3; ++k) c[k] = p[k];
+    for (int k = 0; k < 3; ++k)
+      l.rgba[i * 4 + k] = encoded ? srgb_to_linear(std::clamp(c[k], 0.0f, 1.0f)) : std::max(c[k], 0.0f);
     l.rgba[i * 4 + 3] = alpha_channel >= 0 ? std::clamp(p[alpha_channel], 0.0f, 1.0f) : 1.0f;
   }
   return l;
@@ -78,7 +83,8 @@ Level resize(const Level& src, uint32_t w, uint32_t h) {
   std::vector<float> pre(src.rgba);
   for (size_t i = 0; i < pre.size(); i += 4)
     for (int k = 0; k < 3; ++k) pre[i + k] *= pre[i + 3];
-  OIIO::ImageBuf in(OIIO::ImageSpec(static_cast<int>(src.width), static_cast<int>(src.height), 4, OIIO::TypeDesc::FLOAT), pre.data());
+  OIIO::ImageBuf in(
+      OIIO::ImageSpec(static_cast<int>(src.width), static_cast<int>(src.height), 4, OIIO::TypeDesc::FLOAT), pre.data());
   OIIO::ROI roi(0, static_cast<int>(w), 0, static_cast<int>(h), 0, 1, 0, 4);
   OIIO::ImageBuf out = OIIO::ImageBufAlgo::resize(in, "", 0.0f, roi, 1);
   Level l;
@@ -135,8 +141,10 @@ void keep_coverage(Level& l, double target, float cutoff) {
     const float mid = 0.5f * (lo + hi);
     size_t n = 0;
     for (size_t i = 3; i < l.rgba.size(); i += 4) n += std::min(1.0f, l.rgba[i] * mid) >= cutoff;
-    if (static_cast<double>(n) / static_cast<double>(l.rgba.size() / 4) < target) lo = mid;
-    else hi = mid;
+    if (static_cast<double>(n) / static_cast<double>(l.rgba.size() / 4) < target)
+      lo = mid;
+    else
+      hi = mid;
   }
   for (size_t i = 3; i < l.rgba.size(); i += 4) l.rgba[i] = std::min(1.0f, l.rgba[i] * hi);
 }

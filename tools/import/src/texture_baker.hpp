@@ -16,16 +16,16 @@
 namespace texstream::import {
 
 struct BakeInput {
-  const SourceImage* image = nullptr;           // null: a 1x1 texture of `factor`
-  std::array<float, 4> factor{1, 1, 1, 1};       // linear RGBA multiplier (glTF baseColorFactor)
-  bool alpha_test = false;                      // alpha is kept (binary at `cutoff` for BC1), else forced opaque
+  const SourceImage* image = nullptr;       // null: a 1x1 texture of `factor`
+  std::array<float, 4> factor{1, 1, 1, 1};  // linear RGBA multiplier (glTF baseColorFactor)
+  bool alpha_test = false;                  // alpha is kept (binary at `cutoff` for BC1), else forced opaque
   float cutoff = 0.5f;
   TexelFormat format = TexelFormat::kBc1;
-  uint32_t max_extent = 8192;                   // larger images are scaled down to this
+  uint32_t max_extent = 8192;  // larger images are scaled down to this
 };
 
 struct BakedTexture {
-  uint32_t width = 0;   // after the resize to powers of two
+  uint32_t width = 0;  // after the resize to powers of two
   uint32_t height = 0;
   uint32_t mip_count = 0;
   uint32_t source_width = 0;
