@@ -1,5 +1,7 @@
 #include "texstream/stream/crash_quarantine.hpp"
 
+#include <algorithm>
+
 #include <signal.h>
 
 #include <spdlog/spdlog.h>
@@ -54,6 +56,20 @@ void CrashQuarantine::fail_refused(MipSink& sink) {
     sink.failed(TextureId(static_cast<uint32_t>(k >> 32)), MipLevel(static_cast<uint32_t>(k)),
                 CompletionStatus::kCorrupt);
   }
+}
+
+std::vector<uint32_t> CrashQuarantine::charged_ids() const {
+  std::vector<uint32_t> ids;
+  ids.reserve(charges_.size());
+  for (const auto& [texture, deaths] : charges_) ids.push_back(texture);
+  std::sort(ids.begin(), ids.end());
+  return ids;
+}
+
+std::vector<uint32_t> CrashQuarantine::quarantined_ids() const {
+  std::vector<uint32_t> ids(quarantined_.begin(), quarantined_.end());
+  std::sort(ids.begin(), ids.end());
+  return ids;
 }
 
 }  // namespace texstream::stream

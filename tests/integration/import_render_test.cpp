@@ -56,7 +56,7 @@ enum class Wrap { kClamp, kRepeat, kMirror };
 
 struct TestMaterial {
   std::string name;
-  int image = -1;                          // TestImage index, -1: base colour only
+  int image = -1;                            // TestImage index, -1: base colour only
   std::array<double, 4> colour{1, 1, 1, 1};  // baseColorFactor (linear)
   Wrap wrap = Wrap::kClamp;
   bool mask = false;
@@ -83,9 +83,9 @@ struct Placement {
 struct TestModel {
   std::vector<TestImage> images;
   std::vector<TestMaterial> materials;
-  std::vector<QuadMesh> meshes;          // a glTF mesh may hold several (see mesh_group)
-  std::vector<int> mesh_group;           // glTF mesh index of each QuadMesh (primitives of one mesh)
-  std::vector<Placement> placements;     // by QuadMesh index (every primitive of the group is placed)
+  std::vector<QuadMesh> meshes;       // a glTF mesh may hold several (see mesh_group)
+  std::vector<int> mesh_group;        // glTF mesh index of each QuadMesh (primitives of one mesh)
+  std::vector<Placement> placements;  // by QuadMesh index (every primitive of the group is placed)
 };
 
 double srgb_to_linear(double c) { return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4); }
@@ -113,7 +113,8 @@ TestModel make_model() {
   m.images.push_back({"tile.png", 64, 64, [](int x, int y) {
                         // Asymmetric so a wrong rotation or flip shows: a bright corner at the top left.
                         const bool corner = x < 20 && y < 20;
-                        return Rgba{static_cast<uint8_t>(corner ? 250 : 60 + x * 2), static_cast<uint8_t>(corner ? 240 : 40),
+                        return Rgba{static_cast<uint8_t>(corner ? 250 : 60 + x * 2),
+                                    static_cast<uint8_t>(corner ? 240 : 40),
                                     static_cast<uint8_t>(corner ? 20 : 80 + y * 2), 255};
                       }});
   m.images.push_back({"leaf.png", 64, 64, [](int x, int y) {
@@ -133,28 +134,28 @@ TestModel make_model() {
   };
   // Texel densities stay below 4.6 texels per metre at 100 m: one texel per pixel or less, level 0.
   m.meshes = {
-      {110, 62, -5.5, -3.1, 5.5, 3.1, 0},  // background, repeating 11 x 6.2 times
-      {20, 20, 0, 0, 2, 2, 1},             // mirrored twice each way
+      {110, 62, -5.5, -3.1, 5.5, 3.1, 0},     // background, repeating 11 x 6.2 times
+      {20, 20, 0, 0, 2, 2, 1},                // mirrored twice each way
       {25, 12, -0.25, -0.25, 1.25, 1.25, 2},  // clamped past its edges
-      {8, 8, 0, 0, 1, 1, 3},               // the tile, placed four times
-      {15, 15, 0, 0, 1, 1, 4},             // cut-out
-      {10, 10, 0, 0, 1, 1, 5},             // no texture
-      {6, 9, 0, 0, 1, 1, 3},               // one mesh, two materials: left half...
-      {6, 9, 0, 0, 1, 1, 6},               // ...and right half
+      {8, 8, 0, 0, 1, 1, 3},                  // the tile, placed four times
+      {15, 15, 0, 0, 1, 1, 4},                // cut-out
+      {10, 10, 0, 0, 1, 1, 5},                // no texture
+      {6, 9, 0, 0, 1, 1, 3},                  // one mesh, two materials: left half...
+      {6, 9, 0, 0, 1, 1, 6},                  // ...and right half
   };
   m.mesh_group = {0, 1, 2, 3, 4, 5, 6, 6};
   m.placements = {
       {0, 0, 0, -101},
       {1, -75, 30, -100},
       {2, -25, 30, -100},
-      {3, 20, 35, -100},                   // translation only: shares the tile's vertices
-      {3, 45, 35, -100},                   // again
-      {3, 70, 35, -100, 90, 1, true},      // rotated in a child node
-      {3, 85, -25, -100, 0, 1.5, true},    // scaled in a child node
-      {4, -60, -25, -99},                  // cut-out in front of the background
+      {3, 20, 35, -100},                 // translation only: shares the tile's vertices
+      {3, 45, 35, -100},                 // again
+      {3, 70, 35, -100, 90, 1, true},    // rotated in a child node
+      {3, 85, -25, -100, 0, 1.5, true},  // scaled in a child node
+      {4, -60, -25, -99},                // cut-out in front of the background
       {5, -15, -25, -100},
-      {6, 24, -25, -100},                  // the two-material mesh (its second primitive is offset below)
-      {7, 24, -25, -100},                  // (same node; the primitive lies 12 m to the right)
+      {6, 24, -25, -100},  // the two-material mesh (its second primitive is offset below)
+      {7, 24, -25, -100},  // (same node; the primitive lies 12 m to the right)
   };
   return m;
 }
@@ -170,10 +171,14 @@ void write_png(const fs::path& p, const TestImage& im) {
 
 // Quad vertices (counter-clockwise seen from +z) in the mesh's frame; `dx` moves the quad within its mesh.
 std::array<std::array<float, 5>, 4> quad_vertices(const QuadMesh& q, double dx) {
-  return {{{static_cast<float>(dx - q.hw), static_cast<float>(q.hh), 0, static_cast<float>(q.u0), static_cast<float>(q.v0)},
-           {static_cast<float>(dx - q.hw), static_cast<float>(-q.hh), 0, static_cast<float>(q.u0), static_cast<float>(q.v1)},
-           {static_cast<float>(dx + q.hw), static_cast<float>(-q.hh), 0, static_cast<float>(q.u1), static_cast<float>(q.v1)},
-           {static_cast<float>(dx + q.hw), static_cast<float>(q.hh), 0, static_cast<float>(q.u1), static_cast<float>(q.v0)}}};
+  return {
+      {{static_cast<float>(dx - q.hw), static_cast<float>(q.hh), 0, static_cast<float>(q.u0), static_cast<float>(q.v0)},
+       {static_cast<float>(dx - q.hw), static_cast<float>(-q.hh), 0, static_cast<float>(q.u0),
+        static_cast<float>(q.v1)},
+       {static_cast<float>(dx + q.hw), static_cast<float>(-q.hh), 0, static_cast<float>(q.u1),
+        static_cast<float>(q.v1)},
+       {static_cast<float>(dx + q.hw), static_cast<float>(q.hh), 0, static_cast<float>(q.u1),
+        static_cast<float>(q.v0)}}};
 }
 
 // The second primitive of a two-primitive mesh sits 12 m to the right in the mesh's own frame.
@@ -189,7 +194,8 @@ void write_gltf(const fs::path& dir, const TestModel& m) {
     views.push_back({{"buffer", 0}, {"byteOffset", bin.size()}, {"byteLength", bytes}});
     const auto* b = static_cast<const uint8_t*>(data);
     bin.insert(bin.end(), b, b + bytes);
-    accessors.push_back({{"bufferView", views.size() - 1}, {"componentType", component}, {"count", count}, {"type", type}});
+    accessors.push_back(
+        {{"bufferView", views.size() - 1}, {"componentType", component}, {"count", count}, {"type", type}});
     return static_cast<int>(accessors.size() - 1);
   };
   nlohmann::json meshes = nlohmann::json::array();
@@ -209,14 +215,14 @@ void write_gltf(const fs::path& dir, const TestModel& m) {
     accessors[p]["max"] = {hi[0], hi[1], hi[2]};
     const int t = add(uv, sizeof uv, 5126, 4, "VEC2");
     const int i = add(idx, sizeof idx, 5123, 6, "SCALAR");
-    nlohmann::json prim = {{"attributes", {{"POSITION", p}, {"TEXCOORD_0", t}}}, {"indices", i},
-                           {"material", m.meshes[q].material}};
+    nlohmann::json prim = {
+        {"attributes", {{"POSITION", p}, {"TEXCOORD_0", t}}}, {"indices", i}, {"material", m.meshes[q].material}};
     const size_t g = static_cast<size_t>(m.mesh_group[q]);
     if (meshes.size() <= g) meshes.push_back({{"primitives", nlohmann::json::array()}});
     meshes[g]["primitives"].push_back(prim);
   }
-  nlohmann::json images = nlohmann::json::array(), textures = nlohmann::json::array(), samplers = nlohmann::json::array(),
-                 materials = nlohmann::json::array();
+  nlohmann::json images = nlohmann::json::array(), textures = nlohmann::json::array(),
+                 samplers = nlohmann::json::array(), materials = nlohmann::json::array();
   for (const TestImage& im : m.images) {
     write_png(dir / im.file, im);
     images.push_back({{"uri", im.file}});
@@ -225,7 +231,8 @@ void write_gltf(const fs::path& dir, const TestModel& m) {
   for (const TestMaterial& mt : m.materials) {
     nlohmann::json pbr = {{"baseColorFactor", {mt.colour[0], mt.colour[1], mt.colour[2], mt.colour[3]}}};
     if (mt.image >= 0) {
-      samplers.push_back({{"wrapS", wrap_gl[static_cast<int>(mt.wrap)]}, {"wrapT", wrap_gl[static_cast<int>(mt.wrap)]}});
+      samplers.push_back(
+          {{"wrapS", wrap_gl[static_cast<int>(mt.wrap)]}, {"wrapT", wrap_gl[static_cast<int>(mt.wrap)]}});
       textures.push_back({{"source", mt.image}, {"sampler", samplers.size() - 1}});
       pbr["baseColorTexture"] = {{"index", textures.size() - 1}};
     }
@@ -295,8 +302,8 @@ void write_obj(const fs::path& dir, const TestModel& m) {
       obj << "v " << c * x - s * y + pl.tx << " " << s * x + c * y + pl.ty << " " << pl.tz << "\n";
     }
     for (const auto& p : v) obj << "vt " << p[3] << " " << 1.0 - double{p[4]} << "\n";
-    obj << "f " << base << "/" << base << " " << base + 1 << "/" << base + 1 << " " << base + 2 << "/" << base + 2 << " "
-        << base + 3 << "/" << base + 3 << "\n";
+    obj << "f " << base << "/" << base << " " << base + 1 << "/" << base + 1 << " " << base + 2 << "/" << base + 2
+        << " " << base + 3 << "/" << base + 3 << "\n";
     base += 4;
   }
 }
@@ -318,7 +325,8 @@ std::vector<Rgba> decode_bc1(const uint8_t* data, uint32_t w, uint32_t h) {
       const uint8_t* b = data + (size_t{by} * bw + bx) * 8;
       const uint16_t c0 = b[0] | b[1] << 8, c1 = b[2] | b[3] << 8;
       auto rgb = [](uint16_t c) {
-        return std::array<double, 3>{((c >> 11) & 31) * 255.0 / 31, ((c >> 5) & 63) * 255.0 / 63, (c & 31) * 255.0 / 31};
+        return std::array<double, 3>{((c >> 11) & 31) * 255.0 / 31, ((c >> 5) & 63) * 255.0 / 63,
+                                     (c & 31) * 255.0 / 31};
       };
       const auto e0 = rgb(c0), e1 = rgb(c1);
       std::array<std::array<double, 4>, 4> pal{};
@@ -407,7 +415,8 @@ class Reference {
   Hit at(double sx, double sy) const {
     std::vector<int> order(m_.placements.size());
     for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
-    std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return m_.placements[a].tz > m_.placements[b].tz; });
+    std::stable_sort(order.begin(), order.end(),
+                     [&](int a, int b) { return m_.placements[a].tz > m_.placements[b].tz; });
     for (int pi : order) {
       const Placement& pl = m_.placements[pi];
       const QuadMesh& q = m_.meshes[pl.mesh];
@@ -482,11 +491,12 @@ struct Compared {
 Compared render_and_compare(const fs::path& dir, const fs::path& scene_dir, const TestModel& m, std::string& log) {
   std::ofstream(scene_dir / "camera_path.txt") << camera_path_text();
   const fs::path out = dir / "out";
-  const std::string cmd = (kBin / "texstream-render").string() + " --set scene.dir=" + scene_dir.string() +
-                          " --set render.validation=true --set render.lockstep=true --set controller.mode=none" +
-                          " --set render.frames=60 --set render.write_every_frames=0 --set render.width_px=" +
-                          std::to_string(kWidth) + " --set render.height_px=" + std::to_string(kHeight) +
-                          " --set render.fov_y_deg=" + std::to_string(kFovY) + " --set render.output_dir=" + out.string();
+  const std::string cmd =
+      (kBin / "texstream-render").string() + " --set scene.dir=" + scene_dir.string() +
+      " --set render.validation=true --set render.lockstep=true --set controller.mode=none" +
+      " --set render.frames=60 --set render.write_every_frames=0 --set render.width_px=" + std::to_string(kWidth) +
+      " --set render.height_px=" + std::to_string(kHeight) + " --set render.fov_y_deg=" + std::to_string(kFovY) +
+      " --set render.output_dir=" + out.string();
   const int rc = texstream::test::run_logged(cmd, dir / "render.log");
   log = texstream::test::slurp(dir / "render.log");
   EXPECT_EQ(rc, 0) << log;
@@ -569,10 +579,10 @@ TEST(ImportRender, GltfWithHierarchyInstancingRepeatMirrorAndCutOutsDrawsAsTheRe
   write_gltf(dir / "model", m);
   if (HasFatalFailure()) return;
   const fs::path scene_dir = dir / "scene";
-  const int rc = texstream::test::run_logged(
-      (kBin / "texstream-import").string() + " " + (dir / "model" / "model.gltf").string() + " --out " +
-          scene_dir.string() + origin_args(),
-      dir / "import.log");
+  const int rc =
+      texstream::test::run_logged((kBin / "texstream-import").string() + " " + (dir / "model" / "model.gltf").string() +
+                                      " --out " + scene_dir.string() + origin_args(),
+                                  dir / "import.log");
   const std::string import_log = texstream::test::slurp(dir / "import.log");
   ASSERT_EQ(rc, 0) << import_log;
 
@@ -582,14 +592,15 @@ TEST(ImportRender, GltfWithHierarchyInstancingRepeatMirrorAndCutOutsDrawsAsTheRe
   EXPECT_EQ(meshes->meshes.size(), 11u);
   size_t sharing = 0;
   for (size_t i = 0; i < meshes->meshes.size(); ++i)
-    for (size_t j = 0; j < i; ++j)
-      sharing += meshes->meshes[i].first_vertex == meshes->meshes[j].first_vertex;
+    for (size_t j = 0; j < i; ++j) sharing += meshes->meshes[i].first_vertex == meshes->meshes[j].first_vertex;
   EXPECT_EQ(sharing, 1u) << "the second translated tile shares the first's vertices";
   const auto sampling = scene::map_sampling(scene_dir, scene::read_manifest(scene_dir)->texture_count);
   ASSERT_TRUE(sampling.ok());
   const auto ids = textures_of_placements(scene_dir, m);
-  const uint32_t repeat = scene::make_sampling_flags(scene::TextureWrap::kRepeat, scene::TextureWrap::kRepeat, false, 128);
-  const uint32_t mirror = scene::make_sampling_flags(scene::TextureWrap::kMirror, scene::TextureWrap::kMirror, false, 128);
+  const uint32_t repeat =
+      scene::make_sampling_flags(scene::TextureWrap::kRepeat, scene::TextureWrap::kRepeat, false, 128);
+  const uint32_t mirror =
+      scene::make_sampling_flags(scene::TextureWrap::kMirror, scene::TextureWrap::kMirror, false, 128);
   const uint32_t cutout = scene::make_sampling_flags(scene::TextureWrap::kClamp, scene::TextureWrap::kClamp, true, 128);
   EXPECT_EQ(sampling->flags[ids[0]], repeat);
   EXPECT_EQ(sampling->flags[ids[1]], mirror);
@@ -615,10 +626,10 @@ TEST(ImportRender, ObjWithSeveralMaterialsDrawsAsTheReference) {
   write_obj(dir / "model", m);
   if (HasFatalFailure()) return;
   const fs::path scene_dir = dir / "scene";
-  const int rc = texstream::test::run_logged((kBin / "texstream-import").string() + " " +
-                                                 (dir / "model" / "model.obj").string() + " --out " +
-                                                 scene_dir.string() + origin_args(),
-                                             dir / "import.log");
+  const int rc =
+      texstream::test::run_logged((kBin / "texstream-import").string() + " " + (dir / "model" / "model.obj").string() +
+                                      " --out " + scene_dir.string() + origin_args(),
+                                  dir / "import.log");
   ASSERT_EQ(rc, 0) << texstream::test::slurp(dir / "import.log");
   std::string log;
   // OBJ has no alpha mode: the leaf is drawn opaque (its transparent texels black) unless MTL says d/map_d.
@@ -635,10 +646,10 @@ TEST(ImportErrors, AMissingImageIsNamedAndItsMaterialDrawnInItsColour) {
   const fs::path dir = fresh_dir("missing");
   write_gltf(dir / "model", m);
   fs::remove(dir / "model" / "npot.png");
-  const int rc = texstream::test::run_logged((kBin / "texstream-import").string() + " " +
-                                                 (dir / "model" / "model.gltf").string() + " --out " +
-                                                 (dir / "scene").string(),
-                                             dir / "import.log");
+  const int rc =
+      texstream::test::run_logged((kBin / "texstream-import").string() + " " + (dir / "model" / "model.gltf").string() +
+                                      " --out " + (dir / "scene").string(),
+                                  dir / "import.log");
   const std::string log = texstream::test::slurp(dir / "import.log");
   ASSERT_EQ(rc, 0) << log;
   EXPECT_NE(log.find("npot.png: no such image file; drawn in its base colour"), std::string::npos) << log;
@@ -649,9 +660,10 @@ TEST(ImportErrors, ABrokenFileFailsNamingItAndLeavesNoScene) {
   const fs::path dir = fresh_dir("broken");
   std::ofstream(dir / "model" / "model.gltf") << "{\"asset\": {\"version\": \"2.0\"}, \"meshes\": [ {";
   const fs::path scene_dir = dir / "scene";
-  const int rc = texstream::test::run_logged((kBin / "texstream-import").string() + " " +
-                                                 (dir / "model" / "model.gltf").string() + " --out " + scene_dir.string(),
-                                             dir / "import.log");
+  const int rc =
+      texstream::test::run_logged((kBin / "texstream-import").string() + " " + (dir / "model" / "model.gltf").string() +
+                                      " --out " + scene_dir.string(),
+                                  dir / "import.log");
   const std::string log = texstream::test::slurp(dir / "import.log");
   EXPECT_NE(rc, 0);
   EXPECT_NE(log.find("model.gltf"), std::string::npos) << log;

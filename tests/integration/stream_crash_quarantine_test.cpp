@@ -146,6 +146,9 @@ TEST(StreamCrashQuarantine, ATextureLoadingDuringTwoCrashesIsQuarantinedAndTheOt
   EXPECT_EQ(st.crash_signal_deaths, 2u);
   EXPECT_EQ(st.server_deaths, 2u);
   EXPECT_EQ(st.textures_quarantined, 1u);
+  // What the run summary names (textures charged and quarantined).
+  EXPECT_EQ(client->quarantine().quarantined_ids(), std::vector<uint32_t>{2});
+  EXPECT_EQ(client->quarantine().charged_ids(), (std::vector<uint32_t>{1, 2})) << "the bystander was charged once";
 
   // Quarantined: another mip is refused without being sent and fails for good at the next poll; the server
   // lives on.

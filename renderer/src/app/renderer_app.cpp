@@ -245,6 +245,9 @@ Result<RunSummary> Renderer::finish() {
   s.texture_count = scene_.texture_records().size();
   s.streaming_cycles = cycles_;
   s.evictions = cache.stats().evictions;
+  s.textures_refused = TextureTally::of(cache.refused_textures());
+  s.textures_charged = TextureTally::of(client_->quarantine().charged_ids());
+  s.textures_quarantined = TextureTally::of(client_->quarantine().quarantined_ids());
   s.controller_mode = std::string(choice_name(controller_->params().mode));
   s.controller_rejected_frames = controller_->frames_rejected();
   s.startup_seconds = startup_seconds_;

@@ -436,6 +436,7 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
     if (!unplaceable_logged_[texture.value]) {
       spdlog::warn("texture cache: {}", prepared.error().message);
       unplaceable_logged_[texture.value] = true;
+      refused_.push_back(texture.value);
     }
     release_staging(alloc);
     events_.push_back({stream::TextureEvent::Kind::kFailed, texture, mip, CompletionStatus::kNotFound});
@@ -457,6 +458,7 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
       if (!unplaceable_logged_[texture.value]) {
         spdlog::warn("texture cache: {}", placed.error().message);
         unplaceable_logged_[texture.value] = true;
+        refused_.push_back(texture.value);
       }
       release_staging(alloc);
       // Not the file's fault, but it can never be shown: kNotFound marks it broken, so it is not asked again.

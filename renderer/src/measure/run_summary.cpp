@@ -40,6 +40,10 @@ std::string RunSummary::to_json() const {
   j["texture_count"] = texture_count;
   j["streaming_cycles"] = streaming_cycles;
   j["evictions"] = evictions;
+  for (const auto& [key, tally] :
+       {std::pair{"textures_refused", &textures_refused}, std::pair{"textures_charged", &textures_charged},
+        std::pair{"textures_quarantined", &textures_quarantined}})
+    j[key] = {{"count", tally->count}, {"first", tally->first}};
   j["wasted_bytes"] = wasted_bytes;
   // JSON has no NaN: nothing uploaded is null.
   j["wasted_bytes_frac"] = std::isfinite(wasted_bytes_frac) ? nlohmann::json(wasted_bytes_frac) : nlohmann::json();
@@ -55,6 +59,25 @@ std::string RunSummary::to_json() const {
   return j.dump(2);
 }
 
+TextureTally TextureTally::of(const std::vector<uint32_t>& ids) {
+  TextureTally t;
+  t.count = ids.size();
+  t.first.assign(ids.begin(), ids.begin() + static_cast<std::ptrdiff_t>(std::min(ids.size(), kFirst)));
+  return t;
+}
+
+namespace {
+// " (textures 3, 17, ...)" or nothing.
+std::string ids_text(const TextureTally& t) {
+  if (t.count == 0) return "";
+  std::string s = " (texture";
+  s += t.count > 1 ? "s " : " ";
+  for (size_t i = 0; i < t.first.size(); ++i) s += (i ? ", " : "") + std::to_string(t.first[i]);
+  if (t.count > t.first.size()) s += ", ...";
+  return s + ")";
+}
+}  // namespace
+
 std::string RunSummary::to_text() const {
   return fmt::format(
       "texstream-render summary\n"
@@ -67,12 +90,15 @@ std::string RunSummary::to_text() const {
       "  server restarts     {}\n"
       "  validation          {} errors, {} warnings\n"
       "  textures resident   {} of {} ({} evictions)\n"
+      "  textures given up   {} refused{}, {} charged with a server death{}, {} quarantined{}\n"
       "  controller          {}: avg s {:.3f} MB, avg b {:.2f}, avg t_w {:.2f} ms, {} load-time-limited frames\n"
       "  output              {}\n",
       device, frames, frame_latency.median_ms, frame_latency.avg_ms, frame_latency.max_ms, mips_streamed, mb_streamed,
       streaming_cycles, 100.0 * wasted_bytes_frac, 100.0 * server_ram_hit_rate, protocol_errors, server_restarts,
-      validation_errors, validation_warnings, textures_resident, texture_count, evictions, controller_mode,
-      avg_load_size_mb, avg_mip_bias, avg_weighted_latency_ms, load_time_limited_frames, output_dir.string());
+      validation_errors, validation_warnings, textures_resident, texture_count, evictions, textures_refused.count,
+      ids_text(textures_refused), textures_charged.count, ids_text(textures_charged), textures_quarantined.count,
+      ids_text(textures_quarantined), controller_mode, avg_load_size_mb, avg_mip_bias, avg_weighted_latency_ms,
+      load_time_limited_frames, output_dir.string());
 }
 
 Status RunSummary::write_json(const std::filesystem::path& file) const {

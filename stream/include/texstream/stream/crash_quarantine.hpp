@@ -46,6 +46,9 @@ class CrashQuarantine {
   void fail_refused(MipSink& sink);
 
   uint64_t textures_quarantined() const { return quarantined_.size(); }
+  // Texture ids charged with at least one death, and those quarantined, ascending.
+  std::vector<uint32_t> charged_ids() const;
+  std::vector<uint32_t> quarantined_ids() const;
 
  private:
   // Charges the textures in ServerBlock::loading with one death described by `how` ("died by signal 11").

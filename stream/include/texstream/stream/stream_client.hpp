@@ -136,6 +136,7 @@ class StreamClient {
   // Empty if a server is attached to the segment now; else why not, for an error that has to say it.
   std::string unattached_reason() const { return supervisor_->unattached_reason(); }
   bool quarantined(TextureId texture) const { return quarantine_.quarantined(texture); }
+  const CrashQuarantine& quarantine() const { return quarantine_; }
   const Segment& segment() const { return *segment_; }
   Segment& segment() { return *segment_; }
   int server_pid() const { return supervisor_->server_pid(); }

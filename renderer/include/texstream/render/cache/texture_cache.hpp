@@ -153,6 +153,8 @@ class TextureCache final : public stream::MipSink {
   };
   FitMark fit_mark() const;
   bool outgrown_since(const FitMark& mark) const;
+  // Textures the cache refused for good (another texel format, larger than a layer), in the order refused.
+  const std::vector<uint32_t>& refused_textures() const { return refused_; }
   uint32_t layers() const { return options_.layers; }
   CacheEviction eviction() const { return options_.eviction; }
   const SparseBindStats& bind_stats() const { return sparse_->stats(); }
@@ -244,6 +246,7 @@ class TextureCache final : public stream::MipSink {
   uint64_t prepared_serial_ = 0;
   std::deque<Copy> in_flight_;  // recorded, submission not yet complete
   std::vector<bool> unplaceable_logged_;
+  std::vector<uint32_t> refused_;    // the textures of unplaceable_logged_, in order
   std::vector<bool> entry_written_;  // prepare_texture wrote the texture's table entry
   MipFades fades_;
   TextureCacheStats stats_;

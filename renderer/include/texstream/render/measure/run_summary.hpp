@@ -17,6 +17,14 @@ struct LatencyStats {
   static LatencyStats from(std::vector<double> samples_ms);
 };
 
+// Textures a run gave up on, by kind: how many, and the first few ids (ascending or in the order met).
+struct TextureTally {
+  uint64_t count = 0;
+  std::vector<uint32_t> first;  // at most kFirst
+  static constexpr size_t kFirst = 5;
+  static TextureTally of(const std::vector<uint32_t>& ids);
+};
+
 struct RunSummary {
   std::string device;
   std::filesystem::path output_dir;
@@ -34,6 +42,9 @@ struct RunSummary {
   uint64_t texture_count = 0;
   uint64_t streaming_cycles = 0;
   uint64_t evictions = 0;
+  TextureTally textures_refused;      // the cache cannot hold them (another texel format, larger than a layer)
+  TextureTally textures_charged;      // loading while a server crashed or hung (crash_quarantine.hpp)
+  TextureTally textures_quarantined;  // charged kQuarantineAfterCrashes times: never asked again this run
   // Streamed mips never displayed while resident (MipUseLedger, docs/design/stream_metrics.md): their bytes,
   // and those ÷ every byte uploaded (render.preload_all included; NaN when nothing was uploaded).
   uint64_t wasted_bytes = 0;
