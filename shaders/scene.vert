@@ -2,13 +2,14 @@
 // Scene vertices: positions relative to their mesh origin, moved by the mesh's camera-relative offset
 // (computed in double on the CPU), so the view matrix has no translation and nothing jitters at map
 // coordinates. Each vertex carries its mesh's id (one indirect draw covers a run of meshes, SceneGpu::write_draws);
-// an instanced mesh, drawn alone, has its id in firstInstance instead.
+// the instances of one shared range are one instanced draw, each instance's mesh id in the instances buffer.
 #include "bindings.glsl"
 
 layout(location = 0) in vec3 in_position;
 layout(location = 1) in vec3 in_normal;
 layout(location = 2) in vec2 in_uv;
 layout(location = kVertexMeshLocation) in uint in_mesh;
+layout(set = 0, binding = kBindingInstances, std430) readonly buffer InstanceBlock { uint instance_mesh[]; };
 
 // The depth pre-pass and the main pass run this same shader in two pipelines; invariance makes their depths
 // bit-identical, so the main pass's EQUAL depth test keeps exactly the fragments that ended up visible.
@@ -20,9 +21,9 @@ layout(location = 2) flat out uint out_mesh;
 layout(location = 3) out vec4 out_clip;
 
 void main() {
-  // firstInstance = mesh id + 1 for a mesh drawn alone that instances another's vertices (whose in_mesh is
-  // the owner's); 0 for runs of meshes, whose vertices carry their own ids.
-  uint id = gl_InstanceIndex > 0 ? uint(gl_InstanceIndex) - 1u : in_mesh;
+  // Instanced draws start at firstInstance = 1 + their run's place in the instances buffer (their vertices carry
+  // the owner's id); runs of meshes draw at instance 0, their vertices carrying their own ids.
+  uint id = gl_InstanceIndex > 0 ? instance_mesh[uint(gl_InstanceIndex) - 1u] : in_mesh;
   MeshGpu mesh = meshes[id];
   vec3 relative = in_position + vec3(mesh.offset_x, mesh.offset_y, mesh.offset_z);
   gl_Position = pc.view_proj * vec4(relative, 1.0);

@@ -32,6 +32,7 @@ TS_CONST kBindingProbeSampler = 8; // sampler2DArray: the cache image through a 
 TS_CONST kBindingOwner = 9;        // usubpassInput: the depth pre-pass's id buffer (mesh id + 1, 0 = none)
 TS_CONST kBindingDrawn = 10;       // buffer uint[mesh_count]: the ids of the frame's drawn meshes (compact.comp)
 TS_CONST kBindingMetaImage = 11;   // uimage2D (rg32ui): the shading subpass's per-pixel metadata (meta_reduce.comp)
+TS_CONST kBindingInstances = 12;   // buffer uint[mesh_count]: the mesh ids of the instanced draws (scene.vert)
 // Vertex input: binding 0 holds scene::Vertex (locations 0-2), binding 1 the owning mesh's id per vertex
 // (location 3). A draw covers a run of meshes whose indices lie next to each other, so the mesh id comes with
 // each vertex, not with the draw (SceneGpu::write_draws).

@@ -1,8 +1,8 @@
 // SceneGpu's draw list on lavapipe (issue 5, few draws): meshes whose index ranges lie next to each other in
 // meshes.bin become one indirect draw, per pass's list and in mesh id order whatever order the
-// broad phase gave; indices are stored absolute and every vertex carries its mesh's id; a mesh instancing
-// another's ranges is drawn alone with its id in firstInstance; any other sharing of ranges is refused naming
-// the mesh, and leaves nothing resident.
+// broad phase gave; indices are stored absolute and every vertex carries its mesh's id; the meshes instancing
+// one range are one instanced draw per pass after the runs, their ids in the instances buffer; any other
+// sharing of ranges is refused naming the mesh, and leaves nothing resident.
 #include <gtest/gtest.h>
 
 #include <array>
@@ -80,6 +80,7 @@ std::unique_ptr<Gpu> make_gpu(const SceneData& s) {
 
 struct Draw {
   uint32_t first_index, index_count, first_instance;
+  uint32_t instance_count = 1;
   bool operator==(const Draw&) const = default;
 };
 
@@ -87,16 +88,21 @@ std::vector<Draw> draws_of(const SceneGpu& g, uint32_t count) {
   std::vector<Draw> out;
   const auto* d = g.indirect().as<VkDrawIndexedIndirectCommand>();
   for (uint32_t i = 0; i < count; ++i) {
-    EXPECT_EQ(d[i].instanceCount, 1u);
     EXPECT_EQ(d[i].vertexOffset, 0);
-    out.push_back({d[i].firstIndex, d[i].indexCount, d[i].firstInstance});
+    out.push_back({d[i].firstIndex, d[i].indexCount, d[i].firstInstance, d[i].instanceCount});
   }
   return out;
 }
 
+// The mesh ids an instanced draw's instances read (scene.vert): instances[firstInstance - 1 ...].
+std::vector<uint32_t> instance_ids(const SceneGpu& g, const Draw& d) {
+  const uint32_t* ids = g.instances().as<uint32_t>();
+  return {ids + d.first_instance - 1, ids + d.first_instance - 1 + d.instance_count};
+}
+
 }  // namespace
 
-TEST(SceneDraws, AdjacentMeshesMergePerPartInIndexOrderAndInstancesDrawAlone) {
+TEST(SceneDraws, AdjacentMeshesMergePerPartInIndexOrderAndInstancesDrawAfterTheRuns) {
   // Meshes 0-6 own their ranges; mesh 7 has mesh 4's. Meshes 2 and 5 are not in view.
   const SceneData s = triangles(7, {4});
   auto g = make_gpu(s);
@@ -111,14 +117,15 @@ TEST(SceneDraws, AdjacentMeshesMergePerPartInIndexOrderAndInstancesDrawAlone) {
   g->scene.write_draws(s, visible, {0, 0, 0}, ViewportSplit{4}, rec);
 
   // The main pass's list (6 7 0 1) in id order: 0 and 1 (indices 0-5) adjacent, one draw; 6 (18-20); 7
-  // (12-14), the owner, not adjacent to 20. The wide pass's list (3 4): 3 (9-11); 4 (12-14), the instance,
-  // alone with firstInstance 4 + 1, so 3 cannot extend into it.
+  // (12-14), the owner, not adjacent to 20. The wide pass's list (3 4): 3 (9-11); 4 (12-14), the instance, in
+  // an instanced draw of its own after the runs (firstInstance 1: the first entry of the instances buffer).
   const std::vector<Draw> want{{0, 6, 0},
                                {18, 3, 0},
                                {12, 3, 0},  // main
                                {9, 3, 0},
-                               {12, 3, 5}};  // wide
+                               {12, 3, 1, 1}};  // wide
   EXPECT_EQ(draws_of(g->scene, rec.draw_count), want);
+  EXPECT_EQ(instance_ids(g->scene, want[4]), std::vector<uint32_t>{4});
   EXPECT_EQ(rec.main_count, 3u);
   EXPECT_EQ(rec.wide_first, 3u);
   EXPECT_EQ(rec.draw_count, 5u);
@@ -142,6 +149,30 @@ TEST(SceneDraws, AdjacentMeshesMergePerPartInIndexOrderAndInstancesDrawAlone) {
   EXPECT_EQ((std::array<uint32_t, 3>{idx[12], idx[13], idx[14]}), (std::array<uint32_t, 3>{14, 13, 12}));
   EXPECT_EQ((std::array<uint32_t, 3>{vm[12], vm[13], vm[14]}), (std::array<uint32_t, 3>{7, 7, 7}));
   EXPECT_EQ((std::array<uint32_t, 3>{vm[18], vm[19], vm[20]}), (std::array<uint32_t, 3>{6, 6, 6}));
+  EXPECT_EQ(g->ctx->validation_errors(), 0u);
+}
+
+TEST(SceneDraws, TheInstancesOfOneRangeAreOneInstancedDrawPerPass) {
+  // Meshes 0-3 own their ranges; 4, 5, 6 instance mesh 1 and 7, 8 mesh 3.
+  const SceneData s = triangles(4, {1, 1, 1, 3, 3});
+  auto g = make_gpu(s);
+  ASSERT_NE(g, nullptr);
+  const std::vector<uint32_t> visible{8, 5, 1, 6, 7, 3, 4, 0};
+  ASSERT_TRUE(g->scene.make_resident(s, visible, nullptr).ok());
+  FrameRecording rec;
+  // Main pass: 8 5 1 6 7 3 (8 came first, so it owns mesh 3's ranges and 3 and 7 instance them; 5 owns mesh 1's,
+  // 1 and 6 instance them). Wide pass: 4 0.
+  g->scene.write_draws(s, visible, {0, 0, 0}, ViewportSplit{6}, rec);
+  const std::vector<Draw> d = draws_of(g->scene, rec.draw_count);
+  // Main: the owners 5 (3-5) and 8 (9-11) in id order are not adjacent: two runs; then (3-5) x {1, 6},
+  // (9-11) x {3, 7}. Wide: 0 (0-2), then (3-5) x {4}.
+  const std::vector<Draw> want{{3, 3, 0}, {9, 3, 0}, {3, 3, 1, 2}, {9, 3, 3, 2}, {0, 3, 0}, {3, 3, 5, 1}};
+  ASSERT_EQ(d, want);
+  EXPECT_EQ(instance_ids(g->scene, d[2]), (std::vector<uint32_t>{1, 6}));
+  EXPECT_EQ(instance_ids(g->scene, d[3]), (std::vector<uint32_t>{3, 7}));
+  EXPECT_EQ(instance_ids(g->scene, d[5]), (std::vector<uint32_t>{4}));
+  EXPECT_EQ(rec.main_count, 4u);
+  EXPECT_EQ(rec.draw_count, 6u);
   EXPECT_EQ(g->ctx->validation_errors(), 0u);
 }
 

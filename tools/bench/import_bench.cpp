@@ -23,8 +23,8 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
-#include <thread>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "bench_registry.hpp"
@@ -107,7 +107,12 @@ void write_model(const fs::path& dir, uint32_t n, uint32_t size) {
         {{"buffer", 0}, {"byteOffset", sizeof pos}, {"byteLength", sizeof uv}},
         {{"buffer", 0}, {"byteOffset", sizeof pos + sizeof uv}, {"byteLength", sizeof idx}}}},
       {"accessors",
-       {{{"bufferView", 0}, {"componentType", 5126}, {"count", 4}, {"type", "VEC3"}, {"min", {-5, 0, -5}}, {"max", {5, 0, 5}}},
+       {{{"bufferView", 0},
+         {"componentType", 5126},
+         {"count", 4},
+         {"type", "VEC3"},
+         {"min", {-5, 0, -5}},
+         {"max", {5, 0, 5}}},
         {{"bufferView", 1}, {"componentType", 5126}, {"count", 4}, {"type", "VEC2"}},
         {{"bufferView", 2}, {"componentType", 5123}, {"count", 6}, {"type", "SCALAR"}}}}};
   std::ofstream(dir / "model.gltf") << gltf.dump();
@@ -137,7 +142,8 @@ fs::path bin_dir() { return fs::canonical("/proc/self/exe").parent_path(); }
 
 int run_import_bench(const ImportBenchOptions& o) {
   const uint32_t size = o.size ? o.size : (o.quick ? 64 : 256);
-  const fs::path root = o.out.empty() ? fs::temp_directory_path() / ("texstream_bench_import_" + std::to_string(::getpid())) : o.out;
+  const fs::path root =
+      o.out.empty() ? fs::temp_directory_path() / ("texstream_bench_import_" + std::to_string(::getpid())) : o.out;
   fs::remove_all(root);
   fs::create_directories(root);
   std::printf("import bench: %u textures of %ux%u (PNG), folder %s\n", o.textures, size, size, root.c_str());
@@ -167,10 +173,21 @@ int run_import_bench(const ImportBenchOptions& o) {
   for (const auto& r : *table)
     disk_bytes += mip_chain_offset(static_cast<TexelFormat>(r.format), r.width, r.height, r.mip_count);
   const std::vector<std::string> render = {
-      (bin_dir() / "texstream-render").string(), "--set", "scene.dir=" + (root / "scene").string(),
-      "--set", "render.preload_all=true", "--set", "render.frames=2", "--set", "render.width_px=320",
-      "--set", "render.height_px=180", "--set", "cache.memory_bytes=" + std::to_string(std::max<uint64_t>(disk_bytes * 3, 64ull << 20)),
-      "--set", "render.output_dir=" + (root / "out").string()};
+      (bin_dir() / "texstream-render").string(),
+      "--set",
+      "scene.dir=" + (root / "scene").string(),
+      "--set",
+      "render.preload_all=true",
+      "--set",
+      "render.frames=2",
+      "--set",
+      "render.width_px=320",
+      "--set",
+      "render.height_px=180",
+      "--set",
+      "cache.memory_bytes=" + std::to_string(std::max<uint64_t>(disk_bytes * 3, 64ull << 20)),
+      "--set",
+      "render.output_dir=" + (root / "out").string()};
   const auto [rrc, rrss] = run_child(render, root / "render.log");
   (void)rrss;
   double uploaded = 0;
@@ -182,10 +199,11 @@ int run_import_bench(const ImportBenchOptions& o) {
     std::fprintf(stderr, "texstream-render failed (%d): see %s\n", rrc, (root / "render.log").c_str());
   }
   const double ratio = disk_bytes ? uploaded / static_cast<double>(disk_bytes) : std::nan("");
-  std::printf("  import %.2f s (%.0f textures/s on %u cores), peak memory %.0f MB; preload uploaded %.1f MB of %.1f MB "
-              "of mips on disk\n",
-              import_s, o.textures / import_s, std::thread::hardware_concurrency(), rss_kib / 1024.0, uploaded / 1e6,
-              disk_bytes / 1e6);
+  std::printf(
+      "  import %.2f s (%.0f textures/s on %u cores), peak memory %.0f MB; preload uploaded %.1f MB of %.1f MB "
+      "of mips on disk\n",
+      import_s, o.textures / import_s, std::thread::hardware_concurrency(), rss_kib / 1024.0, uploaded / 1e6,
+      disk_bytes / 1e6);
   if (rc == 0 && rrc == 0 && o.out.empty()) fs::remove_all(root);
   Summary()
       .add("textures", o.textures)
@@ -200,8 +218,10 @@ int run_import_bench(const ImportBenchOptions& o) {
 std::function<int()> define_import(CLI::App& app) {
   auto o = std::make_shared<ImportBenchOptions>();
   app.add_flag("--quick", o->quick, "10,000 textures of 64 x 64 (within 60 s here)");
-  app.add_option("--textures", o->textures, "Textures (each its own image and material)")->check(CLI::Range(1u, 1000000u));
-  app.add_option("--size", o->size, "Image side in pixels (default 64 with --quick, else 256)")->check(CLI::Range(1u, 16384u));
+  app.add_option("--textures", o->textures, "Textures (each its own image and material)")
+      ->check(CLI::Range(1u, 1000000u));
+  app.add_option("--size", o->size, "Image side in pixels (default 64 with --quick, else 256)")
+      ->check(CLI::Range(1u, 16384u));
   app.add_option("--out", o->out, "Keep the model, scene and logs here (default: a temp folder, removed)");
   app.add_option("--threads", o->threads, "texstream-import --threads (default: all cores)");
   return [o] { return run_import_bench(*o); };

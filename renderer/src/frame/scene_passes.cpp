@@ -149,7 +149,7 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
   TS_VK_TRY(vkCreateSampler(device, &si, nullptr, &probe_sampler));
   probe_sampler_ = UniqueSampler(device, probe_sampler);
 
-  const std::array<VkDescriptorSetLayoutBinding, 12> bindings{{
+  const std::array<VkDescriptorSetLayoutBinding, 13> bindings{{
       {gpu::kBindingFrame, VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1, kAllStages, nullptr},
       {gpu::kBindingMeshes, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
       {gpu::kBindingTextures, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
@@ -162,6 +162,7 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
       {gpu::kBindingOwner, VK_DESCRIPTOR_TYPE_INPUT_ATTACHMENT, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr},
       {gpu::kBindingDrawn, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr},
       {gpu::kBindingMetaImage, VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr},
+      {gpu::kBindingInstances, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_VERTEX_BIT, nullptr},
   }};
   VkDescriptorSetLayoutCreateInfo li{};
   li.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO;
@@ -172,7 +173,7 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
   set_layout_ = UniqueDescriptorSetLayout(device, set_layout);
 
   const std::array<VkDescriptorPoolSize, 5> sizes{{{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1},
-                                                   {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 7},
+                                                   {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 8},
                                                    {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2},
                                                    {VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1},
                                                    {VK_DESCRIPTOR_TYPE_INPUT_ATTACHMENT, 1}}};
@@ -191,7 +192,7 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
   ai.pSetLayouts = &set_layout;
   TS_VK_TRY(vkAllocateDescriptorSets(device, &ai, &set_));
 
-  constexpr size_t kBuffers = 8;
+  constexpr size_t kBuffers = 9;
   const std::array<VkDescriptorBufferInfo, kBuffers> buffers{{
       {scene_.frame_uniforms().handle(), 0, VK_WHOLE_SIZE},
       {scene_.meshes().handle(), 0, VK_WHOLE_SIZE},
@@ -201,6 +202,7 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
       {scene_.readback().handle(), 0, VK_WHOLE_SIZE},
       {probe_.handle(), 0, VK_WHOLE_SIZE},
       {scene_.drawn().handle(), 0, VK_WHOLE_SIZE},
+      {scene_.instances().handle(), 0, VK_WHOLE_SIZE},
   }};
   const VkDescriptorImageInfo image{sampler_.get(), cache.image_view(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
   const VkDescriptorImageInfo probe_image{probe_sampler_.get(), cache.image_view(),
@@ -211,8 +213,9 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
   const VkDescriptorImageInfo meta_texels{VK_NULL_HANDLE, meta_.view(), VK_IMAGE_LAYOUT_GENERAL};
   std::array<VkWriteDescriptorSet, kBuffers + 4> writes{};
   const std::array<uint32_t, kBuffers> buffer_bindings{
-      gpu::kBindingFrame,     gpu::kBindingMeshes,   gpu::kBindingTextures, gpu::kBindingMeshMeta,
-      gpu::kBindingCompacted, gpu::kBindingReadback, gpu::kBindingLodProbe, gpu::kBindingDrawn};
+      gpu::kBindingFrame,    gpu::kBindingMeshes,    gpu::kBindingTextures,
+      gpu::kBindingMeshMeta, gpu::kBindingCompacted, gpu::kBindingReadback,
+      gpu::kBindingLodProbe, gpu::kBindingDrawn,     gpu::kBindingInstances};
   for (size_t i = 0; i < kBuffers; ++i) {
     writes[i] = {};
     writes[i].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;

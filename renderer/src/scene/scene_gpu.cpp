@@ -122,6 +122,7 @@ Result<SceneGpu> SceneGpu::create(const VulkanContext& ctx, const SceneData& sce
   TS_TRY(make(g.indirect_, 2 * n * sizeof(VkDrawIndexedIndirectCommand), VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
               MemoryUse::kHostVisible));
   TS_TRY(make(g.drawn_, n * sizeof(uint32_t), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible));
+  TS_TRY(make(g.instances_, n * sizeof(uint32_t), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible));
   TS_TRY(make(g.mesh_meta_, n * sizeof(gpu::MeshMeta), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst, geometry));
   const VkDeviceSize list_bytes = sizeof(gpu::CompactListHeader) + n * sizeof(gpu::CompactEntry);
   TS_TRY(make(g.compacted_, list_bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | kDst, MemoryUse::kDeviceLocal));
@@ -346,8 +347,9 @@ void SceneGpu::write_draws(const SceneData& scene, std::span<const uint32_t> vis
     drawn_out[drawn_count++] = id;  // each mesh once, whichever passes draw it
   }
   // Two lists, one per pass, each sorted and merged on its own.
-  const auto main_list = write_list(scene, visible.first(main_end), 0);
-  const auto wide_list = write_list(scene, visible.subspan(main_end), main_list.second);
+  uint32_t instance_at = 0;
+  const auto main_list = write_list(scene, visible.first(main_end), 0, instance_at);
+  const auto wide_list = write_list(scene, visible.subspan(main_end), main_list.second, instance_at);
   rec.main_count = main_list.second;
   rec.wide_first = main_list.second;
   rec.draw_count = main_list.second + wide_list.second;
@@ -357,7 +359,7 @@ void SceneGpu::write_draws(const SceneData& scene, std::span<const uint32_t> vis
 }
 
 std::pair<uint32_t, uint32_t> SceneGpu::write_list(const SceneData& scene, std::span<const uint32_t> ids,
-                                                   uint32_t draw_at) {
+                                                   uint32_t draw_at, uint32_t& instance_at) {
   const auto records = scene.mesh_records();
   // Mesh id order: meshes.bin stores neighbouring meshes' indices next to each other, so neighbours in id
   // become one draw. The broad phase returns the meshes in quadtree order, which splits such runs (on the
@@ -380,23 +382,38 @@ std::pair<uint32_t, uint32_t> SceneGpu::write_list(const SceneData& scene, std::
   auto* draws = indirect_.as<VkDrawIndexedIndirectCommand>() + draw_at;
   uint32_t count = 0;
   bool open = false;  // whether draws[count - 1] is a run that the next adjacent mesh may extend
+  grouped_.clear();
   for (size_t w = lo; w <= hi && w < in_list_.size(); ++w) {
     for (uint64_t bits = std::exchange(in_list_[w], 0); bits != 0; bits &= bits - 1) {
       const auto id = static_cast<uint32_t>(w * 64 + static_cast<size_t>(std::countr_zero(bits)));
-      emit_draw(id, records[id].first_index, records[id].index_count, draws, count, open);
+      if (is_instanced(id)) {
+        grouped_.push_back({records[id].first_index, records[id].index_count, id});
+        continue;
+      }
+      emit_draw(records[id].first_index, records[id].index_count, draws, count, open);
     }
+  }
+  // Instances after the runs, one draw per shared range: their vertices carry the owner's id, so each instance
+  // takes its mesh id from the instances buffer (scene.vert: firstInstance - 1 + the instance's index). A city's
+  // trees or lamps, thousands of placements of a few meshes, become a few draws.
+  std::sort(grouped_.begin(), grouped_.end());
+  auto* inst = instances_.as<uint32_t>();
+  for (size_t i = 0; i < grouped_.size();) {
+    size_t j = i;
+    while (j < grouped_.size() && grouped_[j][0] == grouped_[i][0] && grouped_[j][1] == grouped_[i][1]) {
+      inst[instance_at + (j - i)] = grouped_[j][2];
+      ++j;
+    }
+    const auto k = static_cast<uint32_t>(j - i);
+    draws[count++] = VkDrawIndexedIndirectCommand{grouped_[i][1], k, grouped_[i][0], 0, instance_at + 1};
+    instance_at += k;
+    i = j;
   }
   return {meshes_listed, count};
 }
 
-void SceneGpu::emit_draw(uint32_t id, uint32_t first_index, uint32_t index_count, VkDrawIndexedIndirectCommand* draws,
+void SceneGpu::emit_draw(uint32_t first_index, uint32_t index_count, VkDrawIndexedIndirectCommand* draws,
                          uint32_t& count, bool& open) const {
-  if (is_instanced(id)) {
-    // Its vertices carry the owner's id: drawn alone, its own id + 1 in firstInstance (scene.vert).
-    draws[count++] = VkDrawIndexedIndirectCommand{index_count, 1, first_index, 0, id + 1};
-    open = false;
-    return;
-  }
   // Owned ranges never overlap (make_resident), so "ends where this one starts" is exactly "adjacent".
   if (open && draws[count - 1].firstIndex + draws[count - 1].indexCount == first_index) {
     draws[count - 1].indexCount += index_count;

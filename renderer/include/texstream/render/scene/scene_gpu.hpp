@@ -9,8 +9,10 @@
 // meshes' indices together) and merges such runs:
 // on the default city a view's ~650 meshes become ~70 draws. A CPU rasterizer (lavapipe) pays a fixed cost per
 // draw, large next to a mesh of a few triangles; a GPU's multi-draw indirect gains less but loses nothing. A
-// mesh that instances another's ranges (same vertices and indices, another origin) is drawn alone, its id in
-// firstInstance; any other sharing of ranges is refused by make_resident.
+// mesh that instances another's ranges (same vertices and indices, another origin) is drawn with every other
+// instance of those ranges in the pass: one draw of instanceCount = k whose instances read their mesh ids from
+// the instances buffer (firstInstance - 1 is where the draw's run starts); any other sharing of ranges is
+// refused by make_resident.
 //
 // Geometry follows the view, not the scene: the vertex and index buffers are allocated at the scene's size
 // (each mesh keeps its meshes.bin offsets) but a mesh's data reaches them only
@@ -95,18 +97,21 @@ class SceneGpu {
   const GpuBuffer& meshes() const { return meshes_; }
   const GpuBuffer& indirect() const { return indirect_; }
   const GpuBuffer& drawn() const { return drawn_; }
+  const GpuBuffer& instances() const { return instances_; }
   const GpuBuffer& mesh_meta() const { return mesh_meta_; }
   const GpuBuffer& compacted() const { return compacted_; }
   const GpuBuffer& readback() const { return readback_; }
   const GpuBuffer& frame_uniforms() const { return frame_uniforms_; }
 
  private:
-  // One pass's list: the meshes' merged draws from draw position `draw_at`; returns {meshes, draws}.
-  std::pair<uint32_t, uint32_t> write_list(const SceneData& scene, std::span<const uint32_t> ids, uint32_t draw_at);
+  // One pass's list: the meshes' merged draws from draw position `draw_at`, the instanced meshes' ids from
+  // instances_[instance_at] on (advanced past them); returns {meshes, draws}.
+  std::pair<uint32_t, uint32_t> write_list(const SceneData& scene, std::span<const uint32_t> ids, uint32_t draw_at,
+                                           uint32_t& instance_at);
   // Appends mesh `id` (indices [first_index, + index_count)) to draws[0, count): extends the open run if it
   // continues it, else starts a draw.
-  void emit_draw(uint32_t id, uint32_t first_index, uint32_t index_count, VkDrawIndexedIndirectCommand* draws,
-                 uint32_t& count, bool& open) const;
+  void emit_draw(uint32_t first_index, uint32_t index_count, VkDrawIndexedIndirectCommand* draws, uint32_t& count,
+                 bool& open) const;
 
   uint32_t mesh_count_ = 0;
   uint32_t compact_capacity_ = 0;  // entries of the compacted list (= mesh count: every mesh fits)
@@ -118,17 +123,20 @@ class SceneGpu {
   GpuBuffer indirect_;             // VkDrawIndexedIndirectCommand[2 * mesh_count], host-visible: the main pass's
                                    // list, then the wide pass's (at most one draw per mesh each)
   GpuBuffer drawn_;                // uint32[mesh_count], host-visible: the frame's drawn meshes (compact.comp)
+  GpuBuffer instances_;            // uint32[mesh_count], host-visible: the ids of the instanced draws' meshes,
+                                   // each draw's run of them from firstInstance - 1 (scene.vert)
   GpuBuffer mesh_meta_;            // gpu::MeshMeta[mesh_count], device-local, set on first use, reset by compact.comp
   GpuBuffer compacted_;            // gpu::CompactListHeader + gpu::CompactEntry[capacity], device-local
   GpuBuffer readback_;             // same layout, host-visible: header + used prefix, written only when a
                                    // streaming cycle starts (compact.comp, COMPACT_TO_HOST)
   GpuBuffer frame_uniforms_;       // gpu::FrameUniforms, host-visible
   const VulkanContext* ctx_ = nullptr;
-  bool in_place_ = false;                 // unified memory: make_resident writes the buffers, nothing is queued
-  std::vector<uint64_t> resident_;        // one bit per mesh
-  std::vector<uint32_t> queued_;          // checked, marked resident, not yet recorded
-  std::vector<uint32_t> fresh_;           // make_resident's scratch: the call's meshes not resident before
-  std::vector<uint64_t> in_list_;         // write_list's scratch: one bit per mesh, all clear between calls
+  bool in_place_ = false;                         // unified memory: make_resident writes the buffers, nothing is queued
+  std::vector<uint64_t> resident_;                // one bit per mesh
+  std::vector<uint32_t> queued_;                  // checked, marked resident, not yet recorded
+  std::vector<uint32_t> fresh_;                   // make_resident's scratch: the call's meshes not resident before
+  std::vector<uint64_t> in_list_;                 // write_list's scratch: one bit per mesh, all clear between calls
+  std::vector<std::array<uint32_t, 3>> grouped_;  // write_list's scratch: (first index, index count, id) of instances
   std::vector<uint64_t> instanced_;       // one bit per mesh: its ranges are another resident mesh's (instancing)
   std::vector<uint64_t> vertex_claimed_;  // one bit per vertex / index of meshes.bin: owned by a resident mesh
   std::vector<uint64_t> index_claimed_;
