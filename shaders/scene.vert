@@ -20,15 +20,19 @@ layout(location = 1) out vec3 out_normal;
 layout(location = 2) flat out uint out_mesh;
 layout(location = 3) out vec4 out_clip;
 
+// v turned by the unit quaternion q (x, y, z, w).
+vec3 rotate(vec4 q, vec3 v) { return v + 2.0 * cross(q.xyz, cross(q.xyz, v) + q.w * v); }
+
 void main() {
   // Instanced draws start at firstInstance = 1 + their run's place in the instances buffer (their vertices carry
   // the owner's id); runs of meshes draw at instance 0, their vertices carrying their own ids.
   uint id = gl_InstanceIndex > 0 ? instance_mesh[uint(gl_InstanceIndex) - 1u] : in_mesh;
   MeshGpu mesh = meshes[id];
-  vec3 relative = in_position + vec3(mesh.offset_x, mesh.offset_y, mesh.offset_z);
+  // transforms.bin: the instance's rotation and uniform scale, then its camera-relative origin.
+  vec3 relative = rotate(mesh.rotation, in_position * mesh.scale.x) + vec3(mesh.offset_x, mesh.offset_y, mesh.offset_z);
   gl_Position = pc.view_proj * vec4(relative, 1.0);
   out_uv = in_uv;
-  out_normal = in_normal;
+  out_normal = rotate(mesh.rotation, in_normal);
   out_mesh = id;
   out_clip = gl_Position;
 }

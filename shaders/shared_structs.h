@@ -118,6 +118,8 @@ struct MeshGpu {
   float offset_y;
   float offset_z;
   uint texture_id;
+  vec4 rotation;        // unit quaternion (x, y, z, w) turning the vertices (transforms.bin; identity without)
+  vec4 scale;           // x: uniform scale of the vertices before the rotation; y, z, w: 0
 };
 
 struct TextureGpu {

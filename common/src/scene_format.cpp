@@ -30,6 +30,7 @@ constexpr const char* kMeshFile = "meshes.bin";
 constexpr const char* kTextureFile = "textures.bin";
 constexpr const char* kColormapFile = "colormap.bin";
 constexpr const char* kSamplingFile = "sampling.bin";
+constexpr const char* kTransformFile = "transforms.bin";
 constexpr const char* kMeshIndexFile = "mesh_index.bin";
 
 // ---- small binary I/O helpers (stdio: one FILE*, large buffer, explicit error checks) ----
@@ -555,6 +556,49 @@ Result<MappedSampling> map_sampling(const fs::path& dir, uint64_t expected_count
   for (size_t i = 0; i < m.flags.size(); ++i)
     if (auto bad = sampling_flags_error(m.flags[i]))
       return make_error(ErrorCode::kCorrupt, m.file.what() + ": texture " + std::to_string(i) + ": " + bad);
+  return m;
+}
+
+Status write_transforms(const fs::path& dir, std::span<const MeshTransform> transforms) {
+  auto out = OutputFile::create(dir / kTransformFile);
+  if (!out) return out.error();
+  const TransformFileHeader h{kTransformMagic, kSceneFormatVersion, 0, transforms.size()};
+  out->write(&h, sizeof h);
+  write_array(*out, transforms);
+  return out->commit();
+}
+
+Result<MappedTransforms> map_transforms(const fs::path& dir, uint64_t expected_count) {
+  auto file = MappedFile::open(dir / kTransformFile);
+  if (!file) return file.error();
+  auto h = mapped_header<TransformFileHeader>(*file);
+  if (!h) return h.error();
+  const std::string& what = file->what();
+  TS_TRY(check_magic_version(*h, kTransformMagic, what));
+  if (h->mesh_count != expected_count)
+    return make_error(ErrorCode::kCorrupt, what + ": holds " + std::to_string(h->mesh_count) +
+                                               " transforms, the scene has " + std::to_string(expected_count) +
+                                               " meshes");
+  const uint64_t size = file->bytes().size();
+  if ((size - sizeof(TransformFileHeader)) / sizeof(MeshTransform) < h->mesh_count ||
+      sizeof(TransformFileHeader) + h->mesh_count * sizeof(MeshTransform) != size)
+    return make_error(ErrorCode::kCorrupt, what + ": size " + std::to_string(size) + " bytes does not hold " +
+                                               std::to_string(h->mesh_count) + " transforms exactly");
+  MappedTransforms m;
+  m.file = std::move(*file);
+  m.transforms = mapped_array<MeshTransform>(m.file, sizeof(TransformFileHeader), h->mesh_count);
+  for (size_t i = 0; i < m.transforms.size(); ++i) {
+    const MeshTransform& t = m.transforms[i];
+    double n = 0;
+    bool finite = std::isfinite(t.scale);
+    for (float q : t.rotation) {
+      finite = finite && std::isfinite(q);
+      n += double{q} * double{q};
+    }
+    if (!finite || std::abs(n - 1.0) > 1e-3 || !(t.scale > 0.0f))
+      return make_error(ErrorCode::kCorrupt,
+                        m.file.what() + ": mesh " + std::to_string(i) + ": not a unit rotation with a positive scale");
+  }
   return m;
 }
 

@@ -586,14 +586,24 @@ TEST(ImportRender, GltfWithHierarchyInstancingRepeatMirrorAndCutOutsDrawsAsTheRe
   const std::string import_log = texstream::test::slurp(dir / "import.log");
   ASSERT_EQ(rc, 0) << import_log;
 
-  // What the file says, as the scene holds it: 11 placements, two sharing the tile's vertices by translation.
+  // What the file says, as the scene holds it: 11 placements; the tile's four (moved, moved, turned, scaled)
+  // share one copy of its vertices, the turn and the scale in transforms.bin.
   const auto meshes = scene::read_meshes(scene_dir);
   ASSERT_TRUE(meshes.ok());
   EXPECT_EQ(meshes->meshes.size(), 11u);
-  size_t sharing = 0;
-  for (size_t i = 0; i < meshes->meshes.size(); ++i)
-    for (size_t j = 0; j < i; ++j) sharing += meshes->meshes[i].first_vertex == meshes->meshes[j].first_vertex;
-  EXPECT_EQ(sharing, 1u) << "the second translated tile shares the first's vertices";
+  std::map<uint32_t, int> users;
+  for (const auto& r : meshes->meshes) ++users[r.first_vertex];
+  EXPECT_EQ(std::count_if(users.begin(), users.end(), [](const auto& u) { return u.second == 4; }), 1)
+      << "the four tiles share one range";
+  const auto xf = scene::map_transforms(scene_dir, meshes->meshes.size());
+  ASSERT_TRUE(xf.ok());
+  int turned = 0, scaled = 0;
+  for (const auto& t : xf->transforms) {
+    turned += std::abs(t.rotation[3]) < 0.99f;
+    scaled += std::abs(t.scale - 1.5f) < 1e-6f;
+  }
+  EXPECT_EQ(turned, 1);
+  EXPECT_EQ(scaled, 1);
   const auto sampling = scene::map_sampling(scene_dir, scene::read_manifest(scene_dir)->texture_count);
   ASSERT_TRUE(sampling.ok());
   const auto ids = textures_of_placements(scene_dir, m);

@@ -14,8 +14,10 @@ TEST(SharedStructs, SizesAndOffsets) {
   EXPECT_EQ(offsetof(TextureGpu, placement), 0u);
   EXPECT_EQ(offsetof(TextureGpu, region), 16u);
   EXPECT_EQ(offsetof(TextureGpu, colour), 32u);
-  EXPECT_EQ(sizeof(MeshGpu), 16u);
+  EXPECT_EQ(sizeof(MeshGpu), 48u);
   EXPECT_EQ(offsetof(MeshGpu, texture_id), 12u);
+  EXPECT_EQ(offsetof(MeshGpu, rotation), 16u);
+  EXPECT_EQ(offsetof(MeshGpu, scale), 32u);
   EXPECT_EQ(sizeof(MeshMeta), 8u);
   EXPECT_EQ(sizeof(CompactEntry), 16u);
   EXPECT_EQ(sizeof(CompactListHeader), 16u);

@@ -6,6 +6,7 @@
 #include <cstdio>
 
 #include <OpenImageIO/imageio.h>
+#include <cmath>
 #include <cstring>
 #include <fstream>
 
@@ -275,6 +276,51 @@ TEST_F(SceneFormatTest, ColormapRoundTripsAndValidates) {
   auto missing = read_colormap(dir_ / "nope", 3);
   ASSERT_FALSE(missing.ok());
   EXPECT_EQ(missing.error().code, ErrorCode::kNotFound);
+}
+
+TEST_F(SceneFormatTest, SamplingRoundTripsAndRefusesUnknownModesNamingTheTexture) {
+  const std::vector<uint32_t> f = {make_sampling_flags(TextureWrap::kRepeat, TextureWrap::kMirror, false, 128),
+                                   make_sampling_flags(TextureWrap::kClamp, TextureWrap::kClamp, true, 100), 0};
+  ASSERT_TRUE(write_sampling(dir_, f).ok());
+  auto r = map_sampling(dir_, 3);
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  EXPECT_EQ(std::vector<uint32_t>(r->flags.begin(), r->flags.end()), f);
+  EXPECT_EQ(f[0] & 3u, 1u);
+  EXPECT_EQ((f[0] >> 2) & 3u, 2u);
+  EXPECT_EQ((f[1] >> 8) & 0xffu, 100u);
+  expect_error_names(map_sampling(dir_, 4).error(), "sampling.bin");
+  const std::vector<uint32_t> bad = {0, 3u << 2};  // wrap mode 3 along v
+  ASSERT_TRUE(write_sampling(dir_, bad).ok());
+  auto refused = map_sampling(dir_, 2);
+  ASSERT_FALSE(refused.ok());
+  expect_error_names(refused.error(), "texture 1");
+  EXPECT_EQ(map_sampling(dir_ / "nope", 2).error().code, ErrorCode::kNotFound);
+}
+
+TEST_F(SceneFormatTest, TransformsRoundTripAndRefuseWhatIsNotARotationWithAScale) {
+  const float h = std::sqrt(0.5f);
+  std::vector<MeshTransform> t = {kIdentityTransform, {{0, 0, h, h}, 2.5f}};
+  ASSERT_TRUE(write_transforms(dir_, t).ok());
+  auto r = map_transforms(dir_, 2);
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  ASSERT_EQ(r->transforms.size(), 2u);
+  EXPECT_EQ(r->transforms[1].scale, 2.5f);
+  EXPECT_EQ(r->transforms[1].rotation[3], h);
+  expect_error_names(map_transforms(dir_, 3).error(), "transforms.bin");
+  for (const MeshTransform& wrong : {MeshTransform{{0, 0, 0, 2}, 1}, MeshTransform{{0, 0, 0, 1}, 0},
+                                     MeshTransform{{0, 0, 0, 1}, -1}, MeshTransform{{0, 0, NAN, 1}, 1}}) {
+    t[1] = wrong;
+    ASSERT_TRUE(write_transforms(dir_, t).ok());
+    auto refused = map_transforms(dir_, 2);
+    ASSERT_FALSE(refused.ok());
+    expect_error_names(refused.error(), "mesh 1");
+  }
+  const auto full = read_all(dir_ / "transforms.bin");
+  for (size_t len = 0; len < full.size(); len += 7) {
+    write_all(dir_ / "transforms.bin", std::vector<char>(full.begin(), full.begin() + static_cast<long>(len)));
+    ASSERT_FALSE(map_transforms(dir_, 2).ok()) << len;
+  }
+  EXPECT_EQ(map_transforms(dir_ / "nope", 2).error().code, ErrorCode::kNotFound);
 }
 
 TEST(TexturePath, SplitsIdIntoFolderAndFile) {

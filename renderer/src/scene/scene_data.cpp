@@ -51,6 +51,11 @@ Result<SceneData> SceneData::load(const std::filesystem::path& dir) {
     s.sampling.assign(sampling->flags.begin(), sampling->flags.end());
   else if (sampling.error().code != ErrorCode::kNotFound)
     return sampling.error();
+  auto transforms = scene::map_transforms(dir, s.meshes.meshes.size());
+  if (transforms.ok())
+    s.transforms.assign(transforms->transforms.begin(), transforms->transforms.end());
+  else if (transforms.error().code != ErrorCode::kNotFound)
+    return transforms.error();
 
   TS_TRY(check_counts(s, s.meshes.meshes.size(), s.meshes.vertices.size(), s.textures.size()));
   for (size_t i = 0; i < s.meshes.meshes.size(); ++i)
@@ -79,6 +84,11 @@ Result<SceneData> SceneData::open(const std::filesystem::path& dir) {
     mapped->sampling = std::move(*sampling);
   else if (sampling.error().code != ErrorCode::kNotFound)
     return sampling.error();
+  auto transforms = scene::map_transforms(dir, mapped->meshes.meshes.size());
+  if (transforms.ok())
+    mapped->transforms = std::move(*transforms);
+  else if (transforms.error().code != ErrorCode::kNotFound)
+    return transforms.error();
   s.mapped_ = std::move(mapped);
   TS_TRY(check_counts(s, s.mesh_records().size(), s.vertices().size(), s.texture_records().size()));
   return s;
@@ -105,6 +115,12 @@ uint32_t SceneData::sampling_flags(uint32_t id) const {
   return id < flags.size() ? flags[id] : 0u;
 }
 
+scene::MeshTransform SceneData::mesh_transform(uint32_t id) const {
+  const std::span<const scene::MeshTransform> t =
+      mapped_ ? mapped_->transforms.transforms : std::span<const scene::MeshTransform>(transforms);
+  return id < t.size() ? t[id] : scene::kIdentityTransform;
+}
+
 bool SceneData::has_alpha_test() const {
   const std::span<const uint32_t> flags = mapped_ ? mapped_->sampling.flags : std::span<const uint32_t>(sampling);
   for (uint32_t f : flags)
@@ -128,6 +144,7 @@ Status SceneData::make_loaded() {
   textures.assign(texture_records().begin(), texture_records().end());
   colormap.assign(colours().begin(), colours().end());
   sampling.assign(mapped_->sampling.flags.begin(), mapped_->sampling.flags.end());
+  transforms.assign(mapped_->transforms.transforms.begin(), mapped_->transforms.transforms.end());
   mapped_.reset();
   return ok_status();
 }

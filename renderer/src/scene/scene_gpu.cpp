@@ -344,6 +344,9 @@ void SceneGpu::write_draws(const SceneData& scene, std::span<const uint32_t> vis
     g.offset_y = static_cast<float>(m.origin[1] - camera[1]);
     g.offset_z = static_cast<float>(m.origin[2] - camera[2]);
     g.texture_id = m.texture_id;
+    const scene::MeshTransform t = scene.mesh_transform(id);
+    g.rotation = {t.rotation[0], t.rotation[1], t.rotation[2], t.rotation[3]};
+    g.scale = {t.scale, 0, 0, 0};
     drawn_out[drawn_count++] = id;  // each mesh once, whichever passes draw it
   }
   // Two lists, one per pass, each sorted and merged on its own.

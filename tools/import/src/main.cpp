@@ -68,9 +68,11 @@ int main(int argc, char** argv) {
   ::getrusage(RUSAGE_SELF, &ru);
   std::printf("wrote %s\n", std::filesystem::absolute(opt.out).lexically_normal().c_str());
   std::printf(
-      "  meshes     %llu (%llu share another's vertices, %llu with rotation or scale applied), %llu triangles\n",
+      "  meshes     %llu (%llu share another's vertices, %llu of them turned or scaled by transforms.bin, %llu with "
+      "their own transformed copy), %llu triangles\n",
       static_cast<unsigned long long>(r.meshes), static_cast<unsigned long long>(r.shared_meshes),
-      static_cast<unsigned long long>(r.baked_meshes), static_cast<unsigned long long>(r.triangles));
+      static_cast<unsigned long long>(r.transformed_meshes), static_cast<unsigned long long>(r.baked_meshes),
+      static_cast<unsigned long long>(r.triangles));
   std::printf(
       "  textures   %llu (%llu images baked, %llu resized to powers of two, %llu flat base colours, %llu alpha-tested, "
       "%llu repeating), %.1f MB %s\n",

@@ -49,6 +49,78 @@ bool only_moves(const Mat4& m) {
   return m[3] == 0 && m[7] == 0 && m[11] == 0 && m[15] == 1;
 }
 
+// The rotation and uniform scale of a placement relative to its primitive's turned geometry: A = world3 ·
+// turn3^T (column-major 3x3 of `world` times the turn's inverse). Nothing when A is not a proper rotation
+// times one positive scale (a mirror, a shear, a non-uniform scale): such a placement gets its own vertices.
+std::optional<scene::MeshTransform> rotation_and_scale(const Mat4& world, const Mat4& turn) {
+  double a[9];  // a[c * 3 + r]
+  for (int c = 0; c < 3; ++c)
+    for (int r = 0; r < 3; ++r) {
+      double v = 0;
+      for (int k = 0; k < 3; ++k) v += world[k * 4 + r] * turn[k * 4 + c];  // turn^T(k, c) = turn(c, k)
+      a[c * 3 + r] = v;
+    }
+  const double det =
+      a[0] * (a[4] * a[8] - a[7] * a[5]) - a[3] * (a[1] * a[8] - a[7] * a[2]) + a[6] * (a[1] * a[5] - a[4] * a[2]);
+  if (!(det > 0)) return std::nullopt;
+  const double s = std::cbrt(det);
+  for (int c = 0; c < 3; ++c)
+    for (int d = c; d < 3; ++d) {
+      double dot = 0;
+      for (int r = 0; r < 3; ++r) dot += a[c * 3 + r] * a[d * 3 + r];
+      if (std::abs(dot - (c == d ? s * s : 0.0)) > 1e-5 * s * s) return std::nullopt;
+    }
+  double m[9];
+  for (int i = 0; i < 9; ++i) m[i] = a[i] / s;
+  // Quaternion from a rotation matrix (Shepperd's method); m(r, c) = m[c * 3 + r].
+  auto at = [&](int r, int c) { return m[c * 3 + r]; };
+  double q[4];
+  const double tr = at(0, 0) + at(1, 1) + at(2, 2);
+  if (tr > 0) {
+    const double k = 0.5 / std::sqrt(tr + 1.0);
+    q[3] = 0.25 / k;
+    q[0] = (at(2, 1) - at(1, 2)) * k;
+    q[1] = (at(0, 2) - at(2, 0)) * k;
+    q[2] = (at(1, 0) - at(0, 1)) * k;
+  } else if (at(0, 0) > at(1, 1) && at(0, 0) > at(2, 2)) {
+    const double k = 2.0 * std::sqrt(1.0 + at(0, 0) - at(1, 1) - at(2, 2));
+    q[3] = (at(2, 1) - at(1, 2)) / k;
+    q[0] = 0.25 * k;
+    q[1] = (at(0, 1) + at(1, 0)) / k;
+    q[2] = (at(0, 2) + at(2, 0)) / k;
+  } else if (at(1, 1) > at(2, 2)) {
+    const double k = 2.0 * std::sqrt(1.0 + at(1, 1) - at(0, 0) - at(2, 2));
+    q[3] = (at(0, 2) - at(2, 0)) / k;
+    q[0] = (at(0, 1) + at(1, 0)) / k;
+    q[1] = 0.25 * k;
+    q[2] = (at(1, 2) + at(2, 1)) / k;
+  } else {
+    const double k = 2.0 * std::sqrt(1.0 + at(2, 2) - at(0, 0) - at(1, 1));
+    q[3] = (at(1, 0) - at(0, 1)) / k;
+    q[0] = (at(0, 2) + at(2, 0)) / k;
+    q[1] = (at(1, 2) + at(2, 1)) / k;
+    q[2] = 0.25 * k;
+  }
+  const double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  scene::MeshTransform t{};
+  for (int i = 0; i < 4; ++i) t.rotation[i] = static_cast<float>(q[i] / n);
+  t.scale = static_cast<float>(s);
+  return t;
+}
+
+// v turned by the unit quaternion q and scaled: what scene.vert does.
+std::array<double, 3> apply(const scene::MeshTransform& t, const float v[3]) {
+  const double qx = t.rotation[0], qy = t.rotation[1], qz = t.rotation[2], qw = t.rotation[3];
+  const double sc = t.scale, x = double{v[0]} * sc, y = double{v[1]} * sc, z = double{v[2]} * sc;
+  // v + 2 q.xyz x (q.xyz x v + w v)
+  const double cx = qy * z - qz * y + qw * x, cy = qz * x - qx * z + qw * y, cz = qx * y - qy * x + qw * z;
+  return {x + 2 * (qy * cz - qz * cy), y + 2 * (qz * cx - qx * cz), z + 2 * (qx * cy - qy * cx)};
+}
+
+bool is_identity(const scene::MeshTransform& t) {
+  return t.rotation[0] == 0 && t.rotation[1] == 0 && t.rotation[2] == 0 && t.rotation[3] == 1 && t.scale == 1;
+}
+
 // Inverse transpose of the upper 3x3 (normals), row r column c at [c * 3 + r]. Rows of m: (a b c), (d e f), (g h i).
 std::array<double, 9> normal_matrix(const Mat4& m) {
   const double a = m[0], b = m[4], c = m[8], d = m[1], e = m[5], f = m[9], g = m[2], h = m[6], i = m[10];
@@ -248,6 +320,7 @@ Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
   // ---- meshes ----
   const Mat4 turn = up_turn(opt.y_up.value_or(model.y_up));
   scene::MeshData meshes;
+  std::vector<scene::MeshTransform> transforms;  // one per mesh; written only when one is not the identity
   struct Shared {
     uint32_t first_vertex, vertex_count, first_index, index_count;
     float lo[3], hi[3];
@@ -287,8 +360,13 @@ Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
     const Mat4 world = multiply(turn, inst.transform);
     scene::MeshRecord r{};
     r.texture_id = texture_for(p.material);
-    if (only_moves(inst.transform)) {
-      // Shares the primitive's geometry, turned once into the scene's frame.
+    // A placement that turns and scales its primitive uniformly shares the primitive's vertices (turned once
+    // into the scene's frame) and carries its rotation and scale in transforms.bin; any other is baked.
+    scene::MeshTransform xf = scene::kIdentityTransform;
+    const std::optional<scene::MeshTransform> shares =
+        only_moves(inst.transform) ? std::optional(scene::kIdentityTransform) : rotation_and_scale(world, turn);
+    if (shares) {
+      xf = *shares;
       if (!shared[inst.primitive]) {
         Mat4 t = turn;
         const Placed g = place(p, t);
@@ -310,17 +388,31 @@ Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
                                         {r.bounds_min[0], r.bounds_min[1], r.bounds_min[2]},
                                         {r.bounds_max[0], r.bounds_max[1], r.bounds_max[2]}};
       } else {
-        const Shared& s = *shared[inst.primitive];
-        r.first_vertex = s.first_vertex;
-        r.vertex_count = s.vertex_count;
-        r.first_index = s.first_index;
-        r.index_count = s.index_count;
-        for (int a = 0; a < 3; ++a) {
-          r.bounds_min[a] = s.lo[a];
-          r.bounds_max[a] = s.hi[a];
-        }
         ++report.shared_meshes;
       }
+      const Shared& sh = *shared[inst.primitive];
+      r.first_vertex = sh.first_vertex;
+      r.vertex_count = sh.vertex_count;
+      r.first_index = sh.first_index;
+      r.index_count = sh.index_count;
+      // The box of the turned, scaled geometry: its eight corners' box (contains every vertex).
+      float blo[3] = {std::numeric_limits<float>::max(), std::numeric_limits<float>::max(),
+                      std::numeric_limits<float>::max()};
+      float bhi[3] = {-blo[0], -blo[1], -blo[2]};
+      for (int c = 0; c < 8; ++c) {
+        const float corner[3] = {(c & 1) ? sh.hi[0] : sh.lo[0], (c & 2) ? sh.hi[1] : sh.lo[1],
+                                 (c & 4) ? sh.hi[2] : sh.lo[2]};
+        const auto w = apply(xf, corner);
+        for (int a = 0; a < 3; ++a) {
+          blo[a] = std::min(blo[a], static_cast<float>(std::nextafter(w[a], -1e300)));
+          bhi[a] = std::max(bhi[a], static_cast<float>(std::nextafter(w[a], 1e300)));
+        }
+      }
+      for (int a = 0; a < 3; ++a) {
+        r.bounds_min[a] = is_identity(xf) ? sh.lo[a] : blo[a];
+        r.bounds_max[a] = is_identity(xf) ? sh.hi[a] : bhi[a];
+      }
+      if (!is_identity(xf)) ++report.transformed_meshes;
       for (int a = 0; a < 3; ++a) r.origin[a] = world[12 + a] + opt.origin[a];
     } else {
       Placed g = place(p, world);
@@ -333,6 +425,7 @@ Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
       for (int a = 0; a < 3; ++a) r.origin[a] = g.origin[a] + opt.origin[a];
       ++report.baked_meshes;
     }
+    transforms.push_back(xf);
     for (int a = 0; a < 3; ++a) {
       lo[a] = std::min(lo[a], r.origin[a] + double{r.bounds_min[a]});
       hi[a] = std::max(hi[a], r.origin[a] + double{r.bounds_max[a]});
@@ -438,6 +531,8 @@ Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
   TS_TRY(scene::write_texture_table(tmp, table));
   TS_TRY(scene::write_colormap(tmp, colormap));
   TS_TRY(scene::write_sampling(tmp, sampling));
+  if (std::any_of(transforms.begin(), transforms.end(), [](const auto& t) { return !is_identity(t); }))
+    TS_TRY(scene::write_transforms(tmp, transforms));
   scene::Manifest m;
   m.name = fs::path(model.source).stem().string();
   m.mesh_count = meshes.meshes.size();

@@ -1,7 +1,8 @@
 #pragma once
 // A read model → a scene folder (common/scene_format.hpp): one mesh per (primitive, placement); a placement that
-// only moves its primitive shares the primitive's vertices and indices with every other such placement (the
-// scene format's instancing), one that rotates or scales it gets its own transformed copy; one texture per
+// moves, turns and scales its primitive uniformly shares the primitive's vertices and indices with every other
+// such placement (the scene format's instancing, its rotation and scale in transforms.bin), one that mirrors,
+// shears or scales it unevenly gets its own transformed copy; one texture per
 // (image, base colour, wrap modes, alpha mode), each image decoded once; written to a temporary folder beside
 // the destination and renamed into place, so a failed import leaves no half-written scene.
 #include <array>
@@ -31,8 +32,9 @@ struct ImportOptions {
 
 struct ImportReport {
   uint64_t meshes = 0;
-  uint64_t shared_meshes = 0;  // placements drawn from another mesh's vertices (translation only)
-  uint64_t baked_meshes = 0;   // placements whose rotation or scale was applied to a copy of the vertices
+  uint64_t shared_meshes = 0;       // placements drawn from another mesh's vertices
+  uint64_t transformed_meshes = 0;  // placements with a rotation or uniform scale in transforms.bin
+  uint64_t baked_meshes = 0;        // placements whose mirror, shear or non-uniform scale was applied to a copy
   uint64_t triangles = 0;
   uint64_t textures = 0;
   uint64_t images_baked = 0;   // decoded and encoded (each once)

@@ -9,6 +9,9 @@
 //   <scene>/sampling.bin       optional: ColormapFileHeader (magic TSSAMP01), uint32 flags[texture_count], how
 //                              each texture is sampled (wrap modes, alpha test; sampling_flags below). Absent:
 //                              every texture clamped and opaque (what texstream-gen scenes are)
+//   <scene>/transforms.bin     optional: TransformFileHeader, MeshTransform[mesh_count]: a rotation and uniform
+//                              scale per mesh, applied to its vertices before its origin (instances of one
+//                              geometry placed at any orientation). Absent: every mesh unrotated, scale 1
 //   <scene>/camera_path.txt    the default fly-through (see camera_path.hpp)
 //   <scene>/mesh_index.bin     optional: the broad phase's quadtree over meshes.bin (mesh_index.hpp)
 //   <scene>/textures/XXX/YYYYYYYY.dds   one DDS per texture, all mips finest first, no DX10 extension:
@@ -29,10 +32,11 @@
 namespace texstream::scene {
 
 inline constexpr uint32_t kSceneFormatVersion = 1;
-inline constexpr uint64_t kMeshMagic = 0x31304853454d5354ull;      // "TSMESH01"
-inline constexpr uint64_t kTextureMagic = 0x3130584554535354ull;   // "TSSTEX01"
-inline constexpr uint64_t kColormapMagic = 0x31304d4c4f435354ull;  // "TSCOLM01"
-inline constexpr uint64_t kSamplingMagic = 0x3130504d41535354ull;  // "TSSAMP01"
+inline constexpr uint64_t kMeshMagic = 0x31304853454d5354ull;       // "TSMESH01"
+inline constexpr uint64_t kTextureMagic = 0x3130584554535354ull;    // "TSSTEX01"
+inline constexpr uint64_t kColormapMagic = 0x31304d4c4f435354ull;   // "TSCOLM01"
+inline constexpr uint64_t kSamplingMagic = 0x3130504d41535354ull;   // "TSSAMP01"
+inline constexpr uint64_t kTransformMagic = 0x31304d5246585354ull;  // "TSXFRM01"
 
 struct MeshFileHeader {
   uint64_t magic;
@@ -60,6 +64,25 @@ struct MeshRecord {
   uint32_t reserved;
 };
 static_assert(sizeof(MeshRecord) == 72);
+
+// transforms.bin: per mesh, how its vertices are turned and scaled before they are placed at its origin:
+// position = origin + scale * rotate(rotation, vertex), normal = rotate(rotation, normal). The mesh record's
+// bounds are those of the turned, scaled vertices (relative to the origin), so nothing but the vertex shader
+// needs the transform. texstream-import writes it for placements that share their geometry.
+struct TransformFileHeader {
+  uint64_t magic;
+  uint32_t version;
+  uint32_t reserved;
+  uint64_t mesh_count;
+};
+static_assert(sizeof(TransformFileHeader) == 24);
+
+struct MeshTransform {
+  float rotation[4];  // unit quaternion x, y, z, w
+  float scale;        // uniform, > 0
+};
+static_assert(sizeof(MeshTransform) == 20);
+inline constexpr MeshTransform kIdentityTransform{{0, 0, 0, 1}, 1};
 
 struct Vertex {
   float pos[3];  // metres, relative to the mesh origin
@@ -201,6 +224,15 @@ struct MappedSampling {
 };
 Result<MappedSampling> map_sampling(const std::filesystem::path& dir, uint64_t expected_count);
 Status write_sampling(const std::filesystem::path& dir, std::span<const uint32_t> flags);
+
+// transforms.bin, mapped, every entry checked (finite, a unit quaternion within 1e-3, scale > 0); kNotFound when
+// the scene has none.
+struct MappedTransforms {
+  MappedFile file;
+  std::span<const MeshTransform> transforms;
+};
+Result<MappedTransforms> map_transforms(const std::filesystem::path& dir, uint64_t expected_count);
+Status write_transforms(const std::filesystem::path& dir, std::span<const MeshTransform> transforms);
 Status write_colormap(const std::filesystem::path& dir, std::span<const uint32_t> rgba);
 
 // <dir>/textures/<id>>12 as 3 hex digits>/<id as 8 hex digits>.dds

@@ -28,6 +28,7 @@ struct SceneData {
   std::vector<scene::TextureRecord> textures;
   std::vector<uint32_t> colormap;  // RGBA8 sRGB, one per texture
   std::vector<uint32_t> sampling;  // sampling.bin's flags, one per texture, or empty: all clamped and opaque
+  std::vector<scene::MeshTransform> transforms;  // transforms.bin, one per mesh, or empty: all identity
 
   // Reads and cross-checks everything; errors name the file and the record.
   static Result<SceneData> load(const std::filesystem::path& dir);
@@ -42,6 +43,8 @@ struct SceneData {
   std::span<const uint32_t> colours() const;
   // How texture `id` is sampled (scene::sampling_flags: wrap modes, alpha test); 0 without sampling.bin.
   uint32_t sampling_flags(uint32_t id) const;
+  // Mesh `id`'s rotation and scale (transforms.bin); the identity without it.
+  scene::MeshTransform mesh_transform(uint32_t id) const;
   // Whether any texture is alpha-tested (the depth pre-pass then samples the cache).
   bool has_alpha_test() const;
 
@@ -61,7 +64,8 @@ struct SceneData {
     scene::MappedMeshes meshes;
     scene::MappedTextureTable textures;
     scene::MappedColormap colormap;
-    scene::MappedSampling sampling;  // empty flags when the scene has no sampling.bin
+    scene::MappedSampling sampling;      // empty flags when the scene has no sampling.bin
+    scene::MappedTransforms transforms;  // empty when the scene has no transforms.bin
   };
   std::shared_ptr<const Mapped> mapped_;  // shared: a SceneData is copied into ViewRenderer by value
 };
