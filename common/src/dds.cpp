@@ -19,9 +19,11 @@ constexpr uint32_t kDdsCapsComplex = 0x8u, kDdsCapsTexture = 0x1000u, kDdsCapsMi
 constexpr uint32_t kCaps2Cubemap = 0x200u;
 constexpr uint32_t kCaps2Volume = 0x200000u;
 constexpr uint32_t kFourCCDxt1 = 0x31545844u;  // "DXT1"
+constexpr uint32_t kFourCCDxt5 = 0x35545844u;  // "DXT5"
 constexpr uint32_t kFourCCDx10 = 0x30315844u;  // "DX10"
 constexpr uint32_t kDxgiR8G8B8A8Unorm = 28, kDxgiR8G8B8A8UnormSrgb = 29;
 constexpr uint32_t kDxgiBc1Unorm = 71, kDxgiBc1UnormSrgb = 72;
+constexpr uint32_t kDxgiBc3Unorm = 77, kDxgiBc3UnormSrgb = 78;
 constexpr uint32_t kDx10Texture2D = 3;
 
 uint32_t word(std::span<const std::byte> b, size_t offset) {
@@ -54,11 +56,11 @@ std::array<std::byte, kDdsHeaderBytes> make_dds_header(TexelFormat format, uint3
   put(h, kDepth, 0);
   put(h, kMipMapCount, mip_count);
   put(h, kPfSize, 32);
-  if (format == TexelFormat::kBc1) {
+  if (is_block_compressed(format)) {
     flags |= kDdsdLinearSize;
     put(h, kPitchOrLinearSize, static_cast<uint32_t>(mip_bytes(format, width, height, 0)));
     put(h, kPfFlags, kDdpfFourCC);
-    put(h, kPfFourCC, kFourCCDxt1);
+    put(h, kPfFourCC, format == TexelFormat::kBc1 ? kFourCCDxt1 : kFourCCDxt5);
   } else {
     TS_ASSERT(format == TexelFormat::kRgba8, "DDS format %u", static_cast<uint32_t>(format));
     flags |= kDdsdPitch;
@@ -75,15 +77,17 @@ std::array<std::byte, kDdsHeaderBytes> make_dds_header(TexelFormat format, uint3
   return h;
 }
 
-uint64_t DdsLayout::mip_offset(uint32_t level) const {
-  const TexelFormat f = encoding == DdsEncoding::kBc1 ? TexelFormat::kBc1 : TexelFormat::kRgba8;
-  return data_offset + mip_chain_offset(f, width, height, level);
+TexelFormat DdsLayout::texel_format() const {
+  return encoding == DdsEncoding::kBc1   ? TexelFormat::kBc1
+         : encoding == DdsEncoding::kBc3 ? TexelFormat::kBc3
+                                         : TexelFormat::kRgba8;
 }
 
-uint64_t DdsLayout::mip_size(uint32_t level) const {
-  const TexelFormat f = encoding == DdsEncoding::kBc1 ? TexelFormat::kBc1 : TexelFormat::kRgba8;
-  return mip_bytes(f, width, height, level);
+uint64_t DdsLayout::mip_offset(uint32_t level) const {
+  return data_offset + mip_chain_offset(texel_format(), width, height, level);
 }
+
+uint64_t DdsLayout::mip_size(uint32_t level) const { return mip_bytes(texel_format(), width, height, level); }
 
 Result<DdsLayout> parse_dds_layout(std::span<const std::byte> bytes, const std::string& what) {
   if (bytes.size() < kDdsHeaderBytes) {
@@ -126,10 +130,13 @@ Result<DdsLayout> parse_dds_layout(std::span<const std::byte> bytes, const std::
     l.data_offset = kDdsMaxHeaderBytes;
     const uint32_t dxgi = word(bytes, kDx10Format);
     l.encoding = dxgi == kDxgiBc1Unorm || dxgi == kDxgiBc1UnormSrgb             ? DdsEncoding::kBc1
+                 : dxgi == kDxgiBc3Unorm || dxgi == kDxgiBc3UnormSrgb           ? DdsEncoding::kBc3
                  : dxgi == kDxgiR8G8B8A8Unorm || dxgi == kDxgiR8G8B8A8UnormSrgb ? DdsEncoding::kRgba8
                                                                                 : DdsEncoding::kOther;
   } else if ((pf_flags & kDdpfFourCC) != 0) {
-    l.encoding = fourcc == kFourCCDxt1 ? DdsEncoding::kBc1 : DdsEncoding::kOther;
+    l.encoding = fourcc == kFourCCDxt1   ? DdsEncoding::kBc1
+                 : fourcc == kFourCCDxt5 ? DdsEncoding::kBc3
+                                         : DdsEncoding::kOther;
   } else if ((pf_flags & kDdpfRgb) != 0 && word(bytes, kPfBitCount) == 32 && word(bytes, kPfRMask) == 0x000000ffu &&
              word(bytes, kPfGMask) == 0x0000ff00u && word(bytes, kPfBMask) == 0x00ff0000u &&
              word(bytes, kPfAMask) == 0xff000000u) {

@@ -315,14 +315,28 @@ struct Texels {
   std::vector<std::array<double, 4>> linear;  // premultiplied as stored (rgb linear, a)
 };
 
-// BC1 as the Vulkan spec defines it (sRGB endpoints decoded after interpolation is what the GPU does; the
+// BC1 and BC3 as the Vulkan spec defines them (sRGB endpoints decoded after interpolation is what the GPU does; the
 // difference against decoding first is below a quarter of a level on these textures).
-std::vector<Rgba> decode_bc1(const uint8_t* data, uint32_t w, uint32_t h) {
+// BC3: an alpha block (two 8-bit endpoints, 3-bit indices: 8 levels when a0 > a1, else 6 and 0 and 255), then
+// a colour block decoded as BC1 always in 4-colour mode.
+std::vector<Rgba> decode_bc(const uint8_t* data, uint32_t w, uint32_t h, bool bc3) {
   std::vector<Rgba> out(size_t{w} * h);
   const uint32_t bw = (w + 3) / 4, bh = (h + 3) / 4;
   for (uint32_t by = 0; by < bh; ++by)
     for (uint32_t bx = 0; bx < bw; ++bx) {
-      const uint8_t* b = data + (size_t{by} * bw + bx) * 8;
+      const uint8_t* a = data + (size_t{by} * bw + bx) * (bc3 ? 16 : 8);
+      const uint8_t* b = bc3 ? a + 8 : a;
+      std::array<double, 8> alpha{};
+      uint64_t alpha_bits = 0;
+      if (bc3) {
+        const double a0 = a[0], a1 = a[1];
+        alpha[0] = a0, alpha[1] = a1;
+        for (int k = 1; k < 7; ++k)
+          alpha[k + 1] = a0 > a1 ? ((7 - k) * a0 + k * a1) / 7
+                         : k < 5 ? ((5 - k) * a0 + k * a1) / 5
+                                 : (k == 5 ? 0 : 255);
+        for (int k = 0; k < 6; ++k) alpha_bits |= uint64_t{a[2 + k]} << (8 * k);
+      }
       const uint16_t c0 = b[0] | b[1] << 8, c1 = b[2] | b[3] << 8;
       auto rgb = [](uint16_t c) {
         return std::array<double, 3>{((c >> 11) & 31) * 255.0 / 31, ((c >> 5) & 63) * 255.0 / 63,
@@ -332,19 +346,22 @@ std::vector<Rgba> decode_bc1(const uint8_t* data, uint32_t w, uint32_t h) {
       std::array<std::array<double, 4>, 4> pal{};
       for (int k = 0; k < 3; ++k) {
         pal[0][k] = e0[k], pal[1][k] = e1[k];
-        pal[2][k] = c0 > c1 ? (2 * e0[k] + e1[k]) / 3 : (e0[k] + e1[k]) / 2;
-        pal[3][k] = c0 > c1 ? (e0[k] + 2 * e1[k]) / 3 : 0;
+        const bool four = c0 > c1 || bc3;
+        pal[2][k] = four ? (2 * e0[k] + e1[k]) / 3 : (e0[k] + e1[k]) / 2;
+        pal[3][k] = four ? (e0[k] + 2 * e1[k]) / 3 : 0;
       }
       pal[0][3] = pal[1][3] = pal[2][3] = 255;
-      pal[3][3] = c0 > c1 ? 255 : 0;
+      pal[3][3] = c0 > c1 || bc3 ? 255 : 0;
       const uint32_t bits = b[4] | b[5] << 8 | b[6] << 16 | static_cast<uint32_t>(b[7]) << 24;
       for (uint32_t y = 0; y < 4; ++y)
         for (uint32_t x = 0; x < 4; ++x) {
           const uint32_t px = bx * 4 + x, py = by * 4 + y;
           if (px >= w || py >= h) continue;
           const auto& c = pal[(bits >> (2 * (y * 4 + x))) & 3];
+          const double alpha_value = bc3 ? alpha[(alpha_bits >> (3 * (y * 4 + x))) & 7] : c[3];
           out[size_t{py} * w + px] = {static_cast<uint8_t>(std::lround(c[0])), static_cast<uint8_t>(std::lround(c[1])),
-                                      static_cast<uint8_t>(std::lround(c[2])), static_cast<uint8_t>(c[3])};
+                                      static_cast<uint8_t>(std::lround(c[2])),
+                                      static_cast<uint8_t>(std::lround(alpha_value))};
         }
     }
   return out;
@@ -360,8 +377,8 @@ Texels load_level0(const fs::path& scene_dir, uint32_t texture) {
   t.w = r.width, t.h = r.height;
   const auto format = static_cast<TexelFormat>(r.format);
   std::vector<Rgba> px;
-  if (format == TexelFormat::kBc1) {
-    px = decode_bc1(bytes.data() + scene::kDdsHeaderBytes, r.width, r.height);
+  if (is_block_compressed(format)) {
+    px = decode_bc(bytes.data() + scene::kDdsHeaderBytes, r.width, r.height, format == TexelFormat::kBc3);
   } else {
     px.resize(size_t{r.width} * r.height);
     std::memcpy(px.data(), bytes.data() + scene::kDdsHeaderBytes, px.size() * 4);
@@ -573,15 +590,20 @@ std::string origin_args() {
 
 }  // namespace
 
-TEST(ImportRender, GltfWithHierarchyInstancingRepeatMirrorAndCutOutsDrawsAsTheReference) {
+// The glTF case in each texel format the importer writes: BC1 (cut-outs as punch-through), BC3 (8-bit alpha),
+// RGBA8. The reference decodes the baked blocks itself.
+class ImportRenderGltf : public ::testing::TestWithParam<const char*> {};
+
+TEST_P(ImportRenderGltf, HierarchyInstancingRepeatMirrorAndCutOutsDrawAsTheReference) {
   const TestModel m = make_model();
-  const fs::path dir = fresh_dir("gltf");
+  const std::string format = GetParam();
+  const fs::path dir = fresh_dir("gltf_" + format);
   write_gltf(dir / "model", m);
   if (HasFatalFailure()) return;
   const fs::path scene_dir = dir / "scene";
   const int rc =
       texstream::test::run_logged((kBin / "texstream-import").string() + " " + (dir / "model" / "model.gltf").string() +
-                                      " --out " + scene_dir.string() + origin_args(),
+                                      " --out " + scene_dir.string() + origin_args() + " --format " + format,
                                   dir / "import.log");
   const std::string import_log = texstream::test::slurp(dir / "import.log");
   ASSERT_EQ(rc, 0) << import_log;
@@ -622,11 +644,16 @@ TEST(ImportRender, GltfWithHierarchyInstancingRepeatMirrorAndCutOutsDrawsAsTheRe
 
   std::string log;
   const Compared c = render_and_compare(dir, scene_dir, m, log);
-  std::printf("import render (glTF): PSNR %.2f dB over %.1f %% of the pixels\n", c.psnr, 100.0 * c.included);
+  std::printf("import render (glTF, %s): PSNR %.2f dB over %.1f %% of the pixels\n", format.c_str(), c.psnr,
+              100.0 * c.included);
+  EXPECT_EQ(to_string(scene::read_manifest(scene_dir)->texture_format), format);
   EXPECT_GE(c.psnr, 40.0) << "see " << dir << "/{actual,expected,diff_x8}.png\n" << log;
   EXPECT_GE(c.included, 0.85);
   if (!HasFailure()) fs::remove_all(dir);
 }
+
+INSTANTIATE_TEST_SUITE_P(Formats, ImportRenderGltf, ::testing::Values("bc1", "bc3", "rgba8"),
+                         [](const auto& p) { return std::string(p.param); });
 
 TEST(ImportRender, ObjWithSeveralMaterialsDrawsAsTheReference) {
   TestModel m = make_model();

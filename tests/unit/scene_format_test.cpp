@@ -343,12 +343,19 @@ TEST(TexturePath, EqualsThePathAppendsForEveryFolderSpelling) {
   }
 }
 
-TEST(DdsHeader, RoundTripsBothFormats) {
-  for (TexelFormat f : {TexelFormat::kRgba8, TexelFormat::kBc1}) {
+TEST(DdsHeader, RoundTripsEveryFormat) {
+  for (TexelFormat f : {TexelFormat::kRgba8, TexelFormat::kBc1, TexelFormat::kBc3}) {
     const auto h = make_dds_header(f, 512, 8, 10);
     auto info = parse_dds_layout(h, "t.dds");
     ASSERT_TRUE(info.ok()) << info.error().message;
-    EXPECT_EQ(info->encoding, f == TexelFormat::kBc1 ? DdsEncoding::kBc1 : DdsEncoding::kRgba8);
+    EXPECT_EQ(info->encoding, f == TexelFormat::kBc1   ? DdsEncoding::kBc1
+                              : f == TexelFormat::kBc3 ? DdsEncoding::kBc3
+                                                       : DdsEncoding::kRgba8);
+    EXPECT_EQ(info->texel_format(), f);
+    // Level 1 of 256x4 starts after level 0: BC3 16 bytes per block (128 x 2 blocks), BC1 8, RGBA8 4 per texel.
+    EXPECT_EQ(info->mip_offset(1), kDdsHeaderBytes + (f == TexelFormat::kBc3   ? 4096u
+                                                      : f == TexelFormat::kBc1 ? 2048u
+                                                                               : 16384u));
     EXPECT_EQ(info->width, 512u);
     EXPECT_EQ(info->height, 8u);
     EXPECT_EQ(info->mip_count, 10u);

@@ -63,11 +63,15 @@ TEST(DdsLayoutTest, Dx10Bc1DataStartsAfter148Bytes) {
   EXPECT_EQ(l->mip_size(4), 8u);             // 1x1 is one block
 }
 
-TEST(DdsLayoutTest, OtherEncodingsAreForOpenImageIOAndNoMipCountMeansOne) {
+TEST(DdsLayoutTest, Dxt5IsBc3AndOtherEncodingsAreForOpenImageIOAndNoMipCountMeansOne) {
   auto dxt5 = scene::parse_dds_layout(dds_header(8, 8, 0, kDxt5), "dxt5.dds");
   ASSERT_TRUE(dxt5.ok());
-  EXPECT_EQ(dxt5->encoding, scene::DdsEncoding::kOther);
+  EXPECT_EQ(dxt5->encoding, scene::DdsEncoding::kBc3);  // served raw to a bc3 texture, decoded for an rgba8 one
+  EXPECT_EQ(dxt5->mip_size(0), 64u);                    // 8x8: 4 blocks of 16 bytes
   EXPECT_EQ(dxt5->mip_count, 1u);
+  auto bc7 = scene::parse_dds_layout(dds_header(8, 8, 0, kDx10, true, 98), "bc7.dds");  // DXGI_FORMAT_BC7_UNORM
+  ASSERT_TRUE(bc7.ok());
+  EXPECT_EQ(bc7->encoding, scene::DdsEncoding::kOther);
   auto dxt1 = scene::parse_dds_layout(dds_header(8, 8, 2, kDxt1), "short-chain.dds");
   ASSERT_TRUE(dxt1.ok());
   EXPECT_EQ(dxt1->mip_count, 2u);

@@ -204,7 +204,7 @@ double raw_bind_seconds_per_op(const Ctx& c, const std::vector<uint32_t>& sizes,
   using namespace texstream::render;
   VulkanContextOptions vo;
   vo.device_substring = c.device_substring;
-  vo.need_bc1 = format_is_bc1 != 0;
+  vo.need_bc = format_is_bc1 != 0;
   auto ctx = VulkanContext::create(vo);
   if (!ctx) {
     std::fprintf(stderr, "cache bench: %s\n", ctx.error().message.c_str());
@@ -321,7 +321,7 @@ ReplayResult raw_replay_seconds_per_op(const Ctx& c, const nlohmann::json& cache
   if (info.extent == 0 || info.mip_levels == 0 || info.layers == 0 || per_block == 0) return out;
   VulkanContextOptions vo;
   vo.device_substring = c.device_substring;
-  vo.need_bc1 = info.format == VK_FORMAT_BC1_RGBA_SRGB_BLOCK;
+  vo.need_bc = info.format == VK_FORMAT_BC1_RGBA_SRGB_BLOCK || info.format == VK_FORMAT_BC3_SRGB_BLOCK;
   auto ctx = VulkanContext::create(vo);
   if (!ctx) {
     std::fprintf(stderr, "cache bench: %s\n", ctx.error().message.c_str());

@@ -20,7 +20,7 @@ Result<RenderStackOptions> stack_options(const Config& cfg, TexelFormat format) 
   RenderStackOptions so;
   so.vulkan.device_substring = cfg.render.device;
   so.vulkan.validation = cfg.render.validation;
-  so.vulkan.need_bc1 = format == TexelFormat::kBc1;
+  so.vulkan.need_bc = is_block_compressed(format);
   so.cache.format = format;
   so.cache.eviction = cfg.cache.eviction;
   so.cache.layer_extent = static_cast<uint32_t>(cfg.cache.layer_extent_px);

@@ -36,12 +36,14 @@ constexpr uint64_t kStagingAlignment = 16;
 // below one block at some level cannot be written without touching a neighbour.
 constexpr uint32_t kBc1Block = 4;
 
-uint32_t block_size(TexelFormat f) { return f == TexelFormat::kBc1 ? kBc1Block : 1; }
+uint32_t block_size(TexelFormat f) { return is_block_compressed(f) ? kBc1Block : 1; }
 
 }  // namespace
 
 VkFormat cache_vk_format(TexelFormat format) {
-  return format == TexelFormat::kBc1 ? VK_FORMAT_BC1_RGBA_SRGB_BLOCK : VK_FORMAT_R8G8B8A8_SRGB;
+  return format == TexelFormat::kBc1   ? VK_FORMAT_BC1_RGBA_SRGB_BLOCK
+         : format == TexelFormat::kBc3 ? VK_FORMAT_BC3_SRGB_BLOCK
+                                       : VK_FORMAT_R8G8B8A8_SRGB;
 }
 
 TextureCache::TextureCache(const TextureCacheOptions& options, const SceneData& scene)

@@ -68,7 +68,7 @@ Result<std::unique_ptr<ViewRenderer>> ViewRenderer::create(const Config& cfg, Sc
   RenderStackOptions so;
   so.vulkan.device_substring = cfg.render.device;
   so.vulkan.validation = cfg.render.validation;
-  so.vulkan.need_bc1 = m.scene.manifest.texture_format == TexelFormat::kBc1;
+  so.vulkan.need_bc = is_block_compressed(m.scene.manifest.texture_format);
   so.cache.format = m.scene.manifest.texture_format;
   so.cache.layer_extent =
       cfg.cache.layer_extent_px ? static_cast<uint32_t>(cfg.cache.layer_extent_px) : kCacheLayerExtent;

@@ -176,9 +176,9 @@ Result<std::unique_ptr<VulkanContext>> VulkanContext::create(const VulkanContext
   // device without these features.
   features.sparseBinding = supported.sparseBinding;
   features.sparseResidencyImage2D = supported.sparseResidencyImage2D;
-  if (options.need_bc1) {
+  if (options.need_bc) {
     if (!supported.textureCompressionBC)
-      return make_error(ErrorCode::kUnsupported, "cache.format = bc1 but the device lacks textureCompressionBC");
+      return make_error(ErrorCode::kUnsupported, "cache.format = bc1/bc3 but the device lacks textureCompressionBC");
     features.textureCompressionBC = VK_TRUE;
   }
 

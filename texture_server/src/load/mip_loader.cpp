@@ -79,8 +79,10 @@ std::string extent_text(Extent2D e) { return std::to_string(e.width) + "x" + std
 // first, no DX10 extension): read_mip()'s guess before a texture's header has been read.
 scene::DdsLayout generated_dds_layout(const scene::TextureRecord& record) {
   scene::DdsLayout l;
-  l.encoding = static_cast<TexelFormat>(record.format) == TexelFormat::kBc1 ? scene::DdsEncoding::kBc1
-                                                                            : scene::DdsEncoding::kRgba8;
+  const auto format = static_cast<TexelFormat>(record.format);
+  l.encoding = format == TexelFormat::kBc1   ? scene::DdsEncoding::kBc1
+               : format == TexelFormat::kBc3 ? scene::DdsEncoding::kBc3
+                                             : scene::DdsEncoding::kRgba8;
   l.width = record.width;
   l.height = record.height;
   l.mip_count = record.mip_count;
@@ -222,8 +224,7 @@ void MipLoader::release_held() {
 bool MipLoader::serves_raw(TextureId texture, TexelFormat format) const {
   const std::optional<TextureFileEntry> e = index_.find(texture);
   if (!e || e->kind != TextureFileKind::kDds || !e->dds) return false;
-  return format == TexelFormat::kRgba8 ? e->dds->encoding == scene::DdsEncoding::kRgba8
-                                       : e->dds->encoding == scene::DdsEncoding::kBc1;
+  return e->dds->encoding != scene::DdsEncoding::kOther && e->dds->texel_format() == format;
 }
 
 bool MipLoader::open_texture(const LoadRequest& request, Opened& opened, CompletionRecord& error,
@@ -414,9 +415,11 @@ CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::Te
                              extent_text({dds.width, dds.height}) + " at mip 0), the texture table says " +
                              extent_text(expected));
     }
-    if (format == TexelFormat::kBc1 && dds.encoding != scene::DdsEncoding::kBc1) {
+    if (is_block_compressed(format) && (dds.encoding == scene::DdsEncoding::kOther || dds.texel_format() != format)) {
       return fail_status(request, CompletionStatus::kCorrupt, path,
-                         "the texture table says bc1 but the file is not BC1/DXT1 (the server never encodes BC1)");
+                         "the texture table says " + std::string(to_string(format)) + " but the file is not " +
+                             (format == TexelFormat::kBc1 ? "BC1/DXT1" : "BC3/DXT5") +
+                             " (the server never encodes block-compressed texels)");
     }
     decode = format == TexelFormat::kRgba8 && dds.encoding != scene::DdsEncoding::kRgba8;
     if (!decode && tail != nullptr && (target.size() <= kTailMipBytes || wanted_levels != 0)) {

@@ -12,9 +12,14 @@
 
 namespace texstream::gen {
 
-void encode_bc1(const uint32_t* rgba, uint32_t width, uint32_t height, std::span<uint8_t> out) {
-  TS_ASSERT(out.size() == mip_bytes(TexelFormat::kBc1, Extent2D{width, height}), "BC1 buffer of %zu bytes for %ux%u",
-            out.size(), width, height);
+namespace {
+
+// Blocks of `format` (BC1, or BC3 = an alpha block then a colour block, stb_dxt's alpha mode).
+void encode_blocks(TexelFormat format, const uint32_t* rgba, uint32_t width, uint32_t height, std::span<uint8_t> out) {
+  TS_ASSERT(out.size() == mip_bytes(format, Extent2D{width, height}), "block buffer of %zu bytes for %ux%u", out.size(),
+            width, height);
+  const int alpha = format == TexelFormat::kBc3 ? 1 : 0;
+  const size_t step = block_bytes(format);
   const uint32_t bw = (width + 3) / 4, bh = (height + 3) / 4;
   uint32_t block[16];
   uint8_t* dst = out.data();
@@ -26,9 +31,19 @@ void encode_bc1(const uint32_t* rgba, uint32_t width, uint32_t height, std::span
       }
       unsigned char bytes[64];
       std::memcpy(bytes, block, sizeof bytes);  // RGBA byte order in memory on a little-endian host
-      stb_compress_dxt_block(dst, bytes, 0, STB_DXT_NORMAL);
-      dst += 8;
+      stb_compress_dxt_block(dst, bytes, alpha, STB_DXT_NORMAL);
+      dst += step;
     }
+}
+
+}  // namespace
+
+void encode_bc1(const uint32_t* rgba, uint32_t width, uint32_t height, std::span<uint8_t> out) {
+  encode_blocks(TexelFormat::kBc1, rgba, width, height, out);
+}
+
+void encode_bc3(const uint32_t* rgba, uint32_t width, uint32_t height, std::span<uint8_t> out) {
+  encode_blocks(TexelFormat::kBc3, rgba, width, height, out);
 }
 
 }  // namespace texstream::gen

@@ -28,8 +28,10 @@ int main(int argc, char** argv) {
                  "Map position X Y Z (metres; x east, y north, z up) of the file's origin; glTF's y-up is turned "
                  "to z-up first")
       ->expected(3);
-  app.add_option("--format", format, "Texel format of the baked textures")
-      ->check(CLI::IsMember({"bc1", "rgba8"}))
+  app.add_option("--format", format,
+                 "Texel format of the baked textures: bc1 (cut-outs as punch-through), bc3 (8-bit alpha, twice the "
+                 "bytes of bc1), rgba8")
+      ->check(CLI::IsMember({"bc1", "bc3", "rgba8"}))
       ->capture_default_str();
   app.add_option("--up", up, "The file's up axis (auto: y, as glTF and most OBJ exporters)")
       ->check(CLI::IsMember({"auto", "y", "z"}))

@@ -201,7 +201,7 @@ Result<BakedTexture> bake_texture(const BakeInput& in, const std::filesystem::pa
   out.height = h;
   out.mip_count = full_mip_count(w, h);
 
-  const bool bc1 = in.format == TexelFormat::kBc1;
+  const bool bc1 = in.format == TexelFormat::kBc1;  // cut-outs binary (punch-through); BC3 and RGBA8 keep 8 bits
   const double coverage0 = in.alpha_test ? coverage(level, in.cutoff) : 1.0;
   std::ofstream f(dds, std::ios::binary | std::ios::trunc);
   const auto header = scene::make_dds_header(in.format, w, h, out.mip_count);
@@ -215,7 +215,9 @@ Result<BakedTexture> bake_texture(const BakeInput& in, const std::filesystem::pa
     const std::vector<uint32_t> texels = to_rgba8(level, in.alpha_test, bc1, in.cutoff);
     const uint64_t bytes = mip_bytes(in.format, level.width, level.height, 0);
     blocks.assign(bytes, 0);
-    if (!bc1) {
+    if (in.format == TexelFormat::kBc3) {
+      gen::encode_bc3(texels.data(), level.width, level.height, blocks);
+    } else if (!bc1) {
       std::memcpy(blocks.data(), texels.data(), bytes);
     } else if (in.alpha_test) {
       // Punch-through: squish picks BC1's 3-colour mode for blocks with a texel below alpha 128.

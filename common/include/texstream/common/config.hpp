@@ -81,12 +81,13 @@ struct ChoiceTable<ControllerMode> {
        {ControllerMode::kFixed, "fixed", "s and b from fixed_load_mb and fixed_bias"}}};
 };
 
-enum class CacheFormat : uint8_t { kAuto, kRgba8, kBc1 };  // cache.format
+enum class CacheFormat : uint8_t { kAuto, kRgba8, kBc1, kBc3 };  // cache.format
 template <>
 struct ChoiceTable<CacheFormat> {
-  static constexpr std::array<ChoiceEntry<CacheFormat>, 3> kEntries{{{CacheFormat::kAuto, "auto", "the scene's"},
+  static constexpr std::array<ChoiceEntry<CacheFormat>, 4> kEntries{{{CacheFormat::kAuto, "auto", "the scene's"},
                                                                      {CacheFormat::kRgba8, "rgba8", ""},
-                                                                     {CacheFormat::kBc1, "bc1", ""}}};
+                                                                     {CacheFormat::kBc1, "bc1", ""},
+                                                                     {CacheFormat::kBc3, "bc3", ""}}};
 };
 // The GPU cache's texel format: auto takes the scene's; an explicit one must match the scene's textures.
 constexpr TexelFormat cache_texel_format(CacheFormat format, TexelFormat scene_format) {
@@ -95,6 +96,8 @@ constexpr TexelFormat cache_texel_format(CacheFormat format, TexelFormat scene_f
       return TexelFormat::kRgba8;
     case CacheFormat::kBc1:
       return TexelFormat::kBc1;
+    case CacheFormat::kBc3:
+      return TexelFormat::kBc3;
     case CacheFormat::kAuto:
       break;
   }

@@ -3,7 +3,7 @@
 // extension, mips finest first). The one parser reads DDS files from any tool: legacy headers (FourCC DXT1,
 // 32-bit RGBA masks) and the DX10 extension (DXGI BC1 / R8G8B8A8). Mips are stored finest first, back to back,
 // after the header (128 bytes, or 148 with the DX10 extension), so one mip is one byte range (seed 000 §3.5:
-// read exactly that). Encodings that cannot be served raw (BGRA, 24-bit, DXT5, ...) are reported as kOther:
+// read exactly that). Encodings that cannot be served raw (BGRA, 24-bit, BC7, ...) are reported as kOther:
 // the server's loader then decodes that mip through OpenImageIO into RGBA8. Pure parsing, no I/O.
 #include <array>
 #include <cstddef>
@@ -34,6 +34,7 @@ std::array<std::byte, kDdsHeaderBytes> make_dds_header(TexelFormat format, uint3
 
 enum class DdsEncoding : uint8_t {
   kBc1,    // BC1/DXT1 blocks: served as they are
+  kBc3,    // BC3/DXT5 blocks: served as they are to a bc3 texture
   kRgba8,  // 32-bit R,G,B,A bytes in this order: served as they are
   kOther,  // anything else OpenImageIO may decode
 };
@@ -45,7 +46,9 @@ struct DdsLayout {
   uint32_t mip_count = 0;    // levels stored in the file (1 when the header has no mip count)
   uint64_t data_offset = 0;  // 128, or 148 with the DX10 extension
 
-  // Byte range of `level` (< mip_count) for kBc1 / kRgba8.
+  // The texel format the blocks are in (kRgba8 for kOther, which is decoded to it).
+  TexelFormat texel_format() const;
+  // Byte range of `level` (< mip_count) for kBc1 / kBc3 / kRgba8.
   uint64_t mip_offset(uint32_t level) const;
   uint64_t mip_size(uint32_t level) const;
   bool operator==(const DdsLayout&) const = default;
