@@ -1,7 +1,7 @@
 #pragma once
 // The DDS header, written and read in one place. The writer makes the generator's files (legacy header, no DX10
-// extension, mips finest first). The one parser reads DDS files from any tool: legacy headers (FourCC DXT1,
-// 32-bit RGBA masks) and the DX10 extension (DXGI BC1 / R8G8B8A8). Mips are stored finest first, back to back,
+// extension, mips finest first). The one parser reads DDS files from any tool: legacy headers (FourCC DXT1, DXT5,
+// 32-bit RGBA masks) and the DX10 extension (DXGI BC1 / BC3 / R8G8B8A8). Mips are stored finest first, back to back,
 // after the header (128 bytes, or 148 with the DX10 extension), so one mip is one byte range (seed 000 §3.5:
 // read exactly that). Encodings that cannot be served raw (BGRA, 24-bit, BC7, ...) are reported as kOther:
 // the server's loader then decodes that mip through OpenImageIO into RGBA8. Pure parsing, no I/O.

@@ -14,7 +14,8 @@
 //                              geometry placed at any orientation). Absent: every mesh unrotated, scale 1
 //   <scene>/camera_path.txt    the default fly-through (see camera_path.hpp)
 //   <scene>/mesh_index.bin     optional: the broad phase's quadtree over meshes.bin (mesh_index.hpp)
-//   <scene>/textures/XXX/YYYYYYYY.dds   one DDS per texture, all mips finest first, no DX10 extension:
+//   <scene>/textures/XXX/YYYYYYYY.dds   one DDS per texture (RGBA8, BC1 or BC3), all mips finest first, no DX10
+//   extension:
 //                              mip L of texture T lies at 128 + mip_chain_offset(format, w, h, L)
 #include <array>
 #include <cstddef>
