@@ -381,5 +381,54 @@ TEST(WorkerPoolLoadingWords, EachWorkerRecordsTheTextureItIsLoadingAndClearsItAf
   EXPECT_EQ(words[1].v.load(), 0u);
 }
 
+
+// Issue 27: a slow first decode must never look like a hang. The dispatcher loads small misses itself, but a
+// texture that needs a decode (here a tiled TIFF whose helper hangs: TEXSTREAM_DECODE_HANG_ON) goes to a worker
+// the moment its header says so, and the raw DDS texture asked after it is served at once — not after the
+// helper's 10 s timeout, which is what the dispatcher would have waited with the decode on its own thread.
+TEST(ServerDecodeOffTheDispatcher, AHungDecodeNeverHoldsUpTheMipsQueuedBehindIt) {
+  const fs::path dir = fs::temp_directory_path() / ("texstream-decode-offload-" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const auto rgba = uint32_t(TexelFormat::kRgba8);
+  const uint32_t mips = full_mip_count(64, 32);
+  const std::vector<scene::TextureRecord> table = {{64, 32, mips, rgba}, {64, 32, mips, rgba}};
+  ASSERT_TRUE(scene::write_texture_table(dir, table).ok());
+  const fs::path hung = texture_file_path(dir, TextureId(0), TextureFileKind::kTx);
+  make_tx(hung);
+  {  // texture 1: a raw RGBA8 DDS, served without a decode
+    const fs::path dds = scene::texture_path(dir, TextureId(1));
+    fs::create_directories(dds.parent_path());
+    std::ofstream out(dds, std::ios::binary);
+    const auto header = scene::make_dds_header(TexelFormat::kRgba8, 64, 32, mips);
+    out.write(reinterpret_cast<const char*>(header.data()), static_cast<std::streamsize>(header.size()));
+    const std::vector<char> texels(mip_chain_offset(TexelFormat::kRgba8, 64, 32, mips), 'x');
+    out.write(texels.data(), static_cast<std::streamsize>(texels.size()));
+  }
+  ScopedEnv hook("TEXSTREAM_DECODE_HANG_ON", hung.filename().string());
+
+  // The hung texture's coarsest mip first (small: the dispatcher would load it inline), then every mip of
+  // the raw one.
+  std::vector<test::WantedMip> wanted{{0, mips - 1, 100.0f}};
+  for (uint32_t m = 0; m < mips; ++m) wanted.push_back({1, m, 1.0f});
+  PosixStorage storage;
+  ServerConfig config;
+  config.idle_wait_ms = 5;
+  config.worker_threads = 2;
+  std::string error;
+  test::DriveResult result;
+  {
+    std::unique_ptr<test::ServerHarness> h = test::ServerHarness::start(dir, config, storage, error);
+    ASSERT_TRUE(h) << error;
+    result = test::drive(*h, wanted, std::chrono::milliseconds(3000));
+  }  // (the hung helper is killed by its timeout before the server's workers are joined)
+  fs::remove_all(dir);
+  for (size_t i = 1; i < wanted.size(); ++i)
+    EXPECT_EQ(static_cast<CompletionStatus>(result.status[i]), CompletionStatus::kOk)
+        << "raw texture mip " << wanted[i].mip << " not served within 3 s behind a hung decode";
+  EXPECT_GE(result.first_ok_s, 0.0);
+  EXPECT_LT(result.first_ok_s, 1.0);
+}
+
 }  // namespace
 }  // namespace texstream::server

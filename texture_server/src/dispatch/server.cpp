@@ -457,8 +457,9 @@ void Server::load_inline(const LoadRequest& request, const scene::TextureRecord&
   }
   // hold_read: the levels read along are answered from the read's own bytes while they are the queue's
   // next requests (dispatch(): serve_held), then inserted into the cache together at the end of the pass.
+  bool deferred_decode = false;
   const CompletionRecord c = loader_.load(request, record, slot, segment_.slot(slot), /*local_only=*/true,
-                                          /*read_tail=*/true, wanted, /*hold_read=*/true);
+                                          /*read_tail=*/true, wanted, /*hold_read=*/true, &deferred_decode);
   if (steady_now_ns() - start > kInlineSlowNs) inline_ok_[request.texture.value] = false;
   // A texture that is decoded (TIFF, OpenEXR, a DDS encoding served as RGBA8) or was not found goes to the
   // workers from now on, however fast this load was: a decode must never hold up the hits behind it.
@@ -466,6 +467,13 @@ void Server::load_inline(const LoadRequest& request, const scene::TextureRecord&
     inline_ok_[request.texture.value] = false;
   }
   inline_loading_->v.store(0, std::memory_order_relaxed);
+  if (deferred_decode) {
+    // A decode (and perhaps a helper's start) is a worker's job: the hits behind it go on being served.
+    inline_ok_[request.texture.value] = false;
+    ++loads_in_flight_;
+    workers_->submit(LoadJob{request, record, slot});
+    return;
+  }
   handle_local_result(LoadResult{c, slot, request.received_ns, request});
 }
 

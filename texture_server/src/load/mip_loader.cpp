@@ -457,6 +457,10 @@ CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::Te
   }
   // OpenImageIO reads ranges of its own choosing: a remote file is decoded on a remote-fetch worker only.
   if (local_only && opened.file->remote()) return CompletionStatus::kUnfilled;
+  if (!opened.may_decode) {  // the dispatcher: a worker decodes it (load()'s deferred_decode)
+    opened.deferred_decode = true;
+    return CompletionStatus::kUnfilled;
+  }
   DecodeOutcome outcome;
   const Status decoded = decode_mip_rgba8(*opened.file, path, level, expected, target, outcome);
   count_read(outcome.bytes_read);
@@ -466,7 +470,8 @@ CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::Te
 
 CompletionRecord MipLoader::load(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot_index,
                                  std::span<std::byte> slot, bool local_only, bool read_tail, uint32_t wanted_levels,
-                                 bool hold_read) {
+                                 bool hold_read, bool* deferred_decode) {
+  if (deferred_decode) *deferred_decode = false;
   // A held read goes into the cache before this load looks at what is cached (read_tail's cached_levels).
   if (read_tail) release_held();
   const TexelFormat format = static_cast<TexelFormat>(record.format);  // validated with the texture table
@@ -477,6 +482,7 @@ CompletionRecord MipLoader::load(const LoadRequest& request, const scene::Textur
   if (!local_only) block_.ram_cache_misses.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
 
   Opened opened;
+  opened.may_decode = deferred_decode == nullptr;
   CompletionRecord error{};
   if (!open_texture(request, opened, error)) return error;
 
@@ -499,6 +505,7 @@ CompletionRecord MipLoader::load(const LoadRequest& request, const scene::Textur
   if (opened.probe_missed) {
     // The first suffix, opened lazily, is not there: the others, the ordinary way, then the read again.
     opened = Opened{};
+    opened.may_decode = deferred_decode == nullptr;
     if (!open_texture(request, opened, error, /*after_lazy_probe=*/true)) return error;
     if (tail) {
       tail->mips.clear();
@@ -506,6 +513,7 @@ CompletionRecord MipLoader::load(const LoadRequest& request, const scene::Textur
     }
     status = read_mip(request, record, opened, target, local_only, tail, wanted_levels);
   }
+  if (deferred_decode) *deferred_decode = opened.deferred_decode;
   if (status == CompletionStatus::kUnfilled) {  // nothing was read: the file is as good as before
     files_.give_back(request.texture, OpenTextureFile{std::move(opened.path), std::move(opened.file)});
     return make_completion(request, status);

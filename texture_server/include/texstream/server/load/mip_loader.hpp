@@ -54,9 +54,13 @@ class MipLoader {
   // them by serve_held() without a cache lookup each; release_held() inserts them all under one lock. Any
   // later load() with read_tail releases the previous held read first; the dispatcher releases it at the end
   // of every dispatch pass, so the cache never waits long for them.
+  // `deferred_decode` (the dispatcher's inline loads): non-null means "never decode here": a mip that needs a
+  // decode (TIFF, OpenEXR, a DDS encoding that is not the texture's) comes back kUnfilled with the flag set,
+  // nothing read beyond the header, so the caller hands it to a worker. A decode may start a helper process
+  // (~1 s) and must never hold up the hits queued behind it (issue 27: a slow first decode looked like a hang).
   CompletionRecord load(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot_index,
                         std::span<std::byte> slot, bool local_only = false, bool read_tail = false,
-                        uint32_t wanted_levels = 0, bool hold_read = false);
+                        uint32_t wanted_levels = 0, bool hold_read = false, bool* deferred_decode = nullptr);
 
   // If the held read (see load()'s hold_read) brought `request`'s mip and it has not been served from there
   // yet: copies it into `slot` and returns its kOk record, counted as serve_cached() counts a first hit of a
@@ -110,6 +114,8 @@ class MipLoader {
     // finds no such file sets probe_missed instead of failing, and load() probes the other suffixes.
     bool lazy_probe = false;
     bool probe_missed = false;
+    bool may_decode = true;        // false: a mip that needs a decode is left to a worker (load()'s deferred_decode)
+    bool deferred_decode = false;  // read_mip() left such a mip undecoded
   };
   // Finds and opens the texture's file (or takes it from files_); on failure returns the error completion in
   // `error`. `after_lazy_probe`: the first suffix was tried lazily and is not there.
