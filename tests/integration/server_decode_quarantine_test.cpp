@@ -381,7 +381,6 @@ TEST(WorkerPoolLoadingWords, EachWorkerRecordsTheTextureItIsLoadingAndClearsItAf
   EXPECT_EQ(words[1].v.load(), 0u);
 }
 
-
 // Issue 27: a slow first decode must never look like a hang. The dispatcher loads small misses itself, but a
 // texture that needs a decode (here a tiled TIFF whose helper hangs: TEXSTREAM_DECODE_HANG_ON) goes to a worker
 // the moment its header says so, and the raw DDS texture asked after it is served at once — not after the

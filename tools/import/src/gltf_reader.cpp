@@ -450,6 +450,11 @@ Result<Model> read_gltf(const std::filesystem::path& file) {
       out.skipped.push_back(name + ": node " + std::to_string(ni) + " is skinned; drawn in its bind pose");
     for (auto it = n.children.rbegin(); it != n.children.rend(); ++it) stack.emplace_back(*it, world);
   }
+  if (out.instances.empty() && !out.primitives.empty()) {
+    // No node of the scene places a mesh (a file of meshes only, or a scene without nodes): each once, as is.
+    out.skipped.push_back(name + ": no node of the scene places a mesh; each mesh is drawn once at the file's origin");
+    for (uint32_t p = 0; p < out.primitives.size(); ++p) out.instances.push_back(Instance{p, identity});
+  }
   return out;
 }
 

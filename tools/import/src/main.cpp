@@ -70,7 +70,7 @@ int main(int argc, char** argv) {
   ::getrusage(RUSAGE_SELF, &ru);
   std::printf("wrote %s\n", std::filesystem::absolute(opt.out).lexically_normal().c_str());
   std::printf(
-      "  meshes     %llu (%llu share another's vertices, %llu of them turned or scaled by transforms.bin, %llu with "
+      "  meshes     %llu (%llu share another's vertices; %llu turned or scaled by transforms.bin; %llu with "
       "their own transformed copy), %llu triangles\n",
       static_cast<unsigned long long>(r.meshes), static_cast<unsigned long long>(r.shared_meshes),
       static_cast<unsigned long long>(r.transformed_meshes), static_cast<unsigned long long>(r.baked_meshes),

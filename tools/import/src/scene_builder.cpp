@@ -433,9 +433,12 @@ Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
     report.triangles += r.index_count / 3;
     meshes.meshes.push_back(r);
   }
-  if (meshes.meshes.empty())
-    return make_error(ErrorCode::kInvalidArgument, model.source + ": no triangles to import (" +
-                                                       std::to_string(model.skipped.size()) + " elements skipped)");
+  if (meshes.meshes.empty()) {
+    std::string why = model.source + ": no triangles to import";
+    for (size_t i = 0; i < report.skipped.size() && i < 3; ++i) why += (i ? "; " : " (") + report.skipped[i];
+    if (!report.skipped.empty()) why += report.skipped.size() > 3 ? "; ...)" : ")";
+    return make_error(ErrorCode::kInvalidArgument, why);
+  }
   report.meshes = meshes.meshes.size();
 
   // ---- bake: each distinct texel set once, in parallel; the other textures of it are hard links ----
