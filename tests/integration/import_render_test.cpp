@@ -1,14 +1,14 @@
 // texstream-import end to end, checked against a reference made another way. The test writes a model itself
-// (glTF with a node hierarchy, a mesh placed four times — twice by translation only, once rotated, once scaled —
-// a mesh with two materials, repeat and mirrored-repeat UVs far outside [0, 1], a non-power-of-two image, an
-// alpha-tested cut-out over another surface, an untextured material, a large --origin; or the same as OBJ+MTL),
-// imports it with the real texstream-import, renders it with the real texstream-render + texstream-server (lock-
-// step, validation on) and compares the last frame with a CPU ray cast of the test's own description of the
-// model: each pixel's ray meets the placements (the test's transforms, not the importer's), the texture is
-// sampled bilinearly with the wrap mode the test wrote into the file, from the baked level-0 texels decoded by
-// the test's own BC1 decoder, alpha-tested and un-premultiplied as glTF says. Every surface faces the camera at
-// a texel density below one texel per pixel, so the level shown is 0. Pixels whose neighbourhood spans two
-// surfaces or whose alpha is within 0.1 of the cutoff are left out (at least 85 % must remain). Tolerance: PSNR
+// (glTF with a node hierarchy, a specular-glossiness material, a mesh placed four times — twice by translation
+// only, once rotated, once scaled —, a mesh with two materials, repeat and mirrored-repeat UVs far outside [0, 1], a
+// non-power-of-two image, an alpha-tested cut-out over another surface, an untextured material, a large --origin; or
+// the same as OBJ+MTL), imports it with the real texstream-import, renders it with the real texstream-render +
+// texstream-server (lock- step, validation on) and compares the last frame with a CPU ray cast of the test's own
+// description of the model: each pixel's ray meets the placements (the test's transforms, not the importer's), the
+// texture is sampled bilinearly with the wrap mode the test wrote into the file, from the baked level-0 texels decoded
+// by the test's own BC1 decoder, alpha-tested and un-premultiplied as glTF says. Every surface faces the camera at a
+// texel density below one texel per pixel, so the level shown is 0. Pixels whose neighbourhood spans two surfaces or
+// whose alpha is within 0.1 of the cutoff are left out (at least 85 % must remain). Tolerance: PSNR
 // >= 40 dB. On failure actual, expected and diff PNGs are kept and named.
 #include <gtest/gtest.h>
 
@@ -237,6 +237,12 @@ void write_gltf(const fs::path& dir, const TestModel& m) {
       pbr["baseColorTexture"] = {{"index", textures.size() - 1}};
     }
     nlohmann::json mat = {{"name", mt.name}, {"pbrMetallicRoughness", pbr}};
+    if (mt.name == "npot") {
+      // The older specular-glossiness workflow, as many exporters still write it: the colour is diffuseTexture.
+      mat["pbrMetallicRoughness"].erase("baseColorTexture");
+      mat["extensions"] = {{"KHR_materials_pbrSpecularGlossiness",
+                            {{"diffuseTexture", {{"index", textures.size() - 1}}}, {"diffuseFactor", {1, 1, 1, 1}}}}};
+    }
     if (mt.mask) mat["alphaMode"] = "MASK", mat["alphaCutoff"] = mt.cutoff;
     materials.push_back(mat);
   }

@@ -286,7 +286,9 @@ Result<Model> read_gltf(const std::filesystem::path& file) {
     out.images.push_back(std::move(s));
   }
 
-  // Materials.
+  // Materials. The colour texture is baseColorTexture, or for a file of the older specular-glossiness workflow
+  // (KHR_materials_pbrSpecularGlossiness, still written by many exporters) its diffuseTexture and diffuseFactor.
+  std::vector<int> texcoord_set(g.materials.size(), 0);
   for (size_t i = 0; i < g.materials.size(); ++i) {
     const tinygltf::Material& gm = g.materials[i];
     Material m;
@@ -297,7 +299,19 @@ Result<Model> read_gltf(const std::filesystem::path& file) {
     if (gm.alphaMode == "MASK") m.alpha = AlphaMode::kMask;
     if (gm.alphaMode == "BLEND") m.alpha = AlphaMode::kBlend;
     m.alpha_cutoff = static_cast<float>(gm.alphaCutoff);
-    const int tex = pbr.baseColorTexture.index;
+    int tex = pbr.baseColorTexture.index;
+    texcoord_set[i] = pbr.baseColorTexture.texCoord;
+    if (auto sg = gm.extensions.find("KHR_materials_pbrSpecularGlossiness"); tex < 0 && sg != gm.extensions.end()) {
+      const tinygltf::Value& v = sg->second;
+      if (v.Has("diffuseFactor") && v.Get("diffuseFactor").ArrayLen() == 4)
+        for (int c = 0; c < 4; ++c)
+          m.base_colour[c] = static_cast<float>(v.Get("diffuseFactor").Get(c).GetNumberAsDouble());
+      if (v.Has("diffuseTexture") && v.Get("diffuseTexture").Has("index")) {
+        tex = v.Get("diffuseTexture").Get("index").GetNumberAsInt();
+        if (v.Get("diffuseTexture").Has("texCoord"))
+          texcoord_set[i] = v.Get("diffuseTexture").Get("texCoord").GetNumberAsInt();
+      }
+    }
     if (tex >= 0 && tex < static_cast<int>(g.textures.size())) {
       const tinygltf::Texture& t = g.textures[tex];
       const int src = texture_source(t);
@@ -310,9 +324,6 @@ Result<Model> read_gltf(const std::filesystem::path& file) {
         m.wrap_u = wrap_of(g.samplers[t.sampler].wrapS);
         m.wrap_v = wrap_of(g.samplers[t.sampler].wrapT);
       }
-      if (pbr.baseColorTexture.texCoord != 0)
-        out.skipped.push_back(name + ": " + m.name + " samples TEXCOORD_" +
-                              std::to_string(pbr.baseColorTexture.texCoord) + "; imported with that set");
     }
     out.materials.push_back(std::move(m));
   }
@@ -343,7 +354,7 @@ Result<Model> read_gltf(const std::filesystem::path& file) {
         }
         int set = 0;
         if (p.material >= 0 && p.material < static_cast<int>(g.materials.size()))
-          set = g.materials[p.material].pbrMetallicRoughness.baseColorTexture.texCoord;
+          set = texcoord_set[static_cast<size_t>(p.material)];
         if (auto t = gp.attributes.find("TEXCOORD_" + std::to_string(set)); t != gp.attributes.end()) {
           st = read_floats(g, t->second, 2, p.uvs, what + " TEXCOORD_" + std::to_string(set));
           if (st.ok() && p.uvs.size() != nv * 2)
