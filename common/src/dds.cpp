@@ -24,6 +24,7 @@ constexpr uint32_t kFourCCDx10 = 0x30315844u;  // "DX10"
 constexpr uint32_t kDxgiR8G8B8A8Unorm = 28, kDxgiR8G8B8A8UnormSrgb = 29;
 constexpr uint32_t kDxgiBc1Unorm = 71, kDxgiBc1UnormSrgb = 72;
 constexpr uint32_t kDxgiBc3Unorm = 77, kDxgiBc3UnormSrgb = 78;
+constexpr uint32_t kDxgiBc7Unorm = 98, kDxgiBc7UnormSrgb = 99;
 constexpr uint32_t kDx10Texture2D = 3;
 
 uint32_t word(std::span<const std::byte> b, size_t offset) {
@@ -56,6 +57,7 @@ std::array<std::byte, kDdsHeaderBytes> make_dds_header(TexelFormat format, uint3
   put(h, kDepth, 0);
   put(h, kMipMapCount, mip_count);
   put(h, kPfSize, 32);
+  TS_ASSERT(format != TexelFormat::kBc7, "a BC7 DDS needs the DX10 extension, which the generator's header has not");
   if (is_block_compressed(format)) {
     flags |= kDdsdLinearSize;
     put(h, kPitchOrLinearSize, static_cast<uint32_t>(mip_bytes(format, width, height, 0)));
@@ -80,6 +82,7 @@ std::array<std::byte, kDdsHeaderBytes> make_dds_header(TexelFormat format, uint3
 TexelFormat DdsLayout::texel_format() const {
   return encoding == DdsEncoding::kBc1   ? TexelFormat::kBc1
          : encoding == DdsEncoding::kBc3 ? TexelFormat::kBc3
+         : encoding == DdsEncoding::kBc7 ? TexelFormat::kBc7
                                          : TexelFormat::kRgba8;
 }
 
@@ -131,6 +134,7 @@ Result<DdsLayout> parse_dds_layout(std::span<const std::byte> bytes, const std::
     const uint32_t dxgi = word(bytes, kDx10Format);
     l.encoding = dxgi == kDxgiBc1Unorm || dxgi == kDxgiBc1UnormSrgb             ? DdsEncoding::kBc1
                  : dxgi == kDxgiBc3Unorm || dxgi == kDxgiBc3UnormSrgb           ? DdsEncoding::kBc3
+                 : dxgi == kDxgiBc7Unorm || dxgi == kDxgiBc7UnormSrgb           ? DdsEncoding::kBc7
                  : dxgi == kDxgiR8G8B8A8Unorm || dxgi == kDxgiR8G8B8A8UnormSrgb ? DdsEncoding::kRgba8
                                                                                 : DdsEncoding::kOther;
   } else if ((pf_flags & kDdpfFourCC) != 0) {

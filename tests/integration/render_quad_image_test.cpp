@@ -260,3 +260,82 @@ INSTANTIATE_TEST_SUITE_P(Textures, RenderQuadImage,
                                            QuadCase{"wide2048x1024_mip2", 2048, 1024, 2}),
                          [](const auto& p) { return std::string(p.param.name); });
 }  // namespace
+
+// BC7 served raw (issue 27: "BC7 served raw where the device supports it"): the same quad with a 256² BC7
+// texture in a DDS with the DX10 extension (DXGI_FORMAT_BC7_UNORM_SRGB), every block of a level one solid
+// colour (mode 6, both endpoints the colour, all indices 0), a different colour per level. The renderer's cache is
+// a BC7 image; the quad shows level 0, so its pixels must be level 0's colour.
+namespace {
+
+// A BC7 mode-6 block of one colour; each channel odd (mode 6 endpoints are 7 bits plus a shared low bit, here 1).
+std::array<uint8_t, 16> bc7_solid(uint8_t r, uint8_t g, uint8_t b) {
+  std::array<uint8_t, 16> block{};
+  uint32_t at = 0;
+  auto put = [&](uint32_t value, uint32_t bits) {
+    for (uint32_t i = 0; i < bits; ++i, ++at)
+      if ((value >> i) & 1u) block[at / 8] |= static_cast<uint8_t>(1u << (at % 8));
+  };
+  put(1u << 6, 7);  // mode 6
+  for (uint8_t c : {r, g, b, uint8_t{255}}) {
+    put(c >> 1, 7);  // endpoint 0
+    put(c >> 1, 7);  // endpoint 1
+  }
+  put(1, 1);  // p0
+  put(1, 1);  // p1; the 63 index bits stay 0
+  return block;
+}
+
+}  // namespace
+
+TEST(RenderQuadBc7, ABc7TextureIsServedRawAndShowsItsLevelsColour) {
+  const QuadCase q{"bc7", 256, 256, 0};
+  const fs::path dir = fs::temp_directory_path() / ("texstream_render_quad_bc7_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir / "scene");
+  write_scene(dir / "scene", q);
+  if (HasFatalFailure()) return;
+  const uint32_t mips = full_mip_count(256, 256);
+  const scene::TextureRecord rec{256, 256, mips, static_cast<uint32_t>(TexelFormat::kBc7)};
+  ASSERT_TRUE(scene::write_texture_table(dir / "scene", std::span(&rec, 1)).ok());
+  auto man = scene::read_manifest(dir / "scene");
+  ASSERT_TRUE(man.ok());
+  man->texture_format = TexelFormat::kBc7;
+  ASSERT_TRUE(scene::write_manifest(dir / "scene", *man).ok());
+  {
+    std::ofstream out(scene::texture_path(dir / "scene", TextureId(0)), std::ios::binary | std::ios::trunc);
+    auto header = scene::make_dds_header(TexelFormat::kBc3, 256, 256, mips);
+    const uint32_t dx10 = 0x30315844u;  // "DX10"
+    std::memcpy(header.data() + scene::dds_field::kPfFourCC, &dx10, 4);
+    out.write(reinterpret_cast<const char*>(header.data()), static_cast<std::streamsize>(header.size()));
+    const uint32_t ext[5] = {99, 3, 0, 1, 0};  // BC7_UNORM_SRGB, TEXTURE2D, no flags, one texture, alpha unknown
+    out.write(reinterpret_cast<const char*>(ext), sizeof ext);
+    for (uint32_t l = 0; l < mips; ++l) {
+      const auto block = bc7_solid(static_cast<uint8_t>(201 - 20 * l), static_cast<uint8_t>(101 + 10 * l), 51);
+      const uint64_t blocks = mip_bytes(TexelFormat::kBc7, 256, 256, l) / 16;
+      for (uint64_t b = 0; b < blocks; ++b) out.write(reinterpret_cast<const char*>(block.data()), 16);
+    }
+  }
+  const fs::path out = dir / "out";
+  const std::string cmd =
+      (kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
+      " --set render.validation=true --set render.lockstep=true --set controller.mode=none" +
+      " --set render.frames=40 --set render.write_every_frames=0 --set render.width_px=" + std::to_string(kWidth) +
+      " --set render.height_px=" + std::to_string(kHeight) + " --set render.fov_y_deg=" + std::to_string(kFovY) +
+      " --set render.output_dir=" + out.string();
+  const int rc = run(cmd, dir / "render.log");
+  const std::string log = slurp(dir / "render.log");
+  ASSERT_EQ(rc, 0) << log;
+  const auto summary = nlohmann::json::parse(slurp(out / "summary.json"));
+  EXPECT_EQ(summary["validation_errors"].get<int>(), 0) << log;
+  EXPECT_EQ(summary["textures_resident"].get<int>(), 1) << log;
+  int w = 0, h = 0, n = 0;
+  unsigned char* pixels = stbi_load((out / "frames" / "frame_00039.png").c_str(), &w, &h, &n, 4);
+  ASSERT_NE(pixels, nullptr);
+  const unsigned char* c = pixels + (static_cast<size_t>(h / 2) * w + w / 2) * 4;
+  const int got[3] = {c[0], c[1], c[2]};
+  stbi_image_free(pixels);
+  EXPECT_NEAR(got[0], 201, 2) << log;
+  EXPECT_NEAR(got[1], 101, 2);
+  EXPECT_NEAR(got[2], 51, 2);
+  if (!HasFailure()) fs::remove_all(dir);
+}

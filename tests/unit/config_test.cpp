@@ -99,7 +99,7 @@ TEST(Config, AChoiceKeyTakesOnlyItsNames) {
   };
   for (const Case& c : {Case{"controller.mode", "sometimes", "auto, seed, adaptive, none or fixed"},
                         Case{"render.debug_view", "depth", "none, mip, weight or mesh_id"},
-                        Case{"cache.format", "dxt5", "auto, rgba8, bc1 or bc3"},
+                        Case{"cache.format", "dxt5", "auto, rgba8, bc1, bc3 or bc7"},
                         Case{"server.log_level", "loud", "trace, debug, info, warn or error"},
                         Case{"server.cache_policy", "mru", "level or lru"},
                         Case{"storage.disk_cache_policy", "level", "lru or fifo"}}) {
@@ -139,10 +139,10 @@ TEST(Config, AChoiceOutsideItsTableIsRefusedByValidate) {
 
 // Each choice's table is what the documentation shows: every name with its doc, in table order.
 TEST(Config, AChoiceKeyIsDocumentedFromItsTable) {
-  EXPECT_EQ(choice_names<CacheFormat>(), "auto, rgba8, bc1 or bc3");
-  EXPECT_EQ(choice_docs<CacheFormat>(), "auto (the scene's), rgba8, bc1 or bc3");
+  EXPECT_EQ(choice_names<CacheFormat>(), "auto, rgba8, bc1, bc3 or bc7");
+  EXPECT_EQ(choice_docs<CacheFormat>(), "auto (the scene's), rgba8, bc1, bc3 or bc7");
   const std::string doc = config_reference_markdown();
-  EXPECT_NE(doc.find("Texel format of the GPU cache: auto (the scene's), rgba8, bc1 or bc3"), std::string::npos);
+  EXPECT_NE(doc.find("Texel format of the GPU cache: auto (the scene's), rgba8, bc1, bc3 or bc7"), std::string::npos);
   EXPECT_NE(doc.find("| `controller.mode` | string | name | `\"auto\"` | auto, seed, adaptive, none or fixed |"),
             std::string::npos);
   EXPECT_EQ(cache_texel_format(CacheFormat::kAuto, TexelFormat::kBc1), TexelFormat::kBc1);

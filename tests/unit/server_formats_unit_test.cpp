@@ -71,7 +71,12 @@ TEST(DdsLayoutTest, Dxt5IsBc3AndOtherEncodingsAreForOpenImageIOAndNoMipCountMean
   EXPECT_EQ(dxt5->mip_count, 1u);
   auto bc7 = scene::parse_dds_layout(dds_header(8, 8, 0, kDx10, true, 98), "bc7.dds");  // DXGI_FORMAT_BC7_UNORM
   ASSERT_TRUE(bc7.ok());
-  EXPECT_EQ(bc7->encoding, scene::DdsEncoding::kOther);
+  EXPECT_EQ(bc7->encoding, scene::DdsEncoding::kBc7);
+  EXPECT_EQ(bc7->mip_offset(0), 148u);
+  EXPECT_EQ(bc7->mip_size(0), 64u);
+  auto bc5 = scene::parse_dds_layout(dds_header(8, 8, 0, kDx10, true, 83), "bc5.dds");  // DXGI_FORMAT_BC5_UNORM
+  ASSERT_TRUE(bc5.ok());
+  EXPECT_EQ(bc5->encoding, scene::DdsEncoding::kOther);
   auto dxt1 = scene::parse_dds_layout(dds_header(8, 8, 2, kDxt1), "short-chain.dds");
   ASSERT_TRUE(dxt1.ok());
   EXPECT_EQ(dxt1->mip_count, 2u);

@@ -71,7 +71,7 @@ ResidentCache resident_cache(const render::SceneData& scene) {
     while (e < std::max(s.width, s.height)) e *= 2;
     c.layer_extent = std::max(c.layer_extent, e);
     ++per_extent[static_cast<size_t>(std::log2(static_cast<double>(e)))];
-    bytes_per_block = s.format == TexelFormat::kBc1 ? 8 : s.format == TexelFormat::kBc3 ? 16 : 64;  // a 4x4 block
+    bytes_per_block = is_block_compressed(s.format) ? block_bytes(s.format) : 64;  // a 4x4 block
   }
   for (size_t k = 0; k < per_extent.size(); ++k) {
     if (!per_extent[k]) continue;

@@ -100,7 +100,8 @@ Result<std::unique_ptr<SparseMemory>> SparseMemory::create(const VulkanContext& 
   // size, and keep texels (VkSparseImageMemoryBind offsets and extents are texels).
   VkExtent3D g = colour->formatProperties.imageGranularity;
   const bool bc1 = info.format == VK_FORMAT_BC1_RGBA_SRGB_BLOCK || info.format == VK_FORMAT_BC1_RGBA_UNORM_BLOCK;
-  const bool bc3 = info.format == VK_FORMAT_BC3_SRGB_BLOCK || info.format == VK_FORMAT_BC3_UNORM_BLOCK;
+  const bool bc3 = info.format == VK_FORMAT_BC3_SRGB_BLOCK || info.format == VK_FORMAT_BC3_UNORM_BLOCK ||
+                   info.format == VK_FORMAT_BC7_SRGB_BLOCK || info.format == VK_FORMAT_BC7_UNORM_BLOCK;  // 16 B blocks
   const uint64_t block_bytes = bc1 ? 8 : bc3 ? 16 : 4, block_side = bc1 || bc3 ? 4 : 1;
   if (block_side > 1 && uint64_t{g.width} * g.height * block_bytes == m->page_bytes_) {
     g.width *= block_side;

@@ -43,6 +43,7 @@ uint32_t block_size(TexelFormat f) { return is_block_compressed(f) ? kBc1Block :
 VkFormat cache_vk_format(TexelFormat format) {
   return format == TexelFormat::kBc1   ? VK_FORMAT_BC1_RGBA_SRGB_BLOCK
          : format == TexelFormat::kBc3 ? VK_FORMAT_BC3_SRGB_BLOCK
+         : format == TexelFormat::kBc7 ? VK_FORMAT_BC7_SRGB_BLOCK
                                        : VK_FORMAT_R8G8B8A8_SRGB;
 }
 

@@ -178,7 +178,8 @@ Result<std::unique_ptr<VulkanContext>> VulkanContext::create(const VulkanContext
   features.sparseResidencyImage2D = supported.sparseResidencyImage2D;
   if (options.need_bc) {
     if (!supported.textureCompressionBC)
-      return make_error(ErrorCode::kUnsupported, "cache.format = bc1/bc3 but the device lacks textureCompressionBC");
+      return make_error(ErrorCode::kUnsupported,
+                        "cache.format = bc1/bc3/bc7 but the device lacks textureCompressionBC");
     features.textureCompressionBC = VK_TRUE;
   }
 

@@ -82,6 +82,7 @@ scene::DdsLayout generated_dds_layout(const scene::TextureRecord& record) {
   const auto format = static_cast<TexelFormat>(record.format);
   l.encoding = format == TexelFormat::kBc1   ? scene::DdsEncoding::kBc1
                : format == TexelFormat::kBc3 ? scene::DdsEncoding::kBc3
+               : format == TexelFormat::kBc7 ? scene::DdsEncoding::kBc7
                                              : scene::DdsEncoding::kRgba8;
   l.width = record.width;
   l.height = record.height;
@@ -418,7 +419,9 @@ CompletionStatus MipLoader::read_mip(const LoadRequest& request, const scene::Te
     if (is_block_compressed(format) && (dds.encoding == scene::DdsEncoding::kOther || dds.texel_format() != format)) {
       return fail_status(request, CompletionStatus::kCorrupt, path,
                          "the texture table says " + std::string(to_string(format)) + " but the file is not " +
-                             (format == TexelFormat::kBc1 ? "BC1/DXT1" : "BC3/DXT5") +
+                             (format == TexelFormat::kBc1   ? "BC1/DXT1"
+                              : format == TexelFormat::kBc3 ? "BC3/DXT5"
+                                                            : "BC7") +
                              " (the server never encodes block-compressed texels)");
     }
     decode = format == TexelFormat::kRgba8 && dds.encoding != scene::DdsEncoding::kRgba8;

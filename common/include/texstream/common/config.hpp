@@ -81,13 +81,14 @@ struct ChoiceTable<ControllerMode> {
        {ControllerMode::kFixed, "fixed", "s and b from fixed_load_mb and fixed_bias"}}};
 };
 
-enum class CacheFormat : uint8_t { kAuto, kRgba8, kBc1, kBc3 };  // cache.format
+enum class CacheFormat : uint8_t { kAuto, kRgba8, kBc1, kBc3, kBc7 };  // cache.format
 template <>
 struct ChoiceTable<CacheFormat> {
-  static constexpr std::array<ChoiceEntry<CacheFormat>, 4> kEntries{{{CacheFormat::kAuto, "auto", "the scene's"},
+  static constexpr std::array<ChoiceEntry<CacheFormat>, 5> kEntries{{{CacheFormat::kAuto, "auto", "the scene's"},
                                                                      {CacheFormat::kRgba8, "rgba8", ""},
                                                                      {CacheFormat::kBc1, "bc1", ""},
-                                                                     {CacheFormat::kBc3, "bc3", ""}}};
+                                                                     {CacheFormat::kBc3, "bc3", ""},
+                                                                     {CacheFormat::kBc7, "bc7", ""}}};
 };
 // The GPU cache's texel format: auto takes the scene's; an explicit one must match the scene's textures.
 constexpr TexelFormat cache_texel_format(CacheFormat format, TexelFormat scene_format) {
@@ -98,6 +99,8 @@ constexpr TexelFormat cache_texel_format(CacheFormat format, TexelFormat scene_f
       return TexelFormat::kBc1;
     case CacheFormat::kBc3:
       return TexelFormat::kBc3;
+    case CacheFormat::kBc7:
+      return TexelFormat::kBc7;
     case CacheFormat::kAuto:
       break;
   }

@@ -1,10 +1,10 @@
 #pragma once
 // The DDS header, written and read in one place. The writer makes the generator's files (legacy header, no DX10
 // extension, mips finest first). The one parser reads DDS files from any tool: legacy headers (FourCC DXT1, DXT5,
-// 32-bit RGBA masks) and the DX10 extension (DXGI BC1 / BC3 / R8G8B8A8). Mips are stored finest first, back to back,
-// after the header (128 bytes, or 148 with the DX10 extension), so one mip is one byte range (seed 000 §3.5:
-// read exactly that). Encodings that cannot be served raw (BGRA, 24-bit, BC7, ...) are reported as kOther:
-// the server's loader then decodes that mip through OpenImageIO into RGBA8. Pure parsing, no I/O.
+// 32-bit RGBA masks) and the DX10 extension (DXGI BC1 / BC3 / BC7 / R8G8B8A8). Mips are stored finest first, back to
+// back, after the header (128 bytes, or 148 with the DX10 extension), so one mip is one byte range (seed 000 §3.5: read
+// exactly that). Encodings that cannot be served raw (BGRA, 24-bit, BC4/5/6, ...) are reported as kOther: the server's
+// loader then decodes that mip through OpenImageIO into RGBA8. Pure parsing, no I/O.
 #include <array>
 #include <cstddef>
 #include <cstdint>
@@ -35,6 +35,7 @@ std::array<std::byte, kDdsHeaderBytes> make_dds_header(TexelFormat format, uint3
 enum class DdsEncoding : uint8_t {
   kBc1,    // BC1/DXT1 blocks: served as they are
   kBc3,    // BC3/DXT5 blocks: served as they are to a bc3 texture
+  kBc7,    // BC7 blocks (DX10 extension): served as they are to a bc7 texture
   kRgba8,  // 32-bit R,G,B,A bytes in this order: served as they are
   kOther,  // anything else OpenImageIO may decode
 };

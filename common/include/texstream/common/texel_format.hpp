@@ -12,27 +12,36 @@ enum class TexelFormat : uint32_t {
   kRgba8 = 1,  // 4 bytes per texel, sRGB-encoded colour
   kBc1 = 2,    // 8 bytes per 4x4 block (seed 000 Table 1: the city datasets are BC1)
   kBc3 = 3,    // 16 bytes per 4x4 block (DXT5): a BC1 colour block and an 8-bit alpha block
+  kBc7 = 4,    // 16 bytes per 4x4 block: served raw from DDS files with the DX10 extension (no encoder here)
 };
 
-constexpr bool is_block_compressed(TexelFormat f) { return f == TexelFormat::kBc1 || f == TexelFormat::kBc3; }
+constexpr bool is_block_compressed(TexelFormat f) {
+  return f == TexelFormat::kBc1 || f == TexelFormat::kBc3 || f == TexelFormat::kBc7;
+}
 // Bytes of one 4x4 block of a block-compressed format.
-constexpr uint64_t block_bytes(TexelFormat f) { return f == TexelFormat::kBc3 ? 16 : 8; }
+constexpr uint64_t block_bytes(TexelFormat f) { return f == TexelFormat::kBc1 ? 8 : 16; }
 
 constexpr std::optional<TexelFormat> texel_format_from_raw(uint32_t raw) {
   if (raw == static_cast<uint32_t>(TexelFormat::kRgba8)) return TexelFormat::kRgba8;
   if (raw == static_cast<uint32_t>(TexelFormat::kBc1)) return TexelFormat::kBc1;
   if (raw == static_cast<uint32_t>(TexelFormat::kBc3)) return TexelFormat::kBc3;
+  if (raw == static_cast<uint32_t>(TexelFormat::kBc7)) return TexelFormat::kBc7;
   return std::nullopt;
 }
 
 constexpr std::string_view to_string(TexelFormat f) {
-  return f == TexelFormat::kRgba8 ? "rgba8" : f == TexelFormat::kBc1 ? "bc1" : f == TexelFormat::kBc3 ? "bc3" : "?";
+  return f == TexelFormat::kRgba8 ? "rgba8"
+         : f == TexelFormat::kBc1 ? "bc1"
+         : f == TexelFormat::kBc3 ? "bc3"
+         : f == TexelFormat::kBc7 ? "bc7"
+                                  : "?";
 }
 
 constexpr std::optional<TexelFormat> texel_format_from_string(std::string_view s) {
   if (s == "rgba8") return TexelFormat::kRgba8;
   if (s == "bc1") return TexelFormat::kBc1;
   if (s == "bc3") return TexelFormat::kBc3;
+  if (s == "bc7") return TexelFormat::kBc7;
   return std::nullopt;
 }
 
@@ -54,7 +63,7 @@ constexpr Extent2D mip_extent(uint32_t width, uint32_t height, uint32_t level) {
   return {std::max(1u, width >> level), std::max(1u, height >> level)};
 }
 
-// Bytes of one mip level. BC1/BC3 round each side up to whole 4x4 blocks (a 1x1 BC1 mip is one 8-byte block).
+// Bytes of one mip level. BC1/BC3/BC7 round each side up to whole 4x4 blocks (a 1x1 BC1 mip is one 8-byte block).
 constexpr uint64_t mip_bytes(TexelFormat format, Extent2D e) {
   if (is_block_compressed(format)) {
     const uint64_t bw = (e.width + 3) / 4, bh = (e.height + 3) / 4;

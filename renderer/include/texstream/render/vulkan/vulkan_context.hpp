@@ -18,7 +18,7 @@ namespace texstream::render {
 struct VulkanContextOptions {
   std::string device_substring;  // empty: the first device
   bool validation = false;       // VK_LAYER_KHRONOS_validation + debug messenger
-  bool need_bc = false;          // textureCompressionBC (cache.format = bc1 or bc3)
+  bool need_bc = false;          // textureCompressionBC (cache.format = bc1, bc3 or bc7)
   // Window mode: instance extensions the window system needs (glfwGetRequiredInstanceExtensions), and a test
   // that the queue family can present (glfwGetPhysicalDevicePresentationSupport); non-empty adds
   // VK_KHR_swapchain to the device.
