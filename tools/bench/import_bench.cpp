@@ -6,7 +6,8 @@
 //   3. renders the imported scene with render.preload_all (every mip of every texture streamed through the real
 //      server into the cache) and compares the bytes the cache uploaded with the mip bytes of the DDS files on
 //      disk: 1.0 when every mip reaches the GPU in its own format, undecoded.
-// --quick: 10,000 textures of 64 x 64 (within 60 s on 2 cores); default: 10,000 of 256 x 256.
+// --quick: 10,000 textures of 64 x 64 (within 60 s on 2 cores); default: 10,000 of 256 x 256. --format picks
+// the importer's texel format (bc1, bc3, rgba8).
 // Last line: summary: textures=N import_s=T textures_per_s=R peak_rss_mb=M upload_vs_disk=U
 #include <sys/resource.h>
 #include <sys/wait.h>
@@ -42,6 +43,7 @@ struct ImportBenchOptions {
   uint32_t size = 0;  // 0: 64 with --quick, else 256
   fs::path out;
   unsigned threads = 0;
+  std::string format = "bc1";  // texstream-import --format
 };
 
 // A small hash: distinct texels per image.
@@ -146,15 +148,21 @@ int run_import_bench(const ImportBenchOptions& o) {
       o.out.empty() ? fs::temp_directory_path() / ("texstream_bench_import_" + std::to_string(::getpid())) : o.out;
   fs::remove_all(root);
   fs::create_directories(root);
-  std::printf("import bench: %u textures of %ux%u (PNG), folder %s\n", o.textures, size, size, root.c_str());
+  std::printf("import bench: %u textures of %ux%u (PNG) to %s, folder %s\n", o.textures, size, size, o.format.c_str(),
+              root.c_str());
   std::fflush(stdout);
   const auto w0 = std::chrono::steady_clock::now();
   write_model(root / "model", o.textures, size);
   const double write_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - w0).count();
   std::printf("  wrote the glTF and its images in %.1f s\n", write_s);
 
-  std::vector<std::string> args = {(bin_dir() / "texstream-import").string(), (root / "model" / "model.gltf").string(),
-                                   "--out", (root / "scene").string(), "--quiet"};
+  std::vector<std::string> args = {(bin_dir() / "texstream-import").string(),
+                                   (root / "model" / "model.gltf").string(),
+                                   "--out",
+                                   (root / "scene").string(),
+                                   "--quiet",
+                                   "--format",
+                                   o.format};
   if (o.threads) args.insert(args.end(), {"--threads", std::to_string(o.threads)});
   const auto t0 = std::chrono::steady_clock::now();
   const auto [rc, rss_kib] = run_child(args, root / "import.log");
@@ -224,6 +232,9 @@ std::function<int()> define_import(CLI::App& app) {
       ->check(CLI::Range(1u, 16384u));
   app.add_option("--out", o->out, "Keep the model, scene and logs here (default: a temp folder, removed)");
   app.add_option("--threads", o->threads, "texstream-import --threads (default: all cores)");
+  app.add_option("--format", o->format, "texstream-import --format")
+      ->check(CLI::IsMember({"bc1", "bc3", "rgba8"}))
+      ->capture_default_str();
   return [o] { return run_import_bench(*o); };
 }
 
