@@ -34,8 +34,14 @@ Result<Model> read_with_assimp(const std::filesystem::path& file) {
   const aiScene* s =
       importer.ReadFile(name, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_GenSmoothNormals |
                                   aiProcess_FlipUVs | aiProcess_SortByPType | aiProcess_ValidateDataStructure);
-  if (s == nullptr || (s->mFlags & AI_SCENE_FLAGS_INCOMPLETE) || s->mRootNode == nullptr)
-    return make_error(ErrorCode::kCorrupt, name + ": Assimp cannot read it: " + importer.GetErrorString());
+  if (s == nullptr || (s->mFlags & AI_SCENE_FLAGS_INCOMPLETE) || s->mRootNode == nullptr) {
+    const std::string why = importer.GetErrorString();
+    if (why.empty() && s != nullptr && s->mNumMeshes == 0)  // cameras or lights only: Assimp marks it incomplete
+      return make_error(ErrorCode::kInvalidArgument, name + ": holds no mesh (" + std::to_string(s->mNumCameras) +
+                                                         " cameras, " + std::to_string(s->mNumLights) + " lights)");
+    return make_error(ErrorCode::kCorrupt,
+                      name + ": Assimp cannot read it: " + (why.empty() ? "no reason given" : why));
+  }
 
   Model out;
   out.source = name;
