@@ -40,7 +40,8 @@ Result<Model> read_with_assimp(const std::filesystem::path& file) {
       return make_error(ErrorCode::kInvalidArgument, name + ": holds no mesh (" + std::to_string(s->mNumCameras) +
                                                          " cameras, " + std::to_string(s->mNumLights) + " lights)");
     return make_error(ErrorCode::kCorrupt,
-                      name + ": Assimp cannot read it: " + (why.empty() ? "no reason given" : why));
+                      name + ": Assimp cannot read it: " +
+                          (why.empty() ? "nothing it imports (no meshes: cameras or lights only?)" : why));
   }
 
   Model out;
