@@ -12,19 +12,6 @@
 namespace texstream::import {
 namespace {
 
-using Mat4 = std::array<double, 16>;  // column-major
-
-Mat4 multiply(const Mat4& a, const Mat4& b) {
-  Mat4 r{};
-  for (int c = 0; c < 4; ++c)
-    for (int row = 0; row < 4; ++row) {
-      double s = 0;
-      for (int k = 0; k < 4; ++k) s += a[k * 4 + row] * b[c * 4 + k];
-      r[c * 4 + row] = s;
-    }
-  return r;
-}
-
 // T * R * S from a translation, a unit quaternion (x, y, z, w) and a scale.
 Mat4 compose(const double t[3], const double q[4], const double s[3]) {
   const double x = q[0], y = q[1], z = q[2], w = q[3];
@@ -401,7 +388,7 @@ Result<Model> read_gltf(const std::filesystem::path& file) {
     roots = g.scenes[0].nodes;
   else
     for (size_t i = 0; i < g.nodes.size(); ++i) roots.push_back(static_cast<int>(i));  // no scene: every node
-  const Mat4 identity{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+  const Mat4 identity = kIdentity;
   std::vector<std::pair<int, Mat4>> stack;
   for (auto it = roots.rbegin(); it != roots.rend(); ++it) stack.emplace_back(*it, identity);
   size_t visited = 0;

@@ -44,6 +44,22 @@ struct Primitive {
   int material = -1;  // -1: the default material (white)
 };
 
+// A 4x4 transform, column-major (element (row, column) at [column * 4 + row]), double: node transforms keep
+// map coordinates exact.
+using Mat4 = std::array<double, 16>;
+inline constexpr Mat4 kIdentity{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+
+inline Mat4 multiply(const Mat4& a, const Mat4& b) {
+  Mat4 r{};
+  for (int c = 0; c < 4; ++c)
+    for (int row = 0; row < 4; ++row) {
+      double s = 0;
+      for (int k = 0; k < 4; ++k) s += a[k * 4 + row] * b[c * 4 + k];
+      r[c * 4 + row] = s;
+    }
+  return r;
+}
+
 // One placement of a primitive: the node's world transform, column-major, double (map coordinates).
 struct Instance {
   uint32_t primitive = 0;

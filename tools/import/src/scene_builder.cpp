@@ -21,24 +21,11 @@ namespace texstream::import {
 namespace fs = std::filesystem;
 namespace {
 
-using Mat4 = std::array<double, 16>;  // column-major
-
 // The file's frame turned to the scene's (x east, y north, z up): a y-up model's -z (glTF "forward") is north.
 Mat4 up_turn(bool y_up) {
   if (!y_up) return {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
   // (x, y, z) -> (x, -z, y)
   return {1, 0, 0, 0, 0, 0, 1, 0, 0, -1, 0, 0, 0, 0, 0, 1};
-}
-
-Mat4 multiply(const Mat4& a, const Mat4& b) {
-  Mat4 r{};
-  for (int c = 0; c < 4; ++c)
-    for (int row = 0; row < 4; ++row) {
-      double s = 0;
-      for (int k = 0; k < 4; ++k) s += a[k * 4 + row] * b[c * 4 + k];
-      r[c * 4 + row] = s;
-    }
-  return r;
 }
 
 bool only_moves(const Mat4& m) {
