@@ -1,14 +1,15 @@
 // texstream-import end to end, checked against a reference made another way. The test writes a model itself
-// (glTF with a node hierarchy, a specular-glossiness material, a mesh placed four times — twice by translation
-// only, once rotated, once scaled —, a mesh with two materials, repeat and mirrored-repeat UVs far outside [0, 1], a
-// non-power-of-two image, an alpha-tested cut-out over another surface, an untextured material, a large --origin; or
-// the same as OBJ+MTL), imports it with the real texstream-import, renders it with the real texstream-render +
-// texstream-server (lock- step, validation on) and compares the last frame with a CPU ray cast of the test's own
-// description of the model: each pixel's ray meets the placements (the test's transforms, not the importer's), the
-// texture is sampled bilinearly with the wrap mode the test wrote into the file, from the baked level-0 texels decoded
-// by the test's own BC1 decoder, alpha-tested and un-premultiplied as glTF says. Every surface faces the camera at a
-// texel density below one texel per pixel, so the level shown is 0. Pixels whose neighbourhood spans two surfaces or
-// whose alpha is within 0.1 of the cutoff are left out (at least 85 % must remain). Tolerance: PSNR
+// (glTF with a node hierarchy, a specular-glossiness material, a mesh placed six times — twice by translation
+// only, once rotated, once scaled, twice by one EXT_mesh_gpu_instancing node —, a mesh with two materials, repeat and
+// mirrored-repeat UVs far outside [0, 1], a non-power-of-two image, an alpha-tested cut-out over another surface, an
+// untextured material, a large --origin; or the same as OBJ+MTL), imports it with the real texstream-import, renders it
+// with the real texstream-render + texstream-server (lock- step, validation on) and compares the last frame with a CPU
+// ray cast of the test's own description of the model: each pixel's ray meets the placements (the test's transforms,
+// not the importer's), the texture is sampled bilinearly with the wrap mode the test wrote into the file, from the
+// baked level-0 texels decoded by the test's own BC1 decoder, alpha-tested and un-premultiplied as glTF says. Every
+// surface faces the camera at a texel density below one texel per pixel, so the level shown is 0. Pixels whose
+// neighbourhood spans two surfaces or whose alpha is within 0.1 of the cutoff are left out (at least 85 % must remain).
+// Tolerance: PSNR
 // >= 40 dB. On failure actual, expected and diff PNGs are kept and named.
 #include <gtest/gtest.h>
 
@@ -78,6 +79,7 @@ struct Placement {
   double rot_deg = 0;
   double scale = 1;
   bool parent = false;
+  bool gpu_instancing = false;  // one of the placements of an EXT_mesh_gpu_instancing node (the first one's tz)
 };
 
 struct TestModel {
@@ -154,8 +156,10 @@ TestModel make_model() {
       {3, 85, -25, -100, 0, 1.5, true},  // scaled in a child node
       {4, -60, -25, -99},                // cut-out in front of the background
       {5, -15, -25, -100},
-      {6, 24, -25, -100},  // the two-material mesh (its second primitive is offset below)
-      {7, 24, -25, -100},  // (same node; the primitive lies 12 m to the right)
+      {6, 24, -25, -100},                        // the two-material mesh (its second primitive is offset below)
+      {7, 24, -25, -100},                        // (same node; the primitive lies 12 m to the right)
+      {3, 0, -47, -100, 0, 1, false, true},      // the tile twice more, by one EXT_mesh_gpu_instancing node:
+      {3, 30, -47, -100, 90, 1.2, false, true},  // translation, rotation and scale per instance
   };
   return m;
 }
@@ -250,9 +254,36 @@ void write_gltf(const fs::path& dir, const TestModel& m) {
   // rotating/scaling child. A two-primitive mesh is placed once (its first QuadMesh's placement).
   nlohmann::json nodes = nlohmann::json::array();
   nodes.push_back({{"name", "root"}, {"children", nlohmann::json::array()}});
+  // EXT_mesh_gpu_instancing: one node at (0, 0, tz) whose instances carry the placements' translations,
+  // rotations and scales (float accessors), as glTF cities place trees and lamps.
+  std::vector<float> it, ir, is;
+  int instanced_mesh = -1;
+  double instanced_z = 0;
+  for (const Placement& pl : m.placements) {
+    if (!pl.gpu_instancing) continue;
+    const double half = pl.rot_deg * M_PI / 360.0;
+    it.insert(it.end(), {static_cast<float>(pl.tx), static_cast<float>(pl.ty), 0.0f});
+    ir.insert(ir.end(), {0.0f, 0.0f, static_cast<float>(std::sin(half)), static_cast<float>(std::cos(half))});
+    is.insert(is.end(), {static_cast<float>(pl.scale), static_cast<float>(pl.scale), static_cast<float>(pl.scale)});
+    instanced_mesh = m.mesh_group[pl.mesh];
+    instanced_z = pl.tz;
+  }
+  if (instanced_mesh >= 0) {
+    const int count = static_cast<int>(it.size() / 3);
+    const int ta = add(it.data(), it.size() * 4, 5126, count, "VEC3");
+    const int ra = add(ir.data(), ir.size() * 4, 5126, count, "VEC4");
+    const int sa = add(is.data(), is.size() * 4, 5126, count, "VEC3");
+    nodes.push_back(
+        {{"mesh", instanced_mesh},
+         {"translation", {0.0, 0.0, instanced_z}},
+         {"extensions",
+          {{"EXT_mesh_gpu_instancing", {{"attributes", {{"TRANSLATION", ta}, {"ROTATION", ra}, {"SCALE", sa}}}}}}}});
+    nodes[0]["children"].push_back(nodes.size() - 1);
+  }
   for (const Placement& pl : m.placements) {
     const int q = pl.mesh;
     if (q > 0 && m.mesh_group[q] == m.mesh_group[q - 1]) continue;  // placed with its group
+    if (pl.gpu_instancing) continue;                                // placed by the instancing node
     const double half = pl.rot_deg * M_PI / 360.0;
     nlohmann::json trs = {{"mesh", m.mesh_group[q]}};
     if (pl.rot_deg != 0) trs["rotation"] = {0, 0, std::sin(half), std::cos(half)};
@@ -269,6 +300,7 @@ void write_gltf(const fs::path& dir, const TestModel& m) {
   }
   std::ofstream(dir / "model.bin", std::ios::binary).write(reinterpret_cast<const char*>(bin.data()), bin.size());
   const nlohmann::json gltf = {{"asset", {{"version", "2.0"}, {"generator", "texstream import test"}}},
+                               {"extensionsUsed", {"EXT_mesh_gpu_instancing", "KHR_materials_pbrSpecularGlossiness"}},
                                {"scene", 0},
                                {"scenes", {{{"nodes", {0}}}}},
                                {"nodes", nodes},
@@ -614,15 +646,15 @@ TEST_P(ImportRenderGltf, HierarchyInstancingRepeatMirrorAndCutOutsDrawAsTheRefer
   const std::string import_log = texstream::test::slurp(dir / "import.log");
   ASSERT_EQ(rc, 0) << import_log;
 
-  // What the file says, as the scene holds it: 11 placements; the tile's four (moved, moved, turned, scaled)
-  // share one copy of its vertices, the turn and the scale in transforms.bin.
+  // What the file says, as the scene holds it: 13 placements; the tile's six (moved, moved, turned, scaled, and
+  // two by EXT_mesh_gpu_instancing) share one copy of its vertices, turns and scales in transforms.bin.
   const auto meshes = scene::read_meshes(scene_dir);
   ASSERT_TRUE(meshes.ok());
-  EXPECT_EQ(meshes->meshes.size(), 11u);
+  EXPECT_EQ(meshes->meshes.size(), 13u);
   std::map<uint32_t, int> users;
   for (const auto& r : meshes->meshes) ++users[r.first_vertex];
-  EXPECT_EQ(std::count_if(users.begin(), users.end(), [](const auto& u) { return u.second == 4; }), 1)
-      << "the four tiles share one range";
+  EXPECT_EQ(std::count_if(users.begin(), users.end(), [](const auto& u) { return u.second == 6; }), 1)
+      << "the six tiles share one range";
   const auto xf = scene::map_transforms(scene_dir, meshes->meshes.size());
   ASSERT_TRUE(xf.ok());
   int turned = 0, scaled = 0;
@@ -630,7 +662,7 @@ TEST_P(ImportRenderGltf, HierarchyInstancingRepeatMirrorAndCutOutsDrawAsTheRefer
     turned += std::abs(t.rotation[3]) < 0.99f;
     scaled += std::abs(t.scale - 1.5f) < 1e-6f;
   }
-  EXPECT_EQ(turned, 1);
+  EXPECT_EQ(turned, 2);
   EXPECT_EQ(scaled, 1);
   const auto sampling = scene::map_sampling(scene_dir, scene::read_manifest(scene_dir)->texture_count);
   ASSERT_TRUE(sampling.ok());
