@@ -593,7 +593,7 @@ Result<MappedTransforms> map_transforms(const fs::path& dir, uint64_t expected_c
     bool finite = std::isfinite(t.scale);
     for (float q : t.rotation) {
       finite = finite && std::isfinite(q);
-      n += double{q} * double{q};
+      n += static_cast<double>(q) * static_cast<double>(q);
     }
     if (!finite || std::abs(n - 1.0) > 1e-3 || !(t.scale > 0.0f))
       return make_error(ErrorCode::kCorrupt,

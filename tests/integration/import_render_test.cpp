@@ -336,10 +336,10 @@ void write_obj(const fs::path& dir, const TestModel& m) {
     const double c = std::cos(pl.rot_deg * M_PI / 180), s = std::sin(pl.rot_deg * M_PI / 180);
     obj << "o placement" << base << "\nusemtl " << m.materials[m.meshes[q].material].name << "\n";
     for (const auto& p : v) {
-      const double x = pl.scale * double{p[0]}, y = pl.scale * double{p[1]};
+      const double x = pl.scale * static_cast<double>(p[0]), y = pl.scale * static_cast<double>(p[1]);
       obj << "v " << c * x - s * y + pl.tx << " " << s * x + c * y + pl.ty << " " << pl.tz << "\n";
     }
-    for (const auto& p : v) obj << "vt " << p[3] << " " << 1.0 - double{p[4]} << "\n";
+    for (const auto& p : v) obj << "vt " << p[3] << " " << 1.0 - static_cast<double>(p[4]) << "\n";
     obj << "f " << base << "/" << base << " " << base + 1 << "/" << base + 1 << " " << base + 2 << "/" << base + 2
         << " " << base + 3 << "/" << base + 3 << "\n";
     base += 4;
@@ -519,7 +519,8 @@ std::vector<uint32_t> textures_of_placements(const fs::path& scene_dir, const Te
     for (const auto& r : meshes->meshes) {
       double d2 = 0;
       for (int a = 0; a < 3; ++a) {
-        const double centre = r.origin[a] + 0.5 * (double{r.bounds_min[a]} + double{r.bounds_max[a]});
+        const double centre =
+            r.origin[a] + 0.5 * (static_cast<double>(r.bounds_min[a]) + static_cast<double>(r.bounds_max[a]));
         d2 += (centre - want[a]) * (centre - want[a]);
       }
       if (d2 < best) best = d2, tex = r.texture_id;

@@ -98,7 +98,8 @@ std::optional<scene::MeshTransform> rotation_and_scale(const Mat4& world, const 
 // v turned by the unit quaternion q and scaled: what scene.vert does.
 std::array<double, 3> apply(const scene::MeshTransform& t, const float v[3]) {
   const double qx = t.rotation[0], qy = t.rotation[1], qz = t.rotation[2], qw = t.rotation[3];
-  const double sc = t.scale, x = double{v[0]} * sc, y = double{v[1]} * sc, z = double{v[2]} * sc;
+  const double sc = t.scale, x = static_cast<double>(v[0]) * sc, y = static_cast<double>(v[1]) * sc,
+               z = static_cast<double>(v[2]) * sc;
   // v + 2 q.xyz x (q.xyz x v + w v)
   const double cx = qy * z - qz * y + qw * x, cy = qz * x - qx * z + qw * y, cz = qx * y - qy * x + qw * z;
   return {x + 2 * (qy * cz - qz * cy), y + 2 * (qz * cx - qx * cz), z + 2 * (qx * cy - qy * cx)};
@@ -181,7 +182,8 @@ Placed place(const Primitive& p, const Mat4& m) {
     for (int r = 0; r < 3; ++r) o.pos[r] = static_cast<float>(world[v][r] - out.origin[r]);
     const float* n = &(*normals)[v * 3];
     for (int r = 0; r < 3; ++r)
-      o.normal[r] = static_cast<float>(nm[r] * double{n[0]} + nm[3 + r] * double{n[1]} + nm[6 + r] * double{n[2]});
+      o.normal[r] = static_cast<float>(nm[r] * static_cast<double>(n[0]) + nm[3 + r] * static_cast<double>(n[1]) +
+                                       nm[6 + r] * static_cast<double>(n[2]));
     normalise(o.normal);
     o.uv[0] = p.uvs.size() == nv * 2 ? p.uvs[v * 2] : 0.0f;
     o.uv[1] = p.uvs.size() == nv * 2 ? p.uvs[v * 2 + 1] : 0.0f;
@@ -414,8 +416,8 @@ Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
     }
     transforms.push_back(xf);
     for (int a = 0; a < 3; ++a) {
-      lo[a] = std::min(lo[a], r.origin[a] + double{r.bounds_min[a]});
-      hi[a] = std::max(hi[a], r.origin[a] + double{r.bounds_max[a]});
+      lo[a] = std::min(lo[a], r.origin[a] + static_cast<double>(r.bounds_min[a]));
+      hi[a] = std::max(hi[a], r.origin[a] + static_cast<double>(r.bounds_max[a]));
     }
     report.triangles += r.index_count / 3;
     meshes.meshes.push_back(r);
