@@ -57,7 +57,14 @@ Result<Level> decode(const SourceImage& image, const std::filesystem::path& scra
   if (!read) return make_error(ErrorCode::kCorrupt, image.name + ": cannot decode: " + why);
 
   // Integer images carry sRGB-encoded colour (glTF: base colour textures are sRGB); float images are linear.
-  const bool encoded = spec.format.basetype == OIIO::TypeDesc::UINT8 || spec.format.basetype == OIIO::TypeDesc::UINT16;
+  const bool bytes = spec.format.basetype == OIIO::TypeDesc::UINT8;
+  const bool encoded = bytes || spec.format.basetype == OIIO::TypeDesc::UINT16;
+  // 8-bit data (k / 255 as OpenImageIO hands it over) through the exact 256-entry table, not std::pow per
+  // channel: that pow was most of the time of a 256² PNG's bake.
+  auto to_linear = [&](float v) {
+    const float c = std::clamp(v, 0.0f, 1.0f);
+    return bytes ? gen::srgb8_to_linear(static_cast<uint8_t>(std::lround(c * 255.0f))) : srgb_to_linear(c);
+  };
   const int alpha_channel = spec.alpha_channel >= 0 ? spec.alpha_channel : (nch == 2 ? 1 : nch >= 4 ? 3 : -1);
   Level l;
   l.width = static_cast<uint32_t>(spec.width);
@@ -70,8 +77,7 @@ Result<Level> decode(const SourceImage& image, const std::filesystem::path& scra
       c[0] = c[1] = c[2] = p[0];
     else
       for (int k = 0; k < 3; ++k) c[k] = p[k];
-    for (int k = 0; k < 3; ++k)
-      l.rgba[i * 4 + k] = encoded ? srgb_to_linear(std::clamp(c[k], 0.0f, 1.0f)) : std::max(c[k], 0.0f);
+    for (int k = 0; k < 3; ++k) l.rgba[i * 4 + k] = encoded ? to_linear(c[k]) : std::max(c[k], 0.0f);
     l.rgba[i * 4 + 3] = alpha_channel >= 0 ? std::clamp(p[alpha_channel], 0.0f, 1.0f) : 1.0f;
   }
   return l;
