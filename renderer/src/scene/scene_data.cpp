@@ -1,5 +1,6 @@
 #include "texstream/render/scene/scene_data.hpp"
 
+#include <algorithm>
 #include <string>
 
 namespace texstream::render {
@@ -110,8 +111,12 @@ std::span<const uint32_t> SceneData::colours() const {
   return mapped_ ? mapped_->colormap.rgba : std::span<const uint32_t>(colormap);
 }
 
+std::span<const uint32_t> SceneData::sampling_words() const {
+  return mapped_ ? mapped_->sampling.flags : std::span<const uint32_t>(sampling);
+}
+
 uint32_t SceneData::sampling_flags(uint32_t id) const {
-  const std::span<const uint32_t> flags = mapped_ ? mapped_->sampling.flags : std::span<const uint32_t>(sampling);
+  const std::span<const uint32_t> flags = sampling_words();
   return id < flags.size() ? flags[id] : 0u;
 }
 
@@ -122,10 +127,9 @@ scene::MeshTransform SceneData::mesh_transform(uint32_t id) const {
 }
 
 bool SceneData::has_alpha_test() const {
-  const std::span<const uint32_t> flags = mapped_ ? mapped_->sampling.flags : std::span<const uint32_t>(sampling);
-  for (uint32_t f : flags)
-    if (f & scene::sampling_flags::kAlphaTest) return true;
-  return false;
+  const std::span<const uint32_t> flags = sampling_words();
+  return std::any_of(flags.begin(), flags.end(),
+                     [](uint32_t f) { return (f & scene::sampling_flags::kAlphaTest) != 0; });
 }
 
 Status SceneData::check_mesh(uint32_t id) const {

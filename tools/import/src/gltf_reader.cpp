@@ -388,9 +388,8 @@ Result<Model> read_gltf(const std::filesystem::path& file) {
     roots = g.scenes[0].nodes;
   else
     for (size_t i = 0; i < g.nodes.size(); ++i) roots.push_back(static_cast<int>(i));  // no scene: every node
-  const Mat4 identity = kIdentity;
   std::vector<std::pair<int, Mat4>> stack;
-  for (auto it = roots.rbegin(); it != roots.rend(); ++it) stack.emplace_back(*it, identity);
+  for (auto it = roots.rbegin(); it != roots.rend(); ++it) stack.emplace_back(*it, kIdentity);
   size_t visited = 0;
   while (!stack.empty()) {
     auto [ni, parent] = stack.back();
@@ -451,7 +450,7 @@ Result<Model> read_gltf(const std::filesystem::path& file) {
   if (out.instances.empty() && !out.primitives.empty()) {
     // No node of the scene places a mesh (a file of meshes only, or a scene without nodes): each once, as is.
     out.skipped.push_back(name + ": no node of the scene places a mesh; each mesh is drawn once at the file's origin");
-    for (uint32_t p = 0; p < out.primitives.size(); ++p) out.instances.push_back(Instance{p, identity});
+    for (uint32_t p = 0; p < out.primitives.size(); ++p) out.instances.push_back(Instance{p, kIdentity});
   }
   return out;
 }

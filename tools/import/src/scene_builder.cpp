@@ -9,7 +9,6 @@
 #include <fstream>
 #include <limits>
 #include <map>
-#include <mutex>
 #include <thread>
 #include <tuple>
 
@@ -152,8 +151,10 @@ struct Placed {
   std::vector<scene::Vertex> vertices;
 };
 
-// `m` applied to a primitive: positions in double, the origin the centre of their box, vertices relative to it.
-Placed place(const Primitive& p, const Mat4& m) {
+// `m` applied to a primitive: positions in double, vertices relative to the origin, which is the centre of their
+// box (`centre`: a placement with its own vertices) or the frame's own origin (a primitive's shared vertices,
+// so that every placement's origin is its translation).
+Placed place(const Primitive& p, const Mat4& m, bool centre) {
   std::vector<float> computed;
   const std::vector<float>* normals = &p.normals;
   if (p.normals.size() != p.positions.size()) {
@@ -175,7 +176,7 @@ Placed place(const Primitive& p, const Mat4& m) {
     }
   }
   Placed out;
-  for (int r = 0; r < 3; ++r) out.origin[r] = nv ? 0.5 * (lo[r] + hi[r]) : m[12 + r];
+  for (int r = 0; r < 3; ++r) out.origin[r] = centre && nv ? 0.5 * (lo[r] + hi[r]) : 0.0;
   out.vertices.resize(nv);
   for (size_t v = 0; v < nv; ++v) {
     scene::Vertex& o = out.vertices[v];
@@ -357,18 +358,12 @@ Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
     if (shares) {
       xf = *shares;
       if (!shared[inst.primitive]) {
-        Mat4 t = turn;
-        const Placed g = place(p, t);
+        const Placed g = place(p, turn, /*centre=*/false);
         if (!finite_geometry(g)) {
           report.skipped.push_back(p.name + ": non-finite positions or UVs");
           continue;
         }
-        // place() centred the vertices on their box; keep them relative to the primitive's own origin instead,
-        // so every placement's origin is its translation.
-        Placed local = g;
-        for (auto& v : local.vertices)
-          for (int a = 0; a < 3; ++a) v.pos[a] = static_cast<float>(static_cast<double>(v.pos[a]) + g.origin[a]);
-        if (!append(local, p, r))
+        if (!append(g, p, r))
           return make_error(ErrorCode::kResourceExhausted, model.source + ": more than 2^32 vertices or indices");
         shared[inst.primitive] = Shared{r.first_vertex,
                                         r.vertex_count,
@@ -404,7 +399,7 @@ Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
       if (!is_identity(xf)) ++report.transformed_meshes;
       for (int a = 0; a < 3; ++a) r.origin[a] = world[12 + a] + opt.origin[a];
     } else {
-      Placed g = place(p, world);
+      Placed g = place(p, world, /*centre=*/true);
       if (!finite_geometry(g)) {
         report.skipped.push_back(p.name + ": non-finite positions or UVs after its node transform");
         continue;

@@ -60,6 +60,8 @@ struct SceneData {
   std::vector<TextureShape> shapes() const;
 
  private:
+  // sampling.bin's words in either form (empty without the file).
+  std::span<const uint32_t> sampling_words() const;
   struct Mapped {
     scene::MappedMeshes meshes;
     scene::MappedTextureTable textures;
