@@ -323,8 +323,9 @@ Result<Manifest> read_manifest(const fs::path& dir) {
   std::string format;
   TS_TRY(get_field(j, "texture_format", format, what));
   const auto f = texel_format_from_string(format);
-  if (!f) return make_error(ErrorCode::kUnsupported, what + ": key 'texture_format': unknown format '" + format + "'");
-  m.texture_format = *f;
+  if (!f && format != kMixedFormats)
+    return make_error(ErrorCode::kUnsupported, what + ": key 'texture_format': unknown format '" + format + "'");
+  m.texture_format = f;
   TS_TRY(get_vec3(j, "origin", m.origin, what));
   TS_TRY(get_vec3(j, "bounds_min", m.bounds_min, what));
   TS_TRY(get_vec3(j, "bounds_max", m.bounds_max, what));
@@ -345,7 +346,7 @@ Status write_manifest(const fs::path& dir, const Manifest& m) {
   j["seed"] = m.seed;
   j["mesh_count"] = m.mesh_count;
   j["texture_count"] = m.texture_count;
-  j["texture_format"] = std::string(to_string(m.texture_format));
+  j["texture_format"] = m.texture_format ? std::string(to_string(*m.texture_format)) : std::string(kMixedFormats);
   j["origin"] = m.origin;
   j["bounds_min"] = m.bounds_min;
   j["bounds_max"] = m.bounds_max;

@@ -685,7 +685,7 @@ TEST_P(ImportRenderGltf, HierarchyInstancingRepeatMirrorAndCutOutsDrawAsTheRefer
   const Compared c = render_and_compare(dir, scene_dir, m, log);
   std::printf("import render (glTF, %s): PSNR %.2f dB over %.1f %% of the pixels\n", format.c_str(), c.psnr,
               100.0 * c.included);
-  EXPECT_EQ(to_string(scene::read_manifest(scene_dir)->texture_format), format);
+  EXPECT_EQ(to_string(scene::read_manifest(scene_dir)->texture_format.value()), format);
   EXPECT_GE(c.psnr, 40.0) << "see " << dir << "/{actual,expected,diff_x8}.png\n" << log;
   EXPECT_GE(c.included, 0.85);
   if (!HasFailure()) fs::remove_all(dir);

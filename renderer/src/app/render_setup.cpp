@@ -15,13 +15,16 @@ namespace {
 namespace fs = std::filesystem;
 
 // The render stack of a run: the device from render.device and render.validation, the cache from
-// cache.* in `format`, the passes from render.width_px, height_px and debug_view.
-Result<RenderStackOptions> stack_options(const Config& cfg, TexelFormat format) {
+// cache.*, the passes from render.width_px, height_px and debug_view. `scene_format` is scene.json's
+// texture_format (nullopt: mixed).
+Result<RenderStackOptions> stack_options(const Config& cfg, std::optional<TexelFormat> scene_format) {
   RenderStackOptions so;
   so.vulkan.device_substring = cfg.render.device;
   so.vulkan.validation = cfg.render.validation;
-  so.vulkan.need_bc = is_block_compressed(format);
-  so.cache.format = format;
+  // cache.format = auto keeps every texture in its own format; an explicit one must be every texture's.
+  so.cache.format = cache_texel_format(cfg.cache.format);
+  const std::optional<TexelFormat> all = so.cache.format ? so.cache.format : scene_format;
+  so.vulkan.need_bc = !all || is_block_compressed(*all);
   so.cache.eviction = cfg.cache.eviction;
   so.cache.layer_extent = static_cast<uint32_t>(cfg.cache.layer_extent_px);
   so.cache.layers = static_cast<uint32_t>(cfg.cache.layers);
@@ -66,9 +69,7 @@ Status Renderer::set_up() {
                      cfg_.render.near_m, cfg_.render.far_m};
   startup_stage("scene_load");
 
-  // cache.format = auto takes the scene's texel format; an explicit one must match the scene's textures.
-  const TexelFormat format = cache_texel_format(cfg_.cache.format, scene_.manifest.texture_format);
-  auto options = stack_options(cfg_, format);
+  auto options = stack_options(cfg_, scene_.manifest.texture_format);
   if (!options) return options.error();
   options->stage = [this](const char* name) { startup_stage(name); };
   if (cfg_.render.window) {

@@ -69,15 +69,20 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
                                                        std::to_string(ctx.properties().limits.maxImageArrayLayers));
   }
   // One pass over the records (mapped): the stream client makes the same pass for its texture table.
+  std::optional<TexelFormat> scene_format = options.format;
   uint32_t largest = 1;
   const scene::TextureRecord* widest = nullptr;  // the largest by area: its pages must fit the budget
   for (const scene::TextureRecord& r : scene.texture_records()) {
     largest = std::max({largest, r.width, r.height});
+    if (!scene_format) scene_format = static_cast<TexelFormat>(r.format);
+    if (!options.format && r.format != static_cast<uint32_t>(*scene_format))
+      return make_error(ErrorCode::kUnsupported, "several texel formats in one scene are not supported yet");
     if (!widest || uint64_t{r.width} * r.height > uint64_t{widest->width} * widest->height) widest = &r;
   }
+  const TexelFormat format = scene_format.value_or(TexelFormat::kRgba8);
   CacheGeometryInputs gi;
   gi.eviction = options.eviction;
-  gi.format = options.format;
+  gi.format = format;
   gi.layer_extent = options.layer_extent;
   gi.layers = options.layers;
   gi.memory_bytes = options.memory_bytes;
@@ -92,7 +97,7 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
     // A device with a mip tail per layer (NVIDIA: 64 KiB) pays it for every layer out of the budget: the
     // automatic layer count keeps the tails within a quarter of it (the seed's ring, with many small layers,
     // would otherwise spend the budget on tails; docs/design/cache_budget.md).
-    auto tail = SparseMemory::tail_bytes_per_layer(ctx, cache_vk_format(options.format), geometry->layer_extent,
+    auto tail = SparseMemory::tail_bytes_per_layer(ctx, cache_vk_format(format), geometry->layer_extent,
                                                    floor_log2(geometry->layer_extent) + 1);
     if (!tail) return tail.error();
     if (*tail > 0 && *tail * geometry->layers > options.memory_bytes / 4) {
@@ -106,17 +111,18 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
   // protocol.staging_slot_bytes = 0); a mip above the protocol's largest slot can never arrive.
   if (widest) {
     resolved.staging_bytes = std::max(
-        resolved.staging_bytes, std::min(mip_bytes(options.format, widest->width, widest->height, 0), kMaxSlotBytes));
+        resolved.staging_bytes, std::min(mip_bytes(format, widest->width, widest->height, 0), kMaxSlotBytes));
   }
   std::unique_ptr<TextureCache> c(new TextureCache(resolved, scene));
+  c->format_ = format;
   if (options.eviction == CacheEviction::kRing) {
     c->layer_ring_.emplace(geometry->layer_extent, geometry->layers);
   } else {
-    c->tree_.emplace(geometry->layer_extent, geometry->layers, block_size(options.format));
+    c->tree_.emplace(geometry->layer_extent, geometry->layers, block_size(format));
   }
   c->mip_levels_ = floor_log2(geometry->layer_extent) + 1;
   SparseImageInfo info;
-  info.format = cache_vk_format(options.format);
+  info.format = cache_vk_format(format);
   info.extent = geometry->layer_extent;
   info.mip_levels = c->mip_levels_;
   info.layers = geometry->layers;
@@ -126,13 +132,13 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
   c->sparse_ = std::move(*sparse);
   c->pages_ = std::make_unique<SparsePageTable>(c->sparse_->geometry(), c->sparse_->slot_count());
   if (widest && widest->width <= geometry->layer_extent && widest->height <= geometry->layer_extent) {
-    const auto [rw, rh] = QuadtreeAllocator::rect_of(widest->width, widest->height, block_size(options.format));
+    const auto [rw, rh] = QuadtreeAllocator::rect_of(widest->width, widest->height, block_size(format));
     const PageRect rect{0,
                         0,
                         0,
                         resolved.eviction == CacheEviction::kRing ? std::max(rw, rh) : rw,
                         resolved.eviction == CacheEviction::kRing ? std::max(rw, rh) : rh,
-                        block_size(options.format)};
+                        block_size(format)};
     uint64_t pages = 0;
     for (uint32_t l = 0; l < c->mip_levels_; ++l)
       pages += SparsePageTable::pages_of_region(c->sparse_->geometry(), rect, l);
@@ -197,9 +203,9 @@ Status TextureCache::prepare_texture(uint32_t texture) {
   if (entry_written_[texture]) return ok_status();
   const scene::TextureRecord& r = records[texture];
   // The renderer never decodes: texel blocks go from the file to the image unchanged.
-  if (r.format != static_cast<uint32_t>(options_.format)) {
+  if (r.format != static_cast<uint32_t>(format_)) {
     return make_error(ErrorCode::kInvalidArgument,
-                      "cache.format = " + std::string(to_string(options_.format)) + " but texture " +
+                      "cache.format = " + std::string(to_string(format_)) + " but texture " +
                           std::to_string(texture) + " of " + (scene_.dir / "textures.bin").string() + " is " +
                           std::string(to_string(texel_format_from_raw(r.format).value_or(TexelFormat::kRgba8))));
   }
@@ -278,7 +284,7 @@ std::optional<CacheRegion> TextureCache::region_of(TextureId texture) const {
 }
 
 PageRect TextureCache::page_rect(const CacheRegion& r) const {
-  return PageRect{r.layer, r.origin_x, r.origin_y, r.width, r.height, block_size(options_.format)};
+  return PageRect{r.layer, r.origin_x, r.origin_y, r.width, r.height, block_size(format_)};
 }
 
 void TextureCache::refuse_for_room(TextureId texture, MipLevel mip) {
@@ -298,7 +304,7 @@ Result<std::optional<CacheRegion>> TextureCache::place(TextureId texture, uint32
   if (layer_ring_) {
     std::vector<TextureId> evicted;
     // BC1 regions are at least one block wide so that the 4x4 level (one block) has a region of its own.
-    auto placed = layer_ring_->allocate(texture, std::max(width, block_size(options_.format)), height, evicted);
+    auto placed = layer_ring_->allocate(texture, std::max(width, block_size(format_)), height, evicted);
     evict_all(evicted);
     if (!placed) return placed.error();
     return std::optional<CacheRegion>(*placed);
@@ -446,7 +452,7 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
     return;
   }
   const scene::TextureRecord& rec = scene_.texture_records()[texture.value];
-  TS_ASSERT(mip.value < rec.mip_count && data.size() == mip_bytes(options_.format, rec.width, rec.height, mip.value),
+  TS_ASSERT(mip.value < rec.mip_count && data.size() == mip_bytes(format_, rec.width, rec.height, mip.value),
             "commit of texture %u mip %u with %zu bytes", texture.value, mip.value, data.size());
 
   auto region = region_of(texture);
@@ -476,7 +482,7 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
     t.region.x = region->origin_x;
     t.region.y = region->origin_y;
   }
-  if ((region->extent >> mip.value) < block_size(options_.format)) {
+  if ((region->extent >> mip.value) < block_size(format_)) {
     // A BC1 level smaller than a block in a shared layer: writing it would overwrite a neighbour's texels.
     release_staging(alloc);
     events_.push_back({stream::TextureEvent::Kind::kRejected, texture, mip});
@@ -583,7 +589,7 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
 
   std::vector<VkBufferImageCopy> regions;
   regions.reserve(ready_.size());
-  const uint32_t block = block_size(options_.format);
+  const uint32_t block = block_size(format_);
   for (Copy& c : ready_) {
     const scene::TextureRecord& rec = scene_.texture_records()[c.texture.value];
     const auto region = region_of(c.texture);

@@ -68,8 +68,7 @@ Result<std::unique_ptr<ViewRenderer>> ViewRenderer::create(const Config& cfg, Sc
   RenderStackOptions so;
   so.vulkan.device_substring = cfg.render.device;
   so.vulkan.validation = cfg.render.validation;
-  so.vulkan.need_bc = is_block_compressed(m.scene.manifest.texture_format);
-  so.cache.format = m.scene.manifest.texture_format;
+  so.vulkan.need_bc = !m.scene.manifest.texture_format || is_block_compressed(*m.scene.manifest.texture_format);
   so.cache.layer_extent =
       cfg.cache.layer_extent_px ? static_cast<uint32_t>(cfg.cache.layer_extent_px) : kCacheLayerExtent;
   so.cache.layers = kCacheLayers;

@@ -84,14 +84,15 @@ struct ChoiceTable<ControllerMode> {
 enum class CacheFormat : uint8_t { kAuto, kRgba8, kBc1, kBc3, kBc7 };  // cache.format
 template <>
 struct ChoiceTable<CacheFormat> {
-  static constexpr std::array<ChoiceEntry<CacheFormat>, 5> kEntries{{{CacheFormat::kAuto, "auto", "the scene's"},
+  static constexpr std::array<ChoiceEntry<CacheFormat>, 5> kEntries{{{CacheFormat::kAuto, "auto", "each texture's own"},
                                                                      {CacheFormat::kRgba8, "rgba8", ""},
                                                                      {CacheFormat::kBc1, "bc1", ""},
                                                                      {CacheFormat::kBc3, "bc3", ""},
                                                                      {CacheFormat::kBc7, "bc7", ""}}};
 };
-// The GPU cache's texel format: auto takes the scene's; an explicit one must match the scene's textures.
-constexpr TexelFormat cache_texel_format(CacheFormat format, TexelFormat scene_format) {
+// The GPU cache's texel format: auto (nullopt) keeps every texture in its own; an explicit one must be every
+// texture's.
+constexpr std::optional<TexelFormat> cache_texel_format(CacheFormat format) {
   switch (format) {
     case CacheFormat::kRgba8:
       return TexelFormat::kRgba8;
@@ -104,7 +105,7 @@ constexpr TexelFormat cache_texel_format(CacheFormat format, TexelFormat scene_f
     case CacheFormat::kAuto:
       break;
   }
-  return scene_format;
+  return std::nullopt;
 }
 
 enum class DiskCachePolicy : uint8_t { kLru, kFifo };  // storage.disk_cache_policy

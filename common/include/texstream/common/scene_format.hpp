@@ -21,6 +21,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -136,13 +137,18 @@ constexpr const char* sampling_flags_error(uint32_t f) {
   return nullptr;
 }
 
+// scene.json's texture_format when the textures do not share one.
+inline constexpr const char* kMixedFormats = "mixed";
+
 struct Manifest {
   uint32_t format_version = kSceneFormatVersion;
   std::string name;
   uint64_t seed = 0;
   uint64_t mesh_count = 0;
   uint64_t texture_count = 0;
-  TexelFormat texture_format = TexelFormat::kRgba8;
+  // The textures' texel format when they all share one; nullopt ("mixed" in the file) when they do not. Each
+  // texture record's own format is what the renderer and the server go by.
+  std::optional<TexelFormat> texture_format = TexelFormat::kRgba8;
   std::array<double, 3> origin{};      // the city's reference point (map coordinates)
   std::array<double, 3> bounds_min{};  // map coordinates
   std::array<double, 3> bounds_max{};

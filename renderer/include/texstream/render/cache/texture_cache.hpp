@@ -57,7 +57,8 @@ class VulkanContext;
 struct SceneData;
 
 struct TextureCacheOptions {
-  TexelFormat format = TexelFormat::kRgba8;      // cache.format; every scene texture must have it
+  // cache.format: nullopt (auto) keeps every texture in its own format; a format must be every texture's.
+  std::optional<TexelFormat> format;
   CacheEviction eviction = CacheEviction::kLru;  // cache.eviction
   uint32_t layer_extent = 0;                     // cache.layer_extent_px, a power of two; 0: chosen (cache_geometry)
   uint32_t layers = 0;                           // cache.layers; 0: chosen
@@ -218,6 +219,7 @@ class TextureCache final : public stream::MipSink {
   Status prepare_texture(uint32_t texture);
   void release_staging(const StagingRing::Allocation& a);
 
+  TexelFormat format_ = TexelFormat::kRgba8;
   TextureCacheOptions options_;  // as resolved by create(): layer_extent and layers are the image's, never 0
   const SceneData& scene_;
   std::vector<stream::TextureEvent> events_;  // for the texture state machine, oldest first (take_events)
