@@ -14,7 +14,7 @@ layout(early_fragment_tests) in;
 #ifdef ALPHA_TEST
 #include "bindings.glsl"
 #include "mip_math.glsl"
-layout(set = 0, binding = kBindingCache) uniform sampler2DArray cache_image;
+layout(set = 0, binding = kBindingCache) uniform sampler2DArray cache_images[kCachePlanes];
 #include "texture_sampling.glsl"
 layout(location = 0) in vec2 in_uv;
 #endif

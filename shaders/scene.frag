@@ -26,7 +26,7 @@ layout(early_fragment_tests) in;  // metadata only from fragments that passed th
 #include "mip_math.glsl"
 #include "colour.glsl"
 
-layout(set = 0, binding = kBindingCache) uniform sampler2DArray cache_image;
+layout(set = 0, binding = kBindingCache) uniform sampler2DArray cache_images[kCachePlanes];
 #include "texture_sampling.glsl"
 
 layout(location = 0) in vec2 in_uv;
@@ -67,7 +67,9 @@ vec3 shade_at(TextureGpu tex, AnisoLod s, float lod, vec2 major, vec2 extent, fl
   vec2 level_extent = max(extent / exp2(ceil(lod)), vec2(1.0));
   vec2 lo = 0.5 / level_extent;
   vec2 hi = 1.0 - lo;
-  float inv_layer = 1.0 / float(frame.cache.x);
+  uint plane = texture_plane(tex);
+  float inv_layer = 1.0 / float(frame.cache[plane]);
+  float layer = float(texture_layer(tex));
   int taps = int(s.taps);
   // A texture that repeats or mirrors (sampling.bin) is filtered here, texel by texel, so that its seams wrap
   // inside the region (texture_sampling.glsl); a clamped one through the sampler, kept inside the region.
@@ -80,7 +82,7 @@ vec3 shade_at(TextureGpu tex, AnisoLod s, float lod, vec2 major, vec2 extent, fl
     } else {
       vec2 uv = clamp(in_uv + major * t, lo, hi);
       vec2 st = (vec2(tex.region.xy) + uv * extent) * inv_layer;
-      sum += textureLod(cache_image, vec3(st, float(tex.placement.x)), lod);
+      sum += cache_lod(plane, vec3(st, layer), lod);
     }
   }
   // Alpha-tested textures are stored with premultiplied colour (BC1 punch-through texels are black): dividing by
@@ -173,7 +175,8 @@ void main() {
   }
 #ifdef LOD_PROBE
   // textureQueryLod's lambda for the same footprint: the region's texels map 1:1 to the layer's, so the
-  // layer-space coordinate has the derivatives the metadata used. The probe sampler has anisotropy A_m.
+  // layer-space coordinate has the derivatives the metadata used. The probe sampler has anisotropy A_m; its
+  // image is plane 0's, so coordinates are in plane 0's layer size whatever the texture's plane.
   vec2 st = (vec2(tex.region.xy) + in_uv * extent) / float(frame.cache.x);
   vec2 queried = textureQueryLod(probe_image, st);
   uint pixel = uint(gl_FragCoord.y) * frame.view.y + uint(gl_FragCoord.x);

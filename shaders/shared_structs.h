@@ -24,7 +24,7 @@ TS_CONST kBindingFrame = 0;        // uniform FrameUniforms
 TS_CONST kBindingMeshes = 1;       // buffer MeshGpu[mesh_count], camera-relative offsets, rewritten per frame
 TS_CONST kBindingTextures = 2;     // buffer TextureGpu[texture_count]
 TS_CONST kBindingMeshMeta = 3;     // buffer MeshMeta[mesh_count], the sparse visibility metadata (seed 000 §3.2)
-TS_CONST kBindingCache = 4;        // sampler2DArray: the texture cache image (seed 000 §3.6)
+TS_CONST kBindingCache = 4;        // sampler2DArray[kCachePlanes]: the texture cache images (seed 000 §3.6)
 TS_CONST kBindingCompacted = 5;    // buffer CompactList: meshes with weight >= tau (seed 000 §3.3)
 TS_CONST kBindingReadback = 6;     // buffer CompactList, host-visible: the used prefix of the compacted list
 TS_CONST kBindingLodProbe = 7;     // buffer LodProbeSample[width * height] (LOD_PROBE variant only; else 1 entry)
@@ -38,6 +38,12 @@ TS_CONST kBindingInstances = 12;   // buffer uint[mesh_count]: the mesh ids of t
 // each vertex, not with the draw (SceneGpu::write_draws).
 TS_CONST kVertexMeshLocation = 3u;
 
+// The cache has an image ("plane") per texel format of the scene (rgba8, bc1, bc3, bc7: at most four);
+// TextureGpu.placement.x holds the texture's layer and, from kPlacementPlaneShift up, its plane. Bindings of
+// planes the scene lacks repeat plane 0 and are never sampled. docs/design/cache_formats.md.
+TS_CONST kCachePlanes = 4u;
+TS_CONST kPlacementPlaneShift = 24u;
+TS_CONST kPlacementLayerMask = 0xffffffu;
 // TextureGpu.placement.y when no mip of the texture is resident: the shader draws the colormap colour.
 TS_CONST kNotResident = 0xffffffffu;
 // MeshMeta.mip_fixed before any fragment wrote it (atomicMin identity).
@@ -91,7 +97,7 @@ struct FrameUniforms {
                         //    Eq. 2, w: ambient term of the headlight
   uvec4 flags;          // x: kFlag* bits, y: mesh count, z: weight cutoff tau in kWeightFixedScale units,
                         // w: capacity of the compacted list (entries)
-  uvec4 cache;          // x: cache layer extent (px), y: cache mip count, z, w: 0
+  uvec4 cache;          // the layer extent (px) of cache planes 0..3 (0: no such plane)
   uvec4 view;           // x: debug view (kDebugView*), y: viewport width (px, row pitch of the LOD probe),
                         // z: meshes drawn this frame (kBindingDrawn; compact.comp's invocations), w: 0
 };

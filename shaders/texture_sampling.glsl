@@ -2,7 +2,27 @@
 // filtering done here: the sampler's own addressing would wrap at the edges of the whole layer, not of the
 // texture's region inside it. Bilinear from four texelFetch per level, trilinear between two levels, each texel
 // index wrapped (repeat, mirrored repeat) or clamped inside the region, so a seam filters across to the other
-// edge exactly as a sampler with that address mode would. Needs `cache_image` declared by the includer.
+// edge exactly as a sampler with that address mode would. Needs `cache_images` declared by the includer.
+
+// The texture's cache image (its texel format's plane) and layer, from TextureGpu.placement.x.
+uint texture_plane(TextureGpu tex) { return tex.placement.x >> kPlacementPlaneShift; }
+int texture_layer(TextureGpu tex) { return int(tex.placement.x & kPlacementLayerMask); }
+
+// A sample of plane `plane`. The array is indexed by constants only: an index that differs between the
+// fragments of one draw would need descriptor indexing (not core Vulkan 1.2; lavapipe has it, not every GPU).
+vec4 cache_lod(uint plane, vec3 st, float lod) {
+  if (plane == 1u) return textureLod(cache_images[1], st, lod);
+  if (plane == 2u) return textureLod(cache_images[2], st, lod);
+  if (plane == 3u) return textureLod(cache_images[3], st, lod);
+  return textureLod(cache_images[0], st, lod);
+}
+
+vec4 cache_fetch(uint plane, ivec3 texel, int level) {
+  if (plane == 1u) return texelFetch(cache_images[1], texel, level);
+  if (plane == 2u) return texelFetch(cache_images[2], texel, level);
+  if (plane == 3u) return texelFetch(cache_images[3], texel, level);
+  return texelFetch(cache_images[0], texel, level);
+}
 
 // Texel index `i` of a level `n` texels wide, addressed as the mode says (Vulkan's REPEAT, MIRRORED_REPEAT,
 // CLAMP_TO_EDGE).
@@ -27,11 +47,12 @@ vec4 fetch_level_wrapped(TextureGpu tex, vec2 uv, int level) {
   ivec2 i0 = ivec2(fl);
   int x0 = wrap_index(i0.x, e.x, wu), x1 = wrap_index(i0.x + 1, e.x, wu);
   int y0 = wrap_index(i0.y, e.y, wv), y1 = wrap_index(i0.y + 1, e.y, wv);
-  int layer = int(tex.placement.x);
-  vec4 t00 = texelFetch(cache_image, ivec3(base + ivec2(x0, y0), layer), level);
-  vec4 t10 = texelFetch(cache_image, ivec3(base + ivec2(x1, y0), layer), level);
-  vec4 t01 = texelFetch(cache_image, ivec3(base + ivec2(x0, y1), layer), level);
-  vec4 t11 = texelFetch(cache_image, ivec3(base + ivec2(x1, y1), layer), level);
+  int layer = texture_layer(tex);
+  uint plane = texture_plane(tex);
+  vec4 t00 = cache_fetch(plane, ivec3(base + ivec2(x0, y0), layer), level);
+  vec4 t10 = cache_fetch(plane, ivec3(base + ivec2(x1, y0), layer), level);
+  vec4 t01 = cache_fetch(plane, ivec3(base + ivec2(x0, y1), layer), level);
+  vec4 t11 = cache_fetch(plane, ivec3(base + ivec2(x1, y1), layer), level);
   return mix(mix(t00, t10, f.x), mix(t01, t11, f.x), f.y);
 }
 

@@ -142,7 +142,8 @@ TEST(Config, AChoiceKeyIsDocumentedFromItsTable) {
   EXPECT_EQ(choice_names<CacheFormat>(), "auto, rgba8, bc1, bc3 or bc7");
   EXPECT_EQ(choice_docs<CacheFormat>(), "auto (each texture's own), rgba8, bc1, bc3 or bc7");
   const std::string doc = config_reference_markdown();
-  EXPECT_NE(doc.find("Texel format of the GPU cache: auto (each texture's own), rgba8, bc1, bc3 or bc7"), std::string::npos);
+  EXPECT_NE(doc.find("Texel format of the GPU cache: auto (each texture's own), rgba8, bc1, bc3 or bc7"),
+            std::string::npos);
   EXPECT_NE(doc.find("| `controller.mode` | string | name | `\"auto\"` | auto, seed, adaptive, none or fixed |"),
             std::string::npos);
   EXPECT_EQ(cache_texel_format(CacheFormat::kAuto), std::nullopt);  // every texture in its own format

@@ -7,37 +7,45 @@
 namespace texstream::render {
 
 SparsePageTable::SparsePageTable(const PageGeometry& geometry, uint32_t slot_count)
-    : geometry_(geometry), slot_count_(slot_count) {
-  TS_ASSERT(geometry.granularity_w > 0 && geometry.granularity_h > 0, "sparse page granularity of zero");
-  TS_ASSERT(geometry.layer_extent > 0 && geometry.mip_levels > 0 && geometry.mip_levels <= 32, "bad cache geometry");
-  // Keys pack layer and level into the upper word and the page column and row into 16 bits each.
-  TS_ASSERT(geometry.layers <= (1u << 27) && geometry.layer_extent / geometry.granularity_w < 65536 &&
-                geometry.layer_extent / geometry.granularity_h < 65536,
-            "cache geometry too large for page keys");
+    : SparsePageTable(std::vector<PageGeometry>{geometry}, slot_count) {}
+
+SparsePageTable::SparsePageTable(std::vector<PageGeometry> images, uint32_t slot_count)
+    : geometries_(std::move(images)), slot_count_(slot_count) {
+  TS_ASSERT(!geometries_.empty() && geometries_.size() <= kMaxCacheImages, "%zu cache images", geometries_.size());
+  for (const PageGeometry& geometry : geometries_) {
+    TS_ASSERT(geometry.granularity_w > 0 && geometry.granularity_h > 0, "sparse page granularity of zero");
+    TS_ASSERT(geometry.layer_extent > 0 && geometry.mip_levels > 0 && geometry.mip_levels <= 32, "bad cache geometry");
+    // Keys pack image, layer and level into the upper word and the page column and row into 16 bits each.
+    TS_ASSERT(geometry.layers <= (1u << 24) && geometry.layer_extent / geometry.granularity_w < 65536 &&
+                  geometry.layer_extent / geometry.granularity_h < 65536,
+              "cache geometry too large for page keys");
+  }
   free_.resize(slot_count);
   for (uint32_t i = 0; i < slot_count; ++i) free_[i] = slot_count - 1 - i;
 }
 
-uint64_t SparsePageTable::key(uint32_t layer, uint32_t mip, uint32_t x, uint32_t y) const {
-  return (static_cast<uint64_t>(layer) << 37) | (static_cast<uint64_t>(mip) << 32) | (static_cast<uint64_t>(x) << 16) |
-         y;
+uint64_t SparsePageTable::key(uint32_t image, uint32_t layer, uint32_t mip, uint32_t x, uint32_t y) const {
+  return (static_cast<uint64_t>(image) << 61) | (static_cast<uint64_t>(layer) << 37) |
+         (static_cast<uint64_t>(mip) << 32) | (static_cast<uint64_t>(x) << 16) | y;
 }
 
 PageLocation SparsePageTable::location(uint64_t k) const {
-  return PageLocation{static_cast<uint32_t>(k >> 37), static_cast<uint32_t>((k >> 32) & 31u),
-                      static_cast<uint32_t>((k >> 16) & 0xffffu), static_cast<uint32_t>(k & 0xffffu)};
+  return PageLocation{static_cast<uint32_t>((k >> 37) & 0xffffffu), static_cast<uint32_t>((k >> 32) & 31u),
+                      static_cast<uint32_t>((k >> 16) & 0xffffu), static_cast<uint32_t>(k & 0xffffu),
+                      static_cast<uint32_t>(k >> 61)};
 }
 
 template <class F>
 void SparsePageTable::for_each_page(const PageRect& r, uint32_t mip, F&& f) const {
-  TS_ASSERT(r.layer < geometry_.layers && mip < geometry_.mip_levels, "page of layer %u mip %u outside the image",
-            r.layer, mip);
-  if (mip >= geometry_.tail_first_level) return;  // the mip tail is bound for good at start-up
+  TS_ASSERT(r.image < geometries_.size(), "page of image %u of %zu", r.image, geometries_.size());
+  const PageGeometry& g = geometries_[r.image];
+  TS_ASSERT(r.layer < g.layers && mip < g.mip_levels, "page of layer %u mip %u outside the image", r.layer, mip);
+  if (mip >= g.tail_first_level) return;  // the mip tail is bound for good at start-up
   const uint32_t x0 = r.x >> mip, y0 = r.y >> mip;
   const uint32_t w = std::max(r.width >> mip, r.block), h = std::max(r.height >> mip, r.block);
-  const uint32_t gw = geometry_.granularity_w, gh = geometry_.granularity_h;
+  const uint32_t gw = g.granularity_w, gh = g.granularity_h;
   for (uint32_t py = y0 / gh; py <= (y0 + h - 1) / gh; ++py)
-    for (uint32_t px = x0 / gw; px <= (x0 + w - 1) / gw; ++px) f(key(r.layer, mip, px, py));
+    for (uint32_t px = x0 / gw; px <= (x0 + w - 1) / gw; ++px) f(key(r.image, r.layer, mip, px, py));
 }
 
 uint32_t SparsePageTable::pages_of_region(const PageGeometry& g, const PageRect& r, uint32_t mip) {
@@ -127,8 +135,9 @@ std::vector<PageBindOp> SparsePageTable::take_batch() {
   }
   batch_.clear();
   TS_ASSERT(device_bound_.size() <= slot_count_, "%zu pages bound with %u slots", device_bound_.size(), slot_count_);
-  // Deterministic order (the map's is not): by layer, level, row, column.
+  // Deterministic order (the map's is not): by image, layer, level, row, column.
   std::sort(out.begin(), out.end(), [](const PageBindOp& a, const PageBindOp& b) {
+    if (a.page.image != b.page.image) return a.page.image < b.page.image;
     if (a.page.layer != b.page.layer) return a.page.layer < b.page.layer;
     if (a.page.mip != b.page.mip) return a.page.mip < b.page.mip;
     if (a.page.y != b.page.y) return a.page.y < b.page.y;

@@ -27,6 +27,9 @@ static_assert(gpu::kSamplingWrapUShift == scene::sampling_flags::kWrapUShift &&
               gpu::kWrapRepeat == static_cast<uint32_t>(scene::TextureWrap::kRepeat) &&
               gpu::kWrapMirror == static_cast<uint32_t>(scene::TextureWrap::kMirror));
 
+// The shader's sampler array has a binding per possible plane, and placement.x room for the plane index.
+static_assert(gpu::kCachePlanes == kMaxCacheImages && kMaxCacheImages <= (1u << (32 - gpu::kPlacementPlaneShift)));
+
 namespace {
 
 // vkCmdCopyBufferToImage wants bufferOffset a multiple of the texel block size (4 for RGBA8, 8 for BC1) and of
@@ -56,6 +59,18 @@ TextureCache::TextureCache(const TextureCacheOptions& options, const SceneData& 
       entry_written_(scene.texture_records().size(), false),
       fades_(options.fade_s, scene.texture_records().size()) {}
 
+namespace {
+
+// What create() learns of one texel format from the scene's records.
+struct FormatTally {
+  uint64_t textures = 0;
+  uint64_t bytes = 0;                            // level 0 of every texture of the format
+  uint32_t largest = 1;                          // max(width, height)
+  const scene::TextureRecord* widest = nullptr;  // the largest by area: its pages must fit the budget
+};
+
+}  // namespace
+
 Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& ctx, const TextureCacheOptions& options,
                                                            const SceneData& scene) {
   const auto t0 = std::chrono::steady_clock::now();
@@ -68,99 +83,132 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
                                                        " exceeds the device's maxImageArrayLayers " +
                                                        std::to_string(ctx.properties().limits.maxImageArrayLayers));
   }
-  // One pass over the records (mapped): the stream client makes the same pass for its texture table.
-  std::optional<TexelFormat> scene_format = options.format;
-  uint32_t largest = 1;
-  const scene::TextureRecord* widest = nullptr;  // the largest by area: its pages must fit the budget
+  // One pass over the records (mapped): the stream client makes the same pass for its texture table. With
+  // cache.format set, textures of another format get no plane and are refused when first named.
+  std::array<FormatTally, 8> tally{};
+  uint64_t largest_mip = 0;
   for (const scene::TextureRecord& r : scene.texture_records()) {
-    largest = std::max({largest, r.width, r.height});
-    if (!scene_format) scene_format = static_cast<TexelFormat>(r.format);
-    if (!options.format && r.format != static_cast<uint32_t>(*scene_format))
-      return make_error(ErrorCode::kUnsupported, "several texel formats in one scene are not supported yet");
-    if (!widest || uint64_t{r.width} * r.height > uint64_t{widest->width} * widest->height) widest = &r;
+    const auto f = texel_format_from_raw(r.format);
+    if (!f || (options.format && *f != *options.format)) continue;
+    FormatTally& t = tally[r.format];
+    ++t.textures;
+    const uint64_t bytes = mip_bytes(*f, r.width, r.height, 0);
+    t.bytes += bytes;
+    largest_mip = std::max(largest_mip, bytes);
+    t.largest = std::max({t.largest, r.width, r.height});
+    if (!t.widest || uint64_t{r.width} * r.height > uint64_t{t.widest->width} * t.widest->height) t.widest = &r;
   }
-  const TexelFormat format = scene_format.value_or(TexelFormat::kRgba8);
-  CacheGeometryInputs gi;
-  gi.eviction = options.eviction;
-  gi.format = format;
-  gi.layer_extent = options.layer_extent;
-  gi.layers = options.layers;
-  gi.memory_bytes = options.memory_bytes;
-  gi.largest_texture = largest;
+  std::vector<TexelFormat> formats;
+  for (uint32_t raw = 0; raw < tally.size(); ++raw)
+    if (tally[raw].textures) formats.push_back(static_cast<TexelFormat>(raw));
+  if (formats.empty()) formats.push_back(options.format.value_or(TexelFormat::kRgba8));  // no texture: one plane
+  TS_ASSERT(formats.size() <= kMaxCacheImages, "%zu texel formats", formats.size());
+
+  // The device's sparse address space is shared by the planes: each is sure of one layer of its largest
+  // texture, and the rest goes by the bytes of its textures (docs/design/cache_formats.md).
   const VkPhysicalDeviceLimits& limits = ctx.properties().limits;
-  gi.max_image_dimension = limits.maxImageDimension2D;
-  gi.max_array_layers = limits.maxImageArrayLayers;
-  gi.sparse_address_space = limits.sparseAddressSpaceSize;
-  auto geometry = choose_cache_geometry(gi);
-  if (!geometry) return geometry.error();
-  if (options.layers == 0 && geometry->layers > 1) {
-    // A device with a mip tail per layer (NVIDIA: 64 KiB) pays it for every layer out of the budget: the
-    // automatic layer count keeps the tails within a quarter of it (the seed's ring, with many small layers,
-    // would otherwise spend the budget on tails; docs/design/cache_budget.md).
-    auto tail = SparseMemory::tail_bytes_per_layer(ctx, cache_vk_format(format), geometry->layer_extent,
-                                                   floor_log2(geometry->layer_extent) + 1);
-    if (!tail) return tail.error();
-    if (*tail > 0 && *tail * geometry->layers > options.memory_bytes / 4) {
-      geometry->layers = static_cast<uint32_t>(std::max<uint64_t>(options.memory_bytes / 4 / *tail, 1));
-    }
+  uint64_t floor_sum = 0, weight_sum = 0;
+  for (TexelFormat f : formats) {
+    const FormatTally& t = tally[static_cast<uint32_t>(f)];
+    floor_sum += cache_layer_bytes(f, std::bit_ceil(std::max(t.largest, 4u)));
+    weight_sum += t.bytes;
   }
-  TextureCacheOptions resolved = options;
-  resolved.layer_extent = geometry->layer_extent;
-  resolved.layers = geometry->layers;
+  const uint64_t space = limits.sparseAddressSpaceSize;
+  const uint64_t spare = space > floor_sum ? space - floor_sum : 0;
+
+  std::unique_ptr<TextureCache> c(new TextureCache(options, scene));
+  c->plane_of_format_.fill(-1);
+  std::vector<SparseImageInfo> infos;
+  for (TexelFormat f : formats) {
+    const FormatTally& t = tally[static_cast<uint32_t>(f)];
+    CacheGeometryInputs gi;
+    gi.eviction = options.eviction;
+    gi.format = f;
+    gi.layer_extent = options.layer_extent;
+    gi.layers = options.layers;
+    gi.memory_bytes = options.memory_bytes;
+    gi.largest_texture = t.largest;
+    gi.max_image_dimension = limits.maxImageDimension2D;
+    gi.max_array_layers = limits.maxImageArrayLayers;
+    gi.sparse_address_space =
+        formats.size() == 1 ? space
+                            : cache_layer_bytes(f, std::bit_ceil(std::max(t.largest, 4u))) +
+                                  static_cast<uint64_t>(static_cast<double>(spare) * static_cast<double>(t.bytes) /
+                                                        static_cast<double>(std::max<uint64_t>(weight_sum, 1)));
+    auto geometry = choose_cache_geometry(gi);
+    if (!geometry) return geometry.error();
+    if (options.layers == 0 && geometry->layers > 1) {
+      // A device with a mip tail per layer (NVIDIA: 64 KiB) pays it for every layer out of the budget: the
+      // automatic layer count keeps the tails within a quarter of it (the seed's ring, with many small layers,
+      // would otherwise spend the budget on tails; docs/design/cache_budget.md).
+      auto tail = SparseMemory::tail_bytes_per_layer(ctx, cache_vk_format(f), geometry->layer_extent,
+                                                     floor_log2(geometry->layer_extent) + 1);
+      if (!tail) return tail.error();
+      const uint64_t share = options.memory_bytes / 4 / formats.size();
+      if (*tail > 0 && *tail * geometry->layers > share) {
+        geometry->layers = static_cast<uint32_t>(std::max<uint64_t>(share / *tail, 1));
+      }
+    }
+    Plane p;
+    p.shape =
+        CachePlane{f, block_size(f), geometry->layer_extent, geometry->layers, floor_log2(geometry->layer_extent) + 1};
+    if (options.eviction == CacheEviction::kRing) {
+      p.ring.emplace(geometry->layer_extent, geometry->layers);
+    } else {
+      p.tree.emplace(geometry->layer_extent, geometry->layers, block_size(f));
+    }
+    c->plane_of_format_[static_cast<uint32_t>(f)] = static_cast<int8_t>(c->planes_.size());
+    c->planes_.push_back(std::move(p));
+    SparseImageInfo info;
+    info.format = cache_vk_format(f);
+    info.extent = geometry->layer_extent;
+    info.mip_levels = floor_log2(geometry->layer_extent) + 1;
+    info.layers = geometry->layers;
+    info.memory_bytes = options.memory_bytes;
+    infos.push_back(info);
+  }
   // The staging ring holds the scene's largest mip (the stream client sizes its slots the same way, with
   // protocol.staging_slot_bytes = 0); a mip above the protocol's largest slot can never arrive.
-  if (widest) {
-    resolved.staging_bytes = std::max(
-        resolved.staging_bytes, std::min(mip_bytes(format, widest->width, widest->height, 0), kMaxSlotBytes));
-  }
-  std::unique_ptr<TextureCache> c(new TextureCache(resolved, scene));
-  c->format_ = format;
-  if (options.eviction == CacheEviction::kRing) {
-    c->layer_ring_.emplace(geometry->layer_extent, geometry->layers);
-  } else {
-    c->tree_.emplace(geometry->layer_extent, geometry->layers, block_size(format));
-  }
-  c->mip_levels_ = floor_log2(geometry->layer_extent) + 1;
-  SparseImageInfo info;
-  info.format = cache_vk_format(format);
-  info.extent = geometry->layer_extent;
-  info.mip_levels = c->mip_levels_;
-  info.layers = geometry->layers;
-  info.memory_bytes = options.memory_bytes;
-  auto sparse = SparseMemory::create(ctx, info);
+  c->options_.staging_bytes = std::max(c->options_.staging_bytes, std::min(largest_mip, kMaxSlotBytes));
+  c->ring_ = StagingRing(c->options_.staging_bytes);
+  auto sparse = SparseMemory::create(ctx, infos, options.memory_bytes);
   if (!sparse) return sparse.error();
   c->sparse_ = std::move(*sparse);
-  c->pages_ = std::make_unique<SparsePageTable>(c->sparse_->geometry(), c->sparse_->slot_count());
-  if (widest && widest->width <= geometry->layer_extent && widest->height <= geometry->layer_extent) {
-    const auto [rw, rh] = QuadtreeAllocator::rect_of(widest->width, widest->height, block_size(format));
-    const PageRect rect{0,
-                        0,
-                        0,
-                        resolved.eviction == CacheEviction::kRing ? std::max(rw, rh) : rw,
-                        resolved.eviction == CacheEviction::kRing ? std::max(rw, rh) : rh,
-                        block_size(format)};
+  c->pages_ = std::make_unique<SparsePageTable>(c->sparse_->geometries(), c->sparse_->slot_count());
+  for (uint32_t i = 0; i < c->planes_.size(); ++i) {
+    const CachePlane& shape = c->planes_[i].shape;
+    const scene::TextureRecord* widest = tally[static_cast<uint32_t>(shape.format)].widest;
+    if (!widest || widest->width > shape.layer_extent || widest->height > shape.layer_extent) continue;
+    const bool ring = options.eviction == CacheEviction::kRing;
+    const auto [rw, rh] = QuadtreeAllocator::rect_of(widest->width, widest->height, shape.block);
+    const PageRect rect{0, 0, 0, ring ? std::max(rw, rh) : rw, ring ? std::max(rw, rh) : rh, shape.block, i};
     uint64_t pages = 0;
-    for (uint32_t l = 0; l < c->mip_levels_; ++l)
-      pages += SparsePageTable::pages_of_region(c->sparse_->geometry(), rect, l);
+    for (uint32_t l = 0; l < shape.mip_levels; ++l)
+      pages += SparsePageTable::pages_of_region(c->sparse_->geometry(i), rect, l);
     if (pages > c->sparse_->slot_count()) {
       return make_error(ErrorCode::kInvalidArgument,
                         "cache.memory_bytes = " + std::to_string(options.memory_bytes) + " cannot hold the scene's " +
-                            std::to_string(widest->width) + "x" + std::to_string(widest->height) +
-                            " texture with all its levels (" + std::to_string(pages) + " pages of " +
-                            std::to_string(c->sparse_->page_bytes()) + " bytes" +
-                            (c->sparse_->tail_bytes() ? " besides the mip tail" : "") + "); raise it");
+                            std::to_string(widest->width) + "x" + std::to_string(widest->height) + " " +
+                            std::string(to_string(shape.format)) + " texture with all its levels (" +
+                            std::to_string(pages) + " pages of " + std::to_string(c->sparse_->page_bytes()) + " bytes" +
+                            (c->sparse_->tail_bytes() ? " besides the mip tails" : "") + "); raise it");
     }
   }
-  spdlog::info(
-      "texture cache: {} eviction, sparse {} layers of {}px ({} MiB of address space), {} KiB pages of {}x{} "
-      "texels, {} page slots ({} MiB budget{})",
-      choice_name(options.eviction), geometry->layers, geometry->layer_extent, c->sparse_->image_bytes() >> 20,
-      c->sparse_->page_bytes() >> 10, c->sparse_->geometry().granularity_w, c->sparse_->geometry().granularity_h,
-      c->sparse_->slot_count(), options.memory_bytes >> 20,
-      c->sparse_->tail_bytes() ? fmt::format(", {} KiB mip tail", c->sparse_->tail_bytes() >> 10) : "");
+  for (uint32_t i = 0; i < c->planes_.size(); ++i) {
+    const CachePlane& shape = c->planes_[i].shape;
+    const PageGeometry& g = c->sparse_->geometry(i);
+    spdlog::info(
+        "texture cache: {} plane, {} eviction, sparse {} layers of {}px ({} MiB of address space), {}x{} "
+        "texels a page",
+        to_string(shape.format), choice_name(options.eviction), shape.layers, shape.layer_extent,
+        c->sparse_->image_bytes(i) >> 20, g.granularity_w, g.granularity_h);
+  }
+  spdlog::info("texture cache: {} KiB pages, {} page slots shared by {} plane(s) ({} MiB budget{})",
+               c->sparse_->page_bytes() >> 10, c->sparse_->slot_count(), c->planes_.size(), options.memory_bytes >> 20,
+               c->sparse_->tail_bytes() ? fmt::format(", {} KiB mip tails", c->sparse_->tail_bytes() >> 10) : "");
 
   auto staging =
-      GpuBuffer::create(ctx, resolved.staging_bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, MemoryUse::kHostVisible);
+      GpuBuffer::create(ctx, c->options_.staging_bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, MemoryUse::kHostVisible);
   if (!staging) return staging.error();
   c->staging_ = std::move(*staging);
 
@@ -173,20 +221,23 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
   c->table_ = std::move(*table);
 
   // Every level of every layer starts in the layout the shader reads; copies move it to TRANSFER_DST and back.
-  VkImage img = c->sparse_->image();
-  const uint32_t levels = c->mip_levels_, layers = geometry->layers;
   TS_TRY(run_one_shot(ctx, [&](VkCommandBuffer cmd) {
-    VkImageMemoryBarrier b{};
-    b.sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER;
-    b.srcAccessMask = 0;
-    b.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
-    b.oldLayout = VK_IMAGE_LAYOUT_UNDEFINED;
-    b.newLayout = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
-    b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
-    b.image = img;
-    b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, levels, 0, layers};
+    std::vector<VkImageMemoryBarrier> barriers;
+    for (uint32_t i = 0; i < c->planes_.size(); ++i) {
+      VkImageMemoryBarrier b{};
+      b.sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER;
+      b.srcAccessMask = 0;
+      b.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
+      b.oldLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+      b.newLayout = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
+      b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+      b.image = c->sparse_->image(i);
+      b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, c->planes_[i].shape.mip_levels, 0,
+                            c->planes_[i].shape.layers};
+      barriers.push_back(b);
+    }
     vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, 0, 0, nullptr,
-                         0, nullptr, 1, &b);
+                         0, nullptr, static_cast<uint32_t>(barriers.size()), barriers.data());
   }));
   c->stats_.create_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return c;
@@ -202,12 +253,14 @@ Status TextureCache::prepare_texture(uint32_t texture) {
   TS_ASSERT(texture < records.size(), "texture %u of %zu", texture, records.size());
   if (entry_written_[texture]) return ok_status();
   const scene::TextureRecord& r = records[texture];
-  // The renderer never decodes: texel blocks go from the file to the image unchanged.
-  if (r.format != static_cast<uint32_t>(format_)) {
+  // The renderer never decodes: texel blocks go from the file to the image of their format unchanged.
+  if (r.format >= plane_of_format_.size() || plane_of_format_[r.format] < 0) {
+    const auto f = texel_format_from_raw(r.format);
     return make_error(ErrorCode::kInvalidArgument,
-                      "cache.format = " + std::string(to_string(format_)) + " but texture " +
+                      (options_.format ? "cache.format = " + std::string(to_string(*options_.format)) + " but texture "
+                                       : std::string("texture ")) +
                           std::to_string(texture) + " of " + (scene_.dir / "textures.bin").string() + " is " +
-                          std::string(to_string(texel_format_from_raw(r.format).value_or(TexelFormat::kRgba8))));
+                          (f ? std::string(to_string(*f)) : "of unknown format " + std::to_string(r.format)));
   }
   gpu::TextureGpu& t = table_.as<gpu::TextureGpu>()[texture];
   t = gpu::TextureGpu{};
@@ -261,10 +314,11 @@ void TextureCache::evict(TextureId texture) {
   for (uint32_t mip = 0; r.bound != 0; ++mip) {
     if (!(r.bound & (1u << mip))) continue;
     r.bound &= ~(1u << mip);
-    pages_->release(page_rect(r.region), mip, last_serial_);
+    pages_->release(page_rect(r.region, plane_of(texture)), mip, last_serial_);
   }
-  if (tree_) {
-    tree_->free(texture);
+  Plane& p = planes_[plane_of(texture)];
+  if (p.tree) {
+    p.tree->free(texture);
     lru_unlink(texture.value);
   }
   // Copies not yet recorded would write into a region that now belongs to another texture: drop them.
@@ -279,12 +333,20 @@ void TextureCache::evict(TextureId texture) {
   events_.push_back({stream::TextureEvent::Kind::kInvalidated, texture});
 }
 
-std::optional<CacheRegion> TextureCache::region_of(TextureId texture) const {
-  return layer_ring_ ? layer_ring_->find(texture) : tree_->find(texture);
+uint32_t TextureCache::plane_of(TextureId texture) const {
+  const uint32_t raw = scene_.texture_records()[texture.value].format;
+  TS_ASSERT(raw < plane_of_format_.size() && plane_of_format_[raw] >= 0, "texture %u has no cache plane",
+            texture.value);
+  return static_cast<uint32_t>(plane_of_format_[raw]);
 }
 
-PageRect TextureCache::page_rect(const CacheRegion& r) const {
-  return PageRect{r.layer, r.origin_x, r.origin_y, r.width, r.height, block_size(format_)};
+std::optional<CacheRegion> TextureCache::region_of(TextureId texture) const {
+  const Plane& p = planes_[plane_of(texture)];
+  return p.ring ? p.ring->find(texture) : p.tree->find(texture);
+}
+
+PageRect TextureCache::page_rect(const CacheRegion& r, uint32_t plane) const {
+  return PageRect{r.layer, r.origin_x, r.origin_y, r.width, r.height, planes_[plane].shape.block, plane};
 }
 
 void TextureCache::refuse_for_room(TextureId texture, MipLevel mip) {
@@ -301,43 +363,62 @@ uint64_t TextureCache::held_bytes() const {
 }
 
 Result<std::optional<CacheRegion>> TextureCache::place(TextureId texture, uint32_t width, uint32_t height) {
-  if (layer_ring_) {
+  const uint32_t plane = plane_of(texture);
+  Plane& p = planes_[plane];
+  if (p.ring) {
     std::vector<TextureId> evicted;
-    // BC1 regions are at least one block wide so that the 4x4 level (one block) has a region of its own.
-    auto placed = layer_ring_->allocate(texture, std::max(width, block_size(format_)), height, evicted);
+    // BC regions are at least one block wide so that the 4x4 level (one block) has a region of its own.
+    auto placed = p.ring->allocate(texture, std::max(width, p.shape.block), height, evicted);
     evict_all(evicted);
     if (!placed) return placed.error();
     return std::optional<CacheRegion>(*placed);
   }
-  if (!tree_->fits(width, height)) {
+  if (!p.tree->fits(width, height)) {
     return make_error(ErrorCode::kInvalidArgument,
                       "texture " + std::to_string(texture.value) + " (" + std::to_string(width) + "x" +
                           std::to_string(height) + ") does not fit a cache layer of " +
-                          std::to_string(options_.layer_extent) + " px (cache.layer_extent_px)");
+                          std::to_string(p.shape.layer_extent) + " px (cache.layer_extent_px)");
   }
   for (;;) {
-    if (auto r = tree_->allocate(texture, width, height)) {
+    if (auto r = p.tree->allocate(texture, width, height)) {
       Residency& res = residency_[texture.value];
       res.used_cycle = use_cycle_;
       lru_append(texture.value);
       return std::optional<CacheRegion>(*r);
     }
-    // No free square large enough: the address space, not the memory, is short. Free by use, as for memory.
-    const std::optional<TextureId> victim = lru_victim(texture);
+    // No free square large enough: the plane's address space, not the memory, is short. Free by use, as for
+    // memory, among the textures of this plane.
+    const std::optional<TextureId> victim = lru_victim(texture, plane);
     if (!victim) return std::optional<CacheRegion>();
     ++stats_.address_evictions;
     evict(*victim);
   }
 }
 
-std::optional<TextureId> TextureCache::lru_victim(TextureId keep) const {
-  // The list is in order of last use, so if its head was used this cycle, every texture was.
+std::optional<TextureId> TextureCache::lru_victim(TextureId keep, std::optional<uint32_t> plane) const {
+  // The list is in order of last use, so once a texture was used this cycle, every later one was.
   for (uint32_t t = lru_head_; t != 0; t = residency_[t - 1].lru_next) {
     const Residency& r = residency_[t - 1];
     if (r.used_cycle == use_cycle_) return std::nullopt;
-    if (t - 1 != keep.value) return TextureId(t - 1);
+    if (t - 1 != keep.value && (!plane || plane_of(TextureId(t - 1)) == *plane)) return TextureId(t - 1);
   }
   return std::nullopt;
+}
+
+bool TextureCache::evict_oldest_layer(uint32_t plane) {
+  // The copy's own plane first; else the pages must come from another plane's layers.
+  uint32_t order[kMaxCacheImages];
+  uint32_t n = 0;
+  order[n++] = plane;
+  for (uint32_t i = 0; i < planes_.size(); ++i)
+    if (i != plane) order[n++] = i;
+  for (uint32_t k = 0; k < n; ++k) {
+    std::vector<TextureId> evicted;
+    if (!planes_[order[k]].ring->evict_oldest(evicted)) continue;
+    evict_all(evicted);
+    return true;
+  }
+  return false;
 }
 
 void TextureCache::lru_unlink(uint32_t texture) {
@@ -371,7 +452,7 @@ void TextureCache::lru_append(uint32_t texture) {
 void TextureCache::touch(std::span<const stream::StreamCandidate> used) {
   ++use_cycle_;
   trimmable_.clear();
-  if (!tree_) return;
+  if (options_.eviction != CacheEviction::kLru) return;
   for (const stream::StreamCandidate& c : used) {
     if (c.texture.value >= scene_.texture_records().size()) continue;
     Residency& r = residency_[c.texture.value];
@@ -405,7 +486,7 @@ bool TextureCache::trim_one(TextureId keep) {
     for (uint32_t bits = surplus; bits != 0; bits &= bits - 1) {
       const auto mip = static_cast<uint32_t>(std::countr_zero(bits));
       // The submissions up to last_serial_ may still sample these levels: their pages retire at it.
-      pages_->release(page_rect(r.region), mip, last_serial_);
+      pages_->release(page_rect(r.region, plane_of(TextureId(t))), mip, last_serial_);
       r.bound &= ~(1u << mip);
       ++stats_.trimmed_levels;
     }
@@ -419,11 +500,19 @@ bool TextureCache::trim_one(TextureId keep) {
 }
 
 TextureCache::FitMark TextureCache::fit_mark() const {
-  return FitMark{layer_ring_ ? layer_ring_->layers_assigned() : 0, stats_.space_refusals};
+  FitMark m;
+  for (uint32_t i = 0; i < planes_.size(); ++i)
+    if (planes_[i].ring) m.layers_assigned[i] = planes_[i].ring->layers_assigned();
+  m.space_refusals = stats_.space_refusals;
+  return m;
 }
 
 bool TextureCache::outgrown_since(const FitMark& mark) const {
-  if (layer_ring_) return layer_ring_->layers_freed() > mark.layers_assigned;
+  if (options_.eviction == CacheEviction::kRing) {
+    for (uint32_t i = 0; i < planes_.size(); ++i)
+      if (planes_[i].ring->layers_freed() > mark.layers_assigned[i]) return true;
+    return false;
+  }
   return stats_.space_refusals > mark.space_refusals;
 }
 
@@ -452,7 +541,8 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
     return;
   }
   const scene::TextureRecord& rec = scene_.texture_records()[texture.value];
-  TS_ASSERT(mip.value < rec.mip_count && data.size() == mip_bytes(format_, rec.width, rec.height, mip.value),
+  const CachePlane& plane = planes_[plane_of(texture)].shape;
+  TS_ASSERT(mip.value < rec.mip_count && data.size() == mip_bytes(plane.format, rec.width, rec.height, mip.value),
             "commit of texture %u mip %u with %zu bytes", texture.value, mip.value, data.size());
 
   auto region = region_of(texture);
@@ -478,12 +568,12 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
     ++stats_.texture_loads;
     if (residency_[texture.value].evicted_before) ++stats_.texture_reloads;
     auto& t = table_.as<gpu::TextureGpu>()[texture.value];
-    t.placement.x = region->layer;
+    t.placement.x = region->layer | plane_of(texture) << gpu::kPlacementPlaneShift;
     t.region.x = region->origin_x;
     t.region.y = region->origin_y;
   }
-  if ((region->extent >> mip.value) < block_size(format_)) {
-    // A BC1 level smaller than a block in a shared layer: writing it would overwrite a neighbour's texels.
+  if ((region->extent >> mip.value) < plane.block) {
+    // A BC level smaller than a block in a shared layer: writing it would overwrite a neighbour's texels.
     release_staging(alloc);
     events_.push_back({stream::TextureEvent::Kind::kRejected, texture, mip});
     return;
@@ -498,7 +588,7 @@ bool TextureCache::bind_pages_for(const Copy& c) {
   while (true) {
     const auto region = region_of(c.texture);
     if (!region || r.epoch != c.epoch) return false;  // evicted while making room
-    if (pages_->acquire(page_rect(*region), c.mip)) {
+    if (pages_->acquire(page_rect(*region, plane_of(c.texture)), c.mip)) {
       TS_ASSERT(r.bound == 0 || (r.region.layer == region->layer && r.region.index == region->index),
                 "texture %u bound in two regions", c.texture.value);
       r.region = *region;
@@ -507,12 +597,10 @@ bool TextureCache::bind_pages_for(const Copy& c) {
     }
     // The evicted pages retire at last_serial_, which has completed by now in the renderer's
     // one-frame-in-flight loop, so reclaim() frees their slots at once.
-    if (layer_ring_) {
+    if (options_.eviction == CacheEviction::kRing) {
       // Seed §3.6: when the cache is full, the oldest layer goes.
-      std::vector<TextureId> evicted;
-      if (!layer_ring_->evict_oldest(evicted)) return false;
+      if (!evict_oldest_layer(plane_of(c.texture))) return false;
       ++stats_.budget_evicted_layers;
-      evict_all(evicted);
     } else {
       const std::optional<TextureId> victim = lru_victim(c.texture);
       if (!victim && trim_one(c.texture)) {
@@ -551,7 +639,11 @@ Status TextureCache::prepare_uploads(uint64_t serial) {
   // Copies come at most one per ready mip: counting them now keeps the trace frame whole.
   trace_open_ = trace_entries_ + batch.size() + ready_.size() <= kTraceEntries && (!batch.empty() || !ready_.empty());
   if (trace_open_) {
-    trace_.push_back(UploadTraceFrame{batch, {}});
+    // The first plane's binds only: the replay has one image (cache.json "sparse_image").
+    UploadTraceFrame f;
+    for (const PageBindOp& op : batch)
+      if (op.page.image == 0) f.binds.push_back(op);
+    trace_.push_back(std::move(f));
     trace_entries_ += batch.size() + ready_.size();
   }
   if (!batch.empty()) {
@@ -574,24 +666,12 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
   }
   last_serial_ = serial;
   if (ready_.empty()) return 0;
-  VkImageMemoryBarrier b{};
-  b.sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER;
-  b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
-  b.image = sparse_->image();
-  b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, mip_levels_, 0, options_.layers};
-  // Earlier frames' fragment shaders read the image; the copies must wait for them (write-after-read).
-  b.srcAccessMask = VK_ACCESS_SHADER_READ_BIT;
-  b.dstAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
-  b.oldLayout = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
-  b.newLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
-  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 0, nullptr, 0,
-                       nullptr, 1, &b);
-
-  std::vector<VkBufferImageCopy> regions;
-  regions.reserve(ready_.size());
-  const uint32_t block = block_size(format_);
+  // Per plane: the copies into its image, between two layout barriers of the planes that get copies.
+  std::vector<std::vector<VkBufferImageCopy>> regions(planes_.size());
   for (Copy& c : ready_) {
     const scene::TextureRecord& rec = scene_.texture_records()[c.texture.value];
+    const uint32_t plane = plane_of(c.texture);
+    const uint32_t block = planes_[plane].shape.block;
     const auto region = region_of(c.texture);
     TS_ASSERT(region.has_value(), "queued copy of texture %u without a region", c.texture.value);
     const Extent2D e = mip_extent(rec.width, rec.height, c.mip);
@@ -602,10 +682,10 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
     r.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, c.mip, region->layer, 1};
     r.imageOffset = {static_cast<int32_t>(region->origin_x >> c.mip), static_cast<int32_t>(region->origin_y >> c.mip),
                      0};
-    // BC1: whole blocks (the payload holds them: mip_bytes rounds up), inside the region by the check in commit.
+    // BC: whole blocks (the payload holds them: mip_bytes rounds up), inside the region by the check in commit.
     r.imageExtent = {(e.width + block - 1) / block * block, (e.height + block - 1) / block * block, 1};
-    regions.push_back(r);
-    if (trace_open_) {
+    regions[plane].push_back(r);
+    if (trace_open_ && plane == 0) {
       trace_.back().copies.push_back({region->layer, c.mip, static_cast<uint32_t>(r.imageOffset.x),
                                       static_cast<uint32_t>(r.imageOffset.y), r.imageExtent.width,
                                       r.imageExtent.height});
@@ -613,15 +693,36 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
     c.serial = serial;
     in_flight_.push_back(c);
   }
-  vkCmdCopyBufferToImage(cmd, staging_.handle(), sparse_->image(), VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
-                         static_cast<uint32_t>(regions.size()), regions.data());
-
-  b.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
-  b.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
-  b.oldLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
-  b.newLayout = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
+  std::vector<VkImageMemoryBarrier> barriers;
+  for (uint32_t i = 0; i < planes_.size(); ++i) {
+    if (regions[i].empty()) continue;
+    VkImageMemoryBarrier b{};
+    b.sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER;
+    b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+    b.image = sparse_->image(i);
+    b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, planes_[i].shape.mip_levels, 0, planes_[i].shape.layers};
+    // Earlier frames' fragment shaders read the image; the copies must wait for them (write-after-read).
+    b.srcAccessMask = VK_ACCESS_SHADER_READ_BIT;
+    b.dstAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+    b.oldLayout = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
+    b.newLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
+    barriers.push_back(b);
+  }
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 0, nullptr, 0,
+                       nullptr, static_cast<uint32_t>(barriers.size()), barriers.data());
+  for (uint32_t i = 0; i < planes_.size(); ++i) {
+    if (regions[i].empty()) continue;
+    vkCmdCopyBufferToImage(cmd, staging_.handle(), sparse_->image(i), VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
+                           static_cast<uint32_t>(regions[i].size()), regions[i].data());
+  }
+  for (VkImageMemoryBarrier& b : barriers) {
+    b.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+    b.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
+    b.oldLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
+    b.newLayout = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
+  }
   vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, 0, 0, nullptr, 0,
-                       nullptr, 1, &b);
+                       nullptr, static_cast<uint32_t>(barriers.size()), barriers.data());
   const auto n = static_cast<uint32_t>(ready_.size());
   ready_.clear();
   trace_open_ = false;
@@ -708,10 +809,24 @@ Status TextureCache::write_stats_json(const std::filesystem::path& file) const {
   j["mips_dropped"] = stats_.mips_dropped;
   j["evictions"] = stats_.evictions;
   j["budget_evicted_layers"] = stats_.budget_evicted_layers;
-  j["layers_recycled"] = layer_ring_ ? layer_ring_->layers_recycled() : 0;
+  uint64_t recycled = 0;
+  for (const Plane& plane : planes_) recycled += plane.ring ? plane.ring->layers_recycled() : 0;
+  j["layers_recycled"] = recycled;
   j["eviction"] = std::string(choice_name(options_.eviction));
-  j["layer_extent"] = options_.layer_extent;
-  j["layers"] = options_.layers;
+  // The first plane's shape (the bind-cost benchmark's replay reads these); every plane's in "planes".
+  j["layer_extent"] = planes_[0].shape.layer_extent;
+  j["layers"] = planes_[0].shape.layers;
+  nlohmann::json planes = nlohmann::json::array();
+  for (uint32_t i = 0; i < planes_.size(); ++i) {
+    const CachePlane& shape = planes_[i].shape;
+    planes.push_back({{"format", std::string(to_string(shape.format))},
+                      {"layer_extent", shape.layer_extent},
+                      {"layers", shape.layers},
+                      {"mip_levels", shape.mip_levels},
+                      {"page_texels", {sparse_->geometry(i).granularity_w, sparse_->geometry(i).granularity_h}},
+                      {"virtual_bytes", sparse_->image_bytes(i)}});
+  }
+  j["planes"] = std::move(planes);
   j["addressable_bytes"] = addressable_bytes();
   j["space_refusals"] = stats_.space_refusals;
   j["trimmed_levels"] = stats_.trimmed_levels;

@@ -31,7 +31,7 @@ gpu::PassConstants wide_pass_constants(const Camera& cam, double fov_y_deg, doub
 }
 
 gpu::FrameUniforms frame_uniforms(const Camera& cam, const Config& cfg, uint32_t mesh_count, uint32_t compact_capacity,
-                                  uint32_t cache_layer_extent, uint32_t cache_mips) {
+                                  const std::array<uint32_t, 4>& cache_layer_extents) {
   gpu::FrameUniforms fu{};
   const auto a_m = static_cast<float>(cfg.stream.max_anisotropy);
   fu.camera_forward = {cam.forward.x, cam.forward.y, cam.forward.z, 0.0f};
@@ -46,7 +46,7 @@ gpu::FrameUniforms frame_uniforms(const Camera& cam, const Config& cfg, uint32_t
     if (cfg.stream.blend == BlendMode::kConvergeLinear) blend |= gpu::kFlagBlendLinear;
   }
   fu.flags = {blend | gpu::kFlagLighting, mesh_count, static_cast<uint32_t>(std::ceil(tau_fixed)), compact_capacity};
-  fu.cache = {cache_layer_extent, cache_mips, 0, 0};
+  fu.cache = {cache_layer_extents[0], cache_layer_extents[1], cache_layer_extents[2], cache_layer_extents[3]};
   return fu;
 }
 

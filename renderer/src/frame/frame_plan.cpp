@@ -47,8 +47,9 @@ Result<FramePlan> plan_frame(RenderStack& stack, const Camera& cam, const Config
   step("draw_list");
   // ScenePasses::record adds the view mode and the feedback bit.
   const SceneGpu& gpu = stack.scene_gpu();
-  gpu::FrameUniforms fu = frame_uniforms(cam, cfg, gpu.mesh_count(), gpu.compact_capacity(),
-                                         stack.cache().layer_extent(), stack.cache().mip_levels());
+  std::array<uint32_t, 4> extents{};
+  for (uint32_t i = 0; i < stack.cache().plane_count(); ++i) extents[i] = stack.cache().layer_extent(i);
+  gpu::FrameUniforms fu = frame_uniforms(cam, cfg, gpu.mesh_count(), gpu.compact_capacity(), extents);
   if (options.keep_every_mesh) fu.flags.z = 0;  // the weight cutoff τ in kWeightFixedScale units
   stack.scene_gpu().set_frame_uniforms(fu);
   return plan;

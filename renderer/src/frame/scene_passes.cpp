@@ -154,7 +154,8 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
       {gpu::kBindingMeshes, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
       {gpu::kBindingTextures, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
       {gpu::kBindingMeshMeta, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
-      {gpu::kBindingCache, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr},
+      {gpu::kBindingCache, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, gpu::kCachePlanes, VK_SHADER_STAGE_FRAGMENT_BIT,
+       nullptr},
       {gpu::kBindingCompacted, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
       {gpu::kBindingReadback, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
       {gpu::kBindingLodProbe, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, kAllStages, nullptr},
@@ -174,7 +175,7 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
 
   const std::array<VkDescriptorPoolSize, 5> sizes{{{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1},
                                                    {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 8},
-                                                   {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2},
+                                                   {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, gpu::kCachePlanes + 1},
                                                    {VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1},
                                                    {VK_DESCRIPTOR_TYPE_INPUT_ATTACHMENT, 1}}};
   VkDescriptorPoolCreateInfo pi{};
@@ -204,7 +205,12 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
       {scene_.drawn().handle(), 0, VK_WHOLE_SIZE},
       {scene_.instances().handle(), 0, VK_WHOLE_SIZE},
   }};
-  const VkDescriptorImageInfo image{sampler_.get(), cache.image_view(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
+  // One descriptor per plane; the planes the scene lacks repeat plane 0 (never sampled: no texture names them).
+  std::array<VkDescriptorImageInfo, gpu::kCachePlanes> planes{};
+  for (uint32_t i = 0; i < gpu::kCachePlanes; ++i) {
+    planes[i] = {sampler_.get(), cache.image_view(i < cache.plane_count() ? i : 0),
+                 VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
+  }
   const VkDescriptorImageInfo probe_image{probe_sampler_.get(), cache.image_view(),
                                           VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
   const VkDescriptorImageInfo owner_image{VK_NULL_HANDLE, owner_.view(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
@@ -226,7 +232,7 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
     writes[i].pBufferInfo = &buffers[i];
   }
   const std::array<std::pair<uint32_t, const VkDescriptorImageInfo*>, 3> sampled{{
-      {gpu::kBindingCache, &image},
+      {gpu::kBindingCache, planes.data()},
       {gpu::kBindingProbeSampler, &probe_image},
       {gpu::kBindingMetaImage, &meta_texels},
   }};  // the last one a storage image
@@ -236,7 +242,7 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
     w.sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
     w.dstSet = set_;
     w.dstBinding = sampled[k].first;
-    w.descriptorCount = 1;
+    w.descriptorCount = sampled[k].first == gpu::kBindingCache ? gpu::kCachePlanes : 1;
     w.descriptorType = sampled[k].first == gpu::kBindingMetaImage ? VK_DESCRIPTOR_TYPE_STORAGE_IMAGE
                                                                   : VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
     w.pImageInfo = sampled[k].second;

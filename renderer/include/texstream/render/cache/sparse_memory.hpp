@@ -1,6 +1,10 @@
 #pragma once
-// The Vulkan side of the sparse cache image (seed 000 §3.6): the partially-resident 2D array image, the
-// device memory behind its pages, and the binds.
+// The Vulkan side of the sparse cache images (seed 000 §3.6): the partially-resident 2D array images (one per
+// texel format of the scene), the device memory behind their pages, and the binds.
+//
+// * Every image's pages come out of one pool of slots and are bound by one vkQueueBindSparse per batch, so
+//   several formats share one budget and one wait (docs/design/cache_formats.md). The images must agree on
+//   the page size and have a memory type in common (they do on lavapipe and NVIDIA); create() says so if not.
 //
 // * The image has VK_IMAGE_CREATE_SPARSE_BINDING_BIT | SPARSE_RESIDENCY_BIT; its page size and the page shape
 //   (imageGranularity) of the cache format are queried from the device, never assumed. The whole image must
@@ -33,7 +37,7 @@ struct SparseImageInfo {
   uint32_t extent = 512;  // layer side at mip 0 (cache.layer_extent_px)
   uint32_t mip_levels = 10;
   uint32_t layers = 64;       // cache.layers
-  uint64_t memory_bytes = 0;  // cache.memory_bytes: the GPU memory budget of the pages (and mip tail)
+  uint64_t memory_bytes = 0;  // cache.memory_bytes: the GPU memory budget of the pages (and mip tails)
 };
 
 struct SparseBindStats {
@@ -51,7 +55,11 @@ class SparseMemory {
   // (well under maxMemoryAllocationCount, which is 4096 on many devices).
   static constexpr uint64_t kBlockBytes = 16ull << 20;
 
+  // One image; info.memory_bytes is the budget.
   static Result<std::unique_ptr<SparseMemory>> create(const VulkanContext& ctx, const SparseImageInfo& info);
+  // Several images (at most kMaxCacheImages) over one budget of `memory_bytes`; PageLocation::image indexes them.
+  static Result<std::unique_ptr<SparseMemory>> create(const VulkanContext& ctx, std::span<const SparseImageInfo> images,
+                                                      uint64_t memory_bytes);
   // Bytes of mip tail each layer of such an image costs on this device (0: none, or one tail for the whole
   // image), from a one-layer image that is never bound: the cache keeps the tail a small part of its budget.
   static Result<uint64_t> tail_bytes_per_layer(const VulkanContext& ctx, VkFormat format, uint32_t extent,
@@ -60,15 +68,19 @@ class SparseMemory {
   SparseMemory(const SparseMemory&) = delete;
   SparseMemory& operator=(const SparseMemory&) = delete;
 
-  VkImage image() const { return image_.get(); }
-  VkImageView view() const { return view_.get(); }
-  const PageGeometry& geometry() const { return geometry_; }
+  uint32_t image_count() const { return static_cast<uint32_t>(images_.size()); }
+  VkImage image(uint32_t i = 0) const { return images_[i].image.get(); }
+  VkImageView view(uint32_t i = 0) const { return images_[i].view.get(); }
+  const PageGeometry& geometry(uint32_t i = 0) const { return images_[i].geometry; }
+  std::vector<PageGeometry> geometries() const;
+  const SparseImageInfo& info(uint32_t i = 0) const { return images_[i].info; }
+  uint64_t image_bytes(uint32_t i) const { return images_[i].image_bytes; }  // one image's virtual size
   uint64_t page_bytes() const { return page_bytes_; }
   uint32_t slot_count() const { return slot_count_; }
-  uint64_t tail_bytes() const { return tail_bytes_; }
+  uint64_t tail_bytes() const { return tail_bytes_; }            // every image's mip tail
   uint64_t allocated_bytes() const { return allocated_bytes_; }  // device memory allocated so far (<= budget)
-  uint64_t image_bytes() const { return image_bytes_; }          // the image's virtual size
-  const SparseImageInfo& info() const { return info_; }
+  uint64_t image_bytes() const { return image_bytes_; }          // the images' virtual size, all together
+  uint64_t memory_bytes() const { return memory_bytes_; }
   uint32_t pages_per_block() const { return pages_per_block_; }
 
   // One vkQueueBindSparse for the whole batch (nothing when it is empty). On success the semaphore reaches
@@ -79,14 +91,28 @@ class SparseMemory {
   const SparseBindStats& stats() const { return stats_; }
 
  private:
+  // One image of the set. Members are destroyed in reverse order: view, image, then the tail's memory.
+  struct Image {
+    SparseImageInfo info;
+    PageGeometry geometry;
+    uint64_t image_bytes = 0;
+    uint64_t tail_bytes = 0;
+    uint64_t page_bytes = 0;
+    uint32_t memory_type_bits = 0;
+    std::vector<VkSparseImageMemoryRequirements> reqs;
+    UniqueMemory tail_memory;
+    UniqueImage image;
+    UniqueImageView view;
+  };
+
   SparseMemory() = default;
+  Result<Image> create_image(const VulkanContext& ctx, const SparseImageInfo& info);
   Result<VkDeviceMemory> block_of(uint32_t slot);
-  Status bind_tail(const std::vector<VkSparseImageMemoryRequirements>& reqs);
+  Status bind_tail(Image& image);
 
   VkDevice device_ = VK_NULL_HANDLE;
   VkQueue queue_ = VK_NULL_HANDLE;
-  SparseImageInfo info_;
-  PageGeometry geometry_;
+  uint64_t memory_bytes_ = 0;
   uint64_t page_bytes_ = 0;
   uint32_t slot_count_ = 0;
   uint32_t pages_per_block_ = 0;
@@ -96,11 +122,9 @@ class SparseMemory {
   uint64_t image_bytes_ = 0;
   uint64_t signal_value_ = 0;
   std::vector<UniqueMemory> blocks_;  // index = slot / pages_per_block_; null until first used
-  UniqueMemory tail_memory_;
   UniqueSemaphore semaphore_;
-  // Destroyed before the memory (members are destroyed in reverse order): view, then image.
-  UniqueImage image_;
-  UniqueImageView view_;
+  // Destroyed before the memory blocks (members are destroyed in reverse order).
+  std::vector<Image> images_;
   std::vector<VkSparseImageMemoryBind> scratch_;
   SparseBindStats stats_;
 };

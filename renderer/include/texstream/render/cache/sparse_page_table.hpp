@@ -1,6 +1,9 @@
 #pragma once
-// Which pages of the sparse cache image are bound, and to which memory slot (seed 000 §3.6 on a sparse
+// Which pages of the sparse cache images are bound, and to which memory slot (seed 000 §3.6 on a sparse
 // partially-resident image). Pure bookkeeping: no Vulkan, no clock, one thread (the frame thread).
+//
+// Several images (one per texel format of the scene, each with its own page shape) share the one pool of
+// slots: the budget is one, whatever format the pages hold (docs/design/cache_formats.md).
 //
 // A page is one sparse block of one mip level of one layer: `granularity` texels (the device's
 // imageGranularity for the cache format: 128x128 for RGBA8 and 512x256 for BC1 with 64 KiB pages). Small
@@ -38,11 +41,15 @@ struct PageGeometry {
   uint32_t tail_first_level = 0;  // first level in the mip tail; == mip_levels when there is none
 };
 
+// The most images one table serves (one per texel format: rgba8, bc1, bc3, bc7).
+inline constexpr uint32_t kMaxCacheImages = 4;
+
 struct PageLocation {
   uint32_t layer = 0;
   uint32_t mip = 0;
   uint32_t x = 0;  // page column/row within the level
   uint32_t y = 0;
+  uint32_t image = 0;  // which of the table's images
 };
 
 // A texture's rectangle in the image at mip 0 (CacheRegion's layer, origin, width, height). At level L it
@@ -54,6 +61,7 @@ struct PageRect {
   uint32_t width = 0;
   uint32_t height = 0;
   uint32_t block = 1;
+  uint32_t image = 0;
 };
 
 struct PageBindOp {
@@ -73,6 +81,8 @@ struct PageTableStats {
 class SparsePageTable {
  public:
   SparsePageTable(const PageGeometry& geometry, uint32_t slot_count);
+  // One table over several images (PageRect::image and PageLocation::image index `images`), one slot pool.
+  SparsePageTable(std::vector<PageGeometry> images, uint32_t slot_count);
 
   // Pages of the rectangle (origin, width x height at mip 0) at `mip`: each side shrinks with the level and is
   // at least one texel. Zero for levels in the mip tail.
@@ -97,7 +107,8 @@ class SparsePageTable {
   uint64_t referenced_pages() const { return pages_.size() - retired_count_; }
   size_t pending_ops() const { return batch_.size(); }
   const PageTableStats& stats() const { return stats_; }
-  const PageGeometry& geometry() const { return geometry_; }
+  const PageGeometry& geometry(uint32_t image = 0) const { return geometries_[image]; }
+  uint32_t image_count() const { return static_cast<uint32_t>(geometries_.size()); }
 
  private:
   struct Page {
@@ -109,13 +120,13 @@ class SparsePageTable {
     bool bind;
     uint32_t slot;
   };
-  uint64_t key(uint32_t layer, uint32_t mip, uint32_t x, uint32_t y) const;
+  uint64_t key(uint32_t image, uint32_t layer, uint32_t mip, uint32_t x, uint32_t y) const;
   PageLocation location(uint64_t key) const;
   // Calls f(key) for every page of the rectangle at `mip`.
   template <class F>
   void for_each_page(const PageRect& rect, uint32_t mip, F&& f) const;
 
-  PageGeometry geometry_;
+  std::vector<PageGeometry> geometries_;
   uint32_t slot_count_;
   std::vector<uint32_t> free_;                // free slots; the lowest on top (blocks fill in order)
   std::unordered_map<uint64_t, Page> pages_;  // referenced or retired (slot still held)

@@ -1,8 +1,13 @@
 #pragma once
-// The texture cache (seed 000 §3.6): one sparse partially-resident 2D array image (SparseMemory), textures
-// placed in regions of its layers, filled from a host-visible staging ring that StreamClient copies validated
-// payloads into (this class is its MipSink). The image's shape comes from the device's limits and the budget
+// The texture cache (seed 000 §3.6): sparse partially-resident 2D array images (SparseMemory), textures
+// placed in regions of their layers, filled from a host-visible staging ring that StreamClient copies validated
+// payloads into (this class is its MipSink). The images' shape comes from the device's limits and the budget
 // (cache_geometry.hpp), so that cache.memory_bytes is the cache's only limit (docs/design/cache_budget.md).
+//
+// Texel formats: one image (a "plane") per texel format the scene has, so every texture stays in its own
+// format on the GPU (BC1, BC3, BC7 and RGBA8 side by side, nothing decoded). The planes share one page pool,
+// one budget, one use list and one bind call per frame; a texture's table entry names its plane
+// (docs/design/cache_formats.md).
 //
 // Residency, per texture and mip: the pages under the texture's rectangle at that level are bound
 // (reference-counted: small regions share pages, SparsePageTable) in the frame that first copies into that
@@ -101,6 +106,15 @@ struct UploadTraceFrame {
 };
 inline constexpr size_t kTraceEntries = size_t{1} << 16;
 
+// One image of the cache: the textures of one texel format.
+struct CachePlane {
+  TexelFormat format = TexelFormat::kRgba8;
+  uint32_t block = 1;  // texel block side: 4 for BC formats
+  uint32_t layer_extent = 0;
+  uint32_t layers = 0;
+  uint32_t mip_levels = 0;
+};
+
 class TextureCache final : public stream::MipSink {
  public:
   static Result<std::unique_ptr<TextureCache>> create(const VulkanContext& ctx, const TextureCacheOptions& options,
@@ -110,7 +124,7 @@ class TextureCache final : public stream::MipSink {
   // texture is named: by the meshes a frame draws for the first time (SceneGpu::make_resident), or by a commit.
   // The table is allocated for every texture but only the entries in use are written, so creating the cache
   // costs the same for 10^3 and 10^6 textures. Errors: a texture whose format is not cache.format (naming
-  // textures.bin and the record).
+  // textures.bin and the record) when cache.format is not auto.
   Status prepare_textures(std::span<const uint32_t> textures);
 
   // ---- MipSink (called from StreamClient::poll) ----
@@ -136,11 +150,13 @@ class TextureCache final : public stream::MipSink {
   // What the texture state machine must hear since the last call, oldest first (TextureStates::apply).
   std::vector<stream::TextureEvent> take_events() { return std::exchange(events_, {}); }
 
-  VkImageView image_view() const { return sparse_->view(); }
+  uint32_t plane_count() const { return static_cast<uint32_t>(planes_.size()); }
+  const CachePlane& plane(uint32_t i) const { return planes_[i].shape; }
+  VkImageView image_view(uint32_t plane = 0) const { return sparse_->view(plane); }
   VkBuffer texture_table() const { return table_.handle(); }
   VkDeviceSize texture_table_bytes() const { return table_.size(); }
-  uint32_t mip_levels() const { return mip_levels_; }
-  uint32_t layer_extent() const { return options_.layer_extent; }
+  uint32_t mip_levels(uint32_t plane = 0) const { return planes_[plane].shape.mip_levels; }
+  uint32_t layer_extent(uint32_t plane = 0) const { return planes_[plane].shape.layer_extent; }
   uint64_t resident_textures() const;
   const TextureCacheStats& stats() const { return stats_; }
   // The textures of the current cycle (the frame's visibility list, or what a load wants): none of them is
@@ -149,14 +165,14 @@ class TextureCache final : public stream::MipSink {
   // Whether the textures used since a mark alone outgrew the cache: ring, a layer assigned after the mark was
   // freed (layers go in assignment order); lru, a copy was refused for lack of room.
   struct FitMark {
-    uint64_t layers_assigned = 0;
+    std::array<uint64_t, kMaxCacheImages> layers_assigned{};  // per plane
     uint64_t space_refusals = 0;
   };
   FitMark fit_mark() const;
   bool outgrown_since(const FitMark& mark) const;
   // Textures the cache refused for good (another texel format, larger than a layer), in the order refused.
   const std::vector<uint32_t>& refused_textures() const { return refused_; }
-  uint32_t layers() const { return options_.layers; }
+  uint32_t layers(uint32_t plane = 0) const { return planes_[plane].shape.layers; }
   CacheEviction eviction() const { return options_.eviction; }
   const SparseBindStats& bind_stats() const { return sparse_->stats(); }
   const PageTableStats& page_stats() const { return pages_->stats(); }
@@ -164,8 +180,8 @@ class TextureCache final : public stream::MipSink {
   uint64_t memory_budget() const { return options_.memory_bytes; }
   // Bytes bound now: pages x page size + the mip tail. Never above memory_budget().
   uint64_t bound_bytes() const { return pages_->bound_pages() * sparse_->page_bytes() + sparse_->tail_bytes(); }
-  const PageGeometry& page_geometry() const { return sparse_->geometry(); }
-  // Bytes the image can address with every level (the sparse image's size): what could be bound at most.
+  const PageGeometry& page_geometry(uint32_t plane = 0) const { return sparse_->geometry(plane); }
+  // Bytes the images can address with every level (their sizes): what could be bound at most.
   uint64_t addressable_bytes() const { return sparse_->image_bytes(); }
   // Bytes held now: page slots in use (bound, or retired and not yet unbound) + the mip tail.
   uint64_t held_bytes() const;
@@ -194,21 +210,32 @@ class TextureCache final : public stream::MipSink {
     uint64_t serial;  // submission that carries it (after record_uploads)
   };
 
+  struct Plane {
+    CachePlane shape;
+    std::optional<CacheAllocator> ring;     // cache.eviction = ring
+    std::optional<QuadtreeAllocator> tree;  // cache.eviction = lru
+  };
+
   TextureCache(const TextureCacheOptions& options, const SceneData& scene);
+  // The plane of a texture's format; the texture's entry is prepared (prepare_texture), so it has one.
+  uint32_t plane_of(TextureId texture) const;
   void evict(TextureId texture);
   void evict_all(const std::vector<TextureId>& textures);
   std::optional<CacheRegion> region_of(TextureId texture) const;
   // A region for the texture's first mip: ring (recycling layers) or lru (evicting by use). nullopt + kNoRoom
   // event when lru has nothing to evict; an error when the texture can never be placed.
   Result<std::optional<CacheRegion>> place(TextureId texture, uint32_t width, uint32_t height);
-  // lru: the texture used longest ago, unless it was used in the current cycle or is `keep`.
-  std::optional<TextureId> lru_victim(TextureId keep) const;
+  // lru: the texture used longest ago, unless it was used in the current cycle or is `keep`; of `plane` only
+  // when given (address space is per plane, memory is shared).
+  std::optional<TextureId> lru_victim(TextureId keep, std::optional<uint32_t> plane = std::nullopt) const;
+  // ring: evicts the oldest layer of `plane`, else of the plane holding the most layers. False: none left.
+  bool evict_oldest_layer(uint32_t plane);
   void lru_unlink(uint32_t texture);
   // lru, when nothing can be evicted: drops the levels of one texture in use that are finer than its wanted
   // level minus one (a texture seen close before and far now). False when no texture has such levels.
   bool trim_one(TextureId keep);
   void lru_append(uint32_t texture);
-  PageRect page_rect(const CacheRegion& r) const;
+  PageRect page_rect(const CacheRegion& r, uint32_t plane) const;
   void note_eviction();
   // lru: a copy dropped because everything that could make room is in use (kNoRoom: asked again later).
   void refuse_for_room(TextureId texture, MipLevel mip);
@@ -219,11 +246,11 @@ class TextureCache final : public stream::MipSink {
   Status prepare_texture(uint32_t texture);
   void release_staging(const StagingRing::Allocation& a);
 
-  TexelFormat format_ = TexelFormat::kRgba8;
-  TextureCacheOptions options_;  // as resolved by create(): layer_extent and layers are the image's, never 0
+  TextureCacheOptions options_;
   const SceneData& scene_;
   std::vector<stream::TextureEvent> events_;  // for the texture state machine, oldest first (take_events)
-  uint32_t mip_levels_ = 1;
+  std::vector<Plane> planes_;                 // image i of sparse_ is plane i
+  std::array<int8_t, 8> plane_of_format_{};   // by TexelFormat value; -1: no plane
   std::unique_ptr<SparseMemory> sparse_;
   std::unique_ptr<SparsePageTable> pages_;
   uint64_t last_serial_ = 0;       // last submission recorded
@@ -232,9 +259,7 @@ class TextureCache final : public stream::MipSink {
   GpuBuffer staging_;
   GpuBuffer table_;  // gpu::TextureGpu[texture_count], host-visible
   StagingRing ring_;
-  std::optional<CacheAllocator> layer_ring_;  // cache.eviction = ring
-  std::optional<QuadtreeAllocator> tree_;     // cache.eviction = lru
-  uint32_t lru_head_ = 0, lru_tail_ = 0;      // texture id + 1; 0 = empty
+  uint32_t lru_head_ = 0, lru_tail_ = 0;  // texture id + 1; 0 = empty
   uint32_t use_cycle_ = 1;
   std::vector<uint32_t> trimmable_;   // textures of the last touch() holding levels finer than they want
   ZeroedArray<Residency> residency_;  // per texture; all-zero = not resident (created in O(1), see zeroed_array.hpp)
