@@ -18,6 +18,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <vector>
@@ -339,3 +340,193 @@ TEST(RenderQuadBc7, ABc7TextureIsServedRawAndShowsItsLevelsColour) {
   EXPECT_NEAR(got[2], 51, 2);
   if (!HasFailure()) fs::remove_all(dir);
 }
+
+// Several texel formats in one scene (issue 27): four quads side by side, textures in RGBA8, BC1, BC3 and BC7,
+// each level of each texture one solid colour. Each format gets its own cache image (plane) and nothing is
+// decoded: every quad must show its texture's level-0 colour (so the shader read the right image at the right
+// layer), every mip must reach the GPU in its own format (bytes uploaded = bytes in the files), and cache.json
+// must list the four planes.
+namespace {
+
+struct MixedTexture {
+  TexelFormat format;
+  std::array<uint8_t, 3> colour;  // level 0; representable exactly in every format (BC1: 5-6-5 bits)
+};
+
+// BC1 block of one colour: both endpoints the colour, all indices 0.
+std::array<uint8_t, 8> bc1_solid(uint8_t r, uint8_t g, uint8_t b) {
+  const auto c = static_cast<uint16_t>(((r >> 3) << 11) | ((g >> 2) << 5) | (b >> 3));
+  return {static_cast<uint8_t>(c & 0xff),
+          static_cast<uint8_t>(c >> 8),
+          static_cast<uint8_t>(c & 0xff),
+          static_cast<uint8_t>(c >> 8),
+          0,
+          0,
+          0,
+          0};
+}
+
+// A colour whose 5-6-5 rounding is exact: each channel's low bits repeat its high bits, as the expansion does.
+std::array<uint8_t, 3> exact565(uint8_t r5, uint8_t g6, uint8_t b5) {
+  return {static_cast<uint8_t>((r5 << 3) | (r5 >> 2)), static_cast<uint8_t>((g6 << 2) | (g6 >> 4)),
+          static_cast<uint8_t>((b5 << 3) | (b5 >> 2))};
+}
+
+// Level l's colour: level 0's, darkened per level so that showing a wrong level is seen too.
+std::array<uint8_t, 3> level_colour(const MixedTexture& t, uint32_t l) {
+  if (l == 0) return t.colour;
+  const uint8_t v = static_cast<uint8_t>(31 - 2 * std::min(l, 15u));
+  return t.format == TexelFormat::kBc7 ? std::array<uint8_t, 3>{static_cast<uint8_t>(2 * v + 1), 1, 1}
+                                       : exact565(v, 0, 0);
+}
+
+std::vector<uint8_t> level_bytes(const MixedTexture& t, uint32_t side, uint32_t l) {
+  const auto c = level_colour(t, l);
+  const uint64_t bytes = mip_bytes(t.format, side, side, l);
+  std::vector<uint8_t> out;
+  out.reserve(bytes);
+  while (out.size() < bytes) {
+    if (t.format == TexelFormat::kRgba8) {
+      out.insert(out.end(), {c[0], c[1], c[2], 255});
+    } else if (t.format == TexelFormat::kBc1) {
+      const auto b = bc1_solid(c[0], c[1], c[2]);
+      out.insert(out.end(), b.begin(), b.end());
+    } else if (t.format == TexelFormat::kBc3) {
+      const std::array<uint8_t, 8> alpha{255, 255, 0, 0, 0, 0, 0, 0};  // alpha0 everywhere
+      const auto b = bc1_solid(c[0], c[1], c[2]);
+      out.insert(out.end(), alpha.begin(), alpha.end());
+      out.insert(out.end(), b.begin(), b.end());
+    } else {
+      const auto b = bc7_solid(c[0], c[1], c[2]);
+      out.insert(out.end(), b.begin(), b.end());
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+class RenderQuadMixedFormats : public ::testing::TestWithParam<std::string> {};
+
+// Under lru every plane's layers are as large as the address space allows; under ring (the seed's eviction) a
+// plane's layer is its largest texture, so the planes here have layers of 64, 128, 32 and 64 texels and the
+// shader must use each texture's own plane's size.
+TEST_P(RenderQuadMixedFormats, EveryTextureIsDrawnFromTheImageOfItsOwnFormat) {
+  const std::array<MixedTexture, 4> textures{{{TexelFormat::kRgba8, {201, 101, 51}},
+                                              {TexelFormat::kBc1, exact565(4, 40, 28)},
+                                              {TexelFormat::kBc3, exact565(28, 60, 4)},
+                                              {TexelFormat::kBc7, {51, 151, 201}}}};
+  // Texture sides (shown at level 0: as many pixels on screen) and quad centres, pixels right of the middle.
+  constexpr std::array<uint32_t, 4> kSide{64, 128, 32, 64};
+  constexpr std::array<double, 4> kCentrePx{-240, -80, 60, 180};
+  const fs::path dir =
+      fs::temp_directory_path() / ("texstream_render_quad_mixed_" + GetParam() + "_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  const fs::path scene_dir = dir / "scene";
+  fs::create_directories(scene_dir);
+  const double metres_per_px = kDistance / focal_px();
+  scene::MeshData md;
+  std::vector<scene::TextureRecord> records;
+  std::vector<uint32_t> colours;
+  uint64_t file_bytes = 0;
+  for (uint32_t k = 0; k < textures.size(); ++k) {
+    const uint32_t mips = full_mip_count(kSide[k], kSide[k]);
+    const auto h = static_cast<float>(metres_per_px * kSide[k] / 2.0);
+    scene::MeshRecord m{};
+    m.origin[0] = kCamX + kCentrePx[k] * metres_per_px;
+    m.origin[1] = kCamY + kDistance;
+    m.origin[2] = kCamZ;
+    m.bounds_min[0] = -h, m.bounds_min[2] = -h;
+    m.bounds_max[0] = h, m.bounds_max[2] = h;
+    m.first_vertex = 4 * k;
+    m.vertex_count = 4;
+    m.first_index = 6 * k;
+    m.index_count = 6;
+    m.texture_id = k;
+    md.meshes.push_back(m);
+    md.vertices.insert(md.vertices.end(), {{{-h, 0, h}, {0, -1, 0}, {0, 0}},
+                                           {{h, 0, h}, {0, -1, 0}, {1, 0}},
+                                           {{h, 0, -h}, {0, -1, 0}, {1, 1}},
+                                           {{-h, 0, -h}, {0, -1, 0}, {0, 1}}});
+    for (uint32_t i : {0u, 1u, 2u, 0u, 2u, 3u}) md.indices.push_back(i);
+    records.push_back({kSide[k], kSide[k], mips, static_cast<uint32_t>(textures[k].format)});
+    const auto c = level_colour(textures[k], mips - 1);
+    colours.push_back(c[0] | (c[1] << 8) | (c[2] << 16) | (255u << 24));
+
+    const fs::path dds = scene::texture_path(scene_dir, TextureId(k));
+    fs::create_directories(dds.parent_path());
+    std::ofstream out(dds, std::ios::binary);
+    const bool bc7 = textures[k].format == TexelFormat::kBc7;
+    auto header = scene::make_dds_header(bc7 ? TexelFormat::kBc3 : textures[k].format, kSide[k], kSide[k], mips);
+    if (bc7) {
+      const uint32_t dx10 = 0x30315844u;  // "DX10"
+      std::memcpy(header.data() + scene::dds_field::kPfFourCC, &dx10, 4);
+    }
+    out.write(reinterpret_cast<const char*>(header.data()), static_cast<std::streamsize>(header.size()));
+    if (bc7) {
+      const uint32_t ext[5] = {99, 3, 0, 1, 0};  // BC7_UNORM_SRGB, TEXTURE2D, no flags, one texture, alpha unknown
+      out.write(reinterpret_cast<const char*>(ext), sizeof ext);
+    }
+    for (uint32_t l = 0; l < mips; ++l) {
+      const auto bytes = level_bytes(textures[k], kSide[k], l);
+      out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+      // Streaming starts at the 4x4 level (seed 000 Algorithm 1), for every format.
+      if ((kSide[k] >> l) >= 4) file_bytes += bytes.size();
+    }
+    ASSERT_TRUE(out.good());
+  }
+  ASSERT_TRUE(scene::write_meshes(scene_dir, md).ok());
+  ASSERT_TRUE(scene::write_texture_table(scene_dir, records).ok());
+  ASSERT_TRUE(scene::write_colormap(scene_dir, colours).ok());
+  std::ofstream(scene_dir / "camera_path.txt") << std::fixed << "0 " << kCamX << " " << kCamY << " " << kCamZ
+                                               << " 0 0\n1000 " << kCamX << " " << kCamY << " " << kCamZ << " 0 0\n";
+  scene::Manifest man;
+  man.name = "mixed formats";
+  man.mesh_count = textures.size();
+  man.texture_count = textures.size();
+  man.texture_format = std::nullopt;  // "mixed"
+  man.origin = {kCamX, kCamY, kCamZ};
+  man.bounds_min = {kCamX - 400 * metres_per_px, kCamY + kDistance, kCamZ - 64 * metres_per_px};
+  man.bounds_max = {kCamX + 400 * metres_per_px, kCamY + kDistance, kCamZ + 64 * metres_per_px};
+  ASSERT_TRUE(scene::write_manifest(scene_dir, man).ok());
+  ASSERT_EQ(scene::read_manifest(scene_dir)->texture_format, std::nullopt);
+
+  const fs::path out = dir / "out";
+  const std::string cmd =
+      (kBin / "texstream-render").string() + " --set scene.dir=" + scene_dir.string() +
+      " --set render.validation=true --set render.lockstep=true --set controller.mode=none" +
+      " --set render.frames=40 --set render.write_every_frames=0 --set render.width_px=" + std::to_string(kWidth) +
+      " --set render.height_px=" + std::to_string(kHeight) + " --set render.fov_y_deg=" + std::to_string(kFovY) +
+      " --set cache.eviction=" + GetParam() + " --set render.output_dir=" + out.string();
+  const int rc = run(cmd, dir / "render.log");
+  const std::string log = slurp(dir / "render.log");
+  ASSERT_EQ(rc, 0) << log;
+  const auto summary = nlohmann::json::parse(slurp(out / "summary.json"));
+  EXPECT_EQ(summary["validation_errors"].get<int>(), 0) << log;
+  EXPECT_EQ(summary["textures_resident"].get<int>(), 4) << log;
+  const auto cache = nlohmann::json::parse(slurp(out / "cache.json"));
+  std::cout << "cache planes: " << cache["planes"].dump() << "\n";
+  std::vector<std::string> planes;
+  for (const auto& p : cache["planes"]) planes.push_back(p["format"].get<std::string>());
+  std::sort(planes.begin(), planes.end());
+  EXPECT_EQ(planes, (std::vector<std::string>{"bc1", "bc3", "bc7", "rgba8"}));
+  // Every level from 4x4 down went to the GPU once, in the bytes of its file (nothing decoded).
+  EXPECT_EQ(cache["bytes_uploaded"].get<uint64_t>(), file_bytes) << cache.dump(1);
+
+  int w = 0, hgt = 0, n = 0;
+  unsigned char* pixels = stbi_load((out / "frames" / "frame_00039.png").c_str(), &w, &hgt, &n, 4);
+  ASSERT_NE(pixels, nullptr);
+  for (uint32_t k = 0; k < textures.size(); ++k) {
+    const auto x = static_cast<int>(std::lround(w / 2.0 + kCentrePx[k]));
+    const unsigned char* c = pixels + (static_cast<size_t>(hgt / 2) * w + x) * 4;
+    for (int ch = 0; ch < 3; ++ch)
+      EXPECT_NEAR(c[ch], textures[k].colour[ch], 2)
+          << "quad " << k << " (" << to_string(textures[k].format) << ") channel " << ch << "\n"
+          << log;
+  }
+  stbi_image_free(pixels);
+  if (!HasFailure()) fs::remove_all(dir);
+}
+
+INSTANTIATE_TEST_SUITE_P(Evictions, RenderQuadMixedFormats, ::testing::Values("lru", "ring"),
+                         [](const auto& p) { return p.param; });

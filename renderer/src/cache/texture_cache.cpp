@@ -806,6 +806,7 @@ Status TextureCache::write_stats_json(const std::filesystem::path& file) const {
   j["max_bound_bytes"] = stats_.max_bound_bytes;
   j["bound_bytes"] = bound_bytes();
   j["mips_uploaded"] = stats_.mips_uploaded;
+  j["bytes_uploaded"] = stats_.bytes_uploaded;
   j["mips_dropped"] = stats_.mips_dropped;
   j["evictions"] = stats_.evictions;
   j["budget_evicted_layers"] = stats_.budget_evicted_layers;
