@@ -176,3 +176,40 @@ TEST(SparsePageTable, RandomWorkloadNeverExceedsTheSlots) {
   EXPECT_EQ(t.bound_pages(), 0u);
   EXPECT_EQ(t.free_slots(), 40u);
 }
+
+// Several images (one per texel format) over one slot pool: a page of one image and the page at the same
+// place of another are different pages, each image counts pages by its own page shape, and the slots the first
+// image holds are not there for the second (one budget).
+TEST(SparsePageTable, ImagesOfSeveralFormatsShareOneSlotPool) {
+  const PageGeometry rgba8 = rgba8_512();
+  const PageGeometry bc1{512, 10, 4, 512, 256, 10};  // NVIDIA's BC1 page: 512 x 256 texels
+  SparsePageTable t({rgba8, bc1}, 6);
+  EXPECT_EQ(t.image_count(), 2u);
+  PageRect a = sq(0, 0, 0, 256);  // RGBA8: 2 x 2 pages at level 0
+  PageRect b = sq(0, 0, 0, 256);
+  b.image = 1;  // BC1: one page at level 0
+  EXPECT_EQ(SparsePageTable::pages_of_region(t.geometry(0), a, 0), 4u);
+  EXPECT_EQ(SparsePageTable::pages_of_region(t.geometry(1), b, 0), 1u);
+  ASSERT_TRUE(t.acquire(a, 0));
+  ASSERT_TRUE(t.acquire(b, 0));  // not shared with image 0's page at (0, 0)
+  EXPECT_EQ(t.free_slots(), 1u);
+  PageRect b2 = sq(0, 0, 256, 256);
+  b2.image = 1;
+  ASSERT_TRUE(t.acquire(b2, 0));
+  PageRect b3 = sq(1, 0, 0, 256);
+  b3.image = 1;
+  EXPECT_FALSE(t.acquire(b3, 0)) << "image 0 holds four of the six slots";
+  const auto ops = t.take_batch();
+  ASSERT_EQ(ops.size(), 6u);
+  EXPECT_EQ(std::count_if(ops.begin(), ops.end(), [](const PageBindOp& o) { return o.page.image == 1; }), 2);
+  EXPECT_TRUE(std::is_sorted(ops.begin(), ops.end(),
+                             [](const PageBindOp& x, const PageBindOp& y) { return x.page.image < y.page.image; }));
+  // Image 0's pages go (once serial 1 has completed): image 1 gets the slots.
+  t.release(a, 0, 1);
+  EXPECT_EQ(t.reclaim(1), 4u);
+  EXPECT_TRUE(t.acquire(b3, 0));
+  const auto next = t.take_batch();
+  EXPECT_EQ(count(next, false), 4u);
+  EXPECT_EQ(count(next, true), 1u);
+  EXPECT_EQ(t.bound_pages(), 3u);
+}

@@ -23,8 +23,9 @@ int main(int argc, char** argv) {
       ->required()
       ->check(CLI::Range(uint64_t{1}, uint64_t{0xffffffffu}));
   app.add_option("--seed", opt.seed, "Random seed: the same seed gives byte-identical files")->required();
-  app.add_option("--format", format, "Texel format of the textures")
-      ->check(CLI::IsMember({"rgba8", "bc1"}))
+  app.add_option("--format", format,
+                 "Texel format of the textures; mixed: each texture BC1, BC3 or RGBA8 (5:2:1), drawn from the seed")
+      ->check(CLI::IsMember({"rgba8", "bc1", "bc3", "mixed"}))
       ->capture_default_str();
   app.add_option("--threads", opt.threads, "Worker threads (default: all cores)")->check(CLI::Range(1u, 1024u));
   app.add_option("--origin", origin,
@@ -33,7 +34,8 @@ int main(int argc, char** argv) {
       ->expected(2);
   app.add_flag("--force", opt.force, "Write into a non-empty folder, replacing a previous scene there");
   CLI11_PARSE(app, argc, argv);
-  opt.format = *texel_format_from_string(format);
+  opt.mixed_formats = format == "mixed";
+  if (!opt.mixed_formats) opt.format = *texel_format_from_string(format);
   if (origin.size() == 2) {
     opt.origin[0] = origin[0];
     opt.origin[1] = origin[1];

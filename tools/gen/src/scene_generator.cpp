@@ -18,6 +18,7 @@
 #include "camera_path_builder.hpp"
 #include "city_layout.hpp"
 #include "mip_chain.hpp"
+#include "rng.hpp"
 #include "texstream/common/mesh_index.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texture_painter.hpp"
@@ -140,26 +141,42 @@ struct WorkerState {
   uint64_t bytes = 0;
 };
 
+}  // namespace
+
+TexelFormat texture_format(const GeneratorOptions& opt, uint32_t id) {
+  if (!opt.mixed_formats) return opt.format;
+  const uint64_t k = hash3(opt.seed, 0x666f726d6174ull, id) % 8;  // stream "format"
+  return k < 5 ? TexelFormat::kBc1 : k < 7 ? TexelFormat::kBc3 : TexelFormat::kRgba8;
+}
+
+namespace {
+
 Status write_texture(const GeneratorOptions& opt, const Surface& s, uint32_t id, WorkerState& ws,
                      std::vector<uint32_t>& colormap) {
+  const TexelFormat format = texture_format(opt, id);
   const uint32_t w = s.width_px, h = s.height_px, levels = full_mip_count(w, h);
   ws.chain.resize(mip_chain_offset(TexelFormat::kRgba8, w, h, levels) / 4);
   paint_texture(opt.seed, id, s, std::span(ws.chain).first(size_t{w} * h));
   build_mip_chain(w, h, ws.chain);
   colormap[id] = ws.chain.back();  // the 1x1 mip: the texture's average colour (seed 000 §3.7)
 
-  const uint64_t total = scene::dds_file_bytes(opt.format, w, h, levels);
+  const uint64_t total = scene::dds_file_bytes(format, w, h, levels);
   ws.file.resize(total);
-  const auto header = scene::make_dds_header(opt.format, w, h, levels);
+  const auto header = scene::make_dds_header(format, w, h, levels);
   std::memcpy(ws.file.data(), header.data(), header.size());
-  if (opt.format == TexelFormat::kRgba8) {
+  if (format == TexelFormat::kRgba8) {
     std::memcpy(ws.file.data() + scene::kDdsHeaderBytes, ws.chain.data(), ws.chain.size() * 4);
   } else {
     uint64_t src = 0;
     for (uint32_t l = 0; l < levels; ++l) {
       const Extent2D e = mip_extent(w, h, l);
-      const uint64_t at = scene::dds_mip_offset(opt.format, w, h, l);
-      encode_bc1(ws.chain.data() + src, e.width, e.height, std::span(ws.file.data() + at, mip_bytes(opt.format, e)));
+      const uint64_t at = scene::dds_mip_offset(format, w, h, l);
+      const std::span<uint8_t> out(ws.file.data() + at, mip_bytes(format, e));
+      if (format == TexelFormat::kBc3) {
+        encode_bc3(ws.chain.data() + src, e.width, e.height, out);
+      } else {
+        encode_bc1(ws.chain.data() + src, e.width, e.height, out);
+      }
       src += uint64_t{e.width} * e.height;
     }
   }
@@ -231,7 +248,7 @@ Result<GeneratorStats> generate_scene(const GeneratorOptions& options, const Pro
   manifest.seed = opt.seed;
   manifest.mesh_count = stats.meshes;
   manifest.texture_count = stats.textures;
-  manifest.texture_format = opt.format;
+  manifest.texture_format = opt.mixed_formats ? std::nullopt : std::optional<TexelFormat>(opt.format);
   manifest.origin = opt.origin;
   {
     const scene::MeshData meshes = build_meshes(city, opt.origin, manifest.bounds_min, manifest.bounds_max);
@@ -246,7 +263,8 @@ Result<GeneratorStats> generate_scene(const GeneratorOptions& options, const Pro
   std::vector<scene::TextureRecord> table(city.surfaces.size());
   for (size_t k = 0; k < table.size(); ++k) {
     const Surface& s = city.surfaces[k];
-    table[k] = {s.width_px, s.height_px, full_mip_count(s.width_px, s.height_px), static_cast<uint32_t>(opt.format)};
+    table[k] = {s.width_px, s.height_px, full_mip_count(s.width_px, s.height_px),
+                static_cast<uint32_t>(texture_format(opt, static_cast<uint32_t>(k)))};
     stats.side_histogram[floor_log2(s.width_px)]++;
     stats.side_histogram[floor_log2(s.height_px)]++;
     stats.max_side_histogram[floor_log2(std::max(s.width_px, s.height_px))]++;

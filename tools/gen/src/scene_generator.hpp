@@ -17,12 +17,18 @@ struct GeneratorOptions {
   uint64_t texture_count = 0;
   uint64_t seed = 0;
   TexelFormat format = TexelFormat::kBc1;  // seed 000 Table 1: the city data sets are BC1
-  unsigned threads = 0;                    // 0: every core
+  // --format mixed: each texture's format drawn from (seed, id), 5/8 BC1, 2/8 BC3, 1/8 RGBA8, as real data mixes
+  // them (a scene of several formats for the cache's planes; `format` is then ignored).
+  bool mixed_formats = false;
+  unsigned threads = 0;  // 0: every core
   // Map coordinates of the city centre at street level: UTM zone 33N, central Berlin (the seed's data set),
   // so that every consumer handles coordinates of 10^5..10^7 m.
   std::array<double, 3> origin{392000.0, 5820000.0, 34.0};
   bool force = false;  // write into a non-empty folder (removing a previous scene there)
 };
+
+// The texel format of texture `id`.
+TexelFormat texture_format(const GeneratorOptions& opt, uint32_t id);
 
 struct GeneratorStats {
   uint64_t textures = 0;
