@@ -2,8 +2,8 @@
 // materials: opaque, MASK, BLEND, the same image opaque and alpha-tested, wrap-only twins, flat colours) through
 // build_scene. With auto (the default) each texture record, its DDS header and its file size name the format its
 // alpha needs (BC1 opaque, BC3 alpha-tested), wrap-only twins share one file and an image used opaque and masked
-// does not, and the manifest says "mixed"; an explicit format is every texture's and the manifest's. The bytes
-// written are the same on two runs and on one or two baking threads.
+// does not, and the manifest says "mixed"; each file is the one the one-format run of its format writes; an
+// explicit format is every texture's and the manifest's. The bytes are the same on two runs and 1 or 2 threads.
 #include <gtest/gtest.h>
 
 #define STB_IMAGE_WRITE_STATIC
@@ -181,6 +181,9 @@ TEST_F(ImportFormats, AutoBakesOpaqueTexturesAsBc1AndCutOutsAsBc3AndTheManifestS
   ASSERT_TRUE(manifest.ok()) << manifest.error().message;
   EXPECT_EQ(manifest->texture_format, std::nullopt);
   EXPECT_EQ(report->textures, kCases.size());
+  EXPECT_TRUE(report->skipped.empty()) << report->skipped.front();
+  EXPECT_EQ(report->images_baked, 3u) << "grid, leaf masked, leaf opaque; the twins are links";
+  EXPECT_EQ((*table)[ids[0]].width, 16u);
   EXPECT_EQ(report->textures_by_format,
             (std::map<TexelFormat, uint64_t>{{TexelFormat::kBc1, 4}, {TexelFormat::kBc3, 3}}));
 }
@@ -207,6 +210,23 @@ TEST_F(ImportFormats, AnExplicitFormatIsEveryTexturesAndTheManifests) {
     ASSERT_TRUE(manifest.ok()) << manifest.error().message;
     EXPECT_EQ(manifest->texture_format, f) << out;
     EXPECT_EQ(report->textures_by_format, (std::map<TexelFormat, uint64_t>{{f, kCases.size()}})) << out;
+  }
+}
+
+// So an auto scene draws what the bc1 and bc3 scenes draw, texture by texture.
+TEST_F(ImportFormats, AutoWritesTheFilesTheOneFormatRunsWriteForEachTexture) {
+  ASSERT_TRUE(import("auto", std::nullopt).ok());
+  ASSERT_TRUE(import("bc1", TexelFormat::kBc1).ok());
+  ASSERT_TRUE(import("bc3", TexelFormat::kBc3).ok());
+  const auto ids = texture_of_cases(dir_ / "auto");
+  ASSERT_EQ(ids.size(), kCases.size());
+  for (size_t i = 0; i < kCases.size(); ++i) {
+    const fs::path same_format = dir_ / std::string(to_string(kCases[i].auto_format));
+    const auto other = texture_of_cases(same_format);
+    ASSERT_EQ(other.size(), kCases.size());
+    EXPECT_EQ(read_all(scene::texture_path(dir_ / "auto", TextureId{ids[i]})),
+              read_all(scene::texture_path(same_format, TextureId{other[i]})))
+        << kCases[i].name << ": auto and --format " << to_string(kCases[i].auto_format);
   }
 }
 
