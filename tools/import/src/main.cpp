@@ -15,13 +15,14 @@ int main(int argc, char** argv) {
   import::ImportOptions opt;
   std::filesystem::path input;
   std::vector<double> origin;
-  std::string format = "bc1", up = "auto";
+  std::string format = "auto", up = "auto";
   CLI::App app{
       "texstream-import: reads a glTF 2.0 (.gltf, .glb), OBJ+MTL or any model Assimp reads (Collada, FBX, ...) and "
       "writes a scene folder for texstream-render: one mesh per (primitive, placement), node transforms and "
-      "instancing kept, every image decoded once and baked to a full mip chain in linear light (BC1, cut-outs as "
-      "BC1 punch-through, or RGBA8), wrap modes and alpha tests in sampling.bin, the City Colormap from the coarse "
-      "mip and an orbit camera path. The scene is written beside --out and renamed into place when complete."};
+      "instancing kept, every image decoded once and baked to a full mip chain in linear light (by default opaque "
+      "textures as BC1 and cut-outs as BC3, each texture in its own format; or one format for all), wrap modes and "
+      "alpha tests in sampling.bin, the City Colormap from the coarse mip and an orbit camera path. The scene is "
+      "written beside --out and renamed into place when complete."};
   app.add_option("file", input, "Model file (.gltf, .glb, .obj, .dae, .fbx, ...)")->required();
   app.add_option("--out", opt.out, "Scene folder to write")->required();
   app.add_option("--origin", origin,
@@ -29,9 +30,10 @@ int main(int argc, char** argv) {
                  "to z-up first")
       ->expected(3);
   app.add_option("--format", format,
-                 "Texel format of the baked textures: bc1 (cut-outs as punch-through), bc3 (8-bit alpha, twice the "
-                 "bytes of bc1), rgba8")
-      ->check(CLI::IsMember({"bc1", "bc3", "rgba8"}))
+                 "Texel format of the baked textures: auto (each its own: BC1 when opaque, BC3 for alpha-tested "
+                 "cut-outs, whose 8-bit alpha keeps their edges), or one for all: bc1 (cut-outs as punch-through), "
+                 "bc3 (8-bit alpha, twice the bytes of bc1), rgba8")
+      ->check(CLI::IsMember({"auto", "bc1", "bc3", "rgba8"}))
       ->capture_default_str();
   app.add_option("--up", up, "The file's up axis (auto: y, as glTF and most OBJ exporters)")
       ->check(CLI::IsMember({"auto", "y", "z"}))
@@ -47,7 +49,7 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   if (origin.size() == 3) opt.origin = {origin[0], origin[1], origin[2]};
   if (up != "auto") opt.y_up = up == "y";
-  opt.format = *texel_format_from_string(format);
+  if (format != "auto") opt.format = *texel_format_from_string(format);
   ProgressBar bar("images");
   if (!quiet && ::isatty(STDERR_FILENO))
     opt.progress = [&bar](uint64_t done, uint64_t total) { bar.update(done, total); };
@@ -75,13 +77,16 @@ int main(int argc, char** argv) {
       static_cast<unsigned long long>(r.meshes), static_cast<unsigned long long>(r.shared_meshes),
       static_cast<unsigned long long>(r.transformed_meshes), static_cast<unsigned long long>(r.baked_meshes),
       static_cast<unsigned long long>(r.triangles));
+  std::string formats;  // "12 bc1, 3 bc3"
+  for (const auto& [f, n] : r.textures_by_format)
+    formats += (formats.empty() ? "" : ", ") + std::to_string(n) + " " + std::string(to_string(f));
   std::printf(
-      "  textures   %llu (%llu images baked, %llu resized to powers of two, %llu flat base colours, %llu alpha-tested, "
-      "%llu repeating), %.1f MB %s\n",
-      static_cast<unsigned long long>(r.textures), static_cast<unsigned long long>(r.images_baked),
+      "  textures   %llu: %s (%llu images baked, %llu resized to powers of two, %llu flat base colours, %llu "
+      "alpha-tested, %llu repeating), %.1f MB\n",
+      static_cast<unsigned long long>(r.textures), formats.c_str(), static_cast<unsigned long long>(r.images_baked),
       static_cast<unsigned long long>(r.resized), static_cast<unsigned long long>(r.flat_textures),
       static_cast<unsigned long long>(r.alpha_tested), static_cast<unsigned long long>(r.repeating),
-      static_cast<double>(r.texture_bytes) / 1e6, format.c_str());
+      static_cast<double>(r.texture_bytes) / 1e6);
   std::printf("  baking     %.2f s, %.1f images/s, peak memory %.0f MB\n", r.bake_seconds,
               r.bake_seconds > 0 ? static_cast<double>(r.images_baked + r.flat_textures) / r.bake_seconds : 0.0,
               static_cast<double>(ru.ru_maxrss) / 1024.0);

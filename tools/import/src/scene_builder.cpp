@@ -199,13 +199,15 @@ bool finite_geometry(const Placed& g) {
   return true;
 }
 
-// What a texture's texels depend on: baked once, however many wrap modes share them.
+// What a texture's baked file depends on: baked once, however many wrap modes share it. The format is part of
+// it so that one file is never linked under two formats (with auto it follows the alpha mode).
 struct TexelKey {
   int image;
   std::array<float, 4> factor;
   bool alpha_test;
   float cutoff;
-  auto tie() const { return std::tie(image, factor, alpha_test, cutoff); }
+  TexelFormat format;
+  auto tie() const { return std::tie(image, factor, alpha_test, cutoff, format); }
   bool operator<(const TexelKey& o) const { return tie() < o.tie(); }
 };
 
@@ -300,6 +302,7 @@ Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
     k.texels.factor = m.base_colour;
     k.texels.alpha_test = m.alpha != AlphaMode::kOpaque;
     k.texels.cutoff = m.alpha == AlphaMode::kMask ? m.alpha_cutoff : 0.5f;
+    k.texels.format = texel_format_for(opt.format, k.texels.alpha_test);
     k.u = m.image >= 0 ? m.wrap_u : Wrap::kClamp;
     k.v = m.image >= 0 ? m.wrap_v : Wrap::kClamp;
     auto [it, added] = texture_of.emplace(k, static_cast<uint32_t>(textures.size()));
@@ -443,7 +446,7 @@ Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
     in.factor = k.factor;
     in.alpha_test = k.alpha_test;
     in.cutoff = k.cutoff;
-    in.format = opt.format;
+    in.format = k.format;
     in.max_extent = opt.max_extent;
     const fs::path dds = scene::texture_path(tmp, TextureId{t});
     std::error_code e;
@@ -502,9 +505,10 @@ Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
       if (e) return make_error(ErrorCode::kIo, to.string() + ": cannot link or copy: " + e.message());
     }
     const bool flat = b.width == 1 && b.height == 1;
-    table[t] = scene::TextureRecord{b.width, b.height, b.mip_count, static_cast<uint32_t>(opt.format)};
-    colormap[t] = b.colormap;
     const TextureKey& k = textures[t];
+    table[t] = scene::TextureRecord{b.width, b.height, b.mip_count, static_cast<uint32_t>(k.texels.format)};
+    ++report.textures_by_format[k.texels.format];
+    colormap[t] = b.colormap;
     sampling[t] = scene::make_sampling_flags(
         flat ? scene::TextureWrap::kClamp : to_scene(k.u), flat ? scene::TextureWrap::kClamp : to_scene(k.v),
         k.texels.alpha_test, static_cast<uint32_t>(std::lround(std::clamp(k.texels.cutoff, 0.0f, 1.0f) * 255.0f)));
@@ -524,7 +528,9 @@ Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
   m.name = fs::path(model.source).stem().string();
   m.mesh_count = meshes.meshes.size();
   m.texture_count = textures.size();
-  m.texture_format = opt.format;
+  // The one format every texture shares, or "mixed".
+  m.texture_format =
+      report.textures_by_format.size() == 1 ? std::optional(report.textures_by_format.begin()->first) : std::nullopt;
   m.origin = {0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), lo[2]};
   m.bounds_min = lo;
   m.bounds_max = hi;

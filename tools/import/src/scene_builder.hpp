@@ -3,12 +3,14 @@
 // moves, turns and scales its primitive uniformly shares the primitive's vertices and indices with every other
 // such placement (the scene format's instancing, its rotation and scale in transforms.bin), one that mirrors,
 // shears or scales it unevenly gets its own transformed copy; one texture per
-// (image, base colour, wrap modes, alpha mode), each image decoded once; written to a temporary folder beside
-// the destination and renamed into place, so a failed import leaves no half-written scene.
+// (image, base colour, wrap modes, alpha mode), each image decoded once and each texture in its own texel format;
+// written to a temporary folder beside the destination and renamed into place, so a failed import leaves no
+// half-written scene.
 #include <array>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -23,7 +25,7 @@ struct ImportOptions {
   std::filesystem::path out;
   std::array<double, 3> origin{0, 0, 0};  // map position (x east, y north, z up, metres) of the file's origin
   std::optional<bool> y_up;               // overrides the model's own convention
-  TexelFormat format = TexelFormat::kBc1;
+  std::optional<TexelFormat> format;      // one for every texture; nullopt (auto): texel_format_for each texture
   uint32_t max_extent = 8192;
   unsigned threads = 0;  // 0: every core
   bool force = false;    // replace an existing scene folder
@@ -43,9 +45,18 @@ struct ImportReport {
   uint64_t repeating = 0;      // textures with a repeat or mirrored wrap
   uint64_t resized = 0;        // images scaled to powers of two
   uint64_t texture_bytes = 0;  // DDS bytes written
+  // Texture records of each texel format: one entry unless auto gave opaque and alpha-tested ones their own.
+  std::map<TexelFormat, uint64_t> textures_by_format;
   double bake_seconds = 0;
   std::vector<std::string> skipped;  // what was not imported, with the reason
 };
+
+// The texel format a texture is baked in: `chosen` when there is one, else BC1 when opaque and BC3 when alpha-
+// tested (8-bit alpha keeps the coverage-rescaled alpha and the edge texels' colour; docs/design/import.md).
+constexpr TexelFormat texel_format_for(std::optional<TexelFormat> chosen, bool alpha_test) {
+  if (chosen) return *chosen;
+  return alpha_test ? TexelFormat::kBc3 : TexelFormat::kBc1;
+}
 
 Result<ImportReport> build_scene(const Model& model, const ImportOptions& options);
 

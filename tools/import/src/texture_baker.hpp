@@ -2,8 +2,9 @@
 // One texture of an imported scene, baked for streaming: the image decoded once (OpenImageIO), turned to linear
 // light, multiplied by the material's base colour, resized to powers of two, a full mip chain built by 2x2 box
 // filters in linear light (colour weighted by alpha; a cut-out's alpha rescaled per level so that it keeps the
-// coverage of level 0), encoded to BC1 (cut-outs as BC1 punch-through, libsquish; opaque texels with stb_dxt) or
-// kept as RGBA8, and written as the DDS file the server reads one mip at a time. docs/design/import.md.
+// coverage of level 0), encoded to BC1 (stb_dxt; cut-outs as BC1 punch-through, libsquish), BC3 (stb_dxt's
+// DXT5: 8-bit alpha) or kept as RGBA8, and written as the DDS file the server reads one mip at a time.
+// docs/design/import.md.
 #include <array>
 #include <cstdint>
 #include <filesystem>
