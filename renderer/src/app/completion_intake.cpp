@@ -234,7 +234,11 @@ Status Renderer::load_wanted(const FrameRecording& rec, uint64_t index) {
   probe.feedback = probe.read_back_list = true;
   probe.wide_first = probe.draw_count;
   TS_TRY(stack_->submit({&probe, Uploads::kAll, false, {}}));
-  if (auto st = load_fully(read_candidates(), LoadGoal::kWantedLevels); !st) {
+  // The list the frame is drawn with: what the mip ledger's "displayed" looks at (else every mip of a
+  // reference run would count as never displayed).
+  last_list_ = read_candidates();
+  have_list_ = true;
+  if (auto st = load_fully(last_list_, LoadGoal::kWantedLevels); !st) {
     return make_error(st.error().code, "frame " + std::to_string(index) + ": " + st.error().message);
   }
   return ok_status();
