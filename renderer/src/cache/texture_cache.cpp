@@ -102,6 +102,14 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
   for (uint32_t raw = 0; raw < tally.size(); ++raw)
     if (tally[raw].textures) formats.push_back(static_cast<TexelFormat>(raw));
   if (formats.empty()) formats.push_back(options.format.value_or(TexelFormat::kRgba8));  // no texture: one plane
+  for (TexelFormat f : formats) {
+    if (is_block_compressed(f) && !ctx.texture_compression_bc()) {
+      return make_error(ErrorCode::kUnsupported, (scene.dir / "textures.bin").string() + " lists " +
+                                                     std::to_string(tally[static_cast<uint32_t>(f)].textures) + " " +
+                                                     std::string(to_string(f)) + " textures but device '" +
+                                                     ctx.device_name() + "' lacks textureCompressionBC");
+    }
+  }
   TS_ASSERT(formats.size() <= kMaxCacheImages, "%zu texel formats", formats.size());
 
   // The device's sparse address space is shared by the planes: each is sure of one layer of its largest

@@ -176,12 +176,11 @@ Result<std::unique_ptr<VulkanContext>> VulkanContext::create(const VulkanContext
   // device without these features.
   features.sparseBinding = supported.sparseBinding;
   features.sparseResidencyImage2D = supported.sparseResidencyImage2D;
-  if (options.need_bc) {
-    if (!supported.textureCompressionBC)
-      return make_error(ErrorCode::kUnsupported,
-                        "cache.format = bc1/bc3/bc7 but the device lacks textureCompressionBC");
-    features.textureCompressionBC = VK_TRUE;
-  }
+  if (options.need_bc && !supported.textureCompressionBC)
+    return make_error(ErrorCode::kUnsupported, "cache.format = bc1/bc3/bc7 but the device lacks textureCompressionBC");
+  // On wherever the device has it: a scene's records may name BC formats its scene.json does not.
+  features.textureCompressionBC = supported.textureCompressionBC;
+  ctx->texture_compression_bc_ = supported.textureCompressionBC == VK_TRUE;
 
   const float priority = 1.0f;
   VkDeviceQueueCreateInfo qci{};

@@ -48,6 +48,7 @@ class VulkanContext {
   std::string device_name() const { return properties_.deviceName; }
   // samplerAnisotropy is enabled (the LOD probe's sampler uses it when the device has it).
   bool sampler_anisotropy() const { return sampler_anisotropy_; }
+  bool texture_compression_bc() const { return texture_compression_bc_; }
   // Whether shaders of `stage` have basic, arithmetic and ballot subgroup operations (Vulkan 1.1 leaves both
   // the stages and the operations to the device).
   bool subgroup_reductions(VkShaderStageFlagBits stage) const { return (subgroup_reduce_stages_ & stage) != 0; }
@@ -71,6 +72,7 @@ class VulkanContext {
   VkQueue queue_ = VK_NULL_HANDLE;
   uint32_t queue_family_ = 0;
   bool sampler_anisotropy_ = false;
+  bool texture_compression_bc_ = false;
   VkShaderStageFlags subgroup_reduce_stages_ = 0;
   VkPhysicalDeviceProperties properties_{};
   VkPhysicalDeviceMemoryProperties memory_properties_{};
