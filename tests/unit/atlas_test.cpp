@@ -70,7 +70,8 @@ Level level_of(const fs::path& dir, uint32_t id, const scene::TextureRecord& r, 
   for (uint32_t by = 0; by < (e.height + 3) / 4; ++by)
     for (uint32_t bx = 0; bx < bw; ++bx) {
       squish::u8 rgba[64];
-      squish::Decompress(rgba, src + (size_t{by} * bw + bx) * bb, f == TexelFormat::kBc1 ? squish::kDxt1 : squish::kDxt5);
+      squish::Decompress(rgba, src + (size_t{by} * bw + bx) * bb,
+                         f == TexelFormat::kBc1 ? squish::kDxt1 : squish::kDxt5);
       for (uint32_t y = 0; y < 4 && 4 * by + y < e.height; ++y)
         for (uint32_t x = 0; x < 4 && 4 * bx + x < e.width; ++x)
           std::memcpy(&out.texels[size_t{4 * by + y} * e.width + 4 * bx + x], rgba + 4 * (4 * y + x), 4);

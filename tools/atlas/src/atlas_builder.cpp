@@ -149,8 +149,9 @@ Result<TextureFile> read_texture(const fs::path& dir, uint32_t id, const scene::
   auto layout = scene::parse_dds_layout(std::as_bytes(std::span(f.bytes)), p.string());
   if (!layout) return layout.error();
   f.layout = *layout;
-  if (f.layout.encoding == scene::DdsEncoding::kOther || f.layout.texel_format() != static_cast<TexelFormat>(r.format) ||
-      f.layout.width != r.width || f.layout.height != r.height || f.layout.mip_count < r.mip_count ||
+  if (f.layout.encoding == scene::DdsEncoding::kOther ||
+      f.layout.texel_format() != static_cast<TexelFormat>(r.format) || f.layout.width != r.width ||
+      f.layout.height != r.height || f.layout.mip_count < r.mip_count ||
       f.layout.mip_offset(r.mip_count - 1) + f.layout.mip_size(r.mip_count - 1) > f.bytes.size()) {
     return make_error(ErrorCode::kCorrupt, p.string() + ": does not hold the " + std::to_string(r.width) + "x" +
                                                std::to_string(r.height) + " " +
@@ -264,7 +265,8 @@ Result<AtlasStats> build_atlases(const AtlasOptions& opt, const AtlasProgress& p
     return make_error(ErrorCode::kInvalidArgument, "cell size must be a positive number of metres");
   const fs::path in = fs::absolute(opt.in).lexically_normal();
   const fs::path out = fs::absolute(opt.out).lexically_normal();
-  if (in == out) return make_error(ErrorCode::kInvalidArgument, "--out must differ from the input scene " + in.string());
+  if (in == out)
+    return make_error(ErrorCode::kInvalidArgument, "--out must differ from the input scene " + in.string());
   std::error_code ec;
   if (fs::exists(out, ec) && !opt.force && !fs::is_empty(out, ec))
     return make_error(ErrorCode::kInvalidArgument, out.string() + ": exists and is not empty (--force replaces it)");
@@ -316,7 +318,9 @@ Result<AtlasStats> build_atlases(const AtlasOptions& opt, const AtlasProgress& p
   constexpr float kUvSlack = 1e-4f;  // a texel of a 16 K texture is 6e-5
   for (size_t i = 0; i < md->meshes.size(); ++i) {
     const scene::MeshRecord& m = md->meshes[i];
-    if (m.texture_id >= n) return make_error(ErrorCode::kCorrupt, "meshes.bin: mesh " + std::to_string(i) + " names texture " + std::to_string(m.texture_id) + " of " + std::to_string(n));
+    if (m.texture_id >= n)
+      return make_error(ErrorCode::kCorrupt, "meshes.bin: mesh " + std::to_string(i) + " names texture " +
+                                                 std::to_string(m.texture_id) + " of " + std::to_string(n));
     std::array<double, 3> normal{};
     for (uint32_t v = 0; v < m.vertex_count; ++v) {
       const scene::Vertex& vx = md->vertices[size_t{m.first_vertex} + v];
@@ -452,8 +456,8 @@ Result<AtlasStats> build_atlases(const AtlasOptions& opt, const AtlasProgress& p
   for (uint32_t t = 0; t < n; ++t) {
     if (packed[t]) {
       ++st.textures_packed;
-      st.texel_bytes_in += mip_bytes(static_cast<TexelFormat>((*records)[t].format), (*records)[t].width,
-                                     (*records)[t].height, 0);
+      st.texel_bytes_in +=
+          mip_bytes(static_cast<TexelFormat>((*records)[t].format), (*records)[t].width, (*records)[t].height, 0);
     } else {
       ++st.textures_kept;
     }
@@ -600,7 +604,8 @@ Result<AtlasStats> build_atlases(const AtlasOptions& opt, const AtlasProgress& p
     for (unsigned k = 0; k < std::min<unsigned>(threads, std::max<uint32_t>(next, 1)); ++k) pool.emplace_back(worker);
   }
   if (first_error) return *first_error;
-  for (uint64_t t = 0; t < n; ++t) bytes_in += fs::file_size(scene::texture_path(in, TextureId(static_cast<uint32_t>(t))), ec);
+  for (uint64_t t = 0; t < n; ++t)
+    bytes_in += fs::file_size(scene::texture_path(in, TextureId(static_cast<uint32_t>(t))), ec);
   st.file_bytes_in = bytes_in;
   st.file_bytes_out = bytes_out;
 

@@ -30,10 +30,10 @@ struct AtlasOptions {
 
 struct AtlasStats {
   uint64_t textures_in = 0;
-  uint64_t textures_out = 0;      // atlases + textures kept as they were
+  uint64_t textures_out = 0;  // atlases + textures kept as they were
   uint64_t atlases = 0;
-  uint64_t textures_packed = 0;   // textures now inside an atlas
-  uint64_t textures_kept = 0;     // textures left as they were
+  uint64_t textures_packed = 0;    // textures now inside an atlas
+  uint64_t textures_kept = 0;      // textures left as they were
   uint64_t kept_not_eligible = 0;  // of those: size, format, wrap, alpha or UVs (the reasons above)
   uint64_t meshes = 0;
   uint64_t vertex_ranges_copied = 0;  // shared geometry whose users ended in different places

@@ -4,14 +4,17 @@
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <mutex>
 #include <thread>
 
+#include "atlas_builder.hpp"
 #include "scene_generator.hpp"
 #include "texstream/common/progress_bar.hpp"
 
 int main(int argc, char** argv) {
   using namespace texstream;
+  namespace fs = std::filesystem;
   gen::GeneratorOptions opt;
   std::string format = "bc1";
   std::vector<double> origin;
@@ -33,6 +36,15 @@ int main(int argc, char** argv) {
                  "UTM 33N Berlin)")
       ->expected(2);
   app.add_flag("--force", opt.force, "Write into a non-empty folder, replacing a previous scene there");
+  uint32_t atlas_px = 0;
+  double atlas_cell_m = 100;
+  app.add_option("--atlas", atlas_px,
+                 "Pack the textures of nearby, similarly oriented meshes into atlases of at most this many texels a "
+                 "side (seed 000 §3.1; 512 as the seed's Berlin (atlas)); 0: one texture per mesh")
+      ->check(CLI::Range(0u, 16384u));
+  app.add_option("--atlas-cell-m", atlas_cell_m, "With --atlas: grid cell side in metres")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
   CLI11_PARSE(app, argc, argv);
   opt.mixed_formats = format == "mixed";
   if (!opt.mixed_formats) opt.format = *texel_format_from_string(format);
@@ -47,10 +59,53 @@ int main(int argc, char** argv) {
   if (show_progress) progress = [&bar](uint64_t done, uint64_t total) { bar.update(done, total); };
 
   const auto start = std::chrono::steady_clock::now();
+  // --atlas: the city is generated beside --out first, then packed into --out (texstream-atlas's engine).
+  const fs::path out = opt.out;
+  if (atlas_px) {
+    std::error_code ec;
+    if (fs::exists(out, ec) && !opt.force && !fs::is_empty(out, ec)) {
+      std::fprintf(stderr, "texstream-gen: error: %s: exists and is not empty (--force replaces it)\n", out.c_str());
+      return 1;
+    }
+    const fs::path abs = fs::absolute(out).lexically_normal();
+    std::string name(1, '.');
+    name += abs.filename().string();
+    name += ".gen-";
+    name += std::to_string(::getpid());
+    opt.out = abs.parent_path() / name;
+    opt.force = true;
+  }
   auto stats = gen::generate_scene(opt, progress);
   if (!stats) {
     std::fprintf(stderr, "texstream-gen: error: %s\n", stats.error().message.c_str());
     return 1;
+  }
+  if (atlas_px) {
+    atlas::AtlasOptions ao;
+    ao.in = opt.out;
+    ao.out = out;
+    ao.atlas_px = atlas_px;
+    ao.cell_m = atlas_cell_m;
+    ao.threads = opt.threads;
+    ao.force = true;
+    auto packed = atlas::build_atlases(ao, show_progress ? atlas::AtlasProgress(progress) : atlas::AtlasProgress{});
+    std::error_code ec;
+    fs::remove_all(opt.out, ec);
+    if (!packed) {
+      std::fprintf(stderr, "texstream-gen: error: %s\n", packed.error().message.c_str());
+      return 1;
+    }
+    std::printf(
+        "atlases: %llu textures -> %llu (%llu atlases of at most %u px holding %llu textures), fill %.1f %%, "
+        "texture files %.1f MB -> %.1f MB\n",
+        static_cast<unsigned long long>(packed->textures_in), static_cast<unsigned long long>(packed->textures_out),
+        static_cast<unsigned long long>(packed->atlases), atlas_px,
+        static_cast<unsigned long long>(packed->textures_packed),
+        packed->atlas_bytes
+            ? 100.0 * static_cast<double>(packed->texel_bytes_in) / static_cast<double>(packed->atlas_bytes)
+            : 0.0,
+        static_cast<double>(packed->file_bytes_in) / 1e6, static_cast<double>(packed->file_bytes_out) / 1e6);
+    opt.out = out;
   }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const unsigned threads = opt.threads != 0 ? opt.threads : std::max(1u, std::thread::hardware_concurrency());
