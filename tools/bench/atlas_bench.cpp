@@ -7,14 +7,15 @@
 //      and mip/s as the seed's tables, requests, frame latency (mean, p99, max), the weighted mip deficit
 //      integrated over the run (what the view wanted and did not have, frames.csv), bytes never displayed.
 // --quick: 2,000 textures, 320x180, the first 150 frames (within 60 s on 2 cores); default: 20,000 textures,
-// 640x360, the whole path. --device gpu uses config/gpu.toml. Ratios are plain ÷ atlas (> 1: the atlas is better
-// for a time or an error, worse for bytes).
-// Last line: summary: textures=N atlases=A fill=F bytes_ratio=… requests_ratio=… deficit_ratio_local=…
+// 640x360, the whole path. --device gpu uses config/gpu.toml at 1920x1080. Ratios are plain ÷ atlas (> 1: the atlas is
+// better for a time or an error, worse for bytes). Last line: summary: textures=N atlases=A fill=F bytes_ratio=…
+// requests_ratio=… deficit_ratio_local=…
 //            deficit_ratio_slow=… max_latency_ratio_local=… max_latency_ratio_slow=…
 #include <sys/wait.h>
 
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -118,11 +119,15 @@ double ratio(double a, double b) { return b > 0 ? a / b : std::nan(""); }
 
 int run_atlas_bench(const AtlasBenchOptions& o) {
   const fs::path bin = self_dir();
-  const fs::path work = o.out.empty() ? fs::temp_directory_path() / ("texstream_atlas_bench_" + std::to_string(::getpid())) : o.out;
+  const fs::path work =
+      o.out.empty() ? fs::temp_directory_path() / ("texstream_atlas_bench_" + std::to_string(::getpid())) : o.out;
   std::error_code ec;
   fs::create_directories(work, ec);
   const uint32_t n = o.textures ? o.textures : (o.quick ? 2000 : 20000);
-  const fs::path profile = fs::path(TEXSTREAM_ATLAS_BENCH_CONFIG_DIR) / (o.device == "gpu" ? "gpu.toml" : "lavapipe.toml");
+  // TEXSTREAM_CONFIG_DIR overrides the build-time path (a bundle run on another machine: scripts/make_gpu_bundle.sh).
+  const char* config_dir = std::getenv("TEXSTREAM_CONFIG_DIR");
+  const fs::path profile = fs::path(config_dir && *config_dir ? config_dir : TEXSTREAM_ATLAS_BENCH_CONFIG_DIR) /
+                           (o.device == "gpu" ? "gpu.toml" : "lavapipe.toml");
   const fs::path plain = work / "plain", atlas = work / "atlas";
   if (run_cmd((bin / "texstream-gen").string() + " --out " + plain.string() + " --textures " + std::to_string(n) +
                   " --seed 1 --format bc1 --force",
@@ -153,7 +158,7 @@ int run_atlas_bench(const AtlasBenchOptions& o) {
   std::printf("texture files: %.1f MB one per mesh, %.1f MB atlased\n", static_cast<double>(bytes_plain) / 1e6,
               static_cast<double>(bytes_atlas) / 1e6);
 
-  const std::string size = o.quick ? "320x180" : "640x360";
+  const std::string size = o.device == "gpu" ? "1920x1080" : o.quick ? "320x180" : "640x360";
   const std::string w = size.substr(0, size.find('x')), h = size.substr(size.find('x') + 1);
   const std::string frames = o.quick ? "150" : "0";
   struct Case {
@@ -168,8 +173,9 @@ int run_atlas_bench(const AtlasBenchOptions& o) {
     fs::remove_all(out, ec);
     std::string cmd = (bin / "texstream-render").string() + " --config " + profile.string() +
                       " --set scene.dir=" + scene_dir.string() + " --set render.output_dir=" + out.string() +
-                      " --set render.width_px=" + w + " --set render.height_px=" + h + " --set render.frames=" +
-                      frames + " --set render.write_every_frames=0 --set render.validation=false";
+                      " --set render.width_px=" + w + " --set render.height_px=" + h +
+                      " --set render.frames=" + frames +
+                      " --set render.write_every_frames=0 --set render.validation=false";
     if (std::string(c.storage) == "slow") {
       char slow[160];
       std::snprintf(slow, sizeof slow,
@@ -184,15 +190,15 @@ int run_atlas_bench(const AtlasBenchOptions& o) {
     c.run = read_run(out);
   }
 
-  std::printf("\n| storage | scene | path s | frames | MB | MB/s | mip/s | requests | latency mean / p99 / max ms | "
-              "∫ mip deficit | never displayed |\n|---|---|---:|---:|---:|---:|---:|---:|---|---:|---:|\n");
+  std::printf(
+      "\n| storage | scene | path s | frames | MB | MB/s | mip/s | requests | latency mean / p99 / max ms | "
+      "∫ mip deficit | never displayed |\n|---|---|---:|---:|---:|---:|---:|---:|---|---:|---:|\n");
   for (const Case& c : cases) {
     const Run& r = c.run;
-    std::printf("| %s | %s | %.1f | %llu | %.2f | %.2f | %.0f | %llu | %.1f / %.1f / %.1f | %.3f | %.3f |\n",
-                c.storage, c.scene, r.path_s, static_cast<unsigned long long>(r.frames), r.mb,
-                ratio(r.mb, r.path_s), ratio(static_cast<double>(r.mips), r.path_s),
-                static_cast<unsigned long long>(r.requests), r.latency_mean, r.latency_p99, r.latency_max, r.deficit,
-                r.wasted);
+    std::printf("| %s | %s | %.1f | %llu | %.2f | %.2f | %.0f | %llu | %.1f / %.1f / %.1f | %.3f | %.3f |\n", c.storage,
+                c.scene, r.path_s, static_cast<unsigned long long>(r.frames), r.mb, ratio(r.mb, r.path_s),
+                ratio(static_cast<double>(r.mips), r.path_s), static_cast<unsigned long long>(r.requests),
+                r.latency_mean, r.latency_p99, r.latency_max, r.deficit, r.wasted);
   }
   const Run &lp = cases[0].run, &la = cases[1].run, &sp = cases[2].run, &sa = cases[3].run;
   std::printf(
@@ -216,6 +222,7 @@ std::function<int()> define_atlas(CLI::App& app) {
 
 }  // namespace
 
-TEXSTREAM_BENCH_COMMAND(atlas, "texture atlases (seed 000 §3.1) against one texture per mesh: bytes, requests, deficit", define_atlas);
+TEXSTREAM_BENCH_COMMAND(atlas, "texture atlases (seed 000 §3.1) against one texture per mesh: bytes, requests, deficit",
+                        define_atlas);
 
 }  // namespace texstream::bench
