@@ -57,7 +57,8 @@ struct Run {
   double mb = 0;
   uint64_t mips = 0;
   uint64_t requests = 0;
-  double latency_mean = 0, latency_p99 = 0, latency_max = 0;
+  double latency_median = 0, latency_mean = 0, latency_p99 = 0, latency_max = 0;
+  double tw_mean = 0;  // the controller's weighted frame latency t_w (seed 000 Eq. 4), mean over frames
   double deficit = 0;  // ∫ weighted mip deficit dt (level-seconds)
   double wasted = 0;   // fraction of bytes never displayed
 };
@@ -84,14 +85,15 @@ Run read_run(const fs::path& out) {
   auto col = [&](const char* n) {
     return static_cast<size_t>(std::find(names.begin(), names.end(), n) - names.begin());
   };
-  const size_t ct = col("time_s"), cl = col("latency_ms"), cd = col("mip_deficit");
-  std::vector<double> lat;
+  const size_t ct = col("time_s"), cl = col("latency_ms"), cd = col("mip_deficit"), cw = col("tw_ms");
+  std::vector<double> lat, tw;
   double prev_t = -1, prev_d = 0;
   while (std::getline(csv, line)) {
     std::vector<std::string> f;
     std::stringstream ss(line);
     for (std::string c; std::getline(ss, c, ',');) f.push_back(c);
-    if (f.size() <= std::max({ct, cl, cd})) continue;
+    if (f.size() <= std::max({ct, cl, cd, cw})) continue;
+    tw.push_back(std::atof(f[cw].c_str()));
     const double t = std::atof(f[ct].c_str()), l = std::atof(f[cl].c_str());
     const double d = f[cd].empty() ? prev_d : std::atof(f[cd].c_str());
     if (prev_t >= 0 && std::isfinite(prev_d)) r.deficit += prev_d * (t - prev_t);
@@ -100,7 +102,9 @@ Run read_run(const fs::path& out) {
     r.path_s = t;
   }
   if (lat.empty()) return r;
+  r.latency_median = percentile(lat, 50);
   r.latency_mean = mean(lat);
+  r.tw_mean = mean(tw);
   r.latency_p99 = percentile(lat, 99);
   r.latency_max = *std::max_element(lat.begin(), lat.end());
   r.ok = true;
@@ -190,15 +194,18 @@ int run_atlas_bench(const AtlasBenchOptions& o) {
     c.run = read_run(out);
   }
 
+  // The seed's Tables 3 and 4: frame latency (median, average, max), t_w, Mip/s, MB/s; then ours.
   std::printf(
-      "\n| storage | scene | path s | frames | MB | MB/s | mip/s | requests | latency mean / p99 / max ms | "
-      "∫ mip deficit | never displayed |\n|---|---|---:|---:|---:|---:|---:|---:|---|---:|---:|\n");
+      "\n| storage | scene | path s | frames | latency median / avg / p99 / max ms | t_w avg ms | Mip/s | MB/s | "
+      "MB | requests | ∫ mip deficit | never displayed |\n"
+      "|---|---|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|\n");
   for (const Case& c : cases) {
     const Run& r = c.run;
-    std::printf("| %s | %s | %.1f | %llu | %.2f | %.2f | %.0f | %llu | %.1f / %.1f / %.1f | %.3f | %.3f |\n", c.storage,
-                c.scene, r.path_s, static_cast<unsigned long long>(r.frames), r.mb, ratio(r.mb, r.path_s),
-                ratio(static_cast<double>(r.mips), r.path_s), static_cast<unsigned long long>(r.requests),
-                r.latency_mean, r.latency_p99, r.latency_max, r.deficit, r.wasted);
+    std::printf(
+        "| %s | %s | %.1f | %llu | %.1f / %.1f / %.1f / %.1f | %.1f | %.0f | %.2f | %.2f | %llu | %.3f | %.3f |\n",
+        c.storage, c.scene, r.path_s, static_cast<unsigned long long>(r.frames), r.latency_median, r.latency_mean,
+        r.latency_p99, r.latency_max, r.tw_mean, ratio(static_cast<double>(r.mips), r.path_s), ratio(r.mb, r.path_s),
+        r.mb, static_cast<unsigned long long>(r.requests), r.deficit, r.wasted);
   }
   const Run &lp = cases[0].run, &la = cases[1].run, &sp = cases[2].run, &sa = cases[3].run;
   std::printf(
