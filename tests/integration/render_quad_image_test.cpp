@@ -95,6 +95,16 @@ std::vector<Level> mip_chain(uint32_t tex_w, uint32_t tex_h) {
 
 double focal_px() { return (kHeight / 2.0) / std::tan(kFovY * M_PI / 360.0); }
 
+// The still camera of these tests, lock-step, validation on, controller off: `frames` frames of `scene`, the last
+// one written (frame_<frames - 1>.png under out/frames), plus `sets`.
+std::string still_render_cmd(const fs::path& scene, const fs::path& out, int frames, const std::string& sets) {
+  return (kBin / "texstream-render").string() + " --set scene.dir=" + scene.string() +
+         " --set render.validation=true --set render.lockstep=true --set controller.mode=none" +
+         " --set render.frames=" + std::to_string(frames) + " --set render.write_every_frames=0" +
+         " --set render.width_px=" + std::to_string(kWidth) + " --set render.height_px=" + std::to_string(kHeight) +
+         " --set render.fov_y_deg=" + std::to_string(kFovY) + " --set render.output_dir=" + out.string() + sets;
+}
+
 void write_scene(const fs::path& dir, const QuadCase& q) {
   const double half_w = kDistance * (q.rect_w() / 2.0) / focal_px();  // quad half-size in metres
   const double half_h = kDistance * (q.rect_h() / 2.0) / focal_px();
@@ -183,12 +193,7 @@ TEST_P(RenderQuadImage, TheLevelShownMatchesTheTextureOnScreen) {
   if (HasFatalFailure()) return;
 
   const fs::path out = dir / "out";
-  const std::string cmd =
-      (kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
-      " --set render.validation=true --set render.lockstep=true --set controller.mode=none" +
-      " --set render.frames=60 --set render.write_every_frames=0" + " --set render.width_px=" + std::to_string(kWidth) +
-      " --set render.height_px=" + std::to_string(kHeight) + " --set render.fov_y_deg=" + std::to_string(kFovY) +
-      " --set cache.format=rgba8 --set render.output_dir=" + out.string();
+  const std::string cmd = still_render_cmd(dir / "scene", out, 60, " --set cache.format=rgba8");
   const int rc = run(cmd, dir / "render.log");
   const std::string log = slurp(dir / "render.log");
   ASSERT_EQ(rc, 0) << log;
@@ -317,12 +322,7 @@ TEST(RenderQuadBc7, ABc7TextureIsServedRawAndShowsItsLevelsColour) {
     }
   }
   const fs::path out = dir / "out";
-  const std::string cmd =
-      (kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
-      " --set render.validation=true --set render.lockstep=true --set controller.mode=none" +
-      " --set render.frames=40 --set render.write_every_frames=0 --set render.width_px=" + std::to_string(kWidth) +
-      " --set render.height_px=" + std::to_string(kHeight) + " --set render.fov_y_deg=" + std::to_string(kFovY) +
-      " --set render.output_dir=" + out.string();
+  const std::string cmd = still_render_cmd(dir / "scene", out, 40, "");
   const int rc = run(cmd, dir / "render.log");
   const std::string log = slurp(dir / "render.log");
   ASSERT_EQ(rc, 0) << log;
@@ -492,12 +492,7 @@ TEST_P(RenderQuadMixedFormats, EveryTextureIsDrawnFromTheImageOfItsOwnFormat) {
   ASSERT_EQ(scene::read_manifest(scene_dir)->texture_format, std::nullopt);
 
   const fs::path out = dir / "out";
-  const std::string cmd =
-      (kBin / "texstream-render").string() + " --set scene.dir=" + scene_dir.string() +
-      " --set render.validation=true --set render.lockstep=true --set controller.mode=none" +
-      " --set render.frames=40 --set render.write_every_frames=0 --set render.width_px=" + std::to_string(kWidth) +
-      " --set render.height_px=" + std::to_string(kHeight) + " --set render.fov_y_deg=" + std::to_string(kFovY) +
-      " --set cache.eviction=" + GetParam() + " --set render.output_dir=" + out.string();
+  const std::string cmd = still_render_cmd(scene_dir, out, 40, " --set cache.eviction=" + GetParam());
   const int rc = run(cmd, dir / "render.log");
   const std::string log = slurp(dir / "render.log");
   ASSERT_EQ(rc, 0) << log;

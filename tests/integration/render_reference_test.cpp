@@ -44,6 +44,15 @@ std::string render_cmd(const fs::path& dir, const fs::path& out, const std::stri
          " --set render.write_every_frames=1 --set controller.mode=none --set stream.colormap_blend=false" + sets;
 }
 
+// The tests' city: 300 textures, seed 11, at dir/scene.
+bool generate_city(const fs::path& dir) {
+  const int rc = texstream::test::run_logged((kBin / "texstream-gen").string() + " --out " + (dir / "scene").string() +
+                                                 " --textures 300 --seed 11 --threads 2",
+                                             dir / "gen.log");
+  EXPECT_EQ(rc, 0) << slurp(dir / "gen.log");
+  return rc == 0;
+}
+
 nlohmann::json run_render(const fs::path& dir, const std::string& name, const std::string& sets) {
   const fs::path log = dir / (name + ".log");
   EXPECT_EQ(texstream::test::run_logged(render_cmd(dir, dir / name, sets), log), 0) << slurp(log);
@@ -70,11 +79,7 @@ std::string write_diff(const fs::path& dir, uint64_t index, const texstream::ren
 
 TEST(RenderReference, LoadingEachFramesWantedMipsGivesThePreloadFramesWithASmallCache) {
   const fs::path dir = texstream::test::fresh_dir("texstream_render_it_", "reference");
-  ASSERT_EQ(texstream::test::run_logged((kBin / "texstream-gen").string() + " --out " + (dir / "scene").string() +
-                                            " --textures 300 --seed 11 --threads 2",
-                                        dir / "gen.log"),
-            0)
-      << slurp(dir / "gen.log");
+  ASSERT_TRUE(generate_city(dir));
 
   // The preload: the default cache (512 layers) holds all 300 textures.
   const auto preload = run_render(dir, "preload", " --set render.preload_all=true");
@@ -157,11 +162,7 @@ TEST(RenderReference, LoadingEachFramesWantedMipsGivesThePreloadFramesWithASmall
 // off read 23-29 dB in the first frames.
 TEST(RenderAtlas, TheAtlasedCityDrawsAsTheCityItCameFrom) {
   const fs::path dir = texstream::test::fresh_dir("texstream_render_it_", "atlas");
-  ASSERT_EQ(texstream::test::run_logged((kBin / "texstream-gen").string() + " --out " + (dir / "scene").string() +
-                                            " --textures 300 --seed 11 --threads 2",
-                                        dir / "gen.log"),
-            0)
-      << slurp(dir / "gen.log");
+  ASSERT_TRUE(generate_city(dir));
   ASSERT_EQ(texstream::test::run_logged((kBin / "texstream-atlas").string() + " " + (dir / "scene").string() +
                                             " --out " + (dir / "atlas").string() + " --quiet",
                                         dir / "atlas.log"),

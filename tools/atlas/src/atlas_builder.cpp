@@ -1,7 +1,6 @@
 #include "atlas_builder.hpp"
 
 #include <squish.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <array>
@@ -24,6 +23,7 @@
 #include "texstream/common/dds.hpp"
 #include "texstream/common/mesh_index.hpp"
 #include "texstream/common/scene_format.hpp"
+#include "texstream/common/staged_folder.hpp"
 #include "texstream/common/texel_format.hpp"
 
 namespace texstream::atlas {
@@ -268,8 +268,10 @@ Result<AtlasStats> build_atlases(const AtlasOptions& opt, const AtlasProgress& p
   if (in == out)
     return make_error(ErrorCode::kInvalidArgument, "--out must differ from the input scene " + in.string());
   std::error_code ec;
-  if (fs::exists(out, ec) && !opt.force && !fs::is_empty(out, ec))
-    return make_error(ErrorCode::kInvalidArgument, out.string() + ": exists and is not empty (--force replaces it)");
+  // Written beside --out and renamed into place: a failed run leaves nothing half written.
+  auto staged = StagedFolder::create(out, opt.force, "atlas");
+  if (!staged) return staged.error();
+  const fs::path tmp = staged->dir();
 
   auto manifest = scene::read_manifest(in);
   if (!manifest) return manifest.error();
@@ -515,29 +517,6 @@ Result<AtlasStats> build_atlases(const AtlasOptions& opt, const AtlasProgress& p
     }
   }
 
-  // ---- the folder: a hidden sibling, renamed into place ----
-  const fs::path parent = out.parent_path();
-  fs::create_directories(parent, ec);
-  auto sibling = [&](const char* kind) {
-    std::string name(1, '.');
-    name += out.filename().string();
-    name += kind;
-    name += std::to_string(::getpid());
-    return parent / name;
-  };
-  const fs::path tmp = sibling(".atlas-");
-  fs::remove_all(tmp, ec);
-  if (!fs::create_directories(tmp / "textures", ec))
-    return make_error(ErrorCode::kIo, tmp.string() + ": cannot create: " + ec.message());
-  struct Cleanup {
-    fs::path dir;
-    bool keep = false;
-    ~Cleanup() {
-      std::error_code e;
-      if (!keep) fs::remove_all(dir, e);
-    }
-  } cleanup{tmp};
-
   std::vector<scene::TextureRecord> table(next);
   std::vector<uint32_t> colormap(next), out_sampling(next, 0);
   for (uint32_t id = 0; id < next; ++id) {
@@ -623,19 +602,7 @@ Result<AtlasStats> build_atlases(const AtlasOptions& opt, const AtlasProgress& p
   m.texture_count = next;
   TS_TRY(scene::write_manifest(tmp, m));
 
-  const fs::path old = sibling(".old-");
-  if (fs::exists(out, ec)) {
-    fs::rename(out, old, ec);
-    if (ec) return make_error(ErrorCode::kIo, out.string() + ": cannot move the old scene aside: " + ec.message());
-  }
-  fs::rename(tmp, out, ec);
-  if (ec) {
-    std::error_code back;
-    if (fs::exists(old, back)) fs::rename(old, out, back);
-    return make_error(ErrorCode::kIo, out.string() + ": cannot rename the new scene into place: " + ec.message());
-  }
-  cleanup.keep = true;
-  fs::remove_all(old, ec);
+  TS_TRY(staged->commit());
   st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return st;
 }

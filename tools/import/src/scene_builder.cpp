@@ -1,7 +1,5 @@
 #include "scene_builder.hpp"
 
-#include <unistd.h>
-
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -14,6 +12,7 @@
 
 #include "texstream/common/camera_path.hpp"
 #include "texstream/common/scene_format.hpp"
+#include "texstream/common/staged_folder.hpp"
 #include "texture_baker.hpp"
 
 namespace texstream::import {
@@ -261,34 +260,11 @@ Status write_text(const fs::path& file, const std::string& text) {
 Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
   ImportReport report;
   report.skipped = model.skipped;
-  const fs::path out = fs::absolute(opt.out).lexically_normal();
+  // Written beside --out and renamed into place: a failed import leaves nothing half written.
+  auto staged = StagedFolder::create(opt.out, opt.force, "import");
+  if (!staged) return staged.error();
+  const fs::path tmp = staged->dir();
   std::error_code ec;
-  if (fs::exists(out, ec) && !opt.force && !fs::is_empty(out, ec))
-    return make_error(ErrorCode::kInvalidArgument, out.string() + ": exists and is not empty (--force replaces it)");
-  const fs::path parent = out.parent_path();
-  fs::create_directories(parent, ec);
-  // A hidden sibling, so the rename below stays on one file system. (Built by appending: GCC 12 warns about
-  // "." + std::string with a false -Wrestrict.)
-  auto sibling = [&](const char* kind) {
-    std::string name(1, '.');
-    name += out.filename().string();
-    name += kind;
-    name += std::to_string(::getpid());
-    return parent / name;
-  };
-  const fs::path tmp = sibling(".import-");
-  fs::remove_all(tmp, ec);
-  if (!fs::create_directories(tmp / "textures", ec))
-    return make_error(ErrorCode::kIo, tmp.string() + ": cannot create: " + ec.message());
-  // Removes the temporary folder on every failure below.
-  struct Cleanup {
-    fs::path dir;
-    bool keep = false;
-    ~Cleanup() {
-      std::error_code e;
-      if (!keep) fs::remove_all(dir, e);
-    }
-  } cleanup{tmp};
 
   // ---- textures: one per (texels, wrap); texels baked once ----
   std::map<TextureKey, uint32_t> texture_of;
@@ -539,19 +515,7 @@ Result<ImportReport> build_scene(const Model& model, const ImportOptions& opt) {
   for (const auto& e : fs::directory_iterator(tmp, ec))
     if (e.path().filename().string().rfind("scratch-", 0) == 0) fs::remove(e.path(), ec);
 
-  const fs::path old = sibling(".old-");
-  if (fs::exists(out, ec)) {
-    fs::rename(out, old, ec);
-    if (ec) return make_error(ErrorCode::kIo, out.string() + ": cannot move the old scene aside: " + ec.message());
-  }
-  fs::rename(tmp, out, ec);
-  if (ec) {
-    std::error_code back;
-    if (fs::exists(old, back)) fs::rename(old, out, back);
-    return make_error(ErrorCode::kIo, out.string() + ": cannot rename the new scene into place: " + ec.message());
-  }
-  cleanup.keep = true;
-  fs::remove_all(old, ec);
+  TS_TRY(staged->commit());
   return report;
 }
 
