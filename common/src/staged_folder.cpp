@@ -33,7 +33,9 @@ Result<StagedFolder> StagedFolder::create(const fs::path& destination, bool forc
 }
 
 StagedFolder::StagedFolder(StagedFolder&& other) noexcept
-    : out_(std::move(other.out_)), tmp_(std::move(other.tmp_)), old_(std::move(other.old_)),
+    : out_(std::move(other.out_)),
+      tmp_(std::move(other.tmp_)),
+      old_(std::move(other.old_)),
       committed_(other.committed_) {
   other.committed_ = true;  // the moved-from object removes nothing
 }
