@@ -2,7 +2,8 @@
 // atlases (seed 000 §3.1; its Tables 3 and 4 compare Berlin (atlas) with Berlin).
 //   1. generates a city (texstream-gen, BC1) and packs it (texstream-atlas, 512 px atlases): textures, atlases,
 //      fill, bytes on disk;
-//   2. renders the same camera path in real time with the default policy on both scenes, from local files and
+//   2. renders the same camera path with the default policy on both scenes (the path advances
+//      render.frame_time_ms per frame; the GPU profile also paces frames to it, like a display), from local files and
 //      from a slow origin (storage.slow_latency_ms per read, jittered, the server's slow-storage emulation): MB/s
 //      and mip/s as the seed's tables, requests, frame latency (mean, p99, max), the weighted mip deficit
 //      integrated over the run (what the view wanted and did not have, frames.csv), bytes never displayed.
