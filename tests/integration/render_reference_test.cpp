@@ -60,7 +60,8 @@ nlohmann::json run_render(const fs::path& dir, const std::string& name, const st
 }
 
 // Writes frame `index` of both runs and their difference (x8) next to them, for a failure message.
-std::string write_diff(const fs::path& dir, uint64_t index, const texstream::render::RgbaView& actual,
+std::string write_diff(const fs::path& dir, const std::string& actual_run, const std::string& expected_run,
+                       uint64_t index, const texstream::render::RgbaView& actual,
                        const texstream::render::RgbaView& expected) {
   std::vector<unsigned char> diff(size_t{kWidth} * kHeight * 4, 255);
   const auto* a = reinterpret_cast<const unsigned char*>(actual.pixels.data());
@@ -70,9 +71,50 @@ std::string write_diff(const fs::path& dir, uint64_t index, const texstream::ren
   }
   const fs::path d = dir / ("frame_" + std::to_string(index) + "_diff_x8.png");
   stbi_write_png(d.c_str(), kWidth, kHeight, 4, diff.data(), kWidth * 4);
-  return "  actual:   " + texstream::render::ReferenceFrames::frame_file(dir / "wanted", index).string() +
-         "\n  expected: " + texstream::render::ReferenceFrames::frame_file(dir / "preload", index).string() +
+  return "  actual:   " + texstream::render::ReferenceFrames::frame_file(dir / actual_run, index).string() +
+         "\n  expected: " + texstream::render::ReferenceFrames::frame_file(dir / expected_run, index).string() +
          "\n  diff x8:  " + d.string();
+}
+
+struct RunComparison {
+  uint64_t frames = 0;
+  uint64_t identical = 0;
+  double min_psnr = texstream::render::kPsnrCapDb;
+  double mean_psnr = 0;
+};
+
+// Every frame of run `actual_run` against run `expected_run` (folders under `dir`); the first frame below
+// `min_db` fails the test with its diff written beside the runs.
+RunComparison compare_runs(const fs::path& dir, const std::string& actual_run, const std::string& expected_run,
+                           uint64_t frames, double min_db) {
+  RunComparison c;
+  auto expected = texstream::render::ReferenceFrames::open(dir / expected_run, kWidth, kHeight);
+  auto actual = texstream::render::ReferenceFrames::open(dir / actual_run, kWidth, kHeight);
+  EXPECT_TRUE(expected.ok() && actual.ok());
+  if (!expected.ok() || !actual.ok()) return c;
+  bool failed = false;
+  double sum = 0;
+  for (uint64_t i = 0; i < frames; ++i) {
+    auto e = expected->frame(i);
+    auto a = actual->frame(i);
+    EXPECT_TRUE(e.ok() && a.ok()) << "frame " << i;
+    if (!e.ok() || !a.ok()) return c;
+    auto err = texstream::render::compare_images(*a, *e);
+    EXPECT_TRUE(err.ok()) << err.error().message;
+    if (!err.ok()) return c;
+    ++c.frames;
+    c.min_psnr = std::min(c.min_psnr, err->psnr_db);
+    c.identical += err->mse == 0 ? 1 : 0;
+    sum += err->psnr_db;
+    if (err->psnr_db < min_db && !failed) {
+      failed = true;
+      ADD_FAILURE() << "frame " << i << ": PSNR " << err->psnr_db << " dB against " << expected_run << " (at least "
+                    << min_db << ")\n"
+                    << write_diff(dir, actual_run, expected_run, i, *a, *e);
+    }
+  }
+  c.mean_psnr = c.frames ? sum / static_cast<double>(c.frames) : 0;
+  return c;
 }
 
 }  // namespace
@@ -97,29 +139,10 @@ TEST(RenderReference, LoadingEachFramesWantedMipsGivesThePreloadFramesWithASmall
   EXPECT_EQ(wanted["protocol_errors"].get<int>(), 0);
 
   const auto frames = preload["frames"].get<uint64_t>();
-  auto expected = texstream::render::ReferenceFrames::open(dir / "preload", kWidth, kHeight);
-  auto actual = texstream::render::ReferenceFrames::open(dir / "wanted", kWidth, kHeight);
-  ASSERT_TRUE(expected.ok() && actual.ok());
-  double min_psnr = texstream::render::kPsnrCapDb;
-  uint64_t identical = 0;
-  bool failed = false;
-  for (uint64_t i = 0; i < frames; ++i) {
-    auto e = expected->frame(i);
-    auto a = actual->frame(i);
-    ASSERT_TRUE(e.ok() && a.ok()) << "frame " << i;
-    auto err = texstream::render::compare_images(*a, *e);
-    ASSERT_TRUE(err.ok()) << err.error().message;
-    min_psnr = std::min(min_psnr, err->psnr_db);
-    identical += err->mse == 0 ? 1 : 0;
-    if (err->psnr_db < kMinPsnrDb && !failed) {
-      failed = true;
-      ADD_FAILURE() << "frame " << i << ": PSNR " << err->psnr_db << " dB against the preload (at least " << kMinPsnrDb
-                    << ")\n"
-                    << write_diff(dir, i, *a, *e);
-    }
-  }
+  const RunComparison c = compare_runs(dir, "wanted", "preload", frames, kMinPsnrDb);
+  EXPECT_EQ(c.frames, frames);
   std::printf("load_wanted_before_drawing vs preload_all: %llu frames, %llu identical, lowest PSNR %.1f dB\n",
-              static_cast<unsigned long long>(frames), static_cast<unsigned long long>(identical), min_psnr);
+              static_cast<unsigned long long>(frames), static_cast<unsigned long long>(c.identical), c.min_psnr);
 
   // What differs is placement only: the level each pixel samples (the shader's lod after its clamp to the
   // resident range) is the preload's, byte for byte.
@@ -181,24 +204,11 @@ TEST(RenderAtlas, TheAtlasedCityDrawsAsTheCityItCameFrom) {
   EXPECT_LT(packed["texture_count"].get<int>(), plain["texture_count"].get<int>() / 4);
   EXPECT_EQ(packed["validation_errors"].get<int>(), 0);
   EXPECT_EQ(packed["frames"], plain["frames"]);
-  auto expected = texstream::render::ReferenceFrames::open(dir / "plain", kWidth, kHeight);
-  auto actual = texstream::render::ReferenceFrames::open(cmd_out, kWidth, kHeight);
-  ASSERT_TRUE(expected.ok() && actual.ok());
-  double min_psnr = texstream::render::kPsnrCapDb, sum = 0;
   const auto frames = plain["frames"].get<uint64_t>();
-  for (uint64_t i = 0; i < frames; ++i) {
-    auto e = expected->frame(i);
-    auto a = actual->frame(i);
-    ASSERT_TRUE(e.ok() && a.ok()) << "frame " << i;
-    auto err = texstream::render::compare_images(*a, *e);
-    ASSERT_TRUE(err.ok()) << err.error().message;
-    min_psnr = std::min(min_psnr, err->psnr_db);
-    sum += err->psnr_db;
-    if (err->psnr_db < 30.0)
-      ADD_FAILURE() << "frame " << i << ": " << err->psnr_db << " dB\n" << write_diff(dir, i, *a, *e);
-  }
+  const RunComparison c = compare_runs(dir, "packed", "plain", frames, 30.0);
+  EXPECT_EQ(c.frames, frames);
   std::printf("atlased vs plain: %llu frames, lowest PSNR %.1f dB, mean %.1f dB\n",
-              static_cast<unsigned long long>(frames), min_psnr, sum / static_cast<double>(frames));
-  EXPECT_GE(sum / static_cast<double>(frames), 40.0);
+              static_cast<unsigned long long>(frames), c.min_psnr, c.mean_psnr);
+  EXPECT_GE(c.mean_psnr, 40.0);
   if (!HasFailure()) fs::remove_all(dir);
 }
