@@ -2,29 +2,33 @@
 # Issue 26 scale run on the device: a city of N textures generated there, then (1) texstream-bench cache
 # --device gpu --scene-1m (its start-up comparison: the city against itself with 1 K textures, same view) and
 # (2) the whole bird's-eye path with config/gpu.toml, sampling both processes' RSS and the GPU's memory.
-# Usage (bundle in .gpu/): docs/bench/cache-budget-h200/scale.sh N [skip-bench]
+# Usage (bundle in .gpu/): [ATLAS=512] docs/bench/cache-budget-h200/scale.sh N [skip-bench]
+# ATLAS=PX: the atlas variant (texstream-gen --atlas PX, seed 000 §3.1) of the same city.
 set -u
 cd "$(dirname "$0")/../../.."
 R=.gpu/run.sh
 n=$1
+atlas=${ATLAS:-0}
 city=/tmp/city_$n
+tag=$n
+[ "$atlas" != 0 ] && city=/tmp/city_${n}_atlas$atlas && tag=${n}_atlas$atlas
 nvidia-smi --query-gpu=name,memory.total --format=csv,noheader
 df -h /tmp | tail -1
 if [ ! -f $city/scene.json ]; then
   t0=$(date +%s)
-  $R texstream-gen --out $city --textures $n --seed 1 --threads 16 > "$OUT/gen_$n.log" 2>&1
-  echo "gen $n rc $? $(( $(date +%s) - t0 )) s, $(du -sh $city | cut -f1)"
+  $R texstream-gen --out $city --textures $n --seed 1 --threads 16 --atlas $atlas > "$OUT/gen_$tag.log" 2>&1
+  echo "gen $tag rc $? $(( $(date +%s) - t0 )) s, $(du -sh $city | cut -f1)"
 fi
 if [ "${2:-}" != skip-bench ]; then
   t0=$(date +%s)
-  $R texstream-bench cache --quick --device gpu --scene-1m $city > "$OUT/cache_bench_$n.txt" 2>&1
+  $R texstream-bench cache --quick --device gpu --scene-1m $city > "$OUT/cache_bench_$tag.txt" 2>&1
   echo "cache bench rc $? $(( $(date +%s) - t0 )) s"
-  grep -E "^(startup|fit|bounds|summary)" "$OUT/cache_bench_$n.txt"
+  grep -E "^(startup|fit|bounds|summary)" "$OUT/cache_bench_$tag.txt"
 fi
 # The whole path, sampled every 0.5 s: renderer and server RSS (ps), GPU memory used (nvidia-smi).
 t0=$(date +%s)
 $R texstream-render --config config/gpu.toml --set scene.dir=$city --set render.output_dir=/tmp/o_scale \
-   --set render.frames=0 --set render.write_every_frames=0 > "$OUT/render_scale_$n.log" 2>&1 &
+   --set render.frames=0 --set render.write_every_frames=0 > "$OUT/render_scale_$tag.log" 2>&1 &
 pid=$!
 rss_r=0; rss_s=0; gpu=0
 while kill -0 $pid 2>/dev/null; do
@@ -55,4 +59,4 @@ print(f"frames {s['frames']} textures {s['texture_count']} resident {s['textures
 print(" ".join(f"{k}={j.get(k)}" for k in ["layer_extent", "layers", "addressable_bytes", "max_bound_bytes",
       "evictions", "thrash_rate", "space_refusals", "address_evictions", "budget_exceeded_frames"]))
 PY
-grep -i "texture cache:" "$OUT/render_scale_$n.log" | head -1
+grep -i "texture cache:" "$OUT/render_scale_$tag.log" | head -1
