@@ -13,10 +13,10 @@ int main(int argc, char** argv) {
   atlas::AtlasOptions opt;
   bool quiet = false;
   CLI::App app{
-      "texstream-atlas: packs the textures of nearby, similarly oriented meshes of a scene into square texture "
-      "atlases (seed 000 §3.1: a grid of cells, six orientation groups per cell, rows of one height), UVs "
-      "remapped; textures that repeat, are alpha-tested, are not a power of two or larger than an atlas stay "
-      "as they are"};
+      "texstream-atlas: packs the textures of nearby, similarly oriented meshes of a scene into texture atlases "
+      "(seed 000 §3.1: a grid of cells, six orientation groups per cell; each texture at a multiple of its size "
+      "so its mip levels are the atlas's), UVs remapped; textures that repeat, are alpha-tested, are not a power "
+      "of two or larger than an atlas stay as they are"};
   app.add_option("scene", opt.in, "Scene folder to read")->required()->check(CLI::ExistingDirectory);
   app.add_option("--out", opt.out, "Scene folder to write")->required();
   app.add_option("--atlas-px", opt.atlas_px, "Largest atlas side, texels (a power of two)")
