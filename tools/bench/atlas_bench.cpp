@@ -40,12 +40,6 @@ struct AtlasBenchOptions {
   double slow_latency_ms = 4;
 };
 
-fs::path self_dir() {
-  std::error_code ec;
-  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-  return ec ? fs::path(".") : exe.parent_path();
-}
-
 int run_cmd(const std::string& cmd, const fs::path& log) {
   const int rc = std::system((cmd + " > " + log.string() + " 2>&1").c_str());
   return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;

@@ -4,11 +4,19 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <string>
 #include <utility>
 #include <vector>
 
 namespace texstream::bench {
+
+// The folder of the running texstream-bench: the other programs a benchmark starts are built beside it.
+inline std::filesystem::path self_dir() {
+  std::error_code ec;
+  const std::filesystem::path exe = std::filesystem::read_symlink("/proc/self/exe", ec);
+  return ec ? std::filesystem::path(".") : exe.parent_path();
+}
 
 // p in [0, 100]; nearest-rank on a sorted copy. Empty input gives 0.
 inline double percentile(std::vector<double> values, double p) {

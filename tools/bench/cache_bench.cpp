@@ -78,12 +78,6 @@ double mse(const Image& a, const Image& b) {
 // PSNR in dB: the renderer's, capped at 100 dB for identical frames (MSE 0).
 double psnr(double m) { return render::psnr_db(m); }
 
-fs::path self_dir() {
-  std::error_code ec;
-  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-  return ec ? fs::path(".") : exe.parent_path();
-}
-
 struct Ctx {
   fs::path bin;
   fs::path profile;

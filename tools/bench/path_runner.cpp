@@ -31,12 +31,6 @@ CameraPath section_around_first_cut(const CameraPath& path, double before_s, dou
   return path_section(path, t0, t1);
 }
 
-fs::path self_dir() {
-  std::error_code ec;
-  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-  return ec ? fs::path(".") : exe.parent_path();
-}
-
 int run_process(const std::vector<std::string>& argv, const fs::path& log) {
   SpawnOptions options;
   options.fds = {SpawnFd::open(1, log.string(), O_WRONLY | O_CREAT | O_TRUNC, 0644), SpawnFd::dup2(1, 2)};

@@ -25,9 +25,6 @@ inline constexpr double kPathFrameTimeS = 0.033333;
 // seconds when it has no cut), re-timed to start at 0.
 CameraPath section_around_first_cut(const CameraPath& path, double before_s, double after_s);
 
-// The folder of the running texstream-bench (where texstream-render and texstream-server are built).
-std::filesystem::path self_dir();
-
 // Runs `argv` with stdout and stderr to `log`; returns the exit code (-1: not started, 128 + n: signal n).
 int run_process(const std::vector<std::string>& argv, const std::filesystem::path& log);
 

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <limits>
 
+#include "bench_util.hpp"
 #include "path_analysis.hpp"
 #include "path_runner.hpp"
 #include "texstream/common/camera_path.hpp"

@@ -435,21 +435,25 @@ Result<AtlasStats> build_atlases(const AtlasOptions& opt, const AtlasProgress& p
   }
 
   // ---- new texture ids: in the order of the old ids, an atlas where its first texture was ----
+  // What each new id is: an old texture kept as it was, or an atlas.
+  struct Source {
+    bool atlas = false;
+    uint32_t index = 0;  // old texture id, or index into `atlases`
+  };
   std::vector<uint32_t> new_id(n);
   std::vector<int64_t> atlas_id(atlases.size(), -1);
-  std::vector<int64_t> kept_source;  // new id -> old id for kept textures, -1 for atlases
-  std::vector<uint32_t> atlas_of_new;
+  std::vector<Source> source;  // by new id
   uint32_t next = 0;
   for (uint32_t t = 0; t < n; ++t) {
     if (!packed[t]) {
       new_id[t] = next++;
-      kept_source.push_back(t);
+      source.push_back({false, t});
       continue;
     }
     const uint32_t a = placement[t].atlas;
     if (atlas_id[a] < 0) {
       atlas_id[a] = next++;
-      kept_source.push_back(-1);
+      source.push_back({true, a});
     }
     new_id[t] = static_cast<uint32_t>(atlas_id[a]);
   }
@@ -467,7 +471,6 @@ Result<AtlasStats> build_atlases(const AtlasOptions& opt, const AtlasProgress& p
   for (const Atlas& a : atlases) {
     st.atlas_bytes += mip_bytes(a.format, a.width, a.height, 0);
   }
-  st.kept_not_eligible = std::min(st.kept_not_eligible, st.textures_kept);
 
   // ---- meshes: UVs into the atlas; shared geometry copied where its users end in different places ----
   scene::MeshData out_md;
@@ -520,16 +523,15 @@ Result<AtlasStats> build_atlases(const AtlasOptions& opt, const AtlasProgress& p
   std::vector<scene::TextureRecord> table(next);
   std::vector<uint32_t> colormap(next), out_sampling(next, 0);
   for (uint32_t id = 0; id < next; ++id) {
-    if (kept_source[id] < 0) continue;
-    const auto t = static_cast<uint32_t>(kept_source[id]);
-    table[id] = (*records)[t];
-    colormap[id] = (*colours)[t];
-    out_sampling[id] = sampling[t];
-  }
-  for (size_t a = 0; a < atlases.size(); ++a) {
-    const auto id = static_cast<uint32_t>(atlas_id[a]);
-    table[id] = {atlases[a].width, atlases[a].height, full_mip_count(atlases[a].width, atlases[a].height),
-                 static_cast<uint32_t>(atlases[a].format)};
+    const Source& s = source[id];
+    if (s.atlas) {
+      const Atlas& a = atlases[s.index];
+      table[id] = {a.width, a.height, full_mip_count(a.width, a.height), static_cast<uint32_t>(a.format)};
+      continue;
+    }
+    table[id] = (*records)[s.index];
+    colormap[id] = (*colours)[s.index];
+    out_sampling[id] = sampling[s.index];
   }
 
   // Texture files, a thread per core: kept ones hard-linked (copied across file systems), atlases built.
@@ -549,8 +551,8 @@ Result<AtlasStats> build_atlases(const AtlasOptions& opt, const AtlasProgress& p
       const fs::path to = scene::texture_path(tmp, TextureId(id));
       std::error_code e;
       fs::create_directories(to.parent_path(), e);
-      if (kept_source[id] >= 0) {
-        const fs::path from = scene::texture_path(in, TextureId(static_cast<uint32_t>(kept_source[id])));
+      if (!source[id].atlas) {
+        const fs::path from = scene::texture_path(in, TextureId(source[id].index));
         fs::create_hard_link(from, to, e);
         if (e) {
           e.clear();
@@ -559,8 +561,7 @@ Result<AtlasStats> build_atlases(const AtlasOptions& opt, const AtlasProgress& p
         if (e) st_one = make_error(ErrorCode::kIo, from.string() + " -> " + to.string() + ": " + e.message());
         bytes_out += fs::file_size(from, e);
       } else {
-        const auto a = static_cast<size_t>(std::find(atlas_id.begin(), atlas_id.end(), id) - atlas_id.begin());
-        auto built = build_atlas_file(in, atlases[a], *records, placement);
+        auto built = build_atlas_file(in, atlases[source[id].index], *records, placement);
         if (!built) {
           st_one = built.error();
         } else {
