@@ -124,6 +124,33 @@ TEST(ImageMetrics, SsimMatchesTheDirectWindowSum) {
   EXPECT_NEAR(*ssim(yb, ya, 37, 23), *s, 1e-12);
 }
 
+// WSSIM (seed 004 §4.2.3.1): 1 for identical frames; the same damage costs more at the centre than in a corner.
+TEST(ImageMetrics, WssimWeighsTheCentreAboveTheCorners) {
+  const uint32_t w = 64, h = 48;
+  std::vector<float> ref(size_t{w} * h);
+  for (size_t i = 0; i < ref.size(); ++i) ref[i] = static_cast<float>((i * 37) % 251);
+  auto map = ssim_map(ref, ref, w, h);
+  ASSERT_TRUE(map.ok());
+  EXPECT_NEAR(wssim(map.value(), w, h), 1.0, 1e-12);
+  auto damaged = [&](uint32_t x0, uint32_t y0) {
+    std::vector<float> d = ref;
+    for (uint32_t y = y0; y < y0 + 12; ++y)
+      for (uint32_t x = x0; x < x0 + 12; ++x) d[size_t{y} * w + x] = 255.0f - d[size_t{y} * w + x];
+    auto m = ssim_map(d, ref, w, h);
+    EXPECT_TRUE(m.ok());
+    double mean = 0;
+    for (double v : m.value()) mean += v;
+    mean /= static_cast<double>(m->size());
+    EXPECT_NEAR(mean, ssim(d, ref, w, h).value(), 1e-12);  // ssim is the map's mean
+    return std::pair{mean, wssim(m.value(), w, h)};
+  };
+  const auto [centre_ssim, centre_wssim] = damaged(26, 18);
+  const auto [corner_ssim, corner_wssim] = damaged(0, 0);
+  EXPECT_LT(centre_wssim, centre_ssim);
+  EXPECT_GT(corner_wssim, corner_ssim);
+  EXPECT_LT(centre_wssim, corner_wssim);
+}
+
 TEST(ImageMetrics, SsimRefusesImagesSmallerThanOneWindow) {
   const std::vector<float> a(10 * 40, 1.0f);
   auto s = ssim(a, a, 10, 40);

@@ -60,7 +60,8 @@ std::vector<float> luma(const RgbaView& image) {
   return y;
 }
 
-Result<double> ssim(std::span<const float> a, std::span<const float> b, uint32_t width, uint32_t height) {
+Result<std::vector<double>> ssim_map(std::span<const float> a, std::span<const float> b, uint32_t width,
+                                     uint32_t height) {
   const size_t n = size_t{width} * height;
   if (a.size() != n || b.size() != n) {
     return make_error(ErrorCode::kInvalidArgument, "ssim: images of " + std::to_string(a.size()) + " and " +
@@ -95,7 +96,7 @@ Result<double> ssim(std::span<const float> a, std::span<const float> b, uint32_t
       h[r * ow + c] = m;
     }
   }
-  double total = 0;
+  std::vector<double> map(ow * oh);
   for (size_t r = 0; r < oh; ++r) {
     for (size_t c = 0; c < ow; ++c) {
       std::array<double, 5> m{};
@@ -105,10 +106,33 @@ Result<double> ssim(std::span<const float> a, std::span<const float> b, uint32_t
       }
       const double mx = m[0], my = m[1];
       const double vx = m[2] - mx * mx, vy = m[3] - my * my, cxy = m[4] - mx * my;
-      total += ((2 * mx * my + c1) * (2 * cxy + c2)) / ((mx * mx + my * my + c1) * (vx + vy + c2));
+      map[r * ow + c] = ((2 * mx * my + c1) * (2 * cxy + c2)) / ((mx * mx + my * my + c1) * (vx + vy + c2));
     }
   }
-  return total / static_cast<double>(ow * oh);
+  return map;
+}
+
+Result<double> ssim(std::span<const float> a, std::span<const float> b, uint32_t width, uint32_t height) {
+  auto map = ssim_map(a, b, width, height);
+  if (!map.ok()) return map.error();
+  double total = 0;
+  for (double v : map.value()) total += v;
+  return total / static_cast<double>(map->size());
+}
+
+double wssim(std::span<const double> map, uint32_t width, uint32_t height) {
+  const uint32_t ow = width - (kSsimWindow - 1), oh = height - (kSsimWindow - 1);
+  TS_ASSERT(map.size() == size_t{ow} * oh, "wssim: a map of %zu for %ux%u", map.size(), width, height);
+  // A window's midpoint is its centre pixel (c + 5, r + 5); weight 1 at the frame's centre, 0 at its corners.
+  const double cx = (width - 1) / 2.0, cy = (height - 1) / 2.0, rmax = std::hypot(cx, cy);
+  double total = 0, weights = 0;
+  for (uint32_t r = 0; r < oh; ++r)
+    for (uint32_t c = 0; c < ow; ++c) {
+      const double w = 1.0 - std::hypot(c + kSsimWindow / 2 - cx, r + kSsimWindow / 2 - cy) / rmax;
+      total += w * map[size_t{r} * ow + c];
+      weights += w;
+    }
+  return total / weights;
 }
 
 Result<ImageError> compare_images(const RgbaView& image, const RgbaView& reference) {

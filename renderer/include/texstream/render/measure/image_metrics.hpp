@@ -48,6 +48,12 @@ std::vector<float> luma(const RgbaView& image);
 // ssim_index.m): (w - 10) x (h - 10) windows. Fails if the image is smaller than one window or the sizes
 // differ. The Gaussian filtering is separable (rows, then columns), in double.
 Result<double> ssim(std::span<const float> a, std::span<const float> b, uint32_t width, uint32_t height);
+// The SSIM map itself: one value per 'valid' window, (w - 10) x (h - 10), rows top to bottom.
+Result<std::vector<double>> ssim_map(std::span<const float> a, std::span<const float> b, uint32_t width,
+                                     uint32_t height);
+// Seed 004 §4.2.3.1's WSSIM: the SSIM map's mean with each window weighted by its midpoint's distance to the
+// frame's centre, 1 - r / r_max (1 at the centre, 0 at the corners; the thesis gives no formula, this is ours).
+double wssim(std::span<const double> map, uint32_t width, uint32_t height);
 
 // MSE, PSNR and SSIM of `image` against `reference`; fails (naming both sizes) if they differ.
 Result<ImageError> compare_images(const RgbaView& image, const RgbaView& reference);
