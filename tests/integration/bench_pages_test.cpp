@@ -12,31 +12,16 @@
 #include <sstream>
 #include <string>
 
+#include "../support/shell_command.hpp"
+
 namespace fs = std::filesystem;
 
 namespace {
 
 const fs::path kBin = TEXSTREAM_BIN_DIR;
 
-int run(const std::string& cmd, std::string* output) {
-  std::string out;
-  FILE* p = popen((cmd + " 2>&1").c_str(), "r");
-  if (!p) return -1;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof buf, p)) > 0) out.append(buf, n);
-  const int rc = pclose(p);
-  if (output) *output = out;
-  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
-}
-
-std::string last_line(const std::string& text) {
-  std::istringstream in(text);
-  std::string line, last;
-  while (std::getline(in, line))
-    if (!line.empty()) last = line;
-  return last;
-}
+using texstream::test::last_line;
+using texstream::test::run_command;
 
 std::map<std::string, std::string> fields(const std::string& summary, std::vector<std::string>* order) {
   std::map<std::string, std::string> out;
@@ -59,7 +44,7 @@ TEST(BenchPages, SummaryHasNoSeamsExactReadsAndOneRowPerFrame) {
   const fs::path work = fs::temp_directory_path() / ("texstream-bench-pages-" + std::to_string(::getpid()));
   fs::remove_all(work);
   std::string output, again;
-  ASSERT_EQ(run(bench(work / "a"), &output), 0) << output;
+  ASSERT_EQ(run_command(bench(work / "a"), &output), 0) << output;
   const std::string summary = last_line(output);
   ASSERT_EQ(summary.rfind("summary: ", 0), 0u) << summary;
   std::vector<std::string> order;
@@ -84,7 +69,7 @@ TEST(BenchPages, SummaryHasNoSeamsExactReadsAndOneRowPerFrame) {
   EXPECT_GT(rows, 0u);
   EXPECT_EQ(rows % 26, 0u);
   // Lock-step: a second run prints the same tables and summary.
-  ASSERT_EQ(run(bench(work / "b"), &again), 0) << again;
+  ASSERT_EQ(run_command(bench(work / "b"), &again), 0) << again;
   EXPECT_EQ(last_line(again), summary);
   auto tables = [](const std::string& o) {
     const auto from = o.find("pages per frame");
@@ -99,14 +84,14 @@ TEST(BenchPages, ABlockCompressedPageFileIsNamed) {
   fs::remove_all(work);
   fs::create_directories(work);
   std::string output;
-  ASSERT_EQ(run((kBin / "texstream-tile").string() + " --paint 256 --format bc1 --quiet --out " +
-                    (work / "g.tspages").string(),
-                &output),
+  ASSERT_EQ(run_command((kBin / "texstream-tile").string() + " --paint 256 --format bc1 --quiet --out " +
+                            (work / "g.tspages").string(),
+                        &output),
             0)
       << output;
-  EXPECT_NE(run((kBin / "texstream-bench").string() + " pages --quick --file " + (work / "g.tspages").string() +
-                    " --out " + (work / "out").string(),
-                &output),
+  EXPECT_NE(run_command((kBin / "texstream-bench").string() + " pages --quick --file " + (work / "g.tspages").string() +
+                            " --out " + (work / "out").string(),
+                        &output),
             0);
   EXPECT_NE(output.find((work / "g.tspages").string() + " is bc1"), std::string::npos) << output;
   fs::remove_all(work);

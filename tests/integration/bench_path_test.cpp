@@ -11,32 +11,16 @@
 #include <sstream>
 #include <string>
 
+#include "../support/shell_command.hpp"
+
 namespace fs = std::filesystem;
 
 namespace {
 
 const fs::path kBin = TEXSTREAM_BIN_DIR;
 
-// Runs a shell command; returns its exit code and what it printed (stdout and stderr).
-int run(const std::string& cmd, std::string* output) {
-  std::string out;
-  FILE* p = popen((cmd + " 2>&1").c_str(), "r");
-  if (!p) return -1;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof buf, p)) > 0) out.append(buf, n);
-  const int rc = pclose(p);
-  if (output) *output = out;
-  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
-}
-
-std::string last_line(const std::string& text) {
-  std::istringstream in(text);
-  std::string line, last;
-  while (std::getline(in, line))
-    if (!line.empty()) last = line;
-  return last;
-}
+using texstream::test::last_line;
+using texstream::test::run_command;
 
 class BenchPath : public ::testing::Test {
  protected:
@@ -44,13 +28,13 @@ class BenchPath : public ::testing::Test {
     work_ = fs::temp_directory_path() / ("texstream-bench-path-" + std::to_string(::getpid()));
     fs::remove_all(work_);
     fs::create_directories(work_);
-    gen_rc_ = run((kBin / "texstream-gen").string() + " --out " + (work_ / "scene").string() +
-                      " --textures 300 --seed 5 --format rgba8 --threads 2",
-                  nullptr);
+    gen_rc_ = run_command((kBin / "texstream-gen").string() + " --out " + (work_ / "scene").string() +
+                              " --textures 300 --seed 5 --format rgba8 --threads 2",
+                          nullptr);
     if (gen_rc_ == 0) {
-      bench_rc_ = run((kBin / "texstream-bench").string() + " path --quick --scene " + (work_ / "scene").string() +
-                          " --out " + (work_ / "out").string(),
-                      &bench_output_);
+      bench_rc_ = run_command((kBin / "texstream-bench").string() + " path --quick --scene " +
+                                  (work_ / "scene").string() + " --out " + (work_ / "out").string(),
+                              &bench_output_);
     }
   }
   static void TearDownTestSuite() { fs::remove_all(work_); }
@@ -142,11 +126,11 @@ TEST_F(BenchPath, MipDeficitIsZeroWithEverythingResidentAndNotWhileStreaming) {
 
 TEST(BenchPathArguments, UnknownArgumentAndMissingSceneAreRefused) {
   std::string out;
-  EXPECT_EQ(run((kBin / "texstream-bench").string() + " path --bogus", &out), 2) << out;
+  EXPECT_EQ(run_command((kBin / "texstream-bench").string() + " path --bogus", &out), 2) << out;
   EXPECT_NE(out.find("--bogus"), std::string::npos);
-  EXPECT_EQ(run((kBin / "texstream-bench").string() + " path --quick --scene /nonexistent-scene-dir --out /tmp/x" +
-                    std::to_string(::getpid()),
-                &out),
+  EXPECT_EQ(run_command((kBin / "texstream-bench").string() +
+                            " path --quick --scene /nonexistent-scene-dir --out /tmp/x" + std::to_string(::getpid()),
+                        &out),
             2)
       << out;
   EXPECT_NE(out.find("/nonexistent-scene-dir"), std::string::npos);
