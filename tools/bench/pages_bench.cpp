@@ -11,7 +11,7 @@
 //      locked and loaded, with the first view's pages, as the thesis's runs started), the heuristic choosing
 //      the pages of each frame from its needbuffer (the LookAhead camera's too where named).
 // The frames are drawn on the CPU through the page table the way the page shader samples (pages_view.hpp).
-// --quick: an 8192² ground, 320x180, a third of the path's frames; default 16384², 640x360, the whole path.
+// --quick: a 4096² ground, 320x180, a third of the path's frames; default 16384², 640x360, the whole path.
 // Last line, all at 5 pages per frame: summary: heuristics=N best=NAME (highest mean SSIM)
 //   best_vs_random_ssim = (1 - SSIM Random) / (1 - SSIM best), lookahead_gain = the same of HotSpot+NoiseValue
 //   over it with the LookAhead camera, extern_uniformity = level spread Intern / Extern (> 1: Extern refines more
@@ -47,7 +47,7 @@ struct PagesBenchOptions {
   bool quick = false;
   fs::path file;
   fs::path out;
-  uint32_t ground = 0;  // baked ground side; 0: 8192 quick, 16384 full
+  uint32_t ground = 0;  // baked ground side; 0: 4096 quick, 16384 full
   uint32_t page = 32;
   double metres_per_texel = 0.03;
   uint32_t width = 0, height = 0;
@@ -185,7 +185,7 @@ int run_pages_bench(const PagesBenchOptions& o) {
   std::unique_ptr<tile::PageSource> ground;
   tile::BakeOptions bake;
   if (file.empty()) {
-    const uint32_t side = o.ground ? o.ground : (o.quick ? 8192 : 16384);
+    const uint32_t side = o.ground ? o.ground : (o.quick ? 4096 : 16384);
     ground = tile::make_painted_ground(side, side, metres_per_texel, 1);
     bake.format = TexelFormat::kRgba8;
     bake.page_texels = o.page;
@@ -524,10 +524,10 @@ int run_pages_bench(const PagesBenchOptions& o) {
 
 std::function<int()> define_pages(CLI::App& app) {
   auto o = std::make_shared<PagesBenchOptions>();
-  app.add_flag("--quick", o->quick, "the short run: 8192² ground, 320x180, a third of the path");
+  app.add_flag("--quick", o->quick, "the short run: 4096² ground, 320x180, a third of the path");
   app.add_option("--file", o->file, "an RGBA8 page file to use instead of baking the painted ground")
       ->check(CLI::ExistingFile);
-  app.add_option("--ground", o->ground, "side of the painted ground to bake (default 8192 quick, 16384 full)")
+  app.add_option("--ground", o->ground, "side of the painted ground to bake (default 4096 quick, 16384 full)")
       ->check(CLI::Range(64u, 65536u));
   app.add_option("--page", o->page, "page side of the baked ground, texels")->capture_default_str();
   app.add_option("--metres-per-texel", o->metres_per_texel, "ground resolution of the baked ground")
