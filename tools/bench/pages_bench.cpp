@@ -115,7 +115,9 @@ std::vector<GroundPose> camera_path(const pages::PageGeometry& g, double metres_
 struct Config {
   std::string name;
   pages::PagePolicyOptions policy;
-  bool lookahead = false;
+  // 0: none; 1: seed 004's LookAhead camera (this frame's motion once more); 2: the same, but held at the
+  // current view when the turn changed abruptly (the thesis's own remedy for a fast turn that stops, §4.2.4.1).
+  int lookahead = 0;
   pages::DiscardRule discard = pages::DiscardRule::kLru;
 };
 
@@ -123,7 +125,7 @@ std::vector<Config> configs() {
   using H = pages::PageHeuristic;
   using O = pages::AncestorOrder;
   auto make = [](std::string name, H h, bool noise = false, O order = O::kNeededOnly, bool skipping = false,
-                 bool lookahead = false, pages::DiscardRule d = pages::DiscardRule::kLru) {
+                 int lookahead = 0, pages::DiscardRule d = pages::DiscardRule::kLru) {
     Config c;
     c.name = std::move(name);
     c.policy.heuristic = h;
@@ -142,8 +144,9 @@ std::vector<Config> configs() {
           make("TexelRatio(p_r)", H::kTexelRatio),
           make("PixelSum+NoiseValue", H::kPixelSum, true),
           make("HotSpot+NoiseValue", H::kHotSpot, true),
-          make("HotSpot+NoiseValue+LookAhead", H::kHotSpot, true, O::kNeededOnly, false, true),
-          make("HotSpot+NoiseValue+LookAhead,p_d", H::kHotSpot, true, O::kNeededOnly, false, true,
+          make("HotSpot+NoiseValue+LookAhead", H::kHotSpot, true, O::kNeededOnly, false, 1),
+          make("HotSpot+NoiseValue+LookAhead(held)", H::kHotSpot, true, O::kNeededOnly, false, 2),
+          make("HotSpot+NoiseValue+LookAhead,p_d", H::kHotSpot, true, O::kNeededOnly, false, 1,
                pages::DiscardRule::kSeed002P_d),
           make("PixelSum,Intern", H::kPixelSum, false, O::kIntern),
           make("PixelSum,Extern", H::kPixelSum, false, O::kExtern),
@@ -152,7 +155,7 @@ std::vector<Config> configs() {
 
 struct Frame {
   std::vector<GroundSample> samples;
-  std::vector<pages::PageNeedSample> needs, lookahead;
+  std::vector<pages::PageNeedSample> needs, lookahead, lookahead_held;
   std::vector<uint32_t> reference;
   std::vector<float> reference_luma;
   pages::HotSpot hotspot;
@@ -263,6 +266,11 @@ int run_pages_bench(const PagesBenchOptions& o) {
     ahead.x += path[f].x - prev.x, ahead.y += path[f].y - prev.y, ahead.z += path[f].z - prev.z;
     ahead.yaw += path[f].yaw - prev.yaw, ahead.pitch += path[f].pitch - prev.pitch;
     fr.lookahead = needbuffer(view, ahead, g, need_step);
+    // The turn's change since the last frame: above 5° per frame the motion is not extrapolated.
+    const GroundPose& prev2 = path[f > 1 ? f - 2 : 0];
+    const double turn_change = std::fabs((path[f].yaw - prev.yaw) - (prev.yaw - prev2.yaw)) +
+                               std::fabs((path[f].pitch - prev.pitch) - (prev.pitch - prev2.pitch));
+    fr.lookahead_held = turn_change > 5 * std::numbers::pi / 180 ? fr.needs : fr.lookahead;
     // hotspot_from_turn takes a turn to the right and down as positive; yaw grows to the left, pitch upwards.
     fr.hotspot = pages::hotspot_from_turn(static_cast<float>(prev.yaw - path[f].yaw),
                                           static_cast<float>(prev.pitch - path[f].pitch), 0.01f);
@@ -341,7 +349,10 @@ int run_pages_bench(const PagesBenchOptions& o) {
       for (const auto& nd : fr.needs)
         if (auto a = cache.table().available(nd.page)) cache.touch(*a, now);
       std::vector<pages::PageNeedSample> needs = fr.needs;
-      if (cfg.lookahead) needs.insert(needs.end(), fr.lookahead.begin(), fr.lookahead.end());
+      if (cfg.lookahead) {
+        const auto& ahead = cfg.lookahead == 1 ? fr.lookahead : fr.lookahead_held;
+        needs.insert(needs.end(), ahead.begin(), ahead.end());
+      }
       for (const auto& c : pages::choose_pages(needs, pf, cache.table(), {}, cfg.policy, fr.hotspot, now, budgets[bi]))
         (void)cache.insert(c.page, now);
     }
@@ -478,7 +489,10 @@ int run_pages_bench(const PagesBenchOptions& o) {
             if (auto a = cache.table().available(nd.page)) cache.touch(*a, now);
           bucket = std::min(bucket + link.bytes_per_s / 30.0, 30 * page_bytes);  // at most a second's burst
           std::vector<pages::PageNeedSample> needs = fr.needs;
-          if (cfg.lookahead) needs.insert(needs.end(), fr.lookahead.begin(), fr.lookahead.end());
+          if (cfg.lookahead) {
+            const auto& ahead = cfg.lookahead == 1 ? fr.lookahead : fr.lookahead_held;
+            needs.insert(needs.end(), ahead.begin(), ahead.end());
+          }
           const auto budget = static_cast<size_t>(bucket / page_bytes);
           for (const auto& c : pages::choose_pages(needs, pf, cache.table(), {}, cfg.policy, fr.hotspot, now, budget)) {
             (void)cache.insert(c.page, now);
