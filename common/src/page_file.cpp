@@ -149,6 +149,7 @@ Result<PageFile> PageFile::load(const ReadAt& read, uint64_t file_size, const st
   if (!got.ok()) return got.error();
 
   uint64_t stored = 0;
+  double noise_sum = 0;
   for (uint64_t s = 0; s < f.index_.size(); ++s) {
     const PageIndexEntry& e = f.index_[s];
     auto at = [&] {
@@ -174,10 +175,12 @@ Result<PageFile> PageFile::load(const ReadAt& read, uint64_t file_size, const st
     if (p.level > 0 && f.index_[g->slot({p.level - 1, p.x / 2, p.y / 2})].offset == 0)
       return corrupt(name, at() + " is stored but its parent is not: every page needs its ancestors");
     ++stored;
+    noise_sum += static_cast<double>(e.noise);
   }
   if (stored != h.stored_pages)
     return corrupt(name, "field 'stored_pages' is " + std::to_string(h.stored_pages) + " but the index stores " +
                              std::to_string(stored));
+  f.mean_noise_ = noise_sum / static_cast<double>(stored);
   return f;
 }
 

@@ -186,18 +186,8 @@ std::vector<PageCandidate> choose_pages(std::span<const PageNeedSample> needs, c
     }
   }
 
-  double threshold = opt.noise_skip_threshold;
-  if (opt.noise_skipping && threshold < 0) {
-    double sum = 0;
-    uint64_t n = 0;
-    for (uint64_t s = 0; s < g.page_slots(); ++s) {
-      const PageId p = g.page_of_slot(s);
-      if (!file.stored(p)) continue;
-      sum += static_cast<double>(file.noise(p));
-      ++n;
-    }
-    threshold = n ? sum / static_cast<double>(n) : 0.0;
-  }
+  const double threshold =
+      opt.noise_skip_threshold < 0 ? file.mean_noise() : static_cast<double>(opt.noise_skip_threshold);
 
   std::vector<PageCandidate> out;
   out.reserve(priority.size());

@@ -229,6 +229,7 @@ TEST(PageBake, NoiseValuesOfKnownImages) {
   for (uint32_t l = 0; l < 3; ++l)
     for (uint32_t y = 0; y < (1u << l); ++y)
       for (uint32_t x = 0; x < (1u << l); ++x) EXPECT_EQ(pf->noise({l, x, y}), 0.0f);
+  EXPECT_EQ(pf->mean_noise(), 0.0);
   // A one-texel checkerboard of black and white: the parent level is one grey, so each finest page differs from
   // its parent's quarter by half the white's luminance at every texel: 255 - grey on white, grey on black.
   FnSource checker(64, 64, [](uint32_t x, uint32_t y) { return (x + y) % 2 ? 0xffffffffu : 0xff000000u; });
@@ -240,6 +241,8 @@ TEST(PageBake, NoiseValuesOfKnownImages) {
   EXPECT_NEAR(pf->noise({2, 1, 2}), expected, 0.5);
   EXPECT_NEAR(pf->noise({1, 0, 0}), 0.0, 1e-3);  // grey under grey
   EXPECT_NEAR(pf->noise({0, 0, 0}), 0.0, 1e-3);
+  // 16 finest pages at `expected`, 4 + 1 coarser ones at 0.
+  EXPECT_NEAR(pf->mean_noise(), expected * 16 / 21, 0.5);
   // A smooth ramp: refining it adds little.
   FnSource ramp(64, 64, [](uint32_t x, uint32_t) { return 0xff000000u | (x * 4) * 0x010101u; });
   ASSERT_TRUE(tile::bake_pages(ramp, opt, dir / "ramp.tspages").ok());

@@ -118,12 +118,15 @@ class PageFile {
   std::optional<PageIndexEntry> entry(PageId p) const;
   bool stored(PageId p) const { return entry(p).has_value(); }
   float noise(PageId p) const;
+  // The mean NoiseValue of the stored pages (seed 004 §4.3.1's NoiseValueSkipping threshold).
+  double mean_noise() const { return mean_noise_; }
 
  private:
   std::string name_;
   PageFileHeader header_{};
   PageGeometry geometry_;
   std::vector<PageIndexEntry> index_;
+  double mean_noise_ = 0;
 };
 
 // The header of a file with this geometry (offsets filled in), for writers.
