@@ -64,11 +64,11 @@ stage() {
 
 # The sanitizer builds are most of CI's time on 2 cores: -O1 (ASan's and TSan's own advice) with line tables
 # only (-g1, enough for a report's stack) compiles in 0.43 of the time of -O2 -g; texstream-bench with the
-# one subcommand a test runs (path). Measurements: docs/design/ci_time.md.
+# subcommands the tests run (path, pages). Measurements: docs/design/ci_time.md.
 san_flags=(-DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" -DCMAKE_C_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG")
 asan() {
   cmake -S . -B "$rel"-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DTEXSTREAM_SANITIZE=address,undefined \
-    "${san_flags[@]}" -DTEXSTREAM_BENCH_COMMANDS=path >/dev/null || return 1
+    "${san_flags[@]}" -DTEXSTREAM_BENCH_COMMANDS="path;pages" >/dev/null || return 1
   cmake --build "$rel"-asan -j"$jobs" --target texstream_tests || return 1
   ctest --test-dir "$rel"-asan --output-on-failure -j"$jobs" --timeout 900
 }
@@ -103,7 +103,7 @@ chaos() {
   "$rel"/bin/texstream-chaos --quick --kills 20 --ipc-bound-us 0
 }
 
-fuzz_targets=(fuzz_dds_reader fuzz_completion fuzz_stream_client fuzz_config)
+fuzz_targets=(fuzz_dds_reader fuzz_page_file fuzz_completion fuzz_stream_client fuzz_config)
 fuzz() {
   if ! command -v clang++-14 >/dev/null; then
     echo "ci_sanitizers: clang++-14 missing (scripts/bootstrap.sh installs clang-14 and libclang-rt-14-dev)" >&2

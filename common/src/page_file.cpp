@@ -21,6 +21,7 @@ uint64_t round_up(uint64_t v, uint64_t to) { return (v + to - 1) / to * to; }
 }  // namespace
 
 uint32_t PageGeometry::levels_for(uint32_t width, uint32_t height, uint32_t page_texels) {
+  if (page_texels == 0) return 1;  // make() refuses it; no endless loop here either
   uint32_t levels = 1;
   while (uint64_t{page_texels} << (levels - 1) < std::max(width, height)) ++levels;
   return levels;

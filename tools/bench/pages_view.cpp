@@ -45,10 +45,10 @@ bool ground_hit(const GroundView& view, const GroundPose& pose, const Basis& b, 
   return true;
 }
 
-PageId page_at(const PageGeometry& g, uint32_t level, double u, double v) {
+// The page of `level` holding (u, v) (virtual-square units), clamped into the level's grid.
+PageId page_at(uint32_t level, double u, double v) {
   const double n = static_cast<double>(1u << level);
   const auto clampi = [&](double c) { return static_cast<uint32_t>(std::clamp(std::floor(c * n), 0.0, n - 1)); };
-  (void)g;
   return {level, clampi(u), clampi(v)};
 }
 
@@ -143,7 +143,7 @@ std::vector<pages::PageNeedSample> needbuffer(const GroundView& view, const Grou
     const auto lo = static_cast<uint32_t>(std::floor(s.level));
     const auto hi = std::min(static_cast<uint32_t>(std::ceil(s.level)), g.levels - 1);
     for (uint32_t l = lo; l <= hi; ++l)
-      out.push_back({page_at(g, l, s.u, s.v), sx, sy, static_cast<float>(s.distance), static_cast<float>(s.level)});
+      out.push_back({page_at(l, s.u, s.v), sx, sy, static_cast<float>(s.distance), static_cast<float>(s.level)});
   }
   return out;
 }
@@ -155,7 +155,7 @@ void draw_pages(const std::vector<GroundSample>& samples, const PageGeometry& g,
   draw(
       samples, g,
       [&](size_t i, uint32_t level, double u, double v, bool finer) -> uint32_t {
-        const auto shown = table.available(page_at(g, level, u, v));
+        const auto shown = table.available(page_at(level, u, v));
         if (!shown) return kGroundBackground;
         if (finer && shown_level) (*shown_level)[i] = static_cast<float>(shown->level);
         const uint32_t* t = texels(*shown);
