@@ -9,6 +9,7 @@
 #include <memory>
 #include <span>
 
+#include "memory_storage.hpp"
 #include "texstream/common/dds.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texstream/server/cache/eviction_policy.hpp"
@@ -20,31 +21,6 @@
 namespace {
 
 using namespace texstream;
-
-class MemoryFile : public server::StorageFile {
- public:
-  explicit MemoryFile(std::span<const std::byte> b) : bytes_(b) {}
-  Result<uint64_t> read_at(std::span<std::byte> out, uint64_t offset) override {
-    if (offset >= bytes_.size()) return uint64_t{0};
-    const uint64_t n = std::min<uint64_t>(out.size(), bytes_.size() - offset);
-    std::memcpy(out.data(), bytes_.data() + offset, n);
-    return n;
-  }
-  Result<uint64_t> size() override { return uint64_t{bytes_.size()}; }
-
- private:
-  std::span<const std::byte> bytes_;
-};
-
-// Every .dds path is the fuzz input; other extensions do not exist.
-class MemoryStorage : public server::Storage {
- public:
-  std::span<const std::byte> bytes;
-  Result<std::unique_ptr<server::StorageFile>> open(const std::filesystem::path& path) override {
-    if (path.extension() != ".dds") return make_error(ErrorCode::kNotFound, "no " + path.string());
-    return std::unique_ptr<server::StorageFile>(std::make_unique<MemoryFile>(bytes));
-  }
-};
 
 void check(bool ok) {
   if (!ok) __builtin_trap();
@@ -72,7 +48,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const auto format = (pick[2] & 1) ? TexelFormat::kBc1 : TexelFormat::kRgba8;
   const scene::TextureRecord record{w, h, full_mip_count(w, h), static_cast<uint32_t>(format)};
   const uint32_t mip = pick[3] % record.mip_count;
-  static MemoryStorage storage;
+  static fuzz::MemoryStorage storage;
+  storage.extension = ".dds";  // every .dds path is the input; other extensions do not exist
   storage.bytes = file;
   auto policy = server::make_eviction_policy("lru", {});
   if (!policy) return 0;

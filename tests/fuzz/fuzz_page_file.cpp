@@ -8,6 +8,7 @@
 #include <span>
 #include <vector>
 
+#include "memory_storage.hpp"
 #include "texstream/common/page_file.hpp"
 #include "texstream/server/load/page_reader.hpp"
 #include "texstream/server/storage/storage.hpp"
@@ -16,29 +17,6 @@ namespace {
 
 using namespace texstream;
 
-class MemoryFile : public server::StorageFile {
- public:
-  explicit MemoryFile(std::span<const std::byte> b) : bytes_(b) {}
-  Result<uint64_t> read_at(std::span<std::byte> out, uint64_t offset) override {
-    if (offset >= bytes_.size()) return uint64_t{0};
-    const uint64_t n = std::min<uint64_t>(out.size(), bytes_.size() - offset);
-    std::memcpy(out.data(), bytes_.data() + offset, n);
-    return n;
-  }
-  Result<uint64_t> size() override { return uint64_t{bytes_.size()}; }
-
- private:
-  std::span<const std::byte> bytes_;
-};
-
-class MemoryStorage : public server::Storage {
- public:
-  std::span<const std::byte> bytes;
-  Result<std::unique_ptr<server::StorageFile>> open(const std::filesystem::path&) override {
-    return std::unique_ptr<server::StorageFile>(std::make_unique<MemoryFile>(bytes));
-  }
-};
-
 void check(bool ok) {
   if (!ok) __builtin_trap();
 }
@@ -46,7 +24,7 @@ void check(bool ok) {
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-  MemoryStorage storage;
+  fuzz::MemoryStorage storage;
   storage.bytes = std::span(reinterpret_cast<const std::byte*>(data), size);
   auto reader = server::PageReader::open(storage, "fuzz.tspages");
   if (!reader.ok()) return 0;

@@ -249,7 +249,7 @@ TEST(PageBake, NoiseValuesOfKnownImages) {
   pf = PageFile::open(dir / "ramp.tspages");
   ASSERT_TRUE(pf.ok());
   EXPECT_LT(pf->noise({2, 1, 1}), 2.0f);
-  EXPECT_GT(pf->noise({0, 0, 0}), 50.0f);  // the root against the placeholder: the ramp's spread
+  EXPECT_GT(pf->noise({0, 0, 0}), 50.0f);  // the root against its mean colour: the ramp's spread
 }
 
 // BC1 pages are the RGBA8 pages encoded: decoded they stay close to them (a painted ground, 8-texel borders).

@@ -60,7 +60,7 @@ struct PageIndexEntry {
   uint64_t offset;  // of the page's bytes in the file; 0 when the page is not stored
   uint32_t bytes;   // page_bytes for a stored page, 0 otherwise
   float noise;      // seed 004 §3.3.1.2: luminance RMSE (0-255) of the page against its parent's quarter scaled
-                    // up; for the root, against the page's mean colour (what the colour placeholder shows)
+                    // up; for the root, against the page's mean colour (what the City Colormap shows first)
 };
 static_assert(sizeof(PageIndexEntry) == 16);
 
