@@ -9,7 +9,7 @@
 #include <memory>
 #include <span>
 
-#include "memory_storage.hpp"
+#include "fuzz_support.hpp"
 #include "texstream/common/dds.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texstream/server/cache/eviction_policy.hpp"
@@ -21,10 +21,7 @@
 namespace {
 
 using namespace texstream;
-
-void check(bool ok) {
-  if (!ok) __builtin_trap();
-}
+using fuzz::check;
 
 }  // namespace
 

@@ -8,7 +8,7 @@
 #include <span>
 #include <vector>
 
-#include "memory_storage.hpp"
+#include "fuzz_support.hpp"
 #include "texstream/common/page_file.hpp"
 #include "texstream/server/load/page_reader.hpp"
 #include "texstream/server/storage/storage.hpp"
@@ -16,10 +16,7 @@
 namespace {
 
 using namespace texstream;
-
-void check(bool ok) {
-  if (!ok) __builtin_trap();
-}
+using fuzz::check;
 
 }  // namespace
 

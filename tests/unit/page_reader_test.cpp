@@ -11,41 +11,13 @@
 #include "test_temp_dir.hpp"
 #include "texstream/server/load/page_reader.hpp"
 #include "texstream/server/storage/caching_storage.hpp"
+#include "texstream/server/storage/counting_storage.hpp"
 #include "texstream/server/storage/disk_cache.hpp"
 #include "texstream/server/storage/posix_storage.hpp"
 #include "texstream/server/storage/slow_storage.hpp"
 
 namespace texstream::server {
 namespace {
-
-// Counts what the tier above asks of the origin: reads and bytes.
-class CountingStorage final : public Storage {
- public:
-  explicit CountingStorage(Storage& inner) : inner_(inner) {}
-  Result<std::unique_ptr<StorageFile>> open(const std::filesystem::path& path) override {
-    auto f = inner_.open(path);
-    if (!f.ok()) return f.error();
-    return std::unique_ptr<StorageFile>(new File(std::move(f.value()), *this));
-  }
-  std::atomic<uint64_t> reads{0}, bytes{0};
-
- private:
-  class File final : public StorageFile {
-   public:
-    File(std::unique_ptr<StorageFile> f, CountingStorage& s) : f_(std::move(f)), s_(s) {}
-    Result<uint64_t> read_at(std::span<std::byte> out, uint64_t offset) override {
-      ++s_.reads;
-      s_.bytes += out.size();
-      return f_->read_at(out, offset);
-    }
-    Result<uint64_t> size() override { return f_->size(); }
-
-   private:
-    std::unique_ptr<StorageFile> f_;
-    CountingStorage& s_;
-  };
-  Storage& inner_;
-};
 
 std::vector<std::byte> file_bytes(const std::filesystem::path& p) {
   std::vector<std::byte> b(std::filesystem::file_size(p));
@@ -92,14 +64,14 @@ TEST_F(PageReaderTest, OneExactReadPerPageLocally) {
   CountingStorage origin(posix);
   auto r = PageReader::open(origin, (dir_ / "scene" / "ground.tspages").string());
   ASSERT_TRUE(r.ok()) << r.error().message;
-  const uint64_t index_reads = origin.reads, index_bytes = origin.bytes;
+  const uint64_t index_reads = origin.reads(), index_bytes = origin.bytes();
   EXPECT_EQ(index_reads, 2u);  // header, index
   EXPECT_EQ(index_bytes, r.value()->index_bytes());
   const uint64_t pages = read_all(*r.value(), whole_);
   EXPECT_EQ(pages, r.value()->file().stored_pages());
-  EXPECT_EQ(origin.reads - index_reads, pages);
+  EXPECT_EQ(origin.reads() - index_reads, pages);
   const double amp =
-      static_cast<double>(origin.bytes - index_bytes) / static_cast<double>(r.value()->page_bytes_read());
+      static_cast<double>(origin.bytes() - index_bytes) / static_cast<double>(r.value()->page_bytes_read());
   EXPECT_EQ(amp, 1.0);
 }
 
@@ -117,13 +89,13 @@ TEST_F(PageReaderTest, ThroughSlowStorageAndTheDiskCacheTheSecondPassStaysOffThe
     auto r = PageReader::open(caching, path);
     ASSERT_TRUE(r.ok()) << r.error().message;
     const uint64_t pages = read_all(*r.value(), whole_);
-    EXPECT_EQ(origin.bytes, r.value()->index_bytes() + pages * r.value()->file().geometry().page_bytes());
+    EXPECT_EQ(origin.bytes(), r.value()->index_bytes() + pages * r.value()->file().geometry().page_bytes());
   }
-  const uint64_t after_first = origin.bytes;
+  const uint64_t after_first = origin.bytes();
   auto r = PageReader::open(caching, path);
   ASSERT_TRUE(r.ok()) << r.error().message;
   read_all(*r.value(), whole_);
-  EXPECT_EQ(origin.bytes, after_first) << "the second pass read the origin again";
+  EXPECT_EQ(origin.bytes(), after_first) << "the second pass read the origin again";
   EXPECT_GT(caching.counters().bytes_from_disk_cache.load(), r.value()->page_bytes_read());
 }
 

@@ -35,6 +35,7 @@
 #include "pages_view.hpp"
 #include "texstream/render/measure/image_metrics.hpp"
 #include "texstream/server/load/page_reader.hpp"
+#include "texstream/server/storage/counting_storage.hpp"
 #include "texstream/server/storage/posix_storage.hpp"
 #include "texstream/stream/page_policy.hpp"
 
@@ -51,34 +52,6 @@ struct PagesBenchOptions {
   uint32_t page = 32;
   double metres_per_texel = 0.03;
   uint32_t width = 0, height = 0;
-};
-
-// Counts what the reader asks of the origin (read amplification).
-class CountingStorage final : public server::Storage {
- public:
-  explicit CountingStorage(server::Storage& inner) : inner_(inner) {}
-  Result<std::unique_ptr<server::StorageFile>> open(const fs::path& path) override {
-    auto f = inner_.open(path);
-    if (!f.ok()) return f.error();
-    return std::unique_ptr<server::StorageFile>(new File(std::move(f.value()), bytes));
-  }
-  std::atomic<uint64_t> bytes{0};
-
- private:
-  class File final : public server::StorageFile {
-   public:
-    File(std::unique_ptr<server::StorageFile> f, std::atomic<uint64_t>& b) : f_(std::move(f)), bytes_(b) {}
-    Result<uint64_t> read_at(std::span<std::byte> out, uint64_t offset) override {
-      bytes_ += out.size();
-      return f_->read_at(out, offset);
-    }
-    Result<uint64_t> size() override { return f_->size(); }
-
-   private:
-    std::unique_ptr<server::StorageFile> f_;
-    std::atomic<uint64_t>& bytes_;
-  };
-  server::Storage& inner_;
 };
 
 // Camera motions in the spirit of seed 004 §4.2.1 (its motions 1-15): holds, a very fast turn that stops after
@@ -208,7 +181,7 @@ int run_pages_bench(const PagesBenchOptions& o) {
 
   // 2. Every page through the server's reader, the origin's bytes counted.
   server::PosixStorage posix;
-  CountingStorage origin(posix);
+  server::CountingStorage origin(posix);
   auto reader = server::PageReader::open(origin, file.string());
   if (!reader.ok()) {
     std::fprintf(stderr, "pages bench: %s\n", reader.error().message.c_str());
@@ -232,8 +205,7 @@ int run_pages_bench(const PagesBenchOptions& o) {
       return 1;
     }
   }
-  const double read_amp =
-      static_cast<double>(origin.bytes.load()) / static_cast<double>(pf.stored_pages() * g.page_bytes());
+  const double read_amp = static_cast<double>(origin.bytes()) / static_cast<double>(pf.stored_pages() * g.page_bytes());
   const PageTexels page_texels = [&](PageId p) { return texels[g.slot(p)].data(); };
   std::printf("mean NoiseValue per level (coarsest first):");
   for (uint32_t l = 0; l < g.levels; ++l) {

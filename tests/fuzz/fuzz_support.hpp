@@ -1,6 +1,7 @@
 #pragma once
-// A Storage over the fuzz input's bytes, for the fuzzers of the server's file readers: every path the reader asks
-// for is the input (or, with `extension` set, only paths with that extension; the others do not exist).
+// What the fuzzers share: an invariant check that traps (libFuzzer keeps the input), and a Storage over the fuzz
+// input's bytes for the server's file readers: every path the reader asks for is the input (or, with `extension`
+// set, only paths with that extension; the others do not exist).
 #include <algorithm>
 #include <cstring>
 #include <filesystem>
@@ -11,6 +12,10 @@
 #include "texstream/server/storage/storage.hpp"
 
 namespace texstream::fuzz {
+
+inline void check(bool ok) {
+  if (!ok) __builtin_trap();
+}
 
 class MemoryFile : public server::StorageFile {
  public:
