@@ -333,6 +333,22 @@ Result<Manifest> read_manifest(const fs::path& dir) {
     if (m.bounds_min[a] > m.bounds_max[a])
       return make_error(ErrorCode::kCorrupt, what + ": bounds_min[" + std::to_string(a) + "] > bounds_max");
   TS_TRY(get_field(j, "camera_path", m.camera_path, what));
+  if (const auto g = j.find("ground"); g != j.end()) {
+    const std::string gwhat = what + ": key 'ground'";
+    if (!g->is_object()) return make_error(ErrorCode::kCorrupt, gwhat + " must be an object");
+    GroundPages ground;
+    TS_TRY(get_field(*g, "pages", ground.pages, gwhat));
+    const fs::path rel(ground.pages);
+    const bool escapes = std::any_of(rel.begin(), rel.end(), [](const fs::path& part) { return part == ".."; });
+    if (ground.pages.empty() || rel.is_absolute() || escapes)
+      return make_error(ErrorCode::kCorrupt, gwhat + ": key 'pages' must be a path inside the scene folder, not '" +
+                                                 ground.pages + "'");
+    TS_TRY(get_vec3(*g, "origin", ground.origin, gwhat));
+    TS_TRY(get_field(*g, "metres_per_texel", ground.metres_per_texel, gwhat));
+    if (!std::isfinite(ground.metres_per_texel) || ground.metres_per_texel <= 0)
+      return make_error(ErrorCode::kCorrupt, gwhat + ": key 'metres_per_texel' must be a positive number");
+    m.ground = std::move(ground);
+  }
   // Texture ids are uint32 on the wire (TextureId) and mesh records index them with uint32.
   if (m.texture_count > std::numeric_limits<uint32_t>::max() || m.mesh_count > std::numeric_limits<uint32_t>::max())
     return make_error(ErrorCode::kCorrupt, what + ": mesh_count or texture_count exceeds 2^32-1");
@@ -351,6 +367,11 @@ Status write_manifest(const fs::path& dir, const Manifest& m) {
   j["bounds_min"] = m.bounds_min;
   j["bounds_max"] = m.bounds_max;
   j["camera_path"] = m.camera_path;
+  if (m.ground) {
+    j["ground"] = {{"pages", m.ground->pages},
+                   {"origin", m.ground->origin},
+                   {"metres_per_texel", m.ground->metres_per_texel}};
+  }
   const std::string text = j.dump(2) + "\n";
   auto out = OutputFile::create(dir / kManifestFile);
   if (!out) return out.error();

@@ -106,6 +106,36 @@ TEST_F(SceneFormatTest, ManifestRoundTrips) {
   EXPECT_FALSE(fs::exists(dir_ / "scene.json.tmp"));
 }
 
+TEST_F(SceneFormatTest, ManifestGroundPagesRoundTripAndBadOnesAreNamed) {
+  Manifest m;
+  m.name = "city";
+  ASSERT_TRUE(write_manifest(dir_, m).ok());
+  EXPECT_FALSE(read_manifest(dir_)->ground.has_value());
+  m.ground = GroundPages{"pages/ground.tspages", {-512.5, -256, 0.25}, 0.125};
+  ASSERT_TRUE(write_manifest(dir_, m).ok());
+  auto r = read_manifest(dir_);
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  ASSERT_TRUE(r->ground.has_value());
+  EXPECT_EQ(r->ground->pages, "pages/ground.tspages");
+  EXPECT_EQ(r->ground->origin, m.ground->origin);
+  EXPECT_EQ(r->ground->metres_per_texel, 0.125);
+  const std::pair<GroundPages, const char*> bad[] = {
+      {{"../ground.tspages", {0, 0, 0}, 1}, "pages"},
+      {{"/abs/ground.tspages", {0, 0, 0}, 1}, "pages"},
+      {{"", {0, 0, 0}, 1}, "pages"},
+      {{"g.tspages", {0, 0, 0}, 0}, "metres_per_texel"},
+      {{"g.tspages", {0, 0, 0}, -2}, "metres_per_texel"},
+  };
+  for (const auto& [g, key] : bad) {
+    m.ground = g;
+    ASSERT_TRUE(write_manifest(dir_, m).ok());
+    auto e = read_manifest(dir_);
+    ASSERT_FALSE(e.ok()) << g.pages;
+    expect_error_names(e.error(), "ground");
+    expect_error_names(e.error(), key);
+  }
+}
+
 TEST_F(SceneFormatTest, ManifestRejectsMissingWrongAndUnknown) {
   auto missing = read_manifest(dir_);
   ASSERT_FALSE(missing.ok());

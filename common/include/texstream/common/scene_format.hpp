@@ -14,6 +14,8 @@
 //                              geometry placed at any orientation). Absent: every mesh unrotated, scale 1
 //   <scene>/camera_path.txt    the default fly-through (see camera_path.hpp)
 //   <scene>/mesh_index.bin     optional: the broad phase's quadtree over meshes.bin (mesh_index.hpp)
+//   <scene>/<ground.pages>     optional: the ground as one huge texture in pages (page_file.hpp), placed by
+//                              scene.json's "ground" (GroundPages below); read by the server one page at a time
 //   <scene>/textures/XXX/YYYYYYYY.dds   one DDS per texture (RGBA8, BC1 or BC3), all mips finest first, no DX10
 //   extension:
 //                              mip L of texture T lies at 128 + mip_chain_offset(format, w, h, L)
@@ -140,6 +142,15 @@ constexpr const char* sampling_flags_error(uint32_t f) {
 // scene.json's texture_format when the textures do not share one.
 inline constexpr const char* kMixedFormats = "mixed";
 
+// scene.json's optional "ground": one huge texture over the ground plane, streamed as pages (issue 28). Texel
+// (u, v) of the page square (u, v in texels of the finest level) lies at map coordinates
+// origin + (u, v, 0) * metres_per_texel: u grows east, v grows north, z is the ground's height.
+struct GroundPages {
+  std::string pages;  // the page file, relative to the scene folder (no "..", not absolute)
+  std::array<double, 3> origin{};
+  double metres_per_texel = 1;
+};
+
 struct Manifest {
   uint32_t format_version = kSceneFormatVersion;
   std::string name;
@@ -153,6 +164,7 @@ struct Manifest {
   std::array<double, 3> bounds_min{};  // map coordinates
   std::array<double, 3> bounds_max{};
   std::string camera_path = "camera_path.txt";
+  std::optional<GroundPages> ground;
 };
 
 struct MeshData {
