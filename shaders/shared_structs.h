@@ -87,9 +87,39 @@ TS_CONST kDebugViewNone = 0u;
 TS_CONST kDebugViewMip = 1u;       // grey = displayed mip level * 16 / 255 (seed 000 Fig. 5 inset): 0 black
 TS_CONST kDebugViewWeight = 2u;    // heat map of the per-fragment weight W, 1 (blue) .. 17 (red)
 TS_CONST kDebugViewMeshId = 3u;    // RGB = ((mesh id + 1) * kMeshIdHashMul) mod 2^24, 0 = nothing drawn
+TS_CONST kDebugViewPageLevel = 4u;     // the ground (issue 28): R = page level shown x 16, G = level wanted x 16
+TS_CONST kDebugViewPageResidency = 5u; // the ground: green = wanted page resident, yellow = an ancestor, red = none
 // Odd multiplier (the 24 low bits of the golden-ratio constant 0x9E3779B1): a bijection on 24 bits that
 // scatters neighbouring ids over the colour cube; C++ inverts it to decode an id-buffer PNG.
 TS_CONST kMeshIdHashMul = 0x3779B1u;
+
+// ---- descriptor set 1: the ground's pages (issue 28; ground.vert, ground.frag, renderer/.../page_cache.hpp) ----
+TS_CONST kGroundBindingUniforms = 0u;  // uniform GroundUniforms
+TS_CONST kGroundBindingFrames = 1u;    // sampler2DArray: one bordered page per layer (the page cache's frames)
+TS_CONST kGroundBindingTable = 2u;     // buffer uint[quadtree slots]: the frame holding each page, kNoPageFrame: none
+TS_CONST kGroundBindingNeeds = 3u;     // buffer PageNeedGpu[cols * rows]: the needbuffer (seed 004 §3.2.3)
+TS_CONST kNoPageFrame = 0xffffffffu;
+// The owner id the ground writes in the depth pre-pass: no mesh has it (mesh id + 1 <= mesh count < 2^32 - 1).
+TS_CONST kGroundOwner = 0xffffffffu;
+
+struct GroundUniforms {
+  vec4 corner;          // xyz: camera-relative position of the page square's texel (0, 0) corner (metres);
+                        // w: metres per texel of the finest level
+  uvec4 image;          // x, y: image width and height (finest texels); z: levels; w: page texels (interior)
+  uvec4 page;           // x: border texels; y: stored side (border included); z: needbuffer step (px);
+                        // w: needbuffer columns
+  uvec4 flags;          // x: needbuffer rows; y: 1 = write the needbuffer this frame; z, w: 0
+};
+
+// One needbuffer texel: where its pixel meets the ground (page-square units, 0..1), the fractional page level it
+// wants (finest = levels - 1) and its eye distance. level is NaN (the buffer is filled with ~0) where no ground
+// fragment was shaded.
+struct PageNeedGpu {
+  float u;
+  float v;
+  float level;
+  float distance;
+};
 
 struct FrameUniforms {
   vec4 camera_forward;  // xyz: unit view direction (world axes; the view has no translation)

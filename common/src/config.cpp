@@ -167,6 +167,29 @@ void visit_keys(Config& c, V&& v) {
     "Longest time one streaming cycle may spend loading (Table 2)", Range{0.1, 1e6});
   v("controller", "fixed_load_mb", c.controller.fixed_load_mb, "MB", "mode = fixed: load size s", Range{0.001, 1e5});
   v("controller", "fixed_bias", c.controller.fixed_bias, "levels", "mode = fixed: mip bias b", Range{0, 16});
+  v("pages", "enabled", c.pages.enabled, "bool",
+    "Draw and stream the scene's ground as one huge texture in pages when scene.json has a \"ground\"", kAny);
+  v("pages", "memory_bytes", c.pages.memory_bytes, "bytes",
+    "GPU memory of the ground's page frames (one bordered page per array layer; never exceeded)",
+    Range{1 << 20, 1ll << 40});
+  v("pages", "per_frame", c.pages.per_frame, "pages", "Pages requested per frame at most (seed 004's page budget)",
+    Range{1, 4096});
+  v("pages", "heuristic", c.pages.heuristic, "name", "Which needed page goes first:", kAny);
+  v("pages", "order", c.pages.order, "name", "When the ancestors of needed pages are loaded:", kAny);
+  v("pages", "noise_scaling", c.pages.noise_scaling, "bool",
+    "Priority times the NoiseValues between a page and its resident ancestor (seed 004 §4.2)", kAny);
+  v("pages", "noise_skipping", c.pages.noise_skipping, "bool",
+    "order = extern: ancestors whose NoiseValue is below the file's mean are not loaded (seed 004 §4.3)", kAny);
+  v("pages", "locked_levels", c.pages.locked_levels, "levels",
+    "The coarsest levels are never evicted (seed 004 §4.3.1 locks four)", Range{0, 16});
+  v("pages", "discard", c.pages.discard, "name", "Which page leaves a full page cache:", kAny);
+  v("pages", "needbuffer_step", c.pages.needbuffer_step, "px",
+    "Every Nth pixel per axis writes the needbuffer (seed 004 renders it at reduced resolution)", Range{1, 64});
+  v("pages", "reference", c.pages.reference, "bool",
+    "Draw the ground from one ordinary mipmapped texture read whole from its page file (RGBA8, at most 8192 texels "
+    "per side), nothing streamed: the reference the page path's seams are measured against",
+    kAny);
+
   v("cache", "format", c.cache.format, "name", "Texel format of the GPU cache:", kAny);
   v("cache", "eviction", c.cache.eviction, "name", "Placement and eviction in the cache:", kAny);
   v("cache", "layer_extent_px", c.cache.layer_extent_px, "px",

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <limits>
+#include <numbers>
 #include <thread>
 
 #include "renderer.hpp"
@@ -101,6 +102,67 @@ void Renderer::start_cycle(const std::vector<stream::StreamCandidate>& candidate
   last_cycle_sent_ = result.sent.size();
   spdlog::debug("cycle {}: {} candidates, {} requests, {} bytes", cycles_, candidates.size(), result.sent.size(),
                 result.bytes);
+}
+
+void Renderer::request_ground_pages(uint64_t frame, const CameraPose& pose) {
+  GroundPages* ground = stack_->ground();
+  if (!ground) return;
+  // HotSpot's centre moves to the side the camera turns towards (right and down positive), beyond half a degree
+  // 0.01 rad per frame (seed 004 §4.2; texstream-bench pages uses the same threshold). Yaw grows to the right.
+  pages::HotSpot hotspot;
+  if (last_pose_) {
+    const double yaw = (pose.yaw_deg - last_pose_->yaw_deg) * std::numbers::pi / 180.0;
+    const double pitch = (last_pose_->pitch_deg - pose.pitch_deg) * std::numbers::pi / 180.0;
+    hotspot = pages::hotspot_from_turn(static_cast<float>(yaw), static_cast<float>(pitch), 0.01f);
+  }
+  last_pose_ = pose;
+  // Pages go ahead of the cycle's mips at the server: the per-frame budget (pages.per_frame) bounds them, and
+  // the ground is under every view.
+  const auto candidates = ground->plan(frame, hotspot);
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    const float priority = std::numeric_limits<float>::max() / 2 - static_cast<float>(i);
+    const stream::RequestOutcome o = client_->try_request_page(GroundPages::kFileId, candidates[i].page, priority);
+    if (o == stream::RequestOutcome::kSent) {
+      ground->on_requested(candidates[i].page);
+    } else if (stream::to_send_result(o) == stream::SendResult::kStop) {
+      break;
+    }
+  }
+}
+
+Status Renderer::load_ground_wanted(uint64_t index) {
+  GroundPages* ground = stack_->ground();
+  if (!ground) return ok_status();
+  // Every page the probe frame's needbuffer wants, with their ancestors (pages.order), round after round until
+  // none is missing: staging holds staging_pages at once, so a full staging buffer is uploaded in between.
+  LoadTimeSink none(stack_->cache(), Clock::time_point::max());
+  for (uint32_t round = 0; round < kMaxFruitlessLoadRounds; ++round) {
+    const auto wanted = ground->plan(index, {}, true);
+    if (wanted.empty()) return ok_status();
+    for (const pages::PageCandidate& c : wanted) {
+      const stream::RequestOutcome o = client_->try_request_page(GroundPages::kFileId, c.page, 1.0f);
+      if (o == stream::RequestOutcome::kSent) ground->on_requested(c.page);
+      if (stream::to_send_result(o) == stream::SendResult::kStop) break;
+    }
+    const auto start = Clock::now();
+    while (ground->pending() > 0) {
+      client_->poll(none, std::numeric_limits<size_t>::max());
+      TS_TRY(server_can_start());
+      if (ground->staging_full()) TS_TRY(upload_now());
+      if (Clock::now() - start > kLockstepTimeout) {
+        return make_error(ErrorCode::kTimeout, "frame " + std::to_string(index) + ": " +
+                                                   std::to_string(ground->pending()) +
+                                                   " ground pages unanswered while loading the wanted ones");
+      }
+      if (ground->pending() > 0) client_->wait_for_completions(std::chrono::microseconds(200));
+    }
+    TS_TRY(upload_now());
+  }
+  return make_error(ErrorCode::kTimeout, "frame " + std::to_string(index) +
+                                             ": the ground's wanted pages did not "
+                                             "all arrive in " +
+                                             std::to_string(kMaxFruitlessLoadRounds) +
+                                             " rounds (do they fit pages.memory_bytes?)");
 }
 
 Status Renderer::upload_now() {
@@ -238,6 +300,7 @@ Status Renderer::load_wanted(const FrameRecording& rec, uint64_t index) {
   // reference run would count as never displayed).
   last_list_ = read_candidates();
   have_list_ = true;
+  TS_TRY(load_ground_wanted(index));
   if (auto st = load_fully(last_list_, LoadGoal::kWantedLevels); !st) {
     return make_error(st.error().code, "frame " + std::to_string(index) + ": " + st.error().message);
   }

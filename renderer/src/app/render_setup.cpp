@@ -17,7 +17,8 @@ namespace fs = std::filesystem;
 // The render stack of a run: the device from render.device and render.validation, the cache from
 // cache.*, the passes from render.width_px, height_px and debug_view. `scene_format` is scene.json's
 // texture_format (nullopt: mixed).
-Result<RenderStackOptions> stack_options(const Config& cfg, std::optional<TexelFormat> scene_format) {
+Result<RenderStackOptions> stack_options(const Config& cfg, const SceneData& scene) {
+  const std::optional<TexelFormat> scene_format = scene.manifest.texture_format;
   RenderStackOptions so;
   so.vulkan.device_substring = cfg.render.device;
   so.vulkan.validation = cfg.render.validation;
@@ -35,6 +36,15 @@ Result<RenderStackOptions> stack_options(const Config& cfg, std::optional<TexelF
   auto passes = scene_passes_options(cfg);
   if (!passes) return passes.error();
   so.passes = *passes;
+  if (cfg.pages.enabled) {
+    GroundPagesOptions ground;
+    ground.config = cfg.pages;
+    ground.viewport_width = so.passes.width;
+    ground.viewport_height = so.passes.height;
+    ground.reference = cfg.pages.reference;
+    if (scene.manifest.ground) ground.file_path = scene.dir / scene.manifest.ground->pages;
+    so.ground = ground;
+  }
   return so;
 }
 
@@ -69,7 +79,7 @@ Status Renderer::set_up() {
                      cfg_.render.near_m, cfg_.render.far_m};
   startup_stage("scene_load");
 
-  auto options = stack_options(cfg_, scene_.manifest.texture_format);
+  auto options = stack_options(cfg_, scene_);
   if (!options) return options.error();
   options->stage = [this](const char* name) { startup_stage(name); };
   if (cfg_.render.window) {
@@ -113,6 +123,7 @@ Status Renderer::start_stream_client() {
   auto client = stream::StreamClient::start(cfg_, scene_.shapes(), scene_.dir, run_.config_file, run_.overrides, so);
   if (!client) return client.error();
   client_ = std::move(*client);
+  if (GroundPages* ground = stack_->ground()) client_->set_page_files({scene_.ground_pages}, ground);
   if (run_.in_process_server) {
     in_process_ = run_.in_process_server(cfg_);
     if (!in_process_) return make_error(ErrorCode::kInvalidArgument, "in-process server: the factory made none");

@@ -70,6 +70,10 @@ class Renderer {
   // time (at most controller.load_time_ms of the frame) or lock-step (every answer to the previous cycle).
   // Returns the time waited for the server (lock-step), which is not frame latency.
   Result<Clock::duration> take_completions();
+  // The ground's pages (RenderStack::ground): requests for what the frame's needbuffer wants (pages.*).
+  void request_ground_pages(uint64_t frame, const CameraPose& pose);
+  // render.load_wanted_before_drawing: every ground page the probe frame wants, loaded before it is drawn.
+  Status load_ground_wanted(uint64_t index);
   // A streaming cycle (Algorithm 1, LoadTextures) over the compacted list the frame read back.
   void start_cycle(const std::vector<stream::StreamCandidate>& candidates);
   std::vector<stream::StreamCandidate> read_candidates();
@@ -134,7 +138,8 @@ class Renderer {
   uint64_t cycles_ = 0;
   uint64_t last_cycle_sent_ = 0;
   uint64_t load_bytes_ = 0;
-  uint64_t deaths_before_frames_ = 0;  // server deaths before frame 0 (render.lockstep allows none after it)
+  uint64_t deaths_before_frames_ = 0;    // server deaths before frame 0 (render.lockstep allows none after it)
+  std::optional<CameraPose> last_pose_;  // the previous frame's, for the ground's HotSpot (the turn per frame)
 };
 
 }  // namespace texstream::render

@@ -163,6 +163,7 @@ Status Renderer::render_frame(uint64_t index, bool last) {
       start_cycle(last_list_);
     }
   }
+  request_ground_pages(index, pose);
   if (first) first_frame_stage("cycle");
   const auto own_end = Clock::now();
   if (pairs && !twin_first) TS_TRY(draw_twin());
@@ -251,6 +252,17 @@ Result<RunSummary> Renderer::finish() {
   s.controller_mode = std::string(choice_name(controller_->params().mode));
   s.controller_rejected_frames = controller_->frames_rejected();
   s.startup_seconds = startup_seconds_;
+  if (const GroundPages* g = stack_->ground()) {
+    s.ground.has_ground = true;
+    s.ground.pages_requested = g->stats().pages_requested;
+    s.ground.pages_uploaded = g->stats().pages_uploaded;
+    s.ground.pages_failed = g->stats().pages_failed;
+    s.ground.pages_refused = g->stats().pages_refused;
+    s.ground.evictions = g->stats().evictions;
+    s.ground.frames = g->frames().frames();
+    s.ground.frames_used = g->frames().used_frames();
+    s.ground.needs_last_frame = g->stats().needs_last_frame;
+  }
   mip_use_->finish();  // mips still resident leave: those never displayed are wasted too
   s.wasted_bytes = mip_use_->bytes_wasted();
   s.wasted_bytes_frac = mip_use_->wasted_fraction();

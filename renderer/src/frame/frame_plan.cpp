@@ -52,6 +52,7 @@ Result<FramePlan> plan_frame(RenderStack& stack, const Camera& cam, const Config
   gpu::FrameUniforms fu = frame_uniforms(cam, cfg, gpu.mesh_count(), gpu.compact_capacity(), extents);
   if (options.keep_every_mesh) fu.flags.z = 0;  // the weight cutoff τ in kWeightFixedScale units
   stack.scene_gpu().set_frame_uniforms(fu);
+  if (GroundPages* ground = stack.ground()) ground->write_uniforms(cam.position, options.ground_needs);
   return plan;
 }
 

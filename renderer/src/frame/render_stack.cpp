@@ -41,6 +41,13 @@ Result<std::unique_ptr<RenderStack>> RenderStack::create(const SceneData& scene,
   s->cache_ = std::move(*cache);
   stage("texture_cache");
 
+  if (options.ground && scene.ground_pages) {
+    auto ground = GroundPages::create(*s->ctx_, scene.ground_pages, *scene.manifest.ground, *options.ground);
+    if (!ground) return ground.error();
+    s->ground_ = std::move(*ground);
+    stage("ground_pages");
+  }
+
   auto gpu = SceneGpu::create(*s->ctx_, scene, options.stage_geometry);
   if (!gpu) return gpu.error();
   s->scene_gpu_ = std::make_unique<SceneGpu>(std::move(*gpu));
@@ -50,7 +57,8 @@ Result<std::unique_ptr<RenderStack>> RenderStack::create(const SceneData& scene,
       std::make_unique<ShaderCompiler>(ShaderCompiler::default_source_dir(), ShaderCompiler::default_cache_dir());
   ScenePassesOptions pass_options = options.passes;
   pass_options.alpha_test = scene.has_alpha_test();
-  auto passes = ScenePasses::create(*s->ctx_, *s->compiler_, pass_options, *s->scene_gpu_, *s->cache_);
+  auto passes =
+      ScenePasses::create(*s->ctx_, *s->compiler_, pass_options, *s->scene_gpu_, *s->cache_, s->ground_.get());
   if (!passes) return passes.error();
   s->passes_ = std::move(*passes);
   stage("passes_and_shaders");
@@ -96,6 +104,7 @@ Status RenderStack::submit(const Submission& s) {
   if (s.uploads == Uploads::kAll || s.uploads == Uploads::kMips) {
     TS_TRY(cache_->prepare_uploads(serial_));  // this frame's sparse binds: one vkQueueBindSparse
     cache_->record_uploads(cmd_, serial_);
+    if (ground_) ground_->record_uploads(cmd_);
   }
   if (s.uploads == Uploads::kAll || s.uploads == Uploads::kGeometry) TS_TRY(scene_gpu_->record_uploads(scene_, cmd_));
   step("record_uploads");
@@ -129,6 +138,7 @@ Status RenderStack::submit(const Submission& s) {
   TS_VK_TRY(vkWaitForFences(device, 1, &fence, VK_TRUE, UINT64_MAX));
   last_gpu_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   cache_->on_submission_complete(serial_);
+  if (ground_) ground_->on_submission_complete(s.passes != nullptr);
   step("gpu");
   return ok_status();
 }
@@ -139,6 +149,7 @@ Status RenderStack::tear_down() {
   capture_.reset();
   scene_gpu_.reset();
   cache_.reset();
+  ground_.reset();
   fence_.reset();
   pool_.reset();
   broad_phase_.reset();

@@ -10,6 +10,7 @@
 #include "scene_pass_objects.hpp"
 #include "texstream/common/contract.hpp"
 #include "texstream/common/scene_format.hpp"
+#include "texstream/render/cache/ground_pages.hpp"
 #include "texstream/render/cache/texture_cache.hpp"
 #include "texstream/render/scene/scene_gpu.hpp"
 #include "texstream/render/vulkan/shader_compiler.hpp"
@@ -31,6 +32,10 @@ uint32_t gpu_debug_view(DebugView view) {
       return gpu::kDebugViewWeight;
     case DebugView::kMeshId:
       return gpu::kDebugViewMeshId;
+    case DebugView::kPageLevel:
+      return gpu::kDebugViewPageLevel;
+    case DebugView::kPageResidency:
+      return gpu::kDebugViewPageResidency;
   }
   TS_UNREACHABLE("render.debug_view %d is outside its table", static_cast<int>(view));
 }
@@ -41,8 +46,9 @@ VkFormat ScenePasses::colour_format() const {
 
 Result<std::unique_ptr<ScenePasses>> ScenePasses::create(const VulkanContext& ctx, ShaderCompiler& compiler,
                                                          const ScenePassesOptions& options, const SceneGpu& scene,
-                                                         const TextureCache& cache) {
+                                                         const TextureCache& cache, const GroundPages* ground) {
   std::unique_ptr<ScenePasses> p(new ScenePasses(options, scene));
+  p->ground_ = ground;
   p->device_ = ctx.device();
   if (options.timestamps) {
     if (ctx.properties().limits.timestampComputeAndGraphics != VK_TRUE) {
@@ -59,6 +65,7 @@ Result<std::unique_ptr<ScenePasses>> ScenePasses::create(const VulkanContext& ct
   }
   TS_TRY(p->create_targets(ctx));
   TS_TRY(p->create_descriptors(ctx, cache));
+  if (ground) TS_TRY(p->create_ground_descriptors(ctx));
   TS_TRY(p->create_pipelines(ctx, compiler));
   return p;
 }
@@ -270,6 +277,90 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
   return ok_status();
 }
 
+Status ScenePasses::create_ground_descriptors(const VulkanContext& ctx) {
+  VkDevice device = ctx.device();
+  VkSamplerCreateInfo si{};
+  si.sType = VK_STRUCTURE_TYPE_SAMPLER_CREATE_INFO;
+  // Bilinear inside one bordered page (a frame has one level; ground.frag blends two levels itself).
+  si.magFilter = si.minFilter = VK_FILTER_LINEAR;
+  // The reference (pages.reference) is one mipmapped image: trilinear by the sampler.
+  si.mipmapMode = ground_->reference() ? VK_SAMPLER_MIPMAP_MODE_LINEAR : VK_SAMPLER_MIPMAP_MODE_NEAREST;
+  si.addressModeU = si.addressModeV = si.addressModeW = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
+  si.maxLod = ground_->reference() ? VK_LOD_CLAMP_NONE : 0.0f;
+  VkSampler sampler = VK_NULL_HANDLE;
+  TS_VK_TRY(vkCreateSampler(device, &si, nullptr, &sampler));
+  ground_sampler_ = UniqueSampler(device, sampler);
+  const std::array<VkDescriptorSetLayoutBinding, 4> bindings{{
+      {gpu::kGroundBindingUniforms, VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1,
+       VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, nullptr},
+      {gpu::kGroundBindingFrames, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr},
+      {gpu::kGroundBindingTable, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr},
+      {gpu::kGroundBindingNeeds, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr},
+  }};
+  VkDescriptorSetLayoutCreateInfo li{};
+  li.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO;
+  li.bindingCount = static_cast<uint32_t>(bindings.size());
+  li.pBindings = bindings.data();
+  VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
+  TS_VK_TRY(vkCreateDescriptorSetLayout(device, &li, nullptr, &set_layout));
+  ground_set_layout_ = UniqueDescriptorSetLayout(device, set_layout);
+  const std::array<VkDescriptorPoolSize, 3> sizes{{{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1},
+                                                   {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1},
+                                                   {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 2}}};
+  VkDescriptorPoolCreateInfo pi{};
+  pi.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
+  pi.maxSets = 1;
+  pi.poolSizeCount = static_cast<uint32_t>(sizes.size());
+  pi.pPoolSizes = sizes.data();
+  VkDescriptorPool pool = VK_NULL_HANDLE;
+  TS_VK_TRY(vkCreateDescriptorPool(device, &pi, nullptr, &pool));
+  ground_pool_ = UniqueDescriptorPool(device, pool);
+  VkDescriptorSetAllocateInfo ai{};
+  ai.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
+  ai.descriptorPool = pool;
+  ai.descriptorSetCount = 1;
+  ai.pSetLayouts = &set_layout;
+  TS_VK_TRY(vkAllocateDescriptorSets(device, &ai, &ground_set_));
+  const VkDescriptorBufferInfo uniforms{ground_->uniforms(), 0, VK_WHOLE_SIZE};
+  const VkDescriptorBufferInfo table{ground_->table(), 0, VK_WHOLE_SIZE};
+  const VkDescriptorBufferInfo needs{ground_->needs(), 0, VK_WHOLE_SIZE};
+  const VkDescriptorImageInfo frames{ground_sampler_.get(), ground_->frames_view(),
+                                     VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
+  std::array<VkWriteDescriptorSet, 4> w{};
+  for (auto& x : w) {
+    x.sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
+    x.dstSet = ground_set_;
+    x.descriptorCount = 1;
+  }
+  w[0].dstBinding = gpu::kGroundBindingUniforms;
+  w[0].descriptorType = VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER;
+  w[0].pBufferInfo = &uniforms;
+  w[1].dstBinding = gpu::kGroundBindingFrames;
+  w[1].descriptorType = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
+  w[1].pImageInfo = &frames;
+  w[2].dstBinding = gpu::kGroundBindingTable;
+  w[2].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+  w[2].pBufferInfo = &table;
+  w[3].dstBinding = gpu::kGroundBindingNeeds;
+  w[3].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+  w[3].pBufferInfo = &needs;
+  vkUpdateDescriptorSets(device, static_cast<uint32_t>(w.size()), w.data(), 0, nullptr);
+
+  // Set 0 as every pipeline has it, set 1 the ground's: binding set 0 once serves both layouts.
+  const std::array<VkDescriptorSetLayout, 2> layouts{set_layout_.get(), set_layout};
+  VkPushConstantRange range{kAllStages, 0, sizeof(gpu::PassConstants)};
+  VkPipelineLayoutCreateInfo pli{};
+  pli.sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO;
+  pli.setLayoutCount = static_cast<uint32_t>(layouts.size());
+  pli.pSetLayouts = layouts.data();
+  pli.pushConstantRangeCount = 1;
+  pli.pPushConstantRanges = &range;
+  VkPipelineLayout layout = VK_NULL_HANDLE;
+  TS_VK_TRY(vkCreatePipelineLayout(device, &pli, nullptr, &layout));
+  ground_layout_ = UniquePipelineLayout(device, layout);
+  return ok_status();
+}
+
 Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& compiler) {
   VkDevice device = ctx.device();
   auto vert = make_module(ctx, compiler, {"scene.vert", ShaderStage::kVertex, {}});
@@ -343,6 +434,11 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
   dy.pDynamicStates = dyn.data();
 
   // One write mask per colour attachment of the subpass (none: depth only).
+  VkPipelineVertexInputStateCreateInfo no_vertices{};
+  no_vertices.sType = VK_STRUCTURE_TYPE_PIPELINE_VERTEX_INPUT_STATE_CREATE_INFO;
+  VkShaderModule vs = vert->get();
+  VkPipelineLayout pipeline_layout = layout_.get();
+  const VkPipelineVertexInputStateCreateInfo* vertex_input = &vi;
   auto graphics = [&](VkShaderModule fs, VkRenderPass pass, uint32_t subpass,
                       std::span<const VkColorComponentFlags> colour_masks, VkCompareOp compare, bool depth_write,
                       UniquePipeline& out) -> Status {
@@ -353,7 +449,7 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
     stages[0] = {};
     stages[0].sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
     stages[0].stage = VK_SHADER_STAGE_VERTEX_BIT;
-    stages[0].module = vert->get();
+    stages[0].module = vs;
     stages[0].pName = "main";
     stages[1] = {};
     stages[1].sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
@@ -366,7 +462,7 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
     gi.sType = VK_STRUCTURE_TYPE_GRAPHICS_PIPELINE_CREATE_INFO;
     gi.stageCount = 2;
     gi.pStages = stages.data();
-    gi.pVertexInputState = &vi;
+    gi.pVertexInputState = vertex_input;
     gi.pInputAssemblyState = &ia;
     gi.pViewportState = &vp;
     gi.pRasterizationState = &rs;
@@ -374,7 +470,7 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
     gi.pDepthStencilState = &ds;
     gi.pColorBlendState = &cb;
     gi.pDynamicState = &dy;
-    gi.layout = layout_.get();
+    gi.layout = pipeline_layout;
     gi.renderPass = pass;
     gi.subpass = subpass;
     VkPipeline p = VK_NULL_HANDLE;
@@ -395,6 +491,24 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
   TS_TRY(graphics(prepass->get(), main_pass_.get(), 0, kOwnerMask, VK_COMPARE_OP_GREATER, true, prepass_pipeline_));
   TS_TRY(graphics(frag->get(), main_pass_.get(), 1, kShadingMasks, VK_COMPARE_OP_EQUAL, false, main_pipeline_));
   TS_TRY(graphics(wide_frag->get(), wide_pass_.get(), 0, {}, VK_COMPARE_OP_GREATER, true, wide_pipeline_));
+  if (ground_) {
+    // The ground (ground.vert: one quad, no vertex buffers) in both subpasses, like the meshes.
+    auto ground_vert = make_module(ctx, compiler, {"ground.vert", ShaderStage::kVertex, {}});
+    if (!ground_vert) return ground_vert.error();
+    auto ground_pre = make_module(ctx, compiler, {"ground.frag", ShaderStage::kFragment, {"PREPASS"}});
+    if (!ground_pre) return ground_pre.error();
+    std::vector<std::string> ground_defines;
+    if (ground_->reference()) ground_defines.push_back("GROUND_REFERENCE");
+    auto ground_frag = make_module(ctx, compiler, {"ground.frag", ShaderStage::kFragment, ground_defines});
+    if (!ground_frag) return ground_frag.error();
+    vs = ground_vert->get();
+    vertex_input = &no_vertices;
+    pipeline_layout = ground_layout_.get();
+    TS_TRY(graphics(ground_pre->get(), main_pass_.get(), 0, kOwnerMask, VK_COMPARE_OP_GREATER, true,
+                    ground_prepass_pipeline_));
+    TS_TRY(
+        graphics(ground_frag->get(), main_pass_.get(), 1, kShadingMasks, VK_COMPARE_OP_EQUAL, false, ground_pipeline_));
+  }
 
   auto compute = [&](VkShaderModule module, UniquePipeline& out) -> Status {
     VkComputePipelineCreateInfo ci{};
@@ -438,6 +552,7 @@ void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const
   // is about to start (compact.comp with COMPACT_TO_HOST), else the device-local one.
   const GpuBuffer& list = frame.read_back_list ? scene_.readback() : scene_.compacted();
   if (frame.feedback) vkCmdFillBuffer(cmd, list.handle(), 0, sizeof(gpu::CompactListHeader), 0);
+  if (ground_) ground_->record_needs_clear(cmd);
 
   auto begin_pass = [&](VkRenderPass pass, VkFramebuffer fb, uint32_t w, uint32_t h, bool main) {
     std::array<VkClearValue, 4> clears{};
@@ -476,11 +591,26 @@ void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const
                              sizeof(VkDrawIndexedIndirectCommand));
   };
   // Main pass: the pre-pass (depth + owner id), then the shading subpass over the same draws.
+  // The ground (GroundPages) after the meshes in each subpass: one quad, its own set 1.
+  auto draw_ground = [&](VkPipeline pipeline) {
+    if (!ground_) return;
+    const std::array<VkDescriptorSet, 2> sets{set_, ground_set_};
+    vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, ground_layout_.get(), 0, 2, sets.data(), 0, nullptr);
+    vkCmdPushConstants(cmd, ground_layout_.get(), kAllStages, 0, sizeof frame.main, &frame.main);
+    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline);
+    vkCmdDraw(cmd, 6, 1, 0, 0);
+  };
   begin_pass(main_pass_.get(), main_fb_.get(), options_.width, options_.height, true);
   draw(prepass_pipeline_.get(), frame.main, 0, main_count);
+  draw_ground(ground_prepass_pipeline_.get());
   vkCmdNextSubpass(cmd, VK_SUBPASS_CONTENTS_INLINE);
   draw(main_pipeline_.get(), frame.main, 0, main_count);
+  draw_ground(ground_pipeline_.get());
   vkCmdEndRenderPass(cmd);
+  if (ground_ && ground_->writes_needs()) {
+    memory_barrier(cmd, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT, VK_PIPELINE_STAGE_HOST_BIT,
+                   VK_ACCESS_HOST_READ_BIT);
+  }
   if (timestamps_) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps_.get(), 1);
   timestamps_written_ = 2;
   if (!frame.feedback) return;

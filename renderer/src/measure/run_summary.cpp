@@ -53,6 +53,12 @@ std::string RunSummary::to_json() const {
                      {"avg_weighted_latency_ms", avg_weighted_latency_ms},
                      {"load_time_limited_frames", load_time_limited_frames},
                      {"rejected_frames", controller_rejected_frames}};
+  if (ground.has_ground) {
+    j["ground_pages"] = {{"requested", ground.pages_requested}, {"uploaded", ground.pages_uploaded},
+                         {"failed", ground.pages_failed},       {"refused", ground.pages_refused},
+                         {"evictions", ground.evictions},       {"frames", ground.frames},
+                         {"frames_used", ground.frames_used},   {"needs_last_frame", ground.needs_last_frame}};
+  }
   nlohmann::json startup = nlohmann::json::object();
   for (const auto& [stage, seconds] : startup_seconds) startup[stage] = seconds;
   j["startup_seconds"] = startup;
@@ -92,13 +98,21 @@ std::string RunSummary::to_text() const {
       "  textures resident   {} of {} ({} evictions)\n"
       "  textures given up   {} refused{}, {} charged with a server death{}, {} quarantined{}\n"
       "  controller          {}: avg s {:.3f} MB, avg b {:.2f}, avg t_w {:.2f} ms, {} load-time-limited frames\n"
+      "{}"
       "  output              {}\n",
       device, frames, frame_latency.median_ms, frame_latency.avg_ms, frame_latency.max_ms, mips_streamed, mb_streamed,
       streaming_cycles, 100.0 * wasted_bytes_frac, 100.0 * server_ram_hit_rate, protocol_errors, server_restarts,
       validation_errors, validation_warnings, textures_resident, texture_count, evictions, textures_refused.count,
       ids_text(textures_refused), textures_charged.count, ids_text(textures_charged), textures_quarantined.count,
       ids_text(textures_quarantined), controller_mode, avg_load_size_mb, avg_mip_bias, avg_weighted_latency_ms,
-      load_time_limited_frames, output_dir.string());
+      load_time_limited_frames,
+      ground.has_ground
+          ? fmt::format("  ground pages        {} uploaded of {} requested ({} failed), {} of {} frames used, "
+                        "{} evictions\n",
+                        ground.pages_uploaded, ground.pages_requested, ground.pages_failed, ground.frames_used,
+                        ground.frames, ground.evictions)
+          : std::string(),
+      output_dir.string());
 }
 
 Status RunSummary::write_json(const std::filesystem::path& file) const {

@@ -30,6 +30,17 @@ Status check_texture_id(const SceneData& s, uint32_t mesh, const scene::MeshReco
                                              std::to_string(s.texture_records().size()));
 }
 
+// scene.json's "ground": its page file's header and index, checked (page_file.hpp names file and field).
+Status open_ground(SceneData& s) {
+  if (!s.manifest.ground) return ok_status();
+  auto file = pages::PageFile::open(s.dir / s.manifest.ground->pages);
+  if (!file) {
+    return make_error(file.error().code, (s.dir / "scene.json").string() + ": key 'ground': " + file.error().message);
+  }
+  s.ground_pages = std::make_shared<const pages::PageFile>(std::move(*file));
+  return ok_status();
+}
+
 }  // namespace
 
 Result<SceneData> SceneData::load(const std::filesystem::path& dir) {
@@ -38,6 +49,7 @@ Result<SceneData> SceneData::load(const std::filesystem::path& dir) {
   auto manifest = scene::read_manifest(dir);
   if (!manifest) return manifest.error();
   s.manifest = std::move(*manifest);
+  TS_TRY(open_ground(s));
   auto meshes = scene::read_meshes(dir);
   if (!meshes) return meshes.error();
   s.meshes = std::move(*meshes);
@@ -70,6 +82,7 @@ Result<SceneData> SceneData::open(const std::filesystem::path& dir) {
   auto manifest = scene::read_manifest(dir);
   if (!manifest) return manifest.error();
   s.manifest = std::move(*manifest);
+  TS_TRY(open_ground(s));
   auto mapped = std::make_shared<Mapped>();
   auto meshes = scene::map_meshes(dir);
   if (!meshes) return meshes.error();

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "texstream/common/config_choice.hpp"
+#include "texstream/common/page_modes.hpp"
 #include "texstream/common/result.hpp"
 #include "texstream/common/texel_format.hpp"
 
@@ -40,13 +41,17 @@ struct ChoiceTable<RamCachePolicy> {
        {RamCachePolicy::kLru, "lru", ""}}};
 };
 
-enum class DebugView : uint8_t { kNone, kMip, kWeight, kMeshId };  // render.debug_view
+enum class DebugView : uint8_t { kNone, kMip, kWeight, kMeshId, kPageLevel, kPageResidency };  // render.debug_view
 template <>
 struct ChoiceTable<DebugView> {
-  static constexpr std::array<ChoiceEntry<DebugView>, 4> kEntries{{{DebugView::kNone, "none", ""},
-                                                                   {DebugView::kMip, "mip", "displayed mip as grey"},
-                                                                   {DebugView::kWeight, "weight", "heat map"},
-                                                                   {DebugView::kMeshId, "mesh_id", ""}}};
+  static constexpr std::array<ChoiceEntry<DebugView>, 6> kEntries{
+      {{DebugView::kNone, "none", ""},
+       {DebugView::kMip, "mip", "displayed mip as grey"},
+       {DebugView::kWeight, "weight", "heat map"},
+       {DebugView::kMeshId, "mesh_id", ""},
+       {DebugView::kPageLevel, "page_level", "the ground's pages: red = level shown x 16, green = level wanted x 16"},
+       {DebugView::kPageResidency, "page_residency",
+        "the ground's pages: green = the wanted page, yellow = an ancestor, red = nothing resident"}}};
 };
 
 // How the City Colormap colour is blended with the sampled colour (stream.blend; docs/design/blend.md).
@@ -227,6 +232,21 @@ struct CacheConfig {
   int64_t memory_bytes = 128ll << 20;  // GPU memory the cache's bound sparse pages may use (never exceeded)
 };
 
+// The scene's ground as one huge texture in pages (scene.json "ground", issue 28; docs/design/pages.md).
+struct PagesConfig {
+  bool enabled = true;                // draw and stream the ground when the scene has one
+  int64_t memory_bytes = 64ll << 20;  // GPU memory of the page frames (bordered pages, one per array layer)
+  int64_t per_frame = 16;             // pages requested per frame at most (seed 004's fixed page budget)
+  pages::PageHeuristic heuristic = pages::PageHeuristic::kPixelSum;
+  pages::AncestorOrder order = pages::AncestorOrder::kIntern;
+  bool noise_scaling = false;
+  bool noise_skipping = false;  // order = extern only
+  int64_t locked_levels = 4;    // the coarsest levels are never evicted (seed 004 §4.3.1)
+  pages::DiscardRule discard = pages::DiscardRule::kLru;
+  int64_t needbuffer_step = 4;  // every Nth pixel per axis writes the needbuffer
+  bool reference = false;       // the ground as one ordinary mipmapped texture, nothing streamed (seams check)
+};
+
 // Where texture bytes come from and the tiers in front of it (issue 4, seed 002 §3.2 Meta-texture Server).
 struct StorageConfig {
   std::string origin;                    // empty: scene.dir on the local file system; else a path or http(s):// URL
@@ -258,6 +278,7 @@ struct Config {
   ControllerConfig controller;
   CacheConfig cache;
   StorageConfig storage;
+  PagesConfig pages;
 
   // Relations between fields (filament validateConfig style); messages name the keys.
   Status validate() const;

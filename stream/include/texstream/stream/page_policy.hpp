@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "texstream/common/page_file.hpp"
+#include "texstream/common/page_modes.hpp"  // DiscardRule, PageHeuristic, AncestorOrder
 
 namespace texstream::pages {
 
@@ -45,11 +46,6 @@ class PageTable {
  private:
   PageGeometry g_;
   std::vector<uint32_t> frame_;
-};
-
-enum class DiscardRule : uint8_t {
-  kLru,        // the page unused longest
-  kSeed002P_d  // seed 002 Eq. 4: the largest f (l + 1), f frames since last use, l the level (root 0)
 };
 
 class PageFrameCache {
@@ -86,21 +82,7 @@ struct PageNeedSample {
   float lod = 0;         // wanted level, fractional, in page-file levels (finest = levels - 1)
 };
 
-enum class PageHeuristic : uint8_t {
-  kRandom,         // seed 004: a uniform random priority (no heuristic)
-  kPixelSum,       // seed 004: pixels that want the page
-  kDistance,       // seed 004: 1 / the mean eye distance of those pixels
-  kWeightedPixel,  // seed 004: pixels weighted by nearness to the screen centre
-  kHotSpot,        // seed 004: WeightedPixel around a centre moved to the border the camera turns towards
-  kTexelRatio,     // seed 002 Eq. 3: p_r = r_s / r_t, the screen size over the texture size of the page asked
-};
 std::string_view to_string(PageHeuristic h);
-
-enum class AncestorOrder : uint8_t {
-  kNeededOnly,  // only the pages pixels want (seed 004 §4.2's setting)
-  kIntern,      // a page's missing ancestors before it; otherwise by priority (seed 004 §4.3)
-  kExtern,      // coarser levels before finer ones, by priority within a level (seed 004 §4.3)
-};
 
 struct PagePolicyOptions {
   PageHeuristic heuristic = PageHeuristic::kPixelSum;

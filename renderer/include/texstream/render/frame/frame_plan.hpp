@@ -21,6 +21,8 @@ struct FramePlanOptions {
   // The compaction keeps every mesh with a fragment (τ = 0 instead of stream.tau): a list that names every
   // texture the frame samples (render.load_wanted_before_drawing).
   bool keep_every_mesh = false;
+  // The ground (RenderStack::ground) writes its needbuffer in this frame (read back after it, GroundPages::plan).
+  bool ground_needs = true;
   // "broad_phase", "make_resident", "texture_entries", "draw_list", each as it ends.
   StepHook step;
 };

@@ -11,10 +11,12 @@
 
 #include <functional>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "texstream/common/config.hpp"
 #include "texstream/common/result.hpp"
+#include "texstream/render/cache/ground_pages.hpp"
 #include "texstream/render/cache/texture_cache.hpp"
 #include "texstream/render/frame/scene_passes.hpp"
 #include "texstream/render/scene/broad_phase.hpp"
@@ -37,6 +39,8 @@ struct RenderStackOptions {
   TextureCacheOptions cache;
   ScenePassesOptions passes;
   bool stage_geometry = false;  // SceneGpu copies meshes through staging even on unified memory (tests)
+  // The ground's pages (GroundPages) when the scene has a ground; nullopt: the ground is not drawn.
+  std::optional<GroundPagesOptions> ground;
   // After each part: "vulkan", "texture_cache", "scene_gpu_upload", "passes_and_shaders", "broad_phase_tree"
   // (RunSummary::startup_seconds).
   StepHook stage;
@@ -80,6 +84,9 @@ class RenderStack {
   VulkanContext& context() { return *ctx_; }
   const VulkanContext& context() const { return *ctx_; }
   TextureCache& cache() { return *cache_; }
+  // Null when the scene has no ground or it is not drawn (pages.enabled = false).
+  GroundPages* ground() { return ground_.get(); }
+  const GroundPages* ground() const { return ground_.get(); }
   const TextureCache& cache() const { return *cache_; }
   SceneGpu& scene_gpu() { return *scene_gpu_; }
   const SceneGpu& scene_gpu() const { return *scene_gpu_; }
@@ -100,6 +107,7 @@ class RenderStack {
   const SceneData& scene_;
   std::unique_ptr<VulkanContext> ctx_;
   std::unique_ptr<TextureCache> cache_;
+  std::unique_ptr<GroundPages> ground_;
   std::unique_ptr<SceneGpu> scene_gpu_;
   std::unique_ptr<ShaderCompiler> compiler_;
   std::unique_ptr<ScenePasses> passes_;

@@ -36,6 +36,7 @@ class VulkanContext;
 class ShaderCompiler;
 class TextureCache;
 class SceneGpu;
+class GroundPages;
 
 struct ScenePassesOptions {
   uint32_t width = 960;
@@ -68,7 +69,7 @@ class ScenePasses {
  public:
   static Result<std::unique_ptr<ScenePasses>> create(const VulkanContext& ctx, ShaderCompiler& compiler,
                                                      const ScenePassesOptions& options, const SceneGpu& scene,
-                                                     const TextureCache& cache);
+                                                     const TextureCache& cache, const GroundPages* ground = nullptr);
   void record(VkCommandBuffer cmd, const FrameRecording& frame) const;
   // After the recorded frame's submission completed.
   PassTimes read_pass_times() const;
@@ -88,6 +89,7 @@ class ScenePasses {
   Status create_targets(const VulkanContext& ctx);
   Status create_descriptors(const VulkanContext& ctx, const TextureCache& cache);
   Status create_pipelines(const VulkanContext& ctx, ShaderCompiler& compiler);
+  Status create_ground_descriptors(const VulkanContext& ctx);
 
   ScenePassesOptions options_;
   const SceneGpu& scene_;
@@ -118,6 +120,15 @@ class ScenePasses {
   UniquePipeline meta_reduce_pipeline_;
   UniquePipeline compact_pipeline_;
   UniquePipeline compact_to_host_pipeline_;
+  // The ground's pages (scene.json "ground"; null without): set 1, its layout and its two pipelines.
+  const GroundPages* ground_ = nullptr;
+  UniqueSampler ground_sampler_;
+  UniqueDescriptorSetLayout ground_set_layout_;
+  UniqueDescriptorPool ground_pool_;
+  VkDescriptorSet ground_set_ = VK_NULL_HANDLE;
+  UniquePipelineLayout ground_layout_;
+  UniquePipeline ground_prepass_pipeline_;
+  UniquePipeline ground_pipeline_;
 };
 
 }  // namespace texstream::render

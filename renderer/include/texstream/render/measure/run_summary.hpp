@@ -56,6 +56,13 @@ struct RunSummary {
   double avg_weighted_latency_ms = 0;       // t_w (Eq. 5)
   uint64_t load_time_limited_frames = 0;    // frames whose completion intake hit controller.load_time_ms
   uint64_t controller_rejected_frames = 0;  // frame latencies the controller refused (non-finite, negative)
+  // The ground's pages (scene.json "ground", issue 28); has_ground false: none drawn.
+  struct Ground {
+    bool has_ground = false;
+    uint64_t pages_requested = 0, pages_uploaded = 0, pages_failed = 0, pages_refused = 0, evictions = 0;
+    uint64_t frames = 0, frames_used = 0;  // page frames of the cache, and those holding a page at the end
+    uint64_t needs_last_frame = 0;         // needbuffer texels that saw the ground in the last frame
+  } ground;
   // Start-up, stage by stage in order (seconds of wall time): what grows with the scene's size.
   std::vector<std::pair<std::string, double>> startup_seconds;
 

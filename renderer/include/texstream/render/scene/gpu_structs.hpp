@@ -10,6 +10,8 @@ namespace texstream::gpu {
 
 static_assert(sizeof(vec4) == 16 && sizeof(uvec4) == 16 && sizeof(mat4) == 64);
 
+static_assert(sizeof(GroundUniforms) == 64 && offsetof(GroundUniforms, flags) == 48);
+static_assert(sizeof(PageNeedGpu) == 16 && offsetof(PageNeedGpu, distance) == 12);
 static_assert(sizeof(FrameUniforms) == 80);
 static_assert(offsetof(FrameUniforms, camera_forward) == 0);
 static_assert(offsetof(FrameUniforms, params) == 16);

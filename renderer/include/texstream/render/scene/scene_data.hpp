@@ -14,6 +14,7 @@
 #include <span>
 #include <vector>
 
+#include "texstream/common/page_file.hpp"
 #include "texstream/common/result.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texstream/protocol/completion_check.hpp"
@@ -29,6 +30,9 @@ struct SceneData {
   std::vector<uint32_t> colormap;  // RGBA8 sRGB, one per texture
   std::vector<uint32_t> sampling;  // sampling.bin's flags, one per texture, or empty: all clamped and opaque
   std::vector<scene::MeshTransform> transforms;  // transforms.bin, one per mesh, or empty: all identity
+  // The ground's page file (header and index only: the pages come from the server), when scene.json has a
+  // "ground"; errors name the file.
+  std::shared_ptr<const pages::PageFile> ground_pages;
 
   // Reads and cross-checks everything; errors name the file and the record.
   static Result<SceneData> load(const std::filesystem::path& dir);
