@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <limits>
 #include <string>
@@ -141,18 +142,21 @@ Result<GroundPlan> plan_ground(const CityLayout& city, double texel_m) {
   } else {
     if (!std::isfinite(texel_m) || texel_m < 0)
       return make_error(ErrorCode::kInvalidArgument, "--ground-texel-m: must be a positive number of metres");
+    char what[64];
+    std::snprintf(what, sizeof what, "--ground-texel-m %g: ", texel_m);
     const double px = std::round(kBlockPitchM / texel_m);
-    if (px < 1 || px > kGroundMaxBlockPx)
-      return make_error(ErrorCode::kInvalidArgument, "--ground-texel-m " + std::to_string(texel_m) + ": a block (" +
-                                                         std::to_string(kBlockPitchM) + " m) must be 1.." +
-                                                         std::to_string(kGroundMaxBlockPx) + " texels across");
+    if (px < 1 || px > kGroundMaxBlockPx) {
+      char why[128];
+      std::snprintf(why, sizeof why, "%.4g texels across a %g m block, not 1..%u", kBlockPitchM / texel_m, kBlockPitchM,
+                    kGroundMaxBlockPx);
+      return make_error(ErrorCode::kInvalidArgument, std::string(what) + why);
+    }
     plan.block_px = static_cast<uint32_t>(px);
     if (uint64_t{cells} * plan.block_px > pages::kMaxVirtualExtent)
       return make_error(ErrorCode::kInvalidArgument,
-                        "--ground-texel-m " + std::to_string(texel_m) + ": the city's ground (" +
-                            std::to_string(cells) + " blocks across) would be " +
-                            std::to_string(uint64_t{cells} * plan.block_px) + " texels a side, more than the page " +
-                            "file's " + std::to_string(pages::kMaxVirtualExtent));
+                        std::string(what) + "the city's ground (" + std::to_string(cells) +
+                            " blocks across) would be " + std::to_string(uint64_t{cells} * plan.block_px) +
+                            " texels a side, more than a page file's " + std::to_string(pages::kMaxVirtualExtent));
   }
   plan.metres_per_texel = kBlockPitchM / plan.block_px;
   return plan;
