@@ -155,8 +155,8 @@ TexelFormat texture_format(const GeneratorOptions& opt, uint32_t id) {
 
 namespace {
 
-// `paint_id`: the surface's index in the layout, which seeds its painting (a texture looks the same whether the
-// blocks' grounds are meshes or pages, though the ids of the textures after the first ground differ).
+// `paint_id`: the surface's index in the layout, which seeds its painting, so that a texture looks the same whether
+// the blocks' grounds are meshes or pages (with pages its id is smaller: the grounds are left out).
 Status write_texture(const GeneratorOptions& opt, const Surface& s, uint32_t id, uint32_t paint_id, WorkerState& ws,
                      std::vector<uint32_t>& colormap) {
   const TexelFormat format = texture_format(opt, id);
