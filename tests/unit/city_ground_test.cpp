@@ -14,6 +14,7 @@
 #include "city_ground.hpp"
 #include "city_layout.hpp"
 #include "scene_generator.hpp"
+#include "texstream/common/mesh_index.hpp"
 #include "texstream/common/page_file.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texture_painter.hpp"
@@ -202,6 +203,10 @@ TEST_F(CityGroundTest, PagesLeaveTheOtherTexturesAsTheMeshesSceneHasThem) {
     ++id;
   }
   EXPECT_EQ(id, p->texture_count);
+  // The fly-through follows the blocks, which both scenes share; the broad phase's tree is that of the meshes left.
+  EXPECT_EQ(hash_file(pages.out / "camera_path.txt"), hash_file(meshes.out / "camera_path.txt"));
+  auto index = scene::map_mesh_index(pages.out, p->mesh_count);
+  EXPECT_TRUE(index.ok()) << index.error().message;
 }
 
 TEST_F(CityGroundTest, PageFileBytesDoNotDependOnThreads) {
