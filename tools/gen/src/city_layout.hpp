@@ -35,7 +35,8 @@ struct Surface {
   SurfaceKind kind;
   BuildingClass cls;
   uint8_t grid;     // subdivisions per side (1: one quad, 2 triangles)
-  uint8_t variant;  // kind-specific: for kGround 1 = park; for kFacade 1 = a setback tier's wall
+  uint8_t variant;  // kind-specific: for kGround 1 = park, 2 = open land beyond the blocks (city_ground.hpp); for
+                    // kFacade 1 = a setback tier's wall
 };
 
 struct Block {

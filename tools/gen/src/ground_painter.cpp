@@ -1,7 +1,8 @@
 // Block grounds: each block's ground reaches to the centre lines of its streets, so neighbouring grounds
 // join into a street network: asphalt with dashed centre lines and zebra crossings, curbs, paved sidewalks,
-// and inside the block a courtyard (paving, lawns, sand) or a park with paths, all with trees.
-// Image row 0 is the block's north edge.
+// and inside the block a courtyard (paving, lawns, sand) or a park with paths, all with trees; beyond the city's
+// blocks (variant 2, only in the city's ground in pages: city_ground.hpp) the grid goes on around open land.
+// Image row 0 is the block's north edge. Only the canvas's band of rows is painted (paint_common.hpp Canvas).
 #include <cmath>
 
 #include "painters.hpp"
@@ -18,6 +19,7 @@ constexpr Rgb kPaving{0.66f, 0.63f, 0.58f};
 constexpr Rgb kGrass{0.33f, 0.45f, 0.22f};
 constexpr Rgb kGravelPath{0.72f, 0.67f, 0.55f};
 constexpr Rgb kSand{0.80f, 0.72f, 0.55f};
+constexpr Rgb kSoil{0.48f, 0.40f, 0.29f};
 
 void paint_trees(const PaintContext& ctx, Canvas& cv, int count, float lo_m, float hi_m) {
   for (int k = 0; k < count; ++k) {
@@ -55,7 +57,7 @@ void paint_trees(const PaintContext& ctx, Canvas& cv, int count, float lo_m, flo
 void paint_ground(const PaintContext& ctx, Canvas& cv) {
   const float tu = ctx.texel_u, tv = ctx.texel_v;
   const float size = ctx.surface.width_m;
-  const bool park = ctx.surface.variant == 1;
+  const bool park = ctx.surface.variant == 1, open_land = ctx.surface.variant == 2;
   const float street = static_cast<float>(kStreetWidthM) / 2, walk = street + static_cast<float>(kSidewalkM);
   const float line = line_m(0.12f, std::max(tu, tv), 0.6f);
   const float curb = line_m(0.25f, std::max(tu, tv), 1.0f);
@@ -65,7 +67,7 @@ void paint_ground(const PaintContext& ctx, Canvas& cv) {
   const NoiseField fine(ctx.key ^ 0x33, cv.width, cv.height, 0.8f / tu);
   const float path_a = ctx.rng.uniform(0.2f, 0.8f) * size, path_b = ctx.rng.uniform(0.2f, 0.8f) * size;
 
-  for (uint32_t y = 0; y < cv.height; ++y) {
+  for (uint32_t y = cv.first_row; y < cv.row_end(); ++y) {
     const float v = size - (static_cast<float>(y) + 0.5f) * tv;  // metres north of the block's south edge
     for (uint32_t x = 0; x < cv.width; ++x) {
       const float u = (static_cast<float>(x) + 0.5f) * tu;
@@ -89,6 +91,11 @@ void paint_ground(const PaintContext& ctx, Canvas& cv) {
       } else if (e < walk) {
         const bool joint = std::fmod(u, slab) < tu * 0.9f || std::fmod(v, slab) < tv * 0.9f;
         col = kSidewalk * ((joint ? 0.8f : 0.95f + 0.1f * fine.at(x, y)) + 0.05f * g);
+      } else if (open_land) {
+        // Meadow with patches of bare soil, no paving: the outskirts the grid has not built on yet.
+        const float z = zones.at(x, y);
+        col = z < 0.7f ? kGrass * (0.85f + 0.3f * fine.at(x, y) + 0.15f * stains.at(x, y) + 0.08f * g)
+                       : kSoil * (0.9f + 0.15f * fine.at(x, y) + 0.06f * g);
       } else if (park) {
         const float d1 = std::fabs(u - v - (path_a - size / 2)) * 0.7071f,
                     d2 = std::fabs(u + v - path_b - size / 2) * 0.7071f;
@@ -109,8 +116,10 @@ void paint_ground(const PaintContext& ctx, Canvas& cv) {
     }
   }
   const float interior = size - 2 * walk;
-  paint_trees(ctx, cv, park ? static_cast<int>(interior * interior / 120.0f) : ctx.rng.range(2, 10), walk + 1,
-              size - walk - 1);
+  const int trees = park        ? static_cast<int>(interior * interior / 120.0f)
+                    : open_land ? ctx.rng.range(0, 4)
+                                : ctx.rng.range(2, 10);
+  paint_trees(ctx, cv, trees, walk + 1, size - walk - 1);
 }
 
 }  // namespace texstream::gen

@@ -45,7 +45,26 @@ int main(int argc, char** argv) {
   app.add_option("--atlas-cell-m", atlas_cell_m, "With --atlas: grid cell side in metres")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
+  std::string ground = "meshes";
+  app.add_option("--ground", ground,
+                 "The blocks' grounds: one textured mesh each (meshes), or the whole city's ground as one huge "
+                 "texture in pages, ground.tspages (pages; BC1, or RGBA8 with --format rgba8)")
+      ->check(CLI::IsMember({"meshes", "pages"}))
+      ->capture_default_str();
+  app.add_option("--ground-texel-m", opt.ground_texel_m,
+                 "With --ground pages: metres per texel of the ground's finest level, rounded to a whole number of "
+                 "texels per 120 m block (default: 0.25, coarser where the image would pass 16384 texels a side)")
+      ->check(CLI::PositiveNumber);
   CLI11_PARSE(app, argc, argv);
+  opt.ground = ground == "pages" ? gen::GroundMode::kPages : gen::GroundMode::kMeshes;
+  if (opt.ground_texel_m != 0 && opt.ground != gen::GroundMode::kPages) {
+    std::fprintf(stderr, "texstream-gen: error: --ground-texel-m: only with --ground pages\n");
+    return 2;
+  }
+  if (opt.ground == gen::GroundMode::kPages && atlas_px) {
+    std::fprintf(stderr, "texstream-gen: error: --ground pages: not with --atlas (texstream-atlas keeps no ground)\n");
+    return 2;
+  }
   opt.mixed_formats = format == "mixed";
   if (!opt.mixed_formats) opt.format = *texel_format_from_string(format);
   if (origin.size() == 2) {
@@ -57,6 +76,12 @@ int main(int argc, char** argv) {
   ProgressBar bar;
   gen::ProgressFn progress;
   if (show_progress) progress = [&bar](uint64_t done, uint64_t total) { bar.update(done, total); };
+  ProgressBar ground_rows("ground rows"), ground_pages("ground pages");
+  gen::GroundProgressFn ground_progress;
+  if (show_progress)
+    ground_progress = [&](gen::GroundPhase phase, uint64_t done, uint64_t total) {
+      (phase == gen::GroundPhase::kPaint ? ground_rows : ground_pages).update(done, total);
+    };
 
   const auto start = std::chrono::steady_clock::now();
   // --atlas: the city is generated beside --out first, then packed into --out (texstream-atlas's engine).
@@ -75,7 +100,7 @@ int main(int argc, char** argv) {
     opt.out = abs.parent_path() / name;
     opt.force = true;
   }
-  auto stats = gen::generate_scene(opt, progress);
+  auto stats = gen::generate_scene(opt, progress, ground_progress);
   if (!stats) {
     std::fprintf(stderr, "texstream-gen: error: %s\n", stats.error().message.c_str());
     return 1;
@@ -131,5 +156,12 @@ int main(int argc, char** argv) {
       static_cast<unsigned long long>(stats->textures), static_cast<unsigned long long>(stats->meshes),
       static_cast<unsigned long long>(stats->triangles), static_cast<double>(stats->bytes_written) / 1e6,
       opt.out.c_str(), seconds, static_cast<double>(stats->textures) / seconds, threads, format.c_str());
+  if (stats->ground_width != 0)
+    std::printf("ground: %llu block grounds -> %s, %ux%u texels at %.4g m/texel (%s), %llu pages, %.1f MB, %.2f s\n",
+                static_cast<unsigned long long>(stats->ground_surfaces), gen::kGroundPagesFile, stats->ground_width,
+                stats->ground_height, stats->ground_metres_per_texel,
+                std::string(to_string(gen::ground_format(opt))).c_str(),
+                static_cast<unsigned long long>(stats->ground_pages), static_cast<double>(stats->ground_bytes) / 1e6,
+                stats->ground_seconds);
   return 0;
 }

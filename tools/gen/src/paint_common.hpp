@@ -11,13 +11,17 @@
 
 namespace texstream::gen {
 
-// Mip 0 being painted: width x height RGBA8 texels, row 0 at the top, R in the low byte.
+// Mip 0 being painted: width x height RGBA8 texels, row 0 at the top, R in the low byte. `texels` holds rows
+// [first_row, row_end()) of it: the whole image, or a band of it (the ground painter paints the city's ground in
+// pages band by band, city_ground.hpp); painting outside the band is clipped by fill_rect and must not be set.
 struct Canvas {
   uint32_t width;
   uint32_t height;
   std::span<uint32_t> texels;
+  uint32_t first_row = 0;
 
-  void set(uint32_t x, uint32_t y, Rgb c) { texels[size_t{y} * width + x] = pack_rgba8(c); }
+  uint32_t row_end() const { return first_row + static_cast<uint32_t>(texels.size() / width); }
+  void set(uint32_t x, uint32_t y, Rgb c) { texels[size_t{y - first_row} * width + x] = pack_rgba8(c); }
 };
 
 // Per-texel grain in [-1, 1): one hash per texel.
@@ -60,15 +64,15 @@ class NoiseField {
 // Fills an axis-aligned rectangle [x0, x1) x [y0, y1) of texels (clipped to the canvas) with `shade(x, y)`.
 template <class F>
 void fill_rect(Canvas& c, int x0, int y0, int x1, int y1, F&& shade) {
-  const int cx0 = std::max(x0, 0), cy0 = std::max(y0, 0);
-  const int cx1 = std::min(x1, static_cast<int>(c.width)), cy1 = std::min(y1, static_cast<int>(c.height));
+  const int cx0 = std::max(x0, 0), cy0 = std::max(y0, static_cast<int>(c.first_row));
+  const int cx1 = std::min(x1, static_cast<int>(c.width)), cy1 = std::min(y1, static_cast<int>(c.row_end()));
   for (int y = cy0; y < cy1; ++y)
     for (int x = cx0; x < cx1; ++x) c.set(static_cast<uint32_t>(x), static_cast<uint32_t>(y), shade(x, y));
 }
 
 // Reads a canvas texel back as a colour (for painting over what is there, e.g. shadows).
 inline Rgb get_rgb(const Canvas& c, uint32_t x, uint32_t y) {
-  const uint32_t v = c.texels[size_t{y} * c.width + x];
+  const uint32_t v = c.texels[size_t{y - c.first_row} * c.width + x];
   return rgb8(static_cast<int>(v & 0xff), static_cast<int>((v >> 8) & 0xff), static_cast<int>((v >> 16) & 0xff));
 }
 

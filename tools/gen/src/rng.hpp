@@ -23,7 +23,8 @@ constexpr uint64_t hash3(uint64_t a, uint64_t b, uint64_t c) { return hash_combi
 constexpr float unit_float(uint64_t h) { return static_cast<float>(h >> 40) * (1.0f / 16777216.0f); }
 
 // Streams: independent random sequences derived from one seed.
-enum class Stream : uint64_t { kLayout = 1, kBuilding = 2, kTexture = 3, kCamera = 4, kBlock = 5 };
+// kOpenLand: the grid cells without a block in the city's ground in pages (city_ground.hpp), by cell.
+enum class Stream : uint64_t { kLayout = 1, kBuilding = 2, kTexture = 3, kCamera = 4, kBlock = 5, kOpenLand = 6 };
 
 // A splitmix64 sequence started at hash(seed, stream, id). Cheap to create; one per building or texture.
 class Rng {

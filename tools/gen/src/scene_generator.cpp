@@ -11,11 +11,14 @@
 #include <limits>
 #include <mutex>
 #include <optional>
+#include <span>
+#include <string>
 #include <thread>
 #include <vector>
 
 #include "bc1_encoder.hpp"
 #include "camera_path_builder.hpp"
+#include "city_ground.hpp"
 #include "city_layout.hpp"
 #include "mip_chain.hpp"
 #include "rng.hpp"
@@ -62,8 +65,9 @@ Status prepare_output(const fs::path& out, bool force) {
     if (!force)
       return make_error(ErrorCode::kInvalidArgument,
                         out.string() + ": folder is not empty (pass --force to overwrite a previous scene)");
-    for (const char* name :
-         {"scene.json", "meshes.bin", "mesh_index.bin", "textures.bin", "colormap.bin", "camera_path.txt"}) {
+    const std::string partial_ground = std::string(kGroundPagesFile) + ".partial";
+    for (const char* name : {"scene.json", "meshes.bin", "mesh_index.bin", "textures.bin", "colormap.bin",
+                             "camera_path.txt", kGroundPagesFile, partial_ground.c_str()}) {
       fs::remove(out / name, ec);
       if (ec) return make_error(ErrorCode::kIo, (out / name).string() + ": cannot remove: " + ec.message());
     }
@@ -151,12 +155,14 @@ TexelFormat texture_format(const GeneratorOptions& opt, uint32_t id) {
 
 namespace {
 
-Status write_texture(const GeneratorOptions& opt, const Surface& s, uint32_t id, WorkerState& ws,
+// `paint_id`: the surface's index in the layout, which seeds its painting, so that a texture looks the same whether
+// the blocks' grounds are meshes or pages (with pages its id is smaller: the grounds are left out).
+Status write_texture(const GeneratorOptions& opt, const Surface& s, uint32_t id, uint32_t paint_id, WorkerState& ws,
                      std::vector<uint32_t>& colormap) {
   const TexelFormat format = texture_format(opt, id);
   const uint32_t w = s.width_px, h = s.height_px, levels = full_mip_count(w, h);
   ws.chain.resize(mip_chain_offset(TexelFormat::kRgba8, w, h, levels) / 4);
-  paint_texture(opt.seed, id, s, std::span(ws.chain).first(size_t{w} * h));
+  paint_texture(opt.seed, paint_id, s, std::span(ws.chain).first(size_t{w} * h));
   build_mip_chain(w, h, ws.chain);
   colormap[id] = ws.chain.back();  // the 1x1 mip: the texture's average colour (seed 000 §3.7)
 
@@ -185,8 +191,9 @@ Status write_texture(const GeneratorOptions& opt, const Surface& s, uint32_t id,
   return ok_status();
 }
 
-Status write_textures(const GeneratorOptions& opt, const CityLayout& city, std::vector<uint32_t>& colormap,
-                      uint64_t& bytes, const ProgressFn& progress) {
+// `paint_ids[k]`: texture k's index in the layout; empty: k itself.
+Status write_textures(const GeneratorOptions& opt, const CityLayout& city, std::span<const uint32_t> paint_ids,
+                      std::vector<uint32_t>& colormap, uint64_t& bytes, const ProgressFn& progress) {
   const uint64_t n = city.surfaces.size();
   const unsigned threads =
       std::max(1u, std::min<unsigned>(opt.threads, static_cast<unsigned>((n + kChunk - 1) / kChunk)));
@@ -204,7 +211,8 @@ Status write_textures(const GeneratorOptions& opt, const CityLayout& city, std::
       if (begin >= n) return;
       const uint64_t end = std::min(n, begin + kChunk);
       for (uint64_t id = begin; id < end; ++id) {
-        auto st = write_texture(opt, city.surfaces[id], static_cast<uint32_t>(id), ws, colormap);
+        const auto tid = static_cast<uint32_t>(id);
+        auto st = write_texture(opt, city.surfaces[id], tid, paint_ids.empty() ? tid : paint_ids[id], ws, colormap);
         if (!st.ok()) {
           std::lock_guard lock(error_mutex);
           if (!first_error) first_error = st.error();
@@ -225,9 +233,29 @@ Status write_textures(const GeneratorOptions& opt, const CityLayout& city, std::
   return ok_status();
 }
 
+// The layout without its blocks' grounds (--ground pages) and, per remaining surface, its index in the layout.
+CityLayout without_grounds(const CityLayout& city, std::vector<uint32_t>& paint_ids) {
+  CityLayout out;
+  out.blocks = city.blocks;
+  out.block_pitch_m = city.block_pitch_m;
+  out.street_width_m = city.street_width_m;
+  out.building_count = city.building_count;
+  for (size_t k = 0; k < city.surfaces.size(); ++k) {
+    if (city.surfaces[k].kind == SurfaceKind::kGround) continue;
+    out.surfaces.push_back(city.surfaces[k]);
+    paint_ids.push_back(static_cast<uint32_t>(k));
+  }
+  return out;
+}
+
 }  // namespace
 
-Result<GeneratorStats> generate_scene(const GeneratorOptions& options, const ProgressFn& progress) {
+TexelFormat ground_format(const GeneratorOptions& opt) {
+  return !opt.mixed_formats && opt.format == TexelFormat::kRgba8 ? TexelFormat::kRgba8 : TexelFormat::kBc1;
+}
+
+Result<GeneratorStats> generate_scene(const GeneratorOptions& options, const ProgressFn& progress,
+                                      const GroundProgressFn& ground_progress) {
   GeneratorOptions opt = options;
   if (opt.texture_count == 0 || opt.texture_count > std::numeric_limits<uint32_t>::max())
     return make_error(ErrorCode::kInvalidArgument,
@@ -236,12 +264,28 @@ Result<GeneratorStats> generate_scene(const GeneratorOptions& options, const Pro
   for (double c : opt.origin)
     if (!std::isfinite(c) || std::fabs(c) > 1e8)
       return make_error(ErrorCode::kInvalidArgument, "--origin: coordinates must be finite and within 1e8 m");
+  const CityLayout layout = generate_layout(opt.seed, opt.texture_count);
+  std::optional<GroundPlan> ground;
+  std::vector<uint32_t> paint_ids;  // --ground pages: texture k is layout surface paint_ids[k]
+  std::optional<CityLayout> without;
+  if (opt.ground == GroundMode::kPages) {
+    auto plan = plan_ground(layout, opt.ground_texel_m);
+    if (!plan.ok()) return plan.error();
+    ground = *plan;
+    without = without_grounds(layout, paint_ids);
+    if (without->surfaces.empty())
+      return make_error(ErrorCode::kInvalidArgument,
+                        "--ground pages: the city of " + std::to_string(opt.texture_count) +
+                            " textures is one block's ground alone, which leaves no mesh (ask for more textures)");
+  }
+  // What becomes meshes and textures: the whole layout, or the layout without its grounds.
+  const CityLayout& city = without ? *without : layout;
   TS_TRY(prepare_output(opt.out, opt.force));
 
-  const CityLayout city = generate_layout(opt.seed, opt.texture_count);
   GeneratorStats stats;
   stats.textures = city.surfaces.size();
   stats.meshes = city.surfaces.size();
+  stats.ground_surfaces = layout.surfaces.size() - city.surfaces.size();
 
   scene::Manifest manifest;
   manifest.name = "texstream-gen city";
@@ -252,6 +296,15 @@ Result<GeneratorStats> generate_scene(const GeneratorOptions& options, const Pro
   manifest.origin = opt.origin;
   {
     const scene::MeshData meshes = build_meshes(city, opt.origin, manifest.bounds_min, manifest.bounds_max);
+    if (ground) {  // the scene's extent includes its ground
+      const double lo[3] = {ground->west_m(), ground->south_m(), ground->z_m};
+      const double hi[3] = {lo[0] + ground->width() * ground->metres_per_texel,
+                            lo[1] + ground->height() * ground->metres_per_texel, ground->z_m};
+      for (size_t a = 0; a < 3; ++a) {
+        manifest.bounds_min[a] = std::min(manifest.bounds_min[a], opt.origin[a] + lo[a]);
+        manifest.bounds_max[a] = std::max(manifest.bounds_max[a], opt.origin[a] + hi[a]);
+      }
+    }
     stats.vertices = meshes.vertices.size();
     stats.triangles = meshes.indices.size() / 3;
     TS_TRY(scene::write_meshes(opt.out, meshes));
@@ -285,7 +338,23 @@ Result<GeneratorStats> generate_scene(const GeneratorOptions& options, const Pro
     if (ec) return make_error(ErrorCode::kIo, dir.string() + ": cannot create: " + ec.message());
   }
   std::vector<uint32_t> colormap(stats.textures);
-  TS_TRY(write_textures(opt, city, colormap, stats.texture_bytes, progress));
+  TS_TRY(write_textures(opt, city, paint_ids, colormap, stats.texture_bytes, progress));
+  if (ground) {
+    // The whole layout: each ground is painted as its texture would have been (seeded by its layout index).
+    auto baked = bake_city_ground(layout, *ground, opt.seed, ground_format(opt), opt.threads,
+                                  opt.out / kGroundPagesFile, ground_progress);
+    if (!baked.ok()) return baked.error();
+    manifest.ground = scene::GroundPages{
+        kGroundPagesFile,
+        {opt.origin[0] + ground->west_m(), opt.origin[1] + ground->south_m(), opt.origin[2] + ground->z_m},
+        ground->metres_per_texel};
+    stats.ground_width = ground->width();
+    stats.ground_height = ground->height();
+    stats.ground_metres_per_texel = ground->metres_per_texel;
+    stats.ground_pages = baked->stored_pages;
+    stats.ground_bytes = baked->file_bytes;
+    stats.ground_seconds = baked->seconds;
+  }
   TS_TRY(scene::write_colormap(opt.out, colormap));
   TS_TRY(scene::write_manifest(opt.out, manifest));  // last: its presence marks a complete scene
 
