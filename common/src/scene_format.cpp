@@ -341,8 +341,8 @@ Result<Manifest> read_manifest(const fs::path& dir) {
     const fs::path rel(ground.pages);
     const bool escapes = std::any_of(rel.begin(), rel.end(), [](const fs::path& part) { return part == ".."; });
     if (ground.pages.empty() || rel.is_absolute() || escapes)
-      return make_error(ErrorCode::kCorrupt, gwhat + ": key 'pages' must be a path inside the scene folder, not '" +
-                                                 ground.pages + "'");
+      return make_error(ErrorCode::kCorrupt,
+                        gwhat + ": key 'pages' must be a path inside the scene folder, not '" + ground.pages + "'");
     TS_TRY(get_vec3(*g, "origin", ground.origin, gwhat));
     TS_TRY(get_field(*g, "metres_per_texel", ground.metres_per_texel, gwhat));
     if (!std::isfinite(ground.metres_per_texel) || ground.metres_per_texel <= 0)
@@ -368,9 +368,8 @@ Status write_manifest(const fs::path& dir, const Manifest& m) {
   j["bounds_max"] = m.bounds_max;
   j["camera_path"] = m.camera_path;
   if (m.ground) {
-    j["ground"] = {{"pages", m.ground->pages},
-                   {"origin", m.ground->origin},
-                   {"metres_per_texel", m.ground->metres_per_texel}};
+    j["ground"] = {
+        {"pages", m.ground->pages}, {"origin", m.ground->origin}, {"metres_per_texel", m.ground->metres_per_texel}};
   }
   const std::string text = j.dump(2) + "\n";
   auto out = OutputFile::create(dir / kManifestFile);

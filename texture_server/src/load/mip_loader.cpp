@@ -18,6 +18,7 @@ CompletionRecord make_completion(const LoadRequest& request, CompletionStatus st
   c.texture_id = request.texture.value;
   c.mip_level = request.mip.value;
   c.generation = request.generation.value;
+  c.request_kind = static_cast<uint32_t>(RequestKind::kLoad);
   return c;
 }
 
