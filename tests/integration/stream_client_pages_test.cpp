@@ -16,6 +16,7 @@
 #include <thread>
 #include <vector>
 
+#include "../support/memory_page_file.hpp"
 #include "../support/patience.hpp"
 #include "../support/unique_name.hpp"
 #include "texstream/protocol/checksum.hpp"
@@ -26,38 +27,8 @@ namespace texstream {
 namespace {
 
 using namespace std::chrono_literals;
+using test::MemoryPageFile;
 using test::unique_name;
-
-// A two-level page file in memory: 16x16 RGBA8 in 8-texel pages without borders: the root and its 4 children,
-// 256 bytes each, every byte of page i equal to (i * 16 + offset) & 0xff.
-struct MemoryPageFile {
-  std::vector<std::byte> bytes;
-  std::shared_ptr<const pages::PageFile> file;
-
-  MemoryPageFile() {
-    auto g = pages::PageGeometry::make(TexelFormat::kRgba8, 16, 16, 8, 0, pages::PageWrap::kClamp, "memory");
-    EXPECT_TRUE(g.ok());
-    const pages::PageFileHeader h = pages::make_page_file_header(*g, 5);
-    bytes.resize(h.data_offset + 5 * g->page_bytes());
-    std::memcpy(bytes.data(), &h, sizeof h);
-    for (uint64_t i = 0; i < 5; ++i) {
-      const pages::PageIndexEntry e{h.data_offset + i * g->page_bytes(), static_cast<uint32_t>(g->page_bytes()), 1.0f};
-      std::memcpy(bytes.data() + h.index_offset + i * sizeof e, &e, sizeof e);
-      for (uint64_t b = 0; b < g->page_bytes(); ++b) bytes[e.offset + b] = std::byte((i * 16 + b) & 0xff);
-    }
-    const pages::PageFile::ReadAt read = [this](std::span<std::byte> out, uint64_t offset) -> Result<uint64_t> {
-      std::memcpy(out.data(), bytes.data() + offset, out.size());
-      return out.size();
-    };
-    auto f = pages::PageFile::load(read, bytes.size(), "memory");
-    EXPECT_TRUE(f.ok()) << f.error().message;
-    file = std::make_shared<const pages::PageFile>(std::move(f).value());
-  }
-  std::span<const std::byte> page(pages::PageId p) const {
-    const auto e = file->entry(p);
-    return std::span<const std::byte>(bytes).subspan(e->offset, e->bytes);
-  }
-};
 
 Config small_config(const std::string& segment) {
   Config c;
@@ -203,6 +174,7 @@ class NoMips : public stream::MipSink {
 class StreamClientPages : public ::testing::Test {
  protected:
   void start(stream::StreamClientOptions o = {}) {
+    ASSERT_NE(pages_.file, nullptr);  // a two-level file: the root and its 4 children
     config_ = small_config(unique_name("pages"));
     o.spawn_server = false;
     auto c = stream::StreamClient::start(config_, {{16, 16, 5, TexelFormat::kRgba8}}, "/nonexistent-scene", "", {}, o);

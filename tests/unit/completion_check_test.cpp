@@ -1,9 +1,7 @@
 // Every field of a completion the renderer uses is checked; each bad value is rejected with its name.
 #include <gtest/gtest.h>
 
-#include <cstring>
-#include <vector>
-
+#include "../support/memory_page_file.hpp"
 #include "texstream/protocol/completion_check.hpp"
 
 namespace texstream {
@@ -105,24 +103,6 @@ TEST(CompletionCheck, RequestKindMustBeAMipOrAPage) {
   expect_rejected(r, "page_x");
 }
 
-// A one-level page file in memory: the root page only, 8x8 RGBA8 with no border (256 bytes).
-pages::PageFile tiny_page_file() {
-  auto g = pages::PageGeometry::make(TexelFormat::kRgba8, 8, 8, 8, 0, pages::PageWrap::kClamp, "tiny");
-  EXPECT_TRUE(g.ok());
-  const pages::PageFileHeader h = pages::make_page_file_header(*g, 1);
-  std::vector<std::byte> file(h.data_offset + g->page_bytes());
-  std::memcpy(file.data(), &h, sizeof h);
-  const pages::PageIndexEntry e{h.data_offset, static_cast<uint32_t>(g->page_bytes()), 0.0f};
-  std::memcpy(file.data() + h.index_offset, &e, sizeof e);
-  const pages::PageFile::ReadAt read = [&](std::span<std::byte> out, uint64_t offset) -> Result<uint64_t> {
-    std::memcpy(out.data(), file.data() + offset, out.size());
-    return out.size();
-  };
-  auto f = pages::PageFile::load(read, file.size(), "tiny");
-  EXPECT_TRUE(f.ok()) << f.error().message;
-  return std::move(f).value();
-}
-
 CompletionRecord good_page_record() {
   CompletionRecord r{};
   r.status = static_cast<uint32_t>(CompletionStatus::kOk);
@@ -150,7 +130,9 @@ void expect_page_rejected(const pages::PageFile& file, const CompletionRecord& r
 }
 
 TEST(CompletionCheck, PageRecordIsCheckedAgainstThePageFile) {
-  const pages::PageFile file = tiny_page_file();
+  const test::MemoryPageFile memory(1);  // the root page only, 8x8 RGBA8 (256 bytes)
+  ASSERT_NE(memory.file, nullptr);
+  const pages::PageFile& file = *memory.file;
   auto c = check_completion(good_page_record(), 4, 1 << 20);
   ASSERT_TRUE(c.ok()) << c.error().message;
   EXPECT_EQ(c->kind, RequestKind::kLoadPage);
