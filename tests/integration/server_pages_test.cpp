@@ -4,7 +4,8 @@
 // read by the dispatcher and local workers, or from a slow origin by the remote-fetch workers;
 // every bad request (file index, level, x/y outside the quadtree, a page not stored, a scene without
 // "ground") is answered with a failure status and the server goes on serving; a page file that scene.json
-// names but that is missing or damaged stops the server at start, naming the file.
+// names but that is missing or damaged stops the server at start, naming the file. And end to end: the
+// StreamClient takes every page from the real server and accepts each answer under its own checks.
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -22,6 +23,7 @@
 #include "texstream/protocol/checksum.hpp"
 #include "texstream/server/storage/posix_storage.hpp"
 #include "texstream/server/storage/slow_storage.hpp"
+#include "texstream/stream/stream_client.hpp"
 
 namespace fs = std::filesystem;
 
@@ -214,6 +216,88 @@ TEST_F(ServerPagesTest, AMissingOrDamagedGroundStopsTheServerAtStartNamingTheFil
   h = ServerHarness::start(dir_, ServerConfig{}, storage_, error);
   EXPECT_EQ(h, nullptr);
   EXPECT_NE(error.find("ground.tspages"), std::string::npos) << error;
+}
+
+// The renderer's side as it will run: StreamClient (validating against its own PageFile) and a PageSink.
+class CollectingPageSink : public stream::PageSink {
+ public:
+  std::span<std::byte> reserve_page(uint32_t, pages::PageId, uint64_t bytes) override {
+    buffer.resize(bytes);
+    return buffer;
+  }
+  void commit_page(uint32_t file, pages::PageId page, std::span<std::byte> data) override {
+    committed[{file, page.level, page.x, page.y}].assign(data.begin(), data.end());
+  }
+  void page_failed(uint32_t file, pages::PageId page, CompletionStatus status) override {
+    ADD_FAILURE() << "page file " << file << " level " << page.level << " page " << page.x << "," << page.y << ": "
+                  << to_string(status);
+  }
+  std::vector<std::byte> buffer;
+  std::map<PageKey, std::vector<std::byte>> committed;
+};
+
+class NoMipSink : public stream::MipSink {
+ public:
+  std::span<std::byte> reserve(TextureId, MipLevel, uint64_t) override { return {}; }
+  void commit(TextureId, MipLevel, std::span<std::byte>) override {}
+  void reject(TextureId, MipLevel, std::span<std::byte>) override {}
+  void failed(TextureId, MipLevel, CompletionStatus) override {}
+};
+
+TEST_F(ServerPagesTest, TheStreamClientTakesEveryPageFromTheServer) {
+  bake_ground(TexelFormat::kRgba8, 64);
+  Config config;
+  config.protocol.segment_name = "texstream-pages-client-" + std::to_string(::getpid());
+  config.protocol.staging_slot_count = 8;
+  config.protocol.staging_slot_bytes = 64 << 10;  // a 72x72 RGBA8 page is 20,736 bytes
+  config.cache.layer_extent_px = 64;              // validate(): the largest cached mip must fit a slot
+  config.stream.max_requests_in_flight = 8;
+  stream::StreamClientOptions options;
+  options.spawn_server = false;
+  auto client = stream::StreamClient::start(config, {{16, 16, full_mip_count(16, 16), TexelFormat::kRgba8}}, dir_, "",
+                                            {}, options);
+  ASSERT_TRUE(client.ok()) << client.error().message;
+  auto server = server::Server::create((*client)->segment(), dir_, ServerConfig{}, storage_);
+  ASSERT_TRUE(server.ok()) << server.error().message;
+  std::atomic<bool> stop{false};
+  std::thread thread([&] { (*server)->run(stop); });
+
+  auto file = pages::PageFile::open(dir_ / "ground.tspages");
+  ASSERT_TRUE(file.ok()) << file.error().message;
+  const auto shared = std::make_shared<const pages::PageFile>(std::move(file).value());
+  CollectingPageSink sink;
+  NoMipSink mips;
+  (*client)->set_page_files({shared}, &sink);
+  const pages::PageGeometry& g = shared->geometry();
+  std::vector<pages::PageId> wanted;
+  for (uint64_t s = 0; s < g.page_slots(); ++s) {
+    if (shared->stored(g.page_of_slot(s))) wanted.push_back(g.page_of_slot(s));
+  }
+  (*client)->begin_cycle();
+  const auto deadline = std::chrono::steady_clock::now() + kHangAfter;
+  while (sink.committed.size() < wanted.size() && std::chrono::steady_clock::now() < deadline) {
+    for (const pages::PageId& p : wanted) {
+      if (sink.committed.count({0, p.level, p.x, p.y}) || (*client)->page_in_flight(0, p)) continue;
+      if ((*client)->try_request_page(0, p, 1.0f) != stream::RequestOutcome::kSent) break;
+    }
+    (*client)->poll(mips, 16);
+    (*client)->wait_for_completions(std::chrono::milliseconds(5));
+  }
+  stop = true;
+  Doorbell((*client)->segment()).wake_all();
+  thread.join();
+  ASSERT_EQ(sink.committed.size(), wanted.size());
+  const std::vector<std::byte> whole = file_bytes(dir_ / "ground.tspages");
+  for (const pages::PageId& p : wanted) {
+    const std::vector<std::byte>& got = sink.committed[{0, p.level, p.x, p.y}];
+    const pages::PageIndexEntry e = *shared->entry(p);
+    ASSERT_EQ(got.size(), e.bytes);
+    EXPECT_TRUE(std::equal(got.begin(), got.end(), whole.begin() + static_cast<ptrdiff_t>(e.offset)));
+  }
+  const stream::StreamStats st = (*client)->stats();
+  EXPECT_EQ(st.pages_ok, wanted.size());
+  EXPECT_EQ(st.pages_failed, 0u);
+  EXPECT_EQ(st.protocol_errors, 0u);
 }
 
 }  // namespace
