@@ -1,5 +1,6 @@
 #include "texstream/protocol/completion_check.hpp"
 
+#include <optional>
 #include <string>
 
 namespace texstream {
@@ -12,8 +13,19 @@ Result<CheckedCompletion> check_completion(const CompletionRecord& r, uint32_t s
   if (r.status == 0 || r.status > kMaxCompletionStatus) return bad("field 'status' = " + std::to_string(r.status));
   CheckedCompletion c{};
   c.status = static_cast<CompletionStatus>(r.status);
+  if (r.request_kind == static_cast<uint32_t>(RequestKind::kLoad)) {
+    if (r.page_x != 0 || r.page_y != 0) {
+      return bad("fields 'page_x'/'page_y' = " + std::to_string(r.page_x) + "," + std::to_string(r.page_y) +
+                 " on a mip's completion");
+    }
+  } else if (r.request_kind != static_cast<uint32_t>(RequestKind::kLoadPage)) {
+    return bad("field 'request_kind' = " + std::to_string(r.request_kind));
+  }
+  c.kind = static_cast<RequestKind>(r.request_kind);
   c.texture = TextureId(r.texture_id);
   c.mip = MipLevel(r.mip_level);
+  c.page_file = r.texture_id;
+  c.page = pages::PageId{r.mip_level, r.page_x, r.page_y};
   c.generation = Generation(r.generation);
   c.checksum = r.checksum;
   if (c.status != CompletionStatus::kOk) {
@@ -41,6 +53,7 @@ Result<CheckedCompletion> check_completion(const CompletionRecord& r, uint32_t s
 }
 
 Status check_against_texture(const CheckedCompletion& c, const TextureShape& shape) {
+  if (c.kind != RequestKind::kLoad) return bad("a page's completion checked as a mip's");
   if (c.mip.value >= shape.mip_count) {
     return bad("field 'mip_level' = " + std::to_string(c.mip.value) + " but texture " +
                std::to_string(c.texture.value) + " has " + std::to_string(shape.mip_count) + " mips");
@@ -58,6 +71,28 @@ Status check_against_texture(const CheckedCompletion& c, const TextureShape& sha
   const uint64_t bytes = mip_bytes(shape.format, expected);
   if (c.byte_size != bytes) {
     return bad("field 'byte_size' = " + std::to_string(c.byte_size) + " but the mip has " + std::to_string(bytes));
+  }
+  return ok_status();
+}
+
+Status check_against_page_file(const CheckedCompletion& c, const pages::PageFile& file) {
+  if (c.kind != RequestKind::kLoadPage) return bad("a mip's completion checked as a page's");
+  const pages::PageGeometry& g = file.geometry();
+  const std::string page = "page file " + std::to_string(c.page_file) + " level " + std::to_string(c.page.level) +
+                           " page " + std::to_string(c.page.x) + "," + std::to_string(c.page.y);
+  const std::optional<pages::PageIndexEntry> entry = file.entry(c.page);  // nullopt outside the quadtree too
+  if (!entry) return bad(page + " is not stored in the page file (or lies outside its quadtree)");
+  if (c.format != g.format) {
+    return bad(std::string("field 'format' = ") + std::string(to_string(c.format)) + " but " + page + " is " +
+               std::string(to_string(g.format)));
+  }
+  if (c.extent != Extent2D{g.stored_side(), g.stored_side()}) {
+    return bad("extent " + std::to_string(c.extent.width) + "x" + std::to_string(c.extent.height) + " but " + page +
+               " is " + std::to_string(g.stored_side()) + " texels square with its borders");
+  }
+  if (c.byte_size != entry->bytes) {
+    return bad("field 'byte_size' = " + std::to_string(c.byte_size) + " but " + page + " has " +
+               std::to_string(entry->bytes));
   }
   return ok_status();
 }

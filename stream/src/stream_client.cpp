@@ -32,6 +32,11 @@ std::string mip_name(uint32_t texture, uint32_t mip) {
   return "texture " + std::to_string(texture) + " mip " + std::to_string(mip);
 }
 
+std::string page_name(uint32_t file, pages::PageId p) {
+  return "page file " + std::to_string(file) + " level " + std::to_string(p.level) + " page " + std::to_string(p.x) +
+         "," + std::to_string(p.y);
+}
+
 uint64_t elapsed_ns(std::chrono::steady_clock::time_point since) {
   return static_cast<uint64_t>(
       std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - since).count());
@@ -111,6 +116,12 @@ const char* to_string(RequestOutcome outcome) {
       return "mip level out of range";
     case RequestOutcome::kQuarantined:
       return "texture quarantined (it crashed the server twice)";
+    case RequestOutcome::kUnknownPageFile:
+      return "unknown page file";
+    case RequestOutcome::kPageNotStored:
+      return "page not stored";
+    case RequestOutcome::kPageTooLarge:
+      return "page larger than a staging slot";
   }
   return "?";
 }
@@ -125,6 +136,9 @@ SendResult to_send_result(RequestOutcome outcome) {
     case RequestOutcome::kAlreadyInFlight:
     case RequestOutcome::kUnknownTexture:
     case RequestOutcome::kBadMip:
+    case RequestOutcome::kUnknownPageFile:
+    case RequestOutcome::kPageNotStored:
+    case RequestOutcome::kPageTooLarge:
       return SendResult::kSkip;
     case RequestOutcome::kInFlightLimit:
     case RequestOutcome::kRingFull:
@@ -273,7 +287,7 @@ RequestOutcome StreamClient::try_request(TextureId texture, MipLevel mip, float 
   }
   if (!supervisor_->accepting_requests()) return RequestOutcome::kNoServer;
   if (in_flight_.count(key(texture, mip))) return RequestOutcome::kAlreadyInFlight;
-  if (in_flight_.size() >= static_cast<size_t>(config_.stream.max_requests_in_flight)) {
+  if (requests_in_flight() >= static_cast<size_t>(config_.stream.max_requests_in_flight)) {
     return RequestOutcome::kInFlightLimit;
   }
   flush_releases();  // queued releases go first: the server waits for its slots
@@ -289,6 +303,52 @@ RequestOutcome StreamClient::try_request(TextureId texture, MipLevel mip, float 
   }
   endpoint_.ring();
   return RequestOutcome::kSent;
+}
+
+void StreamClient::set_page_files(std::vector<std::shared_ptr<const pages::PageFile>> files, PageSink* sink) {
+  TS_ASSERT(files.empty() || sink != nullptr, "set_page_files: %zu page files and no sink", files.size());
+  for (size_t i = 0; i < files.size(); ++i) {
+    TS_ASSERT(files[i] != nullptr, "set_page_files: page file %zu is null", i);
+    // Said once here rather than by a refusal per request (the slots are sized for the scene's mips).
+    if (files[i]->geometry().page_bytes() > segment_->slot_bytes()) {
+      spdlog::warn(
+          "stream client: the pages of page file {} ({} bytes) do not fit a staging slot ({} bytes, "
+          "protocol.staging_slot_bytes): they are never requested; raise the key",
+          i, files[i]->geometry().page_bytes(), segment_->slot_bytes());
+    }
+  }
+  pages_.set_files(std::move(files), sink);
+}
+
+RequestOutcome StreamClient::try_request_page(uint32_t file, pages::PageId page, float priority) {
+  IpcScope scope(*this);
+  const pages::PageFile* f = pages_.file(file);
+  if (f == nullptr) return RequestOutcome::kUnknownPageFile;
+  const std::optional<pages::PageIndexEntry> entry = f->entry(page);
+  if (!entry) return RequestOutcome::kPageNotStored;
+  if (entry->bytes > segment_->slot_bytes()) return RequestOutcome::kPageTooLarge;
+  if (!supervisor_->accepting_requests()) return RequestOutcome::kNoServer;
+  const PageRequest r{file, page};
+  if (pages_.in_flight(r)) return RequestOutcome::kAlreadyInFlight;
+  if (requests_in_flight() >= static_cast<size_t>(config_.stream.max_requests_in_flight)) {
+    return RequestOutcome::kInFlightLimit;
+  }
+  flush_releases();  // queued releases go first: the server waits for its slots
+  if (endpoint_.request_free_space() <= release_reserve_) return RequestOutcome::kRingFull;
+  if (!endpoint_.push_load_page(file, page, generation_, priority)) return RequestOutcome::kRingFull;
+  pages_.sent(r, generation_, now());
+  ++stats_.pages_requested;
+  endpoint_.ring();
+  return RequestOutcome::kSent;
+}
+
+void StreamClient::fail_page(PageRequest r, CompletionStatus status) {
+  ++stats_.pages_failed;
+  PageSink* sink = pages_.sink();
+  if (sink == nullptr) return;  // the files were unregistered while it was in flight
+  const auto t0 = std::chrono::steady_clock::now();
+  sink->page_failed(r.file, r.page, status);
+  sink_ns_ += elapsed_ns(t0);  // the renderer's time, not IPC
 }
 
 TextureStates::Sender StreamClient::sender() {
@@ -342,14 +402,16 @@ void StreamClient::on_server_gone(MipSink& sink, const std::string& why) {
   }
   for (uint64_t k : lost) lost_[k] = Lost{};
   in_flight_.clear();
+  const std::vector<PageRequest> lost_pages = pages_.take_all();
   held_.reset();
   endpoint_.drop_releases();
   std::fill(slot_held_.begin(), slot_held_.end(), 0);  // the next server owns every slot
   std::fill(release_pos_.begin(), release_pos_.end(), kNoPosition);
-  stats_.requests_lost += lost.size();
-  if (!lost.empty() || !why.empty()) {
-    spdlog::warn("texstream-server gone ({}): {} request(s) in flight lost", why, lost.size());
+  stats_.requests_lost += lost.size() + lost_pages.size();
+  if (!lost.empty() || !lost_pages.empty() || !why.empty()) {
+    spdlog::warn("texstream-server gone ({}): {} request(s) in flight lost", why, lost.size() + lost_pages.size());
   }
+  for (const PageRequest& r : lost_pages) fail_page(r, CompletionStatus::kCancelled);  // asked again if wanted
   for (uint64_t k : lost) {
     const auto texture = static_cast<uint32_t>(k >> 32);
     // A quarantined texture's lost request is its final answer; any other is asked again (kCancelled).
@@ -384,7 +446,7 @@ void StreamClient::supervise(MipSink& sink) {
   const bool ring_broken = endpoint_.ring_broken() || !server_read_position().has_value();
   expire_requests(sink, now());
   SupervisorHooks hooks(*this, sink);
-  supervisor_->supervise(now(), ring_broken, !in_flight_.empty(), hooks);
+  supervisor_->supervise(now(), ring_broken, requests_in_flight() != 0, hooks);
 }
 
 void StreamClient::wait_for_completions(std::chrono::microseconds timeout) {
@@ -412,7 +474,8 @@ void StreamClient::poll(MipSink& renderer_sink, size_t max_mips) {
     if (mips >= max_mips) return;
     const CheckedCompletion c = *held_;
     held_.reset();
-    if (!deliver(c, sink)) return;  // still no room: keep order, try again next poll
+    // Still no room: keep order, try again next poll.
+    if (!(c.kind == RequestKind::kLoadPage ? deliver_page(c) : deliver(c, sink))) return;
     ++mips;
   }
   // Bounded by one ring's worth per poll: a server publishing as fast as we consume cannot hold us here.
@@ -437,7 +500,18 @@ void StreamClient::handle_record(const CompletionRecord& record, MipSink& sink, 
       slot_held_[record.slot] = 1;
       release_slot(SlotIndex(record.slot));
     }
-    // A request it claims to answer is answered badly: ask again later.
+    // A request it claims to answer is answered badly: ask again later. A record whose kind is garbage may
+    // name a page as well as a mip (a hostile server can fail any request anyway, with a failure status).
+    if (record.request_kind != static_cast<uint32_t>(RequestKind::kLoad)) {
+      const PageRequest r{record.texture_id, pages::PageId{record.mip_level, record.page_x, record.page_y}};
+      if (pages_.find(r) != nullptr) {
+        pages_.erase(r);
+        ++stats_.completions_rejected;
+        fail_page(r, CompletionStatus::kIoError);
+        return;
+      }
+      if (record.request_kind == static_cast<uint32_t>(RequestKind::kLoadPage)) return;
+    }
     if (auto it = in_flight_.find(key(TextureId(record.texture_id), MipLevel(record.mip_level)));
         it != in_flight_.end()) {
       in_flight_.erase(it);
@@ -448,6 +522,10 @@ void StreamClient::handle_record(const CompletionRecord& record, MipSink& sink, 
     return;
   }
   const CheckedCompletion& c = *checked;
+  if (c.kind == RequestKind::kLoadPage) {
+    handle_page_record(c, mips);
+    return;
+  }
   const bool ok = c.status == CompletionStatus::kOk;
   const auto in_flight = in_flight_.find(key(c.texture, c.mip));
   const bool asked = in_flight != in_flight_.end();
@@ -463,18 +541,9 @@ void StreamClient::handle_record(const CompletionRecord& record, MipSink& sink, 
     }
   };
 
-  if (ok) {
-    if (slot_held_[c.slot.value]) {
-      refuse("slot " + std::to_string(c.slot.value) + " handed over while we still hold it", false);
-      return;
-    }
-    // If the server's read position has not passed our release record even now, it had certainly not read
-    // it when it published this completion: it handed over a slot it did not own.
-    if (slot_in_transit(c.slot.value)) {
-      refuse("slot " + std::to_string(c.slot.value) + " handed over before the server read its release", false);
-      return;
-    }
-    slot_held_[c.slot.value] = 1;  // the ring has handed it to us
+  if (std::string why; ok && !take_slot(c.slot, why)) {
+    refuse(why, false);
+    return;
   }
   if (c.texture.value >= shapes_.size()) {
     refuse("texture id outside the table of " + std::to_string(shapes_.size()), true);
@@ -502,6 +571,100 @@ void StreamClient::handle_record(const CompletionRecord& record, MipSink& sink, 
     return;
   }
   if (deliver(c, sink)) ++mips;
+}
+
+bool StreamClient::take_slot(SlotIndex slot, std::string& why) {
+  if (slot_held_[slot.value]) {
+    why = "slot " + std::to_string(slot.value) + " handed over while we still hold it";
+    return false;
+  }
+  // If the server's read position has not passed our release record even now, it had certainly not read
+  // it when it published this completion: it handed over a slot it did not own.
+  if (slot_in_transit(slot.value)) {
+    why = "slot " + std::to_string(slot.value) + " handed over before the server read its release";
+    return false;
+  }
+  slot_held_[slot.value] = 1;  // the ring has handed it to us
+  return true;
+}
+
+void StreamClient::handle_page_record(const CheckedCompletion& c, size_t& delivered) {
+  const PageRequest r{c.page_file, c.page};
+  const bool ok = c.status == CompletionStatus::kOk;
+  const PageRequests::InFlight* asked = pages_.find(r);  // valid until the next change of pages_
+  auto refuse = [&](const std::string& what, bool release) {
+    protocol_error(what + " (" + page_name(r.file, r.page) + ")");
+    if (ok && release) release_slot(c.slot);
+    if (asked != nullptr) {
+      pages_.erase(r);
+      ++stats_.completions_rejected;
+      fail_page(r, CompletionStatus::kIoError);
+    }
+  };
+  if (std::string why; ok && !take_slot(c.slot, why)) {
+    refuse(why, false);
+    return;
+  }
+  const pages::PageFile* file = pages_.file(r.file);
+  if (file == nullptr) {
+    refuse("a page file index the renderer did not register", true);
+    return;
+  }
+  if (asked == nullptr) {
+    refuse("an answer to a page we did not ask for (or already answered)", true);
+    return;
+  }
+  if (c.generation != asked->generation) {
+    refuse("generation " + std::to_string(c.generation.value) + " but the request had " +
+               std::to_string(asked->generation.value),
+           true);
+    return;
+  }
+  if (!ok) {
+    pages_.erase(r);
+    fail_page(r, c.status);
+    return;
+  }
+  // Byte size, format and side those of the file's own index entry: checked before a slot byte is read.
+  if (auto st = check_against_page_file(c, *file); !st.ok()) {
+    refuse(st.error().message, true);
+    return;
+  }
+  if (deliver_page(c)) ++delivered;
+}
+
+bool StreamClient::deliver_page(const CheckedCompletion& c) {
+  const PageRequest r{c.page_file, c.page};
+  PageSink* sink = pages_.sink();
+  TS_ASSERT(sink != nullptr, "a checked page completion with no page sink");  // a registered file has one
+  auto t0 = std::chrono::steady_clock::now();
+  std::span<std::byte> dst = sink->reserve_page(r.file, r.page, c.byte_size);
+  sink_ns_ += elapsed_ns(t0);
+  if (dst.empty()) {
+    held_ = c;  // the slot stays ours and the request stays in flight until there is room
+    return false;
+  }
+  TS_ASSERT(dst.size() >= c.byte_size, "PageSink::reserve_page gave %zu bytes for a %llu-byte page", dst.size(),
+            static_cast<unsigned long long>(c.byte_size));
+  // check_completion bounded slot < slot_count and byte_size <= slot_bytes: the read stays in the slot.
+  const std::span<std::byte> src = segment_->slot(c.slot.value);
+  std::memcpy(dst.data(), src.data(), c.byte_size);  // read the shared bytes once
+  pages_.erase(r);
+  const std::span<std::byte> payload = dst.first(c.byte_size);
+  // The checksum is computed on our copy: the server may change the slot after we read it.
+  if (payload_checksum(payload.data(), payload.size()) == c.checksum) {
+    ++stats_.pages_ok;
+    t0 = std::chrono::steady_clock::now();
+    sink->commit_page(r.file, r.page, payload);
+    sink_ns_ += elapsed_ns(t0);
+  } else {
+    protocol_error("payload checksum mismatch (" + page_name(r.file, r.page) + ")");
+    ++stats_.completions_rejected;
+    ++stats_.payload_checksum_failures;
+    fail_page(r, CompletionStatus::kIoError);
+  }
+  release_slot(c.slot);
+  return true;
 }
 
 bool StreamClient::deliver(const CheckedCompletion& c, MipSink& sink) {
@@ -542,16 +705,28 @@ void StreamClient::restart_server(const std::string& why, MipSink& renderer_sink
 
 void StreamClient::expire_requests(MipSink& sink, SteadyTime t) {
   // A scan at most every 1/8 of the timeout: the map may hold thousands of requests.
-  if (in_flight_.empty() || t < next_expiry_scan_) return;
+  if (requests_in_flight() == 0 || t < next_expiry_scan_) return;
   next_expiry_scan_ = t + options_.request_timeout / 8;
+  std::vector<PageRequest> expired_pages = pages_.take_expired(t, options_.request_timeout);
+  if (held_ && held_->kind == RequestKind::kLoadPage) {
+    const PageRequest h{held_->page_file, held_->page};
+    if (std::erase(expired_pages, h) != 0) {
+      pages_.sent(h, held_->generation, t);  // answered; only the sink had no room: it stays in flight
+    }
+  }
+  for (const PageRequest& r : expired_pages) {
+    ++stats_.requests_timed_out;
+    fail_page(r, CompletionStatus::kTimedOut);
+  }
   std::vector<uint64_t> expired;
   for (const auto& [k, f] : in_flight_)
     if (t - f.sent_at > options_.request_timeout) expired.push_back(k);
-  if (expired.empty()) return;
   std::sort(expired.begin(), expired.end());  // deterministic order for the sink
-  if (held_ && std::binary_search(expired.begin(), expired.end(), key(held_->texture, held_->mip))) {
+  if (held_ && held_->kind == RequestKind::kLoad &&
+      std::binary_search(expired.begin(), expired.end(), key(held_->texture, held_->mip))) {
     std::erase(expired, key(held_->texture, held_->mip));  // answered; only the sink had no room
   }
+  if (expired.empty() && expired_pages.empty()) return;
   for (uint64_t k : expired) {
     in_flight_.erase(k);
     note_answered(k);
@@ -559,7 +734,7 @@ void StreamClient::expire_requests(MipSink& sink, SteadyTime t) {
     sink.failed(TextureId(static_cast<uint32_t>(k >> 32)), MipLevel(static_cast<uint32_t>(k)),
                 CompletionStatus::kTimedOut);
   }
-  const std::string what = std::to_string(expired.size()) + " request(s) unanswered for " +
+  const std::string what = std::to_string(expired.size() + expired_pages.size()) + " request(s) unanswered for " +
                            std::to_string(options_.request_timeout.count()) + " ms: failed as timed out";
   // With no server attached nobody broke the protocol: nobody was there to answer (server.spawn = false and no
   // standalone server yet, or a spawned one that has not attached). Before, each expiry counted as a protocol
@@ -592,7 +767,7 @@ bool StreamClient::in_flight(TextureId texture, MipLevel mip) const { return in_
 
 StreamStats StreamClient::stats() const {
   StreamStats s = stats_;
-  s.in_flight = in_flight_.size();
+  s.in_flight = requests_in_flight();
   s.slots_held = static_cast<uint64_t>(std::count(slot_held_.begin(), slot_held_.end(), uint8_t{1}));
   s.releases_queued = endpoint_.releases_queued();
   const ServerBlock& sb = std::as_const(*segment_).server_block();

@@ -104,6 +104,7 @@ class HostileServer {
       std::memcpy(dst.data(), intended_.data(), n);
       CompletionRecord c{};
       c.status = static_cast<uint32_t>(CompletionStatus::kOk);
+      c.request_kind = static_cast<uint32_t>(RequestKind::kLoad);
       c.slot = slot;
       c.texture_id = r->texture_id;
       c.mip_level = r->mip_level;
@@ -265,6 +266,7 @@ TEST(ChaosHostileServer, EveryLieIsRefusedAndOnlyExactPayloadsAreCommitted) {
   for (uint64_t i = 0; i < bytes; ++i) dst[i] = pattern(0, 4, i);
   CompletionRecord c{};
   c.status = static_cast<uint32_t>(CompletionStatus::kOk);
+  c.request_kind = static_cast<uint32_t>(RequestKind::kLoad);
   c.slot = 0;
   c.texture_id = 0;
   c.mip_level = 4;

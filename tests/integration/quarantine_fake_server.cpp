@@ -101,6 +101,7 @@ int main(int argc, char** argv) {
       }
       CompletionRecord c{};
       c.status = static_cast<uint32_t>(CompletionStatus::kNotFound);
+      c.request_kind = static_cast<uint32_t>(RequestKind::kLoad);
       c.slot = kNoSlot;
       c.texture_id = r->texture_id;
       c.mip_level = r->mip_level;

@@ -88,6 +88,10 @@ class ServerHarness {
     return endpoint_.push_load(TextureId(texture), MipLevel(mip), Generation(generation), priority);
   }
 
+  bool push_page(uint32_t file, pages::PageId page, uint64_t generation, float priority) {
+    return endpoint_.push_load_page(file, page, Generation(generation), priority);
+  }
+
   void ring() { endpoint_.ring(); }
 
   // Calls on(completion, payload) for every completion now waiting (payload empty unless kOk), releases the

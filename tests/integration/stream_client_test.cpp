@@ -123,6 +123,7 @@ class FakeServer {
     for (uint64_t i = 0; i < bytes; ++i) dst[i] = pattern(load.texture_id, load.mip_level, i);
     CompletionRecord c{};
     c.status = static_cast<uint32_t>(CompletionStatus::kOk);
+    c.request_kind = static_cast<uint32_t>(RequestKind::kLoad);
     c.slot = static_cast<uint32_t>(slot);
     c.texture_id = load.texture_id;
     c.mip_level = load.mip_level;
@@ -145,6 +146,7 @@ class FakeServer {
   void fail(const RequestRecord& load, CompletionStatus status) {
     CompletionRecord c{};
     c.status = static_cast<uint32_t>(status);
+    c.request_kind = static_cast<uint32_t>(RequestKind::kLoad);
     c.slot = kNoSlot;
     c.texture_id = load.texture_id;
     c.mip_level = load.mip_level;

@@ -1,6 +1,7 @@
 // Every field of a completion the renderer uses is checked; each bad value is rejected with its name.
 #include <gtest/gtest.h>
 
+#include "../support/memory_page_file.hpp"
 #include "texstream/protocol/completion_check.hpp"
 
 namespace texstream {
@@ -9,6 +10,7 @@ namespace {
 CompletionRecord good_record() {
   CompletionRecord r{};
   r.status = static_cast<uint32_t>(CompletionStatus::kOk);
+  r.request_kind = static_cast<uint32_t>(RequestKind::kLoad);
   r.slot = 2;
   r.texture_id = 7;
   r.mip_level = 1;
@@ -88,6 +90,76 @@ TEST(CompletionCheck, ErrorStatusesCarryNoSlot) {
   auto c = check_completion(r, 4, 1 << 20);
   ASSERT_TRUE(c.ok());
   EXPECT_EQ(c->status, CompletionStatus::kNotFound);
+}
+
+TEST(CompletionCheck, RequestKindMustBeAMipOrAPage) {
+  CompletionRecord r = good_record();
+  r.request_kind = 0;
+  expect_rejected(r, "request_kind");
+  r.request_kind = static_cast<uint32_t>(RequestKind::kReleaseSlot);
+  expect_rejected(r, "request_kind");
+  r = good_record();
+  r.page_x = 1;  // a mip's completion carries no page position
+  expect_rejected(r, "page_x");
+}
+
+CompletionRecord good_page_record() {
+  CompletionRecord r{};
+  r.status = static_cast<uint32_t>(CompletionStatus::kOk);
+  r.request_kind = static_cast<uint32_t>(RequestKind::kLoadPage);
+  r.slot = 1;
+  r.texture_id = 0;  // the page file
+  r.mip_level = 0;   // the root's level
+  r.generation = 3;
+  r.format = static_cast<uint32_t>(TexelFormat::kRgba8);
+  r.width = 8;
+  r.height = 8;
+  r.byte_size = 256;
+  return r;
+}
+
+void expect_page_rejected(const pages::PageFile& file, const CompletionRecord& r, const char* field) {
+  auto c = check_completion(r, 4, 1 << 20);
+  if (c.ok()) {
+    const Status st = check_against_page_file(c.value(), file);
+    ASSERT_FALSE(st.ok()) << "accepted a page record with a bad " << field;
+    EXPECT_NE(st.error().message.find(field), std::string::npos) << st.error().message;
+  } else {
+    EXPECT_NE(c.error().message.find(field), std::string::npos) << c.error().message;
+  }
+}
+
+TEST(CompletionCheck, PageRecordIsCheckedAgainstThePageFile) {
+  const test::MemoryPageFile memory(1);  // the root page only, 8x8 RGBA8 (256 bytes)
+  ASSERT_NE(memory.file, nullptr);
+  const pages::PageFile& file = *memory.file;
+  auto c = check_completion(good_page_record(), 4, 1 << 20);
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  EXPECT_EQ(c->kind, RequestKind::kLoadPage);
+  EXPECT_EQ(c->page_file, 0u);
+  EXPECT_EQ(c->page, (pages::PageId{0, 0, 0}));
+  EXPECT_TRUE(check_against_page_file(*c, file).ok());
+  // A page is never a mip, nor a mip a page.
+  EXPECT_FALSE(check_against_texture(*c, kShape).ok());
+  auto mip = check_completion(good_record(), 4, 1 << 20);
+  ASSERT_TRUE(mip.ok());
+  EXPECT_FALSE(check_against_page_file(*mip, file).ok());
+
+  CompletionRecord r = good_page_record();
+  r.byte_size = 252;
+  expect_page_rejected(file, r, "byte_size");
+  r = good_page_record();
+  r.format = static_cast<uint32_t>(TexelFormat::kBc1);
+  expect_page_rejected(file, r, "format");
+  r = good_page_record();
+  r.width = 16;
+  expect_page_rejected(file, r, "extent");
+  r = good_page_record();
+  r.page_x = 1;  // level 0 has one page
+  expect_page_rejected(file, r, "not stored");
+  r = good_page_record();
+  r.mip_level = 1;  // the file has one level
+  expect_page_rejected(file, r, "not stored");
 }
 
 TEST(TexelFormat, MipArithmetic) {

@@ -31,7 +31,16 @@ TEST(ProtocolLayout, RecordSizesAndOffsets) {
   EXPECT_EQ(offsetof(RendererBlock, waiting), 36u);  // version 4: the completion bell
   EXPECT_EQ(offsetof(ServerBlock, syscalls), 112u);
   EXPECT_EQ(offsetof(ServerBlock, completion_bell), 120u);
-  EXPECT_EQ(kLayoutVersion, 4u);
+  // version 5: page requests (RequestKind::kLoadPage) in what were reserved fields; the records stay 64 bytes
+  EXPECT_EQ(static_cast<uint32_t>(RequestKind::kLoadPage), 3u);
+  EXPECT_EQ(offsetof(RequestRecord, page_x), 28u);
+  EXPECT_EQ(offsetof(RequestRecord, page_y), 32u);
+  EXPECT_EQ(offsetof(RequestRecord, reserved0), 36u);
+  EXPECT_EQ(offsetof(RequestRecord, reserved1), 40u);
+  EXPECT_EQ(offsetof(CompletionRecord, request_kind), 44u);
+  EXPECT_EQ(offsetof(CompletionRecord, page_x), 56u);
+  EXPECT_EQ(offsetof(CompletionRecord, page_y), 60u);
+  EXPECT_EQ(kLayoutVersion, 5u);
 }
 
 TEST(ProtocolLayout, ComputedLayoutIsAlignedAndDisjoint) {
@@ -78,6 +87,28 @@ TEST(ProtocolLayout, RecordRoundTripThroughBytes) {
   EXPECT_EQ(cback.slot, 3u);
   EXPECT_EQ(cback.byte_size, 65536u);
   EXPECT_EQ(cback.checksum, c.checksum);
+}
+
+TEST(ProtocolLayout, PageRequestCarriesFileLevelAndPosition) {
+  const RequestRecord r = make_load_page_request(0, pages::PageId{5, 17, 31}, Generation(9), 2.5f);
+  unsigned char bytes[sizeof r];
+  std::memcpy(bytes, &r, sizeof r);
+  uint32_t word = 0;
+  std::memcpy(&word, bytes + 0, 4);
+  EXPECT_EQ(word, 3u);  // kind
+  std::memcpy(&word, bytes + 8, 4);
+  EXPECT_EQ(word, 5u);  // level in mip_level
+  std::memcpy(&word, bytes + 12, 4);
+  EXPECT_EQ(word, kNoSlot);
+  std::memcpy(&word, bytes + 28, 4);
+  EXPECT_EQ(word, 17u);  // x
+  std::memcpy(&word, bytes + 32, 4);
+  EXPECT_EQ(word, 31u);  // y
+  EXPECT_EQ(r.texture_id, 0u);
+  EXPECT_EQ(r.generation, 9u);
+  EXPECT_EQ(r.priority, 2.5f);
+  // The reserved words stay zero.
+  for (size_t i = 36; i < sizeof r; ++i) EXPECT_EQ(bytes[i], 0) << i;
 }
 
 TEST(ProtocolLayout, HeaderValidationNamesTheField) {

@@ -347,6 +347,10 @@ void GroundPages::commit_page(uint32_t file, PageId page, std::span<std::byte> d
 
 void GroundPages::page_failed(uint32_t file, PageId page, CompletionStatus status) {
   std::erase(pending_, page);
+  if (reserved_ && reserved_->first == page) {  // the span reserve_page() gave is free again
+    free_staging_.push_back(reserved_->second);
+    reserved_.reset();
+  }
   ++stats_.pages_failed;
   if (file != kFileId) return;
   spdlog::debug("ground: page {}/{}/{} failed: {}", page.level, page.x, page.y, to_string(status));

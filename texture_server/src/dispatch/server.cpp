@@ -139,7 +139,13 @@ Result<std::unique_ptr<Server>> Server::create(Segment& segment, const std::file
   if (!(config.rate_limit_mb_s >= 0)) {
     return make_error(ErrorCode::kInvalidArgument, "server.rate_limit_mb_s must be >= 0");
   }
-  return std::unique_ptr<Server>(new Server(segment, scene_dir, config, storage, std::move(textures).value()));
+  std::unique_ptr<Server> server(new Server(segment, scene_dir, config, storage, std::move(textures).value()));
+  // Through the storage the loads read (rate limit included), so that pages come through every tier as mips do.
+  Result<std::unique_ptr<PageLoader>> pages =
+      PageLoader::open(scene_dir, server->rate_limited_ ? *server->rate_limited_ : storage, server->stats_);
+  if (!pages.ok()) return pages.error();
+  server->pages_ = std::move(pages).value();
+  return server;
 }
 
 Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const ServerConfig& config, Storage& storage,
@@ -189,16 +195,12 @@ Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const S
   inline_ok_.assign(textures_.size(), true);
   workers_ = std::make_unique<WorkerPool>(
       static_cast<uint32_t>(config.worker_threads),
-      [this](const LoadJob& job) {
-        return loader_.load(job.request, job.record, job.slot, segment_.slot(job.slot), /*local_only=*/true);
-      },
-      wake, loading.subspan(first_worker_word, local_words), &stats_.syscalls);
+      [this](const LoadJob& job) { return run_job(job, /*local_only=*/true); }, wake,
+      loading.subspan(first_worker_word, local_words), &stats_.syscalls);
   remote_workers_ = std::make_unique<WorkerPool>(
       static_cast<uint32_t>(config.remote_fetches_in_flight),
-      [this](const LoadJob& job) {
-        return loader_.load(job.request, job.record, job.slot, segment_.slot(job.slot), /*local_only=*/false);
-      },
-      wake, loading.subspan(first_worker_word + local_words), &stats_.syscalls);
+      [this](const LoadJob& job) { return run_job(job, /*local_only=*/false); }, wake,
+      loading.subspan(first_worker_word + local_words), &stats_.syscalls);
 }
 
 Server::~Server() {
@@ -310,6 +312,8 @@ bool Server::drain_requests() {
       handle_load(*r);
     } else if (r->kind == static_cast<uint32_t>(RequestKind::kReleaseSlot)) {
       handle_release(*r);
+    } else if (r->kind == static_cast<uint32_t>(RequestKind::kLoadPage)) {
+      handle_load_page(*r);
     } else {
       spdlog::warn("dropped a request record of unknown kind {}", r->kind);
     }
@@ -358,8 +362,8 @@ void Server::handle_load(const RequestRecord& r) {
                                   std::memory_order_relaxed);
   // The pass's clock reading: a batch is drained in microseconds, and a clock read per request was a
   // measurable share of a hit.
-  const LoadRequest request{TextureId(r.texture_id), MipLevel(r.mip_level), Generation(r.generation), r.priority,
-                            pass_now_ns_};
+  LoadRequest request{TextureId(r.texture_id), MipLevel(r.mip_level), Generation(r.generation), r.priority};
+  request.received_ns = pass_now_ns_;
   const uint64_t bytes = mip_bytes(static_cast<TexelFormat>(t.format), t.width, t.height, r.mip_level);
   if (bytes > segment_.slot_bytes()) {
     spdlog::warn("texture {} mip {}: {} ({}): {} bytes do not fit a staging slot of {} bytes", r.texture_id,
@@ -370,6 +374,36 @@ void Server::handle_load(const RequestRecord& r) {
     return;
   }
   drained_keys_.push_back(request.key());
+  if (const std::optional<LoadRequest> cancelled = scheduler_.add(request)) {
+    block.requests_cancelled.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
+    stats_.add(stats_.cancelled, 1);
+    complete(make_completion(*cancelled, CompletionStatus::kCancelled));
+  }
+}
+
+void Server::handle_load_page(const RequestRecord& r) {
+  if (std::isnan(r.priority)) {
+    spdlog::warn("dropped a load of page file {} level {} page {},{}: priority is NaN", r.texture_id, r.mip_level,
+                 r.page_x, r.page_y);
+    return;
+  }
+  ServerBlock& block = segment_.server_block();
+  // relaxed: statistic, one writer (as handle_load's).
+  block.requests_received.v.store(block.requests_received.v.load(std::memory_order_relaxed) + 1,
+                                  std::memory_order_relaxed);
+  LoadRequest request{TextureId(r.texture_id), MipLevel(r.mip_level), Generation(r.generation), r.priority};
+  request.page = true;
+  request.x = r.page_x;
+  request.y = r.page_y;
+  request.received_ns = pass_now_ns_;
+  // Every field checked against the page file before the page is queued (its key needs a level inside the
+  // quadtree): a bad request is answered, never dropped, so the renderer does not wait for its timeout.
+  if (const CompletionStatus refused = pages_->check(request, segment_.slot_bytes());
+      refused != CompletionStatus::kOk) {
+    stats_.add(refused == CompletionStatus::kNotFound ? stats_.not_found : stats_.io_errors, 1);
+    complete(make_completion(request, refused));
+    return;
+  }
   if (const std::optional<LoadRequest> cancelled = scheduler_.add(request)) {
     block.requests_cancelled.v.fetch_add(1, std::memory_order_relaxed);  // relaxed: statistic
     stats_.add(stats_.cancelled, 1);
@@ -393,7 +427,7 @@ bool Server::collect_results() {
     if (i >= local_results) {
       TS_ASSERT(remote_in_flight_ > 0, "a remote-fetch result with no fetch in flight");
       --remote_in_flight_;
-      inline_ok_[r.request.texture.value] = false;  // a remote texture
+      if (!r.request.page) inline_ok_[r.request.texture.value] = false;  // a remote texture
       finish(r);
       continue;
     }
@@ -409,14 +443,15 @@ void Server::handle_local_result(const LoadResult& r) {
     finish(r);
     return;
   }
-  inline_ok_[r.request.texture.value] = false;  // not on this machine: its next mips go to the workers
+  // Not on this machine: the texture's next mips go to the workers (a page's locality is asked per page).
+  if (!r.request.page) inline_ok_[r.request.texture.value] = false;
   // The mip is not on this machine. A free remote-fetch worker takes it (keeping the slot); with all of
   // them busy it waits in the remote queue without its slot, or — queue full — the renderer is told to
   // ask again later (seed 002 §4.3: the server must not get bogged down in old requests).
   if (remote_in_flight_ < remote_workers_->threads() && remote_pending_.empty()) {
     ++remote_in_flight_;
     remote_fetches_.fetch_add(1, std::memory_order_relaxed);
-    remote_workers_->submit(LoadJob{r.request, textures_[r.request.texture.value], r.slot});
+    remote_workers_->submit(job_of(r.request, r.slot));
     return;
   }
   slots_.release_unused(r.slot);
@@ -439,7 +474,9 @@ void Server::handle_local_result(const LoadResult& r) {
 }
 
 uint64_t Server::inline_bytes(const LoadRequest& request) const {
-  if (inline_loading_ == nullptr || !inline_ok_[request.texture.value]) return 0;
+  if (inline_loading_ == nullptr) return 0;
+  if (request.page) return pages_->local_bytes(request, kInlineMissBytes);
+  if (!inline_ok_[request.texture.value]) return 0;
   const scene::TextureRecord& t = textures_[request.texture.value];
   const uint64_t bytes = mip_bytes(static_cast<TexelFormat>(t.format), t.width, t.height, request.mip.value);
   return bytes <= kInlineMissBytes ? bytes : 0;
@@ -483,7 +520,7 @@ bool Server::dispatch_remote() {
     const LoadRequest request = *remote_pending_.pop();
     ++remote_in_flight_;
     remote_fetches_.fetch_add(1, std::memory_order_relaxed);
-    remote_workers_->submit(LoadJob{request, textures_[request.texture.value], *slots_.acquire()});
+    remote_workers_->submit(job_of(request, *slots_.acquire()));
     any = true;
   }
   return any;
@@ -492,7 +529,7 @@ bool Server::dispatch_remote() {
 void Server::finish(const LoadResult& r) {
   if (r.completion.status == static_cast<uint32_t>(CompletionStatus::kOk)) {
     slots_.hand_to_renderer(r.slot);
-    stats_.add(stats_.loads_ok, 1);
+    stats_.add(r.request.page ? stats_.pages_ok : stats_.loads_ok, 1);
     record_latency(stats_.miss_latency, r.received_ns);
   } else {
     slots_.release_unused(r.slot);
@@ -516,16 +553,30 @@ bool Server::dispatch() {
     const bool inline_left = inline_loads < kInlineMissesPerPass && inline_asked < kInlineMissBytes;
     if (workers_full || !inline_left) {
       const LoadRequest top = *scheduler_.top();
-      if (!loader_.holds(top.key()) && !cache_.contains(top.key())) {
+      if (top.page || (!loader_.holds(top.key()) && !cache_.contains(top.key()))) {
         // A local miss that may load inline waits for the next pass's inline loads rather than go to a worker:
         // the hand-off to a worker and back costs more than the read itself (see kInlineMissBytes).
         if (inline_bytes(top) != 0 ? !inline_left : workers_full) break;
       }
     }
     const LoadRequest request = *scheduler_.pop();
-    const scene::TextureRecord& record = textures_[request.texture.value];
     const uint32_t slot = *slots_.acquire();
     any = true;
+    if (request.page) {
+      // A page is never in the RAM cache: read here when its bytes are local and small, else by a worker.
+      if (const uint64_t bytes = inline_left ? inline_bytes(request) : 0; bytes != 0) {
+        ++inline_loads;
+        inline_asked += bytes;
+        // Not charged to a texture in ServerBlock::loading: a page file is no texture of the table.
+        const CompletionRecord c = pages_->load(request, slot, segment_.slot(slot), /*local_only=*/true);
+        handle_local_result(LoadResult{c, slot, request.received_ns, request});
+        continue;
+      }
+      ++loads_in_flight_;
+      workers_->submit(job_of(request, slot));
+      continue;
+    }
+    const scene::TextureRecord& record = textures_[request.texture.value];
     // A level the last inline load brought along is copied from that read's bytes (no cache lookup);
     // otherwise from the cache, where the next request's payload starts loading into the CPU cache while
     // this one is copied.
@@ -554,6 +605,15 @@ bool Server::dispatch() {
   // What the pass's last inline load held back goes into the cache now (MipLoader::load's hold_read).
   if (loader_.holding()) loader_.release_held();
   return any;
+}
+
+LoadJob Server::job_of(const LoadRequest& request, uint32_t slot) const {
+  return LoadJob{request, request.page ? scene::TextureRecord{} : textures_[request.texture.value], slot};
+}
+
+CompletionRecord Server::run_job(const LoadJob& job, bool local_only) {
+  if (job.request.page) return pages_->load(job.request, job.slot, segment_.slot(job.slot), local_only);
+  return loader_.load(job.request, job.record, job.slot, segment_.slot(job.slot), local_only);
 }
 
 CompletionRecord Server::serve_held(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot) {

@@ -69,9 +69,11 @@ void WorkerPool::worker_main(uint32_t index) {
     }
     // The read and the copy run with no lock held. Relaxed: the renderer reads the word only after this
     // process died, when every store it made is in the shared page.
-    if (loading) loading->v.store(job.request.texture.value + 1, std::memory_order_relaxed);
+    // A page is not charged: its file is no texture of the table (the renderer quarantines textures).
+    const bool charge = loading != nullptr && !job.request.page;
+    if (charge) loading->v.store(job.request.texture.value + 1, std::memory_order_relaxed);
     const CompletionRecord completion = work_(job);
-    if (loading) loading->v.store(0, std::memory_order_relaxed);
+    if (charge) loading->v.store(0, std::memory_order_relaxed);
     {
       std::lock_guard lock(mutex_);
       results_.push_back({completion, job.slot, job.request.received_ns, job.request});

@@ -18,7 +18,31 @@ CompletionRecord make_completion(const LoadRequest& request, CompletionStatus st
   c.texture_id = request.texture.value;
   c.mip_level = request.mip.value;
   c.generation = request.generation.value;
+  c.request_kind = static_cast<uint32_t>(request.page ? RequestKind::kLoadPage : RequestKind::kLoad);
+  c.page_x = request.page ? request.x : 0;
+  c.page_y = request.page ? request.y : 0;
   return c;
+}
+
+// A failed storage read: a missing object (http 404) is kNotFound; an origin that did not answer in time,
+// or does not answer at all now (refused or reset connections, 502/503/504: kUnavailable), kTimedOut, which
+// the renderer asks again for without counting it against the texture (texture_states.cpp): before, an
+// origin down for 2.5 s left 4 textures broken for the rest of the run after 4 refused connections each.
+// Anything else — other 5xx, a wrong Content-Range, truncated bodies — kIoError, which the renderer retries a
+// bounded number of times. kCorrupt only for a path that names no regular file (a FIFO or a directory in its
+// place, kNotAFile): asking again cannot help, and it was 4 failed asks per texture as kIoError.
+CompletionStatus read_failure_status(ErrorCode code) {
+  switch (code) {
+    case ErrorCode::kNotFound:
+      return CompletionStatus::kNotFound;
+    case ErrorCode::kTimeout:
+    case ErrorCode::kUnavailable:
+      return CompletionStatus::kTimedOut;
+    case ErrorCode::kNotAFile:
+      return CompletionStatus::kCorrupt;
+    default:
+      return CompletionStatus::kIoError;
+  }
 }
 
 namespace {
@@ -47,27 +71,6 @@ CompletionStatus status_of(ErrorCode code) {
     case ErrorCode::kTimeout:
     case ErrorCode::kUnavailable:
       return CompletionStatus::kTimedOut;
-    default:
-      return CompletionStatus::kIoError;
-  }
-}
-
-// A failed storage read: a missing object (http 404) is kNotFound; an origin that did not answer in time,
-// or does not answer at all now (refused or reset connections, 502/503/504: kUnavailable), kTimedOut, which
-// the renderer asks again for without counting it against the texture (texture_states.cpp): before, an
-// origin down for 2.5 s left 4 textures broken for the rest of the run after 4 refused connections each.
-// Anything else — other 5xx, a wrong Content-Range, truncated bodies — kIoError, which the renderer retries a
-// bounded number of times. kCorrupt only for a path that names no regular file (a FIFO or a directory in its
-// place, kNotAFile): asking again cannot help, and it was 4 failed asks per texture as kIoError.
-CompletionStatus read_status(ErrorCode code) {
-  switch (code) {
-    case ErrorCode::kNotFound:
-      return CompletionStatus::kNotFound;
-    case ErrorCode::kTimeout:
-    case ErrorCode::kUnavailable:
-      return CompletionStatus::kTimedOut;
-    case ErrorCode::kNotAFile:
-      return CompletionStatus::kCorrupt;
     default:
       return CompletionStatus::kIoError;
   }
@@ -279,7 +282,7 @@ CompletionStatus MipLoader::read_failed(const LoadRequest& request, Opened& open
     opened.probe_missed = true;
     return CompletionStatus::kNotFound;
   }
-  return fail_status(request, read_status(error.code), opened.path, error.message);
+  return fail_status(request, read_failure_status(error.code), opened.path, error.message);
 }
 
 CompletionStatus MipLoader::read_tail(const LoadRequest& request, const scene::TextureRecord& record, Opened& opened,

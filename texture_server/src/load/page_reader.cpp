@@ -24,6 +24,11 @@ Result<std::unique_ptr<PageReader>> PageReader::open(Storage& storage, const std
       new PageReader(path, std::move(file.value()), std::move(index.value()), index_bytes));
 }
 
+bool PageReader::local(pages::PageId p) const {
+  const auto e = index_.entry(p);
+  return e && file_->local(e->offset, e->bytes);
+}
+
 Result<uint64_t> PageReader::read(pages::PageId p, std::span<std::byte> out) {
   const auto e = index_.entry(p);
   auto where = [&] {

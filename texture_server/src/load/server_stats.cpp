@@ -45,6 +45,7 @@ std::string format_stats(const ServerStats& s, const MipCacheStats& c) {
   out += fmt::format("completions: {} hits ok, {} loads ok, {} not found, {} corrupt, {} I/O errors, {} cancelled\n",
                      get(s.hits_ok), get(s.loads_ok), get(s.not_found), get(s.corrupt), get(s.io_errors),
                      get(s.cancelled));
+  out += fmt::format("pages: {} ok, {} bytes read\n", get(s.pages_ok), get(s.page_bytes_read));
   out += fmt::format("queues (now/max): pending {}/{}, loads in flight {}/{}, completions waiting {}/{}\n",
                      get(s.pending.now), get(s.pending.max), get(s.in_flight.now), get(s.in_flight.max),
                      get(s.overflow.now), get(s.overflow.max));

@@ -1,6 +1,6 @@
 #pragma once
-// The renderer's end of the protocol over one segment: push loads and slot releases into the request ring,
-// ring the doorbell, take completions off the completion ring. StreamClient, the test harness
+// The renderer's end of the protocol over one segment: push loads (mips, pages) and slot releases into the request
+// ring, ring the doorbell, take completions off the completion ring. StreamClient, the test harness
 // (tests/integration/server_harness.hpp) and texstream-bench server all use this one copy.
 //
 // It trusts nothing it reads: poll() returns an untrusted copy of a completion for the caller to validate
@@ -36,6 +36,13 @@ class RendererEndpoint {
   // once; the server is woken by the next ring().
   bool push_load(TextureId texture, MipLevel mip, Generation generation, float priority) {
     if (!requests_.try_push(make_load_request(texture, mip, generation, priority))) return false;
+    pushed_ = true;
+    return true;
+  }
+
+  // Pushes a kLoadPage of `page` of page file `file` (0 = the scene's ground), as push_load().
+  bool push_load_page(uint32_t file, pages::PageId page, Generation generation, float priority) {
+    if (!requests_.try_push(make_load_page_request(file, page, generation, priority))) return false;
     pushed_ = true;
     return true;
   }

@@ -19,8 +19,9 @@
 namespace texstream {
 
 inline constexpr uint64_t kSegmentMagic = 0x314d525453584554ull;  // "TEXSTRM1" read little-endian
-// 2: ServerBlock.loading; 3: the header's texture table; 4: the completion bell, ServerBlock.syscalls
-inline constexpr uint32_t kLayoutVersion = 4;
+// 2: ServerBlock.loading; 3: the header's texture table; 4: the completion bell, ServerBlock.syscalls;
+// 5: RequestKind::kLoadPage (page x, y in the request; request_kind, page x, y in the completion)
+inline constexpr uint32_t kLayoutVersion = 5;
 inline constexpr uint64_t kSegmentHeaderBytes = 4096;
 inline constexpr uint64_t kSlotAlignment = 4096;
 inline constexpr uint32_t kCompilerIdBytes = 64;

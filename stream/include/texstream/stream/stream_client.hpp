@@ -9,6 +9,10 @@
 //   states.run_cycle(list, s, b, client.sender(), max_mips_per_cycle);   // Algorithm 1 → kLoad requests
 //   client.poll(sink, budget);                  // heartbeat, server liveness, completions → sink
 //
+// Pages of page files (issue 28) travel the same way: set_page_files() registers the files (the renderer reads
+// their headers and indexes itself) and a PageSink; try_request_page() sends a kLoadPage; poll() hands the
+// answers to the PageSink, validated against the registered file as mips are against the texture table.
+//
 // Trust: every completion is copied out of the ring once and validated (check_completion, then the
 // texture table, then "did we ask for this", then slot ownership) before any slot byte is read; the
 // payload is copied once and its checksum computed on the copy. A server that breaks the protocol loses
@@ -44,6 +48,8 @@
 #include "texstream/protocol/spsc_ring.hpp"
 #include "texstream/stream/crash_quarantine.hpp"
 #include "texstream/stream/mip_sink.hpp"
+#include "texstream/stream/page_requests.hpp"
+#include "texstream/stream/page_sink.hpp"
 #include "texstream/stream/server_process.hpp"
 #include "texstream/stream/server_supervisor.hpp"
 #include "texstream/stream/stream_stats.hpp"
@@ -61,6 +67,9 @@ enum class RequestOutcome : uint8_t {
   kUnknownTexture,   // id outside the texture table
   kBadMip,           // mip level >= the texture's mip count
   kQuarantined,      // the texture was being loaded when the server crashed twice: failed (kCorrupt) at next poll
+  kUnknownPageFile,  // a page of a file index set_page_files() did not register
+  kPageNotStored,    // the page lies outside its file's quadtree or is not stored (ask for its parent)
+  kPageTooLarge,     // the page's bytes do not fit a staging slot (protocol.staging_slot_bytes)
 };
 const char* to_string(RequestOutcome outcome);
 // kSent and kQuarantined (answered kCorrupt at the next poll) → kSent; other outcomes about this one
@@ -113,9 +122,20 @@ class StreamClient {
   // A Sender for TextureStates::run_cycle that sends through try_request.
   TextureStates::Sender sender();
 
+  // Registers the page files pages are requested from (index = file id: 0 = the scene's ground) and the sink
+  // their answers go to; the renderer opens each page file's header and index itself (PageFile::open). Requests
+  // in flight stay: their answers are checked against the new files and go to the new sink. `sink` must be set
+  // when `files` is not empty, and outlive its registration.
+  void set_page_files(std::vector<std::shared_ptr<const pages::PageFile>> files, PageSink* sink);
+  // Pushes a kLoadPage for `page` of page file `file` with the current generation. Never blocks. Pages and
+  // mips share stream.max_requests_in_flight and the request ring.
+  RequestOutcome try_request_page(uint32_t file, pages::PageId page, float priority);
+  bool page_in_flight(uint32_t file, pages::PageId page) const { return pages_.in_flight(PageRequest{file, page}); }
+
   // Once per frame: bumps RendererBlock.heartbeat, pushes queued slot releases, supervises the server
   // (reap, watchdog, restart), then takes completions off the ring and hands at most `max_mips` payloads
-  // to `sink` (statuses without payload are not counted against it).
+  // to `sink` — pages to the registered PageSink, counted against `max_mips` as mips are (statuses without
+  // payload are not counted against it).
   void poll(MipSink& sink, size_t max_mips);
   // For a caller with nothing to do until completions arrive (lock-step frames, preloads): blocks at most
   // `timeout`, returns at once when one waits (the completion bell: no system call on either side while
@@ -176,7 +196,14 @@ class StreamClient {
   void protocol_error(const std::string& what);
   // Returns false when the sink had no room (the completion is held).
   bool deliver(const CheckedCompletion& c, MipSink& sink);
+  bool deliver_page(const CheckedCompletion& c);
   void handle_record(const CompletionRecord& record, MipSink& sink, size_t& mips);
+  void handle_page_record(const CheckedCompletion& c, size_t& delivered);
+  // A kOk record's slot, taken from the ring: false (with `why`) when the server cannot have handed it to us.
+  bool take_slot(SlotIndex slot, std::string& why);
+  // Tells the page sink (if any) that `r` ended without a payload, and counts it.
+  void fail_page(PageRequest r, CompletionStatus status);
+  size_t requests_in_flight() const { return in_flight_.size() + pages_.in_flight_count(); }
   // The request ring's read position as published by the server, checked against ours (the ring itself
   // only notices an impossible position when it pushes, and a full-looking ring never pushes).
   std::optional<uint64_t> server_read_position() const;
@@ -194,6 +221,7 @@ class StreamClient {
   RendererEndpoint endpoint_;  // the rings and the doorbell; rebuilt after every reset
   Generation generation_{0};
   std::unordered_map<uint64_t, InFlight> in_flight_;
+  PageRequests pages_;              // the registered page files, the page sink, the pages in flight
   std::vector<uint8_t> slot_held_;  // by slot index: handed to us and not yet handed back
   // By slot: request-ring position of the kReleaseSlot that handed it back (kNoPosition: none pending). The
   // slot is the server's only once it has read that record; naming it in a completion earlier is a violation.

@@ -53,7 +53,12 @@ struct StreamStats {
   uint64_t completions_failed[kMaxCompletionStatus + 1] = {};  // by CompletionStatus value
   uint64_t requests_lost = 0;                                  // in flight when the server died
   uint64_t requests_timed_out = 0;                             // unanswered for StreamClientOptions::request_timeout
-  uint64_t bytes_received = 0;                                 // payload bytes committed
+  uint64_t bytes_received = 0;                                 // payload bytes committed (mips)
+  // Pages of page files (kLoadPage; not in the mip counters above, except protocol_errors and
+  // completions_rejected, which count every refused record).
+  uint64_t pages_requested = 0;
+  uint64_t pages_ok = 0;      // committed to the page sink (checks and checksum passed)
+  uint64_t pages_failed = 0;  // ended without a payload: the server's status, refused, lost or timed out
   uint64_t protocol_errors = 0;
   uint64_t server_restarts = 0;  // spawns after the first
   uint64_t server_deaths = 0;
@@ -107,7 +112,7 @@ struct StreamCounterField {
   std::string_view name;
   uint64_t StreamStats::*member;
 };
-inline constexpr std::array<StreamCounterField, 28> kStreamCounters{{
+inline constexpr std::array<StreamCounterField, 31> kStreamCounters{{
     {"requests_sent", &StreamStats::requests_sent},
     {"releases_sent", &StreamStats::releases_sent},
     {"completions_ok", &StreamStats::completions_ok},
@@ -116,6 +121,9 @@ inline constexpr std::array<StreamCounterField, 28> kStreamCounters{{
     {"requests_lost", &StreamStats::requests_lost},
     {"requests_timed_out", &StreamStats::requests_timed_out},
     {"bytes_received", &StreamStats::bytes_received},
+    {"pages_requested", &StreamStats::pages_requested},
+    {"pages_ok", &StreamStats::pages_ok},
+    {"pages_failed", &StreamStats::pages_failed},
     {"protocol_errors", &StreamStats::protocol_errors},
     {"server_restarts", &StreamStats::server_restarts},
     {"server_deaths", &StreamStats::server_deaths},

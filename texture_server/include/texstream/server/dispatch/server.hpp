@@ -18,6 +18,13 @@
 // the main queue it is cut back to the renderer's newest cycle whenever a new batch arrives (kCancelled:
 // stale), so a slow link never builds up a backlog the renderer no longer wants. Invalid records are logged and
 // dropped. A full completion ring never blocks and never drops: completions wait in a local queue.
+//
+// Pages (kLoadPage, issue 28): a page of one of the scene's page files (PageLoader: today scene.json's ground)
+// is a load like a mip's. It shares the heap (its key cannot be a mip's: load_request.hpp), generations,
+// coalescing and cancellation, the staging slots, the inline reads of local data, and the hand-off of what is
+// not on this machine to the remote-fetch workers. It never touches the RAM cache, and is not charged to a
+// texture in ServerBlock::loading. A bad one (unknown file, a page outside the quadtree or not stored) is
+// answered kNotFound at once.
 #include <atomic>
 #include <cstdint>
 #include <deque>
@@ -36,6 +43,7 @@
 #include "texstream/server/dispatch/slot_pool.hpp"
 #include "texstream/server/dispatch/worker_pool.hpp"
 #include "texstream/server/load/mip_loader.hpp"
+#include "texstream/server/load/page_loader.hpp"
 #include "texstream/server/load/server_stats.hpp"
 #include "texstream/server/storage/storage.hpp"
 
@@ -54,7 +62,8 @@ class Server {
   // The scene's texture table, validated (errors name the file). create() reads it again for each renderer;
   // texstream-server reads it once at start too, so that a wrong scene is refused before it waits.
   static Result<std::vector<scene::TextureRecord>> read_scene(const std::filesystem::path& scene_dir);
-  // Reads the scene's texture table (errors name the file) and attaches to `segment`. The segment and the
+  // Reads the scene's texture table (errors name the file), opens the page files scene.json names (a
+  // missing or damaged one is an error naming it; PageLoader::open) and attaches to `segment`. The segment and the
   // storage must outlive the server. ErrorCode::kProtocol: the segment's renderer reads another scene (its
   // texture table differs); any other error is this server's configuration or scene.
   // `scene`: the table read_scene() returned for scene_dir, taken instead of reading it again (a city's table
@@ -90,6 +99,7 @@ class Server {
   // One pass of the loop; returns true if anything happened (then the loop does not sleep).
   bool drain_requests();
   void handle_load(const RequestRecord& r);
+  void handle_load_page(const RequestRecord& r);
   void handle_release(const RequestRecord& r);
   bool collect_results();
   // A local worker's (or an inline load's) result: finished, or handed on to the remote path if kUnfilled.
@@ -98,6 +108,10 @@ class Server {
   // pass aside; 0 if it may not.
   uint64_t inline_bytes(const LoadRequest& request) const;
   void load_inline(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot);
+  // The job a worker runs for `request` (a page's carries no texture record).
+  LoadJob job_of(const LoadRequest& request, uint32_t slot) const;
+  // What a worker runs: a mip through the loader, a page through the page files.
+  CompletionRecord run_job(const LoadJob& job, bool local_only);
   // dispatch()'s copy of a mip the last inline load holds (MipLoader::serve_held), or from the cache when it
   // was served from there already.
   CompletionRecord serve_held(const LoadRequest& request, const scene::TextureRecord& record, uint32_t slot);
@@ -127,6 +141,7 @@ class Server {
   std::unique_ptr<Storage> rate_limited_;  // server.rate_limit_mb_s > 0: wraps the storage given to create()
   MipCache cache_;
   MipLoader loader_;
+  std::unique_ptr<PageLoader> pages_;  // set by create() before run()
   RequestScheduler scheduler_;
   RequestScheduler remote_pending_;  // remote loads waiting for a remote-fetch worker (no slot held)
   SlotPool slots_;

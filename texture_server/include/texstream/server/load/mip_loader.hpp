@@ -187,7 +187,9 @@ class MipLoader {
   uint32_t held_levels_ = 0;
 };
 
-// The completion a request gets when it is answered without a payload.
+// The completion a request gets when it is answered without a payload (a page's echoes its file, level, x, y).
 CompletionRecord make_completion(const LoadRequest& request, CompletionStatus status);
+// The status of a failed storage read (mip_loader.cpp says why each).
+CompletionStatus read_failure_status(ErrorCode code);
 
 }  // namespace texstream::server

@@ -25,6 +25,11 @@ class PageReader {
   // kNotFound naming the path and the page (the caller asks for its ancestor instead).
   Result<uint64_t> read(pages::PageId p, std::span<std::byte> out);
 
+  // True when the page's bytes would be read on this machine (a local file, a disk-cache entry), not from a
+  // remote or slow origin (StorageFile::local(): a hint). False for a page that is not stored.
+  bool local(pages::PageId p) const;
+  const std::string& path() const { return path_; }
+
   uint64_t index_bytes() const { return index_bytes_; }
   uint64_t page_bytes_read() const { return page_bytes_read_.load(std::memory_order_relaxed); }
 

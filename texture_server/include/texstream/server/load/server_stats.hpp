@@ -34,6 +34,8 @@ struct ServerStats {
   std::atomic<uint64_t> bytes_served_cached{0};  // payload bytes served from the RAM cache (dispatcher only)
   std::atomic<uint64_t> loads_ok{0};             // misses answered kOk
   std::atomic<uint64_t> hits_ok{0};              // hits answered kOk (dispatcher only)
+  std::atomic<uint64_t> pages_ok{0};             // pages of page files answered kOk (not in the counts above)
+  std::atomic<uint64_t> page_bytes_read{0};      // their bytes: one exact read each (not in bytes_read)
   std::atomic<uint64_t> not_found{0};
   std::atomic<uint64_t> corrupt{0};
   std::atomic<uint64_t> io_errors{0};
