@@ -82,10 +82,11 @@ std::vector<stream::StreamCandidate> Renderer::read_candidates() {
   return candidates;
 }
 
-void Renderer::start_cycle(const std::vector<stream::StreamCandidate>& candidates) {
+void Renderer::start_cycle(const std::vector<stream::StreamCandidate>& candidates, const std::function<void()>& first) {
   tell_states();
   client_->begin_cycle();
   ++cycles_;
+  if (first) first();
   // stream.max_mips_per_cycle caps the requests of one cycle on top of the load size s.
   uint64_t sent = 0;
   const auto max_mips = static_cast<uint64_t>(cfg_.stream.max_mips_per_cycle);

@@ -11,6 +11,7 @@
 // summary's per-frame part are RunRecord's (measure/run_record.hpp).
 #include <chrono>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <string>
 #include <utility>
@@ -75,7 +76,8 @@ class Renderer {
   // render.load_wanted_before_drawing: every ground page the probe frame wants, loaded before it is drawn.
   Status load_ground_wanted(uint64_t index);
   // A streaming cycle (Algorithm 1, LoadTextures) over the compacted list the frame read back.
-  void start_cycle(const std::vector<stream::StreamCandidate>& candidates);
+  // `first` runs right after the new generation starts, before the cycle's mips are requested.
+  void start_cycle(const std::vector<stream::StreamCandidate>& candidates, const std::function<void()>& first = {});
   std::vector<stream::StreamCandidate> read_candidates();
   // How far load_fully() loads each texture and what an eviction on the way means.
   enum class LoadGoal : uint8_t {

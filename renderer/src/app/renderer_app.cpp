@@ -152,18 +152,23 @@ Status Renderer::render_frame(uint64_t index, bool last) {
     TS_TRY(interactive_->present(passes.colour().handle(), passes.options().width, passes.options().height, r));
   }
 
-  // 5. The streaming cycle (Algorithm 1), on the list this frame read back.
+  // 5. The streaming cycle (Algorithm 1) on the list this frame read back, and the ground's pages this frame's
+  //    needbuffer asks for (pages.per_frame): in the cycle's generation (an older one would be superseded by it
+  //    at once) and ahead of its mips, so that they cannot take every place in flight.
+  const auto pages = [&] { request_ground_pages(index, pose); };
   if (rec.read_back_list) {
     last_list_ = read_candidates();
     have_list_ = true;
     if (cfg_.render.blocking_loads) {
       // The next frame draws every named texture complete.
       TS_TRY(load_fully(last_list_, LoadGoal::kWholeChains));
+      pages();
     } else {
-      start_cycle(last_list_);
+      start_cycle(last_list_, pages);
     }
+  } else {
+    pages();
   }
-  request_ground_pages(index, pose);
   if (first) first_frame_stage("cycle");
   const auto own_end = Clock::now();
   if (pairs && !twin_first) TS_TRY(draw_twin());
@@ -257,6 +262,7 @@ Result<RunSummary> Renderer::finish() {
     s.ground.pages_requested = g->stats().pages_requested;
     s.ground.pages_uploaded = g->stats().pages_uploaded;
     s.ground.pages_failed = g->stats().pages_failed;
+    s.ground.pages_cancelled = g->stats().pages_cancelled;
     s.ground.pages_refused = g->stats().pages_refused;
     s.ground.evictions = g->stats().evictions;
     s.ground.frames = g->frames().frames();

@@ -351,9 +351,15 @@ void GroundPages::page_failed(uint32_t file, PageId page, CompletionStatus statu
     free_staging_.push_back(reserved_->second);
     reserved_.reset();
   }
+  // Superseded by a newer cycle before the server started it (or lost with a restarted server): asked again by a
+  // later frame if still wanted.
+  if (status == CompletionStatus::kCancelled) {
+    ++stats_.pages_cancelled;
+    return;
+  }
   ++stats_.pages_failed;
   if (file != kFileId) return;
-  spdlog::debug("ground: page {}/{}/{} failed: {}", page.level, page.x, page.y, to_string(status));
+  spdlog::warn("ground: page {}/{}/{} failed: {}", page.level, page.x, page.y, to_string(status));
 }
 
 }  // namespace texstream::render

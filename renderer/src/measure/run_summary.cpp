@@ -54,10 +54,15 @@ std::string RunSummary::to_json() const {
                      {"load_time_limited_frames", load_time_limited_frames},
                      {"rejected_frames", controller_rejected_frames}};
   if (ground.has_ground) {
-    j["ground_pages"] = {{"requested", ground.pages_requested}, {"uploaded", ground.pages_uploaded},
-                         {"failed", ground.pages_failed},       {"refused", ground.pages_refused},
-                         {"evictions", ground.evictions},       {"frames", ground.frames},
-                         {"frames_used", ground.frames_used},   {"needs_last_frame", ground.needs_last_frame}};
+    j["ground_pages"] = {{"requested", ground.pages_requested},
+                         {"uploaded", ground.pages_uploaded},
+                         {"failed", ground.pages_failed},
+                         {"cancelled", ground.pages_cancelled},
+                         {"refused", ground.pages_refused},
+                         {"evictions", ground.evictions},
+                         {"frames", ground.frames},
+                         {"frames_used", ground.frames_used},
+                         {"needs_last_frame", ground.needs_last_frame}};
   }
   nlohmann::json startup = nlohmann::json::object();
   for (const auto& [stage, seconds] : startup_seconds) startup[stage] = seconds;
@@ -107,10 +112,11 @@ std::string RunSummary::to_text() const {
       ids_text(textures_quarantined), controller_mode, avg_load_size_mb, avg_mip_bias, avg_weighted_latency_ms,
       load_time_limited_frames,
       ground.has_ground
-          ? fmt::format("  ground pages        {} uploaded of {} requested ({} failed), {} of {} frames used, "
-                        "{} evictions\n",
-                        ground.pages_uploaded, ground.pages_requested, ground.pages_failed, ground.frames_used,
-                        ground.frames, ground.evictions)
+          ? fmt::format(
+                "  ground pages        {} uploaded of {} requested ({} failed, {} superseded), {} of {} frames used, "
+                "{} evictions\n",
+                ground.pages_uploaded, ground.pages_requested, ground.pages_failed, ground.pages_cancelled,
+                ground.frames_used, ground.frames, ground.evictions)
           : std::string(),
       output_dir.string());
 }

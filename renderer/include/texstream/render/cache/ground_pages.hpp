@@ -44,9 +44,10 @@ struct GroundPagesOptions {
 
 struct GroundPagesStats {
   uint64_t pages_requested = 0;
-  uint64_t pages_uploaded = 0;  // copies recorded into frames
-  uint64_t pages_failed = 0;    // answered without a page (or refused by the client)
-  uint64_t pages_refused = 0;   // arrived, but every frame was locked or used this frame: dropped
+  uint64_t pages_uploaded = 0;   // copies recorded into frames
+  uint64_t pages_failed = 0;     // answered without a page (or refused by the client)
+  uint64_t pages_cancelled = 0;  // superseded by a newer cycle before the server started them (asked again if wanted)
+  uint64_t pages_refused = 0;    // arrived, but every frame was locked or used this frame: dropped
   uint64_t evictions = 0;
   uint64_t needs_last_frame = 0;  // needbuffer texels that saw the ground in the last read-back
 };

@@ -59,7 +59,8 @@ struct RunSummary {
   // The ground's pages (scene.json "ground", issue 28); has_ground false: none drawn.
   struct Ground {
     bool has_ground = false;
-    uint64_t pages_requested = 0, pages_uploaded = 0, pages_failed = 0, pages_refused = 0, evictions = 0;
+    uint64_t pages_requested = 0, pages_uploaded = 0, pages_failed = 0, pages_cancelled = 0, pages_refused = 0;
+    uint64_t evictions = 0;
     uint64_t frames = 0, frames_used = 0;  // page frames of the cache, and those holding a page at the end
     uint64_t needs_last_frame = 0;         // needbuffer texels that saw the ground in the last frame
   } ground;
