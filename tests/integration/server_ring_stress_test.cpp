@@ -31,13 +31,13 @@ RequestRecord make_request(uint64_t seq) {
   r.texture_id = static_cast<uint32_t>(seq);
   r.generation = seq;
   r.reserved1[0] = seq * kScramble;
-  r.reserved1[3] = ~seq;
+  r.reserved1[2] = ~seq;  // the record's last 8 bytes
   return r;
 }
 
 bool valid_request(const RequestRecord& r, uint64_t seq) {
   return r.generation == seq && r.texture_id == static_cast<uint32_t>(seq) && r.reserved1[0] == seq * kScramble &&
-         r.reserved1[3] == ~seq;
+         r.reserved1[2] == ~seq;
 }
 
 CompletionRecord make_completion(uint64_t seq) {
@@ -46,13 +46,14 @@ CompletionRecord make_completion(uint64_t seq) {
   c.generation = seq;
   c.texture_id = static_cast<uint32_t>(seq >> 3);
   c.checksum = seq * kScramble;
-  c.reserved1 = ~seq;
+  c.page_x = static_cast<uint32_t>(~seq);  // the record's last 8 bytes
+  c.page_y = static_cast<uint32_t>(~seq >> 32);
   return c;
 }
 
 bool valid_completion(const CompletionRecord& c, uint64_t seq) {
   return c.generation == seq && c.texture_id == static_cast<uint32_t>(seq >> 3) && c.checksum == seq * kScramble &&
-         c.reserved1 == ~seq;
+         c.page_x == static_cast<uint32_t>(~seq) && c.page_y == static_cast<uint32_t>(~seq >> 32);
 }
 
 // Pushes and pops until both counts reach kRecords. Returns an empty string or what went wrong.
