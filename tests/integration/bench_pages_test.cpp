@@ -52,7 +52,11 @@ TEST(BenchPages, SummaryHasNoSeamsExactReadsAndOneRowPerFrame) {
   EXPECT_EQ(order, (std::vector<std::string>{"heuristics", "best", "best_vs_random_ssim", "lookahead_gain",
                                              "extern_uniformity", "seams_max_abs_diff", "page_read_amp"}));
   EXPECT_EQ(f.at("heuristics"), "14");
-  EXPECT_EQ(std::stod(f.at("seams_max_abs_diff")), 0.0) << "pages with all resident differ from the mipmapped texture";
+  // The larger of the CPU sampler's seams (exactly 0: the same arithmetic both ways) and the GPU's (lavapipe's
+  // filtering: 1), each printed on its own line.
+  EXPECT_LE(std::stod(f.at("seams_max_abs_diff")), 2.0) << "pages with all resident differ from the mipmapped texture";
+  EXPECT_NE(output.find("seams on the GPU (llvmpipe"), std::string::npos) << output;
+  EXPECT_NE(output.find("on the CPU: 0\n"), std::string::npos) << output;
   EXPECT_GE(std::stod(f.at("page_read_amp")), 1.0);
   EXPECT_LE(std::stod(f.at("page_read_amp")), 1.1);
   EXPECT_GT(std::stod(f.at("best_vs_random_ssim")), 0.0);

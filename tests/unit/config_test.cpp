@@ -98,7 +98,7 @@ TEST(Config, AChoiceKeyTakesOnlyItsNames) {
     const char* allowed;
   };
   for (const Case& c : {Case{"controller.mode", "sometimes", "auto, seed, adaptive, none or fixed"},
-                        Case{"render.debug_view", "depth", "none, mip, weight or mesh_id"},
+                        Case{"render.debug_view", "depth", "none, mip, weight, mesh_id, page_level or page_residency"},
                         Case{"cache.format", "dxt5", "auto, rgba8, bc1, bc3 or bc7"},
                         Case{"server.log_level", "loud", "trace, debug, info, warn or error"},
                         Case{"server.cache_policy", "mru", "level or lru"},

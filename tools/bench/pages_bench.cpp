@@ -15,7 +15,7 @@
 // Last line, all at 5 pages per frame: summary: heuristics=N best=NAME (highest mean SSIM)
 //   best_vs_random_ssim = (1 - SSIM Random) / (1 - SSIM best), lookahead_gain = the same of HotSpot+NoiseValue
 //   over it with the LookAhead camera, extern_uniformity = level spread Intern / Extern (> 1: Extern refines more
-//   uniformly), seams_max_abs_diff (0-255), page_read_amp.
+//   uniformly), seams_max_abs_diff (0-255: the larger of the CPU's and the GPU's, step 3b), page_read_amp.
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -32,6 +32,7 @@
 
 #include "bench_registry.hpp"
 #include "page_baker.hpp"
+#include "pages_gpu.hpp"
 #include "pages_view.hpp"
 #include "texstream/render/measure/image_metrics.hpp"
 #include "texstream/server/load/page_reader.hpp"
@@ -52,6 +53,7 @@ struct PagesBenchOptions {
   uint32_t page = 32;
   double metres_per_texel = 0.03;
   uint32_t width = 0, height = 0;
+  std::string gpu_device = "llvmpipe";  // the GPU seams run's render.device; "none" skips it
 };
 
 // Camera motions in the spirit of seed 004 §4.2.1 (its motions 1-15): holds, a very fast turn that stops after
@@ -260,6 +262,19 @@ int run_pages_bench(const PagesBenchOptions& o) {
         for (int c = 0; c < 4; ++c)
           seams = std::max(
               seams, std::fabs(double((ordinary[i] >> (8 * c)) & 0xff) - double((fr.reference[i] >> (8 * c)) & 0xff)));
+    }
+  }
+
+  // 3b. The same check on the GPU: texstream-render's page path against its one-texture reference (pages_gpu.hpp).
+  double cpu_seams = seams;
+  if (o.gpu_device != "none") {
+    const GpuSeams gs = gpu_seams(out / "gpu_seams", o.gpu_device, o.quick);
+    if (gs.ran) {
+      std::printf("seams on the GPU (%s): %llu frames, max |pages - one mipmapped texture| = %.0f; on the CPU: %.0f\n",
+                  gs.device.c_str(), static_cast<unsigned long long>(gs.frames), gs.max_abs_diff, cpu_seams);
+      seams = std::isnan(seams) ? gs.max_abs_diff : std::max(seams, gs.max_abs_diff);
+    } else {
+      std::printf("seams on the GPU: not measured (%s); on the CPU: %.0f\n", gs.why.c_str(), cpu_seams);
     }
   }
 
@@ -511,6 +526,8 @@ int run_pages_bench(const PagesBenchOptions& o) {
 std::function<int()> define_pages(CLI::App& app) {
   auto o = std::make_shared<PagesBenchOptions>();
   app.add_flag("--quick", o->quick, "the short run: 4096² ground, 320x180, a third of the path");
+  app.add_option("--gpu-device", o->gpu_device,
+                 "render.device of the GPU seams run (a substring of the Vulkan device name; none: skip it)");
   app.add_option("--file", o->file, "an RGBA8 page file to use instead of baking the painted ground")
       ->check(CLI::ExistingFile);
   app.add_option("--ground", o->ground, "side of the painted ground to bake (default 4096 quick, 16384 full)")

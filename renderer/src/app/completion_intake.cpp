@@ -131,14 +131,15 @@ void Renderer::request_ground_pages(uint64_t frame, const CameraPose& pose) {
   }
 }
 
-Status Renderer::load_ground_wanted(uint64_t index) {
+Status Renderer::load_ground_wanted(uint64_t index, bool whole) {
   GroundPages* ground = stack_->ground();
   if (!ground) return ok_status();
-  // Every page the probe frame's needbuffer wants, with their ancestors (pages.order), round after round until
-  // none is missing: staging holds staging_pages at once, so a full staging buffer is uploaded in between.
+  // Every page the probe frame's needbuffer wants, with their ancestors (pages.order), or every stored page
+  // (`whole`: render.preload_all), round after round until none is missing: staging holds staging_pages at once,
+  // so a full staging buffer is uploaded in between.
   LoadTimeSink none(stack_->cache(), Clock::time_point::max());
   for (uint32_t round = 0; round < kMaxFruitlessLoadRounds; ++round) {
-    const auto wanted = ground->plan(index, {}, true);
+    const auto wanted = whole ? ground->missing_pages() : ground->plan(index, {}, true);
     if (wanted.empty()) return ok_status();
     for (const pages::PageCandidate& c : wanted) {
       const stream::RequestOutcome o = client_->try_request_page(GroundPages::kFileId, c.page, 1.0f);
@@ -301,7 +302,7 @@ Status Renderer::load_wanted(const FrameRecording& rec, uint64_t index) {
   // reference run would count as never displayed).
   last_list_ = read_candidates();
   have_list_ = true;
-  TS_TRY(load_ground_wanted(index));
+  TS_TRY(load_ground_wanted(index, false));
   if (auto st = load_fully(last_list_, LoadGoal::kWantedLevels); !st) {
     return make_error(st.error().code, "frame " + std::to_string(index) + ": " + st.error().message);
   }

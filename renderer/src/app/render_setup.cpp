@@ -147,6 +147,16 @@ Status Renderer::preload_all() {
   TS_TRY(cache.prepare_textures(ids));  // every entry, and a format check of every texture, up front
   const auto t0 = Clock::now();
   TS_TRY(load_fully(std::move(all), LoadGoal::kWholeScene));
+  if (const GroundPages* ground = stack_->ground()) {
+    if (ground->file().stored_pages() > ground->frames().frames()) {
+      return make_error(ErrorCode::kResourceExhausted,
+                        "render.preload_all: the ground's " + std::to_string(ground->file().stored_pages()) +
+                            " pages do not fit its " + std::to_string(ground->frames().frames()) +
+                            " page frames; raise pages.memory_bytes (now " + std::to_string(cfg_.pages.memory_bytes) +
+                            ")");
+    }
+    TS_TRY(load_ground_wanted(0, true));
+  }
   spdlog::info("render.preload_all: {} mips ({:.1f} MB) of {} textures resident in {:.2f} s",
                cache.stats().mips_uploaded, static_cast<double>(cache.stats().bytes_uploaded) / 1e6,
                cache.resident_textures(), std::chrono::duration<double>(Clock::now() - t0).count());

@@ -73,8 +73,9 @@ class Renderer {
   Result<Clock::duration> take_completions();
   // The ground's pages (RenderStack::ground): requests for what the frame's needbuffer wants (pages.*).
   void request_ground_pages(uint64_t frame, const CameraPose& pose);
-  // render.load_wanted_before_drawing: every ground page the probe frame wants, loaded before it is drawn.
-  Status load_ground_wanted(uint64_t index);
+  // render.load_wanted_before_drawing: every ground page the probe frame wants, loaded before it is drawn;
+  // `whole` (render.preload_all): every stored page.
+  Status load_ground_wanted(uint64_t index, bool whole);
   // A streaming cycle (Algorithm 1, LoadTextures) over the compacted list the frame read back.
   // `first` runs right after the new generation starts, before the cycle's mips are requested.
   void start_cycle(const std::vector<stream::StreamCandidate>& candidates, const std::function<void()>& first = {});

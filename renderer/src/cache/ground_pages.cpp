@@ -300,6 +300,19 @@ std::vector<pages::PageCandidate> GroundPages::plan(uint64_t now, pages::HotSpot
   return pages::choose_pages(needs_seen_, *file_, table, pending_, policy_, hotspot, now, budget - pending_.size());
 }
 
+std::vector<pages::PageCandidate> GroundPages::missing_pages() const {
+  const pages::PageGeometry& geo = file_->geometry();
+  std::vector<pages::PageCandidate> out;
+  for (uint64_t s = 0; s < geo.page_slots(); ++s) {
+    const PageId p = geo.page_of_slot(s);
+    if (!file_->stored(p) || cache_->table().resident(p) ||
+        std::find(pending_.begin(), pending_.end(), p) != pending_.end())
+      continue;
+    out.push_back({p, static_cast<double>(geo.page_slots() - s)});
+  }
+  return out;
+}
+
 void GroundPages::on_requested(PageId page) {
   pending_.push_back(page);
   ++stats_.pages_requested;

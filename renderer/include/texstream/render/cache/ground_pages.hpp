@@ -92,6 +92,8 @@ class GroundPages : public stream::PageSink {
   // page the needbuffer wants with `everything` (reference frames: render.load_wanted_before_drawing).
   std::vector<pages::PageCandidate> plan(uint64_t now, pages::HotSpot hotspot, bool everything = false);
   bool staging_full() const { return free_staging_.empty(); }
+  // Every stored page neither resident nor pending, coarsest first (render.preload_all).
+  std::vector<pages::PageCandidate> missing_pages() const;
   // The stream client took the request (or did not): the page is pending until answered.
   void on_requested(pages::PageId page);
 
