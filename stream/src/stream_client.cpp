@@ -636,7 +636,13 @@ void StreamClient::handle_page_record(const CheckedCompletion& c, size_t& delive
 bool StreamClient::deliver_page(const CheckedCompletion& c) {
   const PageRequest r{c.page_file, c.page};
   PageSink* sink = pages_.sink();
-  TS_ASSERT(sink != nullptr, "a checked page completion with no page sink");  // a registered file has one
+  if (sink == nullptr || pages_.file(r.file) == nullptr) {
+    // Held for room while the renderer unregistered its page files: nobody to hand it to.
+    pages_.erase(r);
+    ++stats_.pages_failed;
+    release_slot(c.slot);
+    return true;
+  }
   auto t0 = std::chrono::steady_clock::now();
   std::span<std::byte> dst = sink->reserve_page(r.file, r.page, c.byte_size);
   sink_ns_ += elapsed_ns(t0);
