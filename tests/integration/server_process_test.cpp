@@ -238,6 +238,22 @@ TEST_F(ServerProcessTest, AStandaloneServerWithAWrongSceneExitsAtOnceNamingTheFi
   EXPECT_EQ(text.find("waiting for the next renderer"), std::string::npos) << text;
 }
 
+TEST_F(ServerProcessTest, AStandaloneServerWhoseGroundIsMissingExitsAtOnceNamingTheFile) {
+  // scene.json names a page file (its "ground", issue 28) that is not there: said at start, not when the first
+  // renderer comes.
+  scene::Manifest m;
+  m.name = "ground";
+  m.texture_count = 1;
+  m.texture_format = TexelFormat::kRgba8;
+  m.ground = scene::GroundPages{"ground.tspages", {0, 0, 0}, 1.0};
+  ASSERT_TRUE(scene::write_manifest(dir_, m).ok());
+  const fs::path log = dir_ / "stderr.txt";
+  const pid_t pid = spawn_server(server_args(), log);
+  EXPECT_EQ(wait_exit(pid, kHangAfter), 2);
+  const std::string text = read_text(log);
+  EXPECT_NE(text.find((dir_ / "ground.tspages").string()), std::string::npos) << text;
+}
+
 TEST_F(ServerProcessTest, HeaderMismatchExitsWithCode3NamingTheField) {
   auto seg = Segment::create(name_, {});
   ASSERT_TRUE(seg.ok()) << seg.error().message;

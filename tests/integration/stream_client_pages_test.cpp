@@ -260,6 +260,25 @@ TEST_F(StreamClientPages, PagesReachTheSinkExactlyAndTheirSlotsGoBack) {
   EXPECT_NE(text.find("pages_ok 3"), std::string::npos) << text;
 }
 
+TEST_F(StreamClientPages, APageHeldForRoomIsDroppedWhenItsFileIsUnregistered) {
+  start();
+  serve([](CompletionRecord&, std::span<std::byte>) { return true; });
+  client_->begin_cycle();
+  sink_.no_room = 1000;
+  ASSERT_EQ(client_->try_request_page(0, {0, 0, 0}, 1.0f), stream::RequestOutcome::kSent);
+  const auto end = std::chrono::steady_clock::now() + test::kHangAfter;
+  while (client_->stats().slots_held == 0 && std::chrono::steady_clock::now() < end) {
+    client_->poll(mips_, 16);  // answered, held: no room
+    std::this_thread::sleep_for(200us);
+  }
+  ASSERT_EQ(client_->stats().slots_held, 1u);
+  client_->set_page_files({}, nullptr);
+  poll_until_released(1);
+  EXPECT_TRUE(sink_.events.empty());
+  EXPECT_EQ(client_->stats().pages_failed, 1u);
+  EXPECT_FALSE(client_->page_in_flight(0, {0, 0, 0}));
+}
+
 TEST_F(StreamClientPages, RequestsForPagesTheFileDoesNotHaveNeverLeave) {
   start();
   client_->begin_cycle();

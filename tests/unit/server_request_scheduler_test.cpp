@@ -11,6 +11,46 @@ LoadRequest req(uint32_t texture, uint32_t mip, uint64_t generation, float prior
   return LoadRequest{TextureId(texture), MipLevel(mip), Generation(generation), priority};
 }
 
+LoadRequest page(uint32_t file, pages::PageId p, uint64_t generation, float priority) {
+  LoadRequest r{TextureId(file), MipLevel(p.level), Generation(generation), priority};
+  r.page = true;
+  r.x = p.x;
+  r.y = p.y;
+  return r;
+}
+
+// Pages (kLoadPage) share the mips' heap: one priority order, their own coalescing and supersede, and no key of
+// a page is a mip's (texture 0 mip 0 and page file 0's root are different loads).
+TEST(RequestSchedulerTest, PagesShareTheHeapWithMipsUnderKeysOfTheirOwn) {
+  RequestScheduler s;
+  EXPECT_FALSE(s.add(req(0, 0, 1, 2)));
+  EXPECT_FALSE(s.add(page(0, {0, 0, 0}, 1, 5)));
+  EXPECT_FALSE(s.add(page(0, {1, 1, 0}, 1, 3)));
+  EXPECT_FALSE(s.add(page(0, {1, 0, 1}, 1, 1)));
+  EXPECT_FALSE(s.add(req(0, 1, 1, 4)));
+  EXPECT_EQ(s.size(), 5u);
+  EXPECT_TRUE(s.contains(MipKey(TextureId(0), MipLevel(0))));
+  EXPECT_NE(page_key(0, {0, 0, 0}), MipKey(TextureId(0), MipLevel(0)));
+  EXPECT_NE(page_key(0, {1, 1, 0}), page_key(0, {1, 0, 1}));
+  EXPECT_NE(page_key(0, {1, 0, 0}), page_key(1, {1, 0, 0}));
+  // A page asked again coalesces like a mip: the older request is the one answered kCancelled.
+  const auto cancelled = s.add(page(0, {1, 1, 0}, 2, 6));
+  ASSERT_TRUE(cancelled);
+  EXPECT_TRUE(cancelled->page);
+  EXPECT_EQ(cancelled->generation.value, 1u);
+  EXPECT_EQ(cancelled->x, 1u);
+  // Generation 2 asked only for that page: everything else of generation 1 is stale, pages and mips alike.
+  std::vector<LoadRequest> stale;
+  s.supersede_older_than(Generation(2), stale);
+  EXPECT_EQ(stale.size(), 4u);
+  const auto top = s.pop();
+  ASSERT_TRUE(top);
+  EXPECT_TRUE(top->page);
+  EXPECT_EQ(top->page_id(), (pages::PageId{1, 1, 0}));
+  EXPECT_FLOAT_EQ(top->priority, 6);
+  EXPECT_TRUE(s.empty());
+}
+
 TEST(RequestSchedulerTest, PopsHighestPriorityFirstAndFifoOnTies) {
   RequestScheduler s;
   EXPECT_FALSE(s.add(req(1, 0, 1, 5)));

@@ -183,6 +183,17 @@ int main(int argc, char** argv) {
     spdlog::error("{}", scene.error().message);
     return kExitBadArguments;
   }
+  // So are the page files scene.json names (its "ground"), for a standalone server: a missing or damaged one is
+  // said now, not when the first renderer comes (Server::create opens them again for each renderer; a spawned
+  // server gets there at once).
+  if (!spawned) {
+    texstream::server::ServerStats unused;
+    auto pages = texstream::server::PageLoader::open((*stack)->scene_dir, (*stack)->storage(), unused);
+    if (!pages.ok()) {
+      spdlog::error("{}", pages.error().message);
+      return kExitBadArguments;
+    }
+  }
   // The first renderer's server takes this table; later ones read it again (the scene may have changed).
   std::optional<std::vector<texstream::scene::TextureRecord>> first_scene = std::move(scene).value();
   texstream::Result<std::unique_ptr<texstream::Segment>> segment = texstream::Segment::open(segment_name);

@@ -124,8 +124,9 @@ class StreamClient {
 
   // Registers the page files pages are requested from (index = file id: 0 = the scene's ground) and the sink
   // their answers go to; the renderer opens each page file's header and index itself (PageFile::open). Requests
-  // in flight stay: their answers are checked against the new files and go to the new sink. `sink` must be set
-  // when `files` is not empty, and outlive its registration.
+  // in flight stay: their answers are checked against the new files and go to the new sink (a page held for
+  // room in the old sink is dropped, its slot handed back, when its file is no longer registered). `sink` must
+  // be set when `files` is not empty, and outlive its registration.
   void set_page_files(std::vector<std::shared_ptr<const pages::PageFile>> files, PageSink* sink);
   // Pushes a kLoadPage for `page` of page file `file` with the current generation. Never blocks. Pages and
   // mips share stream.max_requests_in_flight and the request ring.
