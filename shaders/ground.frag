@@ -15,6 +15,9 @@ layout(early_fragment_tests) in;
 layout(set = 1, binding = kGroundBindingUniforms, std140) uniform GroundBlock { GroundUniforms ground; };
 
 #ifdef PREPASS
+// The vertex stage's outputs, declared so the interface matches (unused here).
+layout(location = 0) in vec2 in_tex;
+layout(location = 1) in vec3 in_rel;
 layout(location = 0) out uint out_owner;
 void main() { out_owner = kGroundOwner; }
 #else
