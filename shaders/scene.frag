@@ -170,6 +170,8 @@ void main() {
     out_colour = vec4(heat((weight - 1.0) / 16.0), 1.0);
   } else if (view == kDebugViewMeshId) {
     out_colour = vec4(mesh_id_colour(in_mesh), 1.0);
+  } else if (view == kDebugViewPageLevel || view == kDebugViewPageResidency) {
+    out_colour = vec4(0.0, 0.0, 1.0, 1.0);  // the ground's views: every mesh pure blue (the ground has no blue)
   } else {
     out_colour = vec4(colour * light, 1.0);
   }

@@ -87,8 +87,10 @@ TS_CONST kDebugViewNone = 0u;
 TS_CONST kDebugViewMip = 1u;       // grey = displayed mip level * 16 / 255 (seed 000 Fig. 5 inset): 0 black
 TS_CONST kDebugViewWeight = 2u;    // heat map of the per-fragment weight W, 1 (blue) .. 17 (red)
 TS_CONST kDebugViewMeshId = 3u;    // RGB = ((mesh id + 1) * kMeshIdHashMul) mod 2^24, 0 = nothing drawn
-TS_CONST kDebugViewPageLevel = 4u;     // the ground (issue 28): R = page level shown x 16, G = level wanted x 16
-TS_CONST kDebugViewPageResidency = 5u; // the ground: green = wanted page resident, yellow = an ancestor, red = none
+// The ground's views (issue 28; meshes pure blue): page_level R = (level shown + 1) x 16, G = (level wanted + 1) x 16;
+// page_residency green = the wanted page resident, yellow = an ancestor stands in, red = nothing.
+TS_CONST kDebugViewPageLevel = 4u;
+TS_CONST kDebugViewPageResidency = 5u;
 // Odd multiplier (the 24 low bits of the golden-ratio constant 0x9E3779B1): a bijection on 24 bits that
 // scatters neighbouring ids over the colour cube; C++ inverts it to decode an id-buffer PNG.
 TS_CONST kMeshIdHashMul = 0x3779B1u;

@@ -49,9 +49,10 @@ struct ChoiceTable<DebugView> {
        {DebugView::kMip, "mip", "displayed mip as grey"},
        {DebugView::kWeight, "weight", "heat map"},
        {DebugView::kMeshId, "mesh_id", ""},
-       {DebugView::kPageLevel, "page_level", "the ground's pages: red = level shown x 16, green = level wanted x 16"},
+       {DebugView::kPageLevel, "page_level",
+        "the ground's pages: red = (level shown + 1) x 16, green = (level wanted + 1) x 16; meshes blue"},
        {DebugView::kPageResidency, "page_residency",
-        "the ground's pages: green = the wanted page, yellow = an ancestor, red = nothing resident"}}};
+        "the ground's pages: green = the wanted page, yellow = an ancestor, red = nothing resident; meshes blue"}}};
 };
 
 // How the City Colormap colour is blended with the sampled colour (stream.blend; docs/design/blend.md).
