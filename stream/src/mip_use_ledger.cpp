@@ -30,7 +30,7 @@ ResidentLevels levels_of(uint32_t mask, uint32_t mip_count) {
 
 }  // namespace
 
-MipUseLedger::MipUseLedger(std::vector<TextureShape> shapes) : shapes_(std::move(shapes)), uses_(shapes_.size()) {}
+MipUseLedger::MipUseLedger(TextureTable shapes) : shapes_(std::move(shapes)), uses_(shapes_.size()) {}
 
 void MipUseLedger::leave(uint32_t texture, uint32_t leaving) {
   Use& u = uses_[texture];

@@ -116,7 +116,7 @@ SendResult to_send_result(RequestOutcome outcome) {
   return SendResult::kStop;
 }
 
-Result<std::unique_ptr<StreamClient>> StreamClient::start(const Config& config, std::vector<TextureShape> shapes,
+Result<std::unique_ptr<StreamClient>> StreamClient::start(const Config& config, TextureTable shapes,
                                                           const std::filesystem::path& scene_dir,
                                                           const std::filesystem::path& config_file,
                                                           const std::vector<std::string>& overrides,

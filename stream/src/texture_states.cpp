@@ -28,7 +28,7 @@ uint32_t initial_mip_level(const TextureShape& shape) {
   return shape.mip_count == 0 ? 0 : std::min(level, shape.mip_count - 1);
 }
 
-TextureStates::TextureStates(std::vector<TextureShape> shapes) : shapes_(std::move(shapes)), states_(shapes_.size()) {
+TextureStates::TextureStates(TextureTable shapes) : shapes_(std::move(shapes)), states_(shapes_.size()) {
   for (size_t i = 0; i < shapes_.size(); ++i) {
     if (shapes_[i].mip_count == 0) states_[i].broken = true;
   }

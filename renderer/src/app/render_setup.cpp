@@ -98,8 +98,10 @@ Status Renderer::set_up() {
   if (!controller) return controller.error();
   controller_ = std::make_unique<stream::AdaptiveController>(std::move(*controller));
   load_bytes_ = controller_->load_bytes();
-  states_ = std::make_unique<stream::TextureStates>(scene_.shapes());
-  mip_use_ = std::make_unique<stream::MipUseLedger>(scene_.shapes());
+  // One copy of the texture table, shared by the states, the ledger and the stream client (host_memory.md).
+  table_ = stream::TextureTable(scene_.shapes());
+  states_ = std::make_unique<stream::TextureStates>(table_);
+  mip_use_ = std::make_unique<stream::MipUseLedger>(table_);
 
   auto stack = RenderStack::create(scene_, *options);
   if (!stack) return stack.error();
@@ -120,7 +122,7 @@ Status Renderer::set_up() {
 Status Renderer::start_stream_client() {
   stream::StreamClientOptions so;
   so.spawn_server = !run_.in_process_server && cfg_.server.spawn;
-  auto client = stream::StreamClient::start(cfg_, scene_.shapes(), scene_.dir, run_.config_file, run_.overrides, so);
+  auto client = stream::StreamClient::start(cfg_, table_, scene_.dir, run_.config_file, run_.overrides, so);
   if (!client) return client.error();
   client_ = std::move(*client);
   if (GroundPages* ground = stack_->ground()) client_->set_page_files({scene_.ground_pages}, ground);

@@ -20,13 +20,14 @@
 #include "texstream/protocol/completion_check.hpp"
 #include "texstream/stream/mip_deficit.hpp"
 #include "texstream/stream/texture_states.hpp"
+#include "texstream/stream/texture_table.hpp"
 
 namespace texstream::stream {
 
 class MipUseLedger {
  public:
   // `shapes`: the scene's texture table, indexed by texture id (a mip's bytes are mip_bytes of its shape).
-  explicit MipUseLedger(std::vector<TextureShape> shapes);
+  explicit MipUseLedger(TextureTable shapes);
 
   // The cache's events, oldest first: kCommitted makes the mip resident and counts its bytes as uploaded,
   // kInvalidated takes every resident mip of the texture out. Other kinds and unknown textures change nothing.
@@ -51,7 +52,7 @@ class MipUseLedger {
   // Mips in `leaving` (a subset of the resident mask) leave the cache.
   void leave(uint32_t texture, uint32_t leaving);
 
-  std::vector<TextureShape> shapes_;
+  TextureTable shapes_;  // shared with the other users of the scene's table
   std::vector<Use> uses_;
   uint64_t bytes_uploaded_ = 0;
   uint64_t bytes_wasted_ = 0;

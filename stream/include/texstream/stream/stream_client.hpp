@@ -54,6 +54,7 @@
 #include "texstream/stream/server_supervisor.hpp"
 #include "texstream/stream/stream_stats.hpp"
 #include "texstream/stream/texture_states.hpp"
+#include "texstream/stream/texture_table.hpp"
 
 namespace texstream::stream {
 
@@ -100,7 +101,7 @@ class StreamClient {
   // sized from `config.protocol`), and spawns the server (unless options.spawn_server is false) with
   // `--scene scene_dir`, `--config config_file` (if not empty) and each override as `--set`.
   // `shapes` is the scene's texture table, indexed by texture id.
-  static Result<std::unique_ptr<StreamClient>> start(const Config& config, std::vector<TextureShape> shapes,
+  static Result<std::unique_ptr<StreamClient>> start(const Config& config, TextureTable shapes,
                                                      const std::filesystem::path& scene_dir,
                                                      const std::filesystem::path& config_file,
                                                      const std::vector<std::string>& overrides,
@@ -215,7 +216,7 @@ class StreamClient {
 
   Config config_;
   StreamClientOptions options_;
-  std::vector<TextureShape> shapes_;
+  TextureTable shapes_;  // shared with the other users of the scene's table
   std::unique_ptr<Segment> segment_;
   std::unique_ptr<ServerSupervisor> supervisor_;  // whoever serves the segment: spawned or standalone
   CrashQuarantine quarantine_;

@@ -29,6 +29,7 @@
 #include "texstream/common/ids.hpp"
 #include "texstream/protocol/completion_check.hpp"
 #include "texstream/protocol/records.hpp"
+#include "texstream/stream/texture_table.hpp"
 
 namespace texstream::stream {
 
@@ -119,7 +120,7 @@ class TextureStates {
   static constexpr uint32_t kMaxCountedFailures = 4;
 
   // `shapes` is the scene's texture table, indexed by texture id. A shape with no mips is broken from start.
-  explicit TextureStates(std::vector<TextureShape> shapes);
+  explicit TextureStates(TextureTable shapes);
 
   using Sender = std::function<SendResult(const MipRequest&)>;
 
@@ -170,7 +171,7 @@ class TextureStates {
   // Undo the transition made when `s.pending` was sent.
   static void roll_back(State& s);
 
-  std::vector<TextureShape> shapes_;
+  TextureTable shapes_;  // shared with the other users of the scene's table
   std::vector<State> states_;
 };
 
