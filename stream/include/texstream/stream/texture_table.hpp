@@ -4,6 +4,7 @@
 // 5.7 M textures; docs/design/host_memory.md). A vector converts implicitly, so a caller with its own table
 // (tests) passes it as before; copies share.
 #include <cstddef>
+#include <initializer_list>
 #include <memory>
 #include <utility>
 #include <vector>
@@ -17,6 +18,7 @@ class TextureTable {
   TextureTable() : shapes_(std::make_shared<const std::vector<TextureShape>>()) {}
   TextureTable(std::vector<TextureShape> shapes)  // NOLINT(google-explicit-constructor): a table is its shapes
       : shapes_(std::make_shared<const std::vector<TextureShape>>(std::move(shapes))) {}
+  TextureTable(std::initializer_list<TextureShape> shapes) : TextureTable(std::vector<TextureShape>(shapes)) {}
 
   size_t size() const { return shapes_->size(); }
   bool empty() const { return shapes_->empty(); }
