@@ -10,6 +10,7 @@
 
 #include "texstream/render/cache/texture_cache.hpp"
 #include "texstream/render/scene/gpu_structs.hpp"
+#include "texstream/render/vulkan/image_barrier.hpp"
 #include "texstream/render/vulkan/one_shot.hpp"
 #include "texstream/render/vulkan/vk_check.hpp"
 #include "texstream/render/vulkan/vulkan_context.hpp"
@@ -27,21 +28,6 @@ PageId page_at(uint32_t level, float u, float v) {
     return static_cast<uint32_t>(std::clamp(std::floor(static_cast<double>(c) * n), 0.0, n - 1));
   };
   return {level, clampi(u), clampi(v)};
-}
-
-void image_barrier(VkCommandBuffer cmd, VkImage image, uint32_t layers, VkImageLayout from, VkImageLayout to,
-                   VkAccessFlags src, VkAccessFlags dst, VkPipelineStageFlags src_stage,
-                   VkPipelineStageFlags dst_stage) {
-  VkImageMemoryBarrier b{};
-  b.sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER;
-  b.srcAccessMask = src;
-  b.dstAccessMask = dst;
-  b.oldLayout = from;
-  b.newLayout = to;
-  b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
-  b.image = image;
-  b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, VK_REMAINING_MIP_LEVELS, 0, layers};
-  vkCmdPipelineBarrier(cmd, src_stage, dst_stage, 0, 0, nullptr, 0, nullptr, 1, &b);
 }
 
 }  // namespace
@@ -107,9 +93,8 @@ Result<std::unique_ptr<GroundPages>> GroundPages::create(const VulkanContext& ct
   g->frames_ = std::move(*image);
   // Sampled from the first frame on (an empty table never reaches a frame): shader-readable at once.
   TS_TRY(run_one_shot(ctx, [&](VkCommandBuffer cmd) {
-    image_barrier(cmd, g->frames_.handle(), ii.layers, VK_IMAGE_LAYOUT_UNDEFINED,
-                  VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL, 0, VK_ACCESS_SHADER_READ_BIT,
-                  VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT);
+    image_barrier(cmd, g->frames_.handle(), VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL, 0,
+                  VK_ACCESS_SHADER_READ_BIT, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT);
   }));
 
   if (options.reference) TS_TRY(g->load_reference(ctx));
@@ -182,25 +167,15 @@ Status GroundPages::load_reference(const VulkanContext& ctx) {
     copies.push_back(c);
     offset += n * n * 4;
   }
-  const GpuImageInfo& info = frames_.info();
   return run_one_shot(ctx, [&](VkCommandBuffer cmd) {
-    VkImageMemoryBarrier b{};
-    b.sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER;
-    b.srcAccessMask = VK_ACCESS_SHADER_READ_BIT;
-    b.dstAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
-    b.oldLayout = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
-    b.newLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
-    b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
-    b.image = frames_.handle();
-    b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, info.mip_levels, 0, 1};
-    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 0, nullptr, 0,
-                         nullptr, 1, &b);
+    image_barrier(cmd, frames_.handle(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
+                  VK_ACCESS_SHADER_READ_BIT, VK_ACCESS_TRANSFER_WRITE_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT,
+                  VK_PIPELINE_STAGE_TRANSFER_BIT);
     vkCmdCopyBufferToImage(cmd, staging->handle(), frames_.handle(), VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
                            static_cast<uint32_t>(copies.size()), copies.data());
-    std::swap(b.oldLayout, b.newLayout);
-    std::swap(b.srcAccessMask, b.dstAccessMask);
-    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, 0, 0, nullptr, 0,
-                         nullptr, 1, &b);
+    image_barrier(cmd, frames_.handle(), VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL,
+                  VK_ACCESS_TRANSFER_WRITE_BIT, VK_ACCESS_SHADER_READ_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT,
+                  VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT);
   });
 }
 
@@ -234,10 +209,9 @@ void GroundPages::record_needs_clear(VkCommandBuffer cmd) const {
 void GroundPages::record_uploads(VkCommandBuffer cmd) {
   if (uploads_.empty()) return;
   const pages::PageGeometry& geo = file_->geometry();
-  const uint32_t layers = static_cast<uint32_t>(page_of_frame_.size());
-  image_barrier(cmd, frames_.handle(), layers, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL,
-                VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, VK_ACCESS_SHADER_READ_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
-                VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT);
+  image_barrier(cmd, frames_.handle(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
+                VK_ACCESS_SHADER_READ_BIT, VK_ACCESS_TRANSFER_WRITE_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT,
+                VK_PIPELINE_STAGE_TRANSFER_BIT);
   std::vector<VkBufferImageCopy> copies;
   copies.reserve(uploads_.size());
   for (const Upload& u : uploads_) {
@@ -250,9 +224,9 @@ void GroundPages::record_uploads(VkCommandBuffer cmd) {
   }
   vkCmdCopyBufferToImage(cmd, staging_.handle(), frames_.handle(), VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
                          static_cast<uint32_t>(copies.size()), copies.data());
-  image_barrier(cmd, frames_.handle(), layers, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
-                VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL, VK_ACCESS_TRANSFER_WRITE_BIT, VK_ACCESS_SHADER_READ_BIT,
-                VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT);
+  image_barrier(cmd, frames_.handle(), VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL,
+                VK_ACCESS_TRANSFER_WRITE_BIT, VK_ACCESS_SHADER_READ_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT,
+                VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT);
   stats_.pages_uploaded += uploads_.size();
   uploads_.clear();
 }

@@ -3,30 +3,12 @@
 #include <algorithm>
 #include <array>
 
+#include "texstream/render/vulkan/image_barrier.hpp"
 #include "texstream/render/vulkan/vk_check.hpp"
 #include "texstream/render/vulkan/vulkan_context.hpp"
 #include "texstream/render/window/app_window.hpp"
 
 namespace texstream::render {
-
-namespace {
-
-void image_barrier(VkCommandBuffer cmd, VkImage image, VkImageLayout from, VkImageLayout to, VkAccessFlags src,
-                   VkAccessFlags dst, VkPipelineStageFlags src_stage, VkPipelineStageFlags dst_stage) {
-  VkImageMemoryBarrier b{};
-  b.sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER;
-  b.srcAccessMask = src;
-  b.dstAccessMask = dst;
-  b.oldLayout = from;
-  b.newLayout = to;
-  b.srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
-  b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
-  b.image = image;
-  b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 1, 0, 1};
-  vkCmdPipelineBarrier(cmd, src_stage, dst_stage, 0, 0, nullptr, 0, nullptr, 1, &b);
-}
-
-}  // namespace
 
 Result<std::unique_ptr<SwapchainPresenter>> SwapchainPresenter::create(const VulkanContext& ctx,
                                                                        const AppWindow& window, VkSurfaceKHR surface) {
