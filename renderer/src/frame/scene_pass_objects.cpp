@@ -1,8 +1,10 @@
 #include "scene_pass_objects.hpp"
 
+#include <algorithm>
 #include <array>
 #include <utility>
 
+#include "texstream/render/scene/gpu_structs.hpp"
 #include "texstream/render/vulkan/vk_check.hpp"
 
 namespace texstream::render::pass_objects {
@@ -158,6 +160,54 @@ void memory_barrier(VkCommandBuffer cmd, VkPipelineStageFlags src_stage, VkAcces
   b.srcAccessMask = src;
   b.dstAccessMask = dst;
   vkCmdPipelineBarrier(cmd, src_stage, dst_stage, 0, 1, &b, 0, nullptr, 0, nullptr);
+}
+
+Result<SingleSet> make_single_set(VkDevice device, std::span<const VkDescriptorSetLayoutBinding> bindings) {
+  SingleSet out;
+  VkDescriptorSetLayoutCreateInfo li{};
+  li.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO;
+  li.bindingCount = static_cast<uint32_t>(bindings.size());
+  li.pBindings = bindings.data();
+  VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
+  TS_VK_TRY(vkCreateDescriptorSetLayout(device, &li, nullptr, &set_layout));
+  out.layout = UniqueDescriptorSetLayout(device, set_layout);
+  std::vector<VkDescriptorPoolSize> sizes;
+  for (const VkDescriptorSetLayoutBinding& b : bindings) {
+    auto it = std::find_if(sizes.begin(), sizes.end(), [&](const auto& s) { return s.type == b.descriptorType; });
+    if (it == sizes.end()) {
+      sizes.push_back({b.descriptorType, b.descriptorCount});
+    } else {
+      it->descriptorCount += b.descriptorCount;
+    }
+  }
+  VkDescriptorPoolCreateInfo pi{};
+  pi.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
+  pi.maxSets = 1;
+  pi.poolSizeCount = static_cast<uint32_t>(sizes.size());
+  pi.pPoolSizes = sizes.data();
+  VkDescriptorPool pool = VK_NULL_HANDLE;
+  TS_VK_TRY(vkCreateDescriptorPool(device, &pi, nullptr, &pool));
+  out.pool = UniqueDescriptorPool(device, pool);
+  VkDescriptorSetAllocateInfo ai{};
+  ai.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
+  ai.descriptorPool = pool;
+  ai.descriptorSetCount = 1;
+  ai.pSetLayouts = &set_layout;
+  TS_VK_TRY(vkAllocateDescriptorSets(device, &ai, &out.set));
+  return out;
+}
+
+Result<UniquePipelineLayout> make_pipeline_layout(VkDevice device, std::span<const VkDescriptorSetLayout> sets) {
+  VkPushConstantRange range{kAllStages, 0, sizeof(gpu::PassConstants)};
+  VkPipelineLayoutCreateInfo pli{};
+  pli.sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO;
+  pli.setLayoutCount = static_cast<uint32_t>(sets.size());
+  pli.pSetLayouts = sets.data();
+  pli.pushConstantRangeCount = 1;
+  pli.pPushConstantRanges = &range;
+  VkPipelineLayout layout = VK_NULL_HANDLE;
+  TS_VK_TRY(vkCreatePipelineLayout(device, &pli, nullptr, &layout));
+  return UniquePipelineLayout(device, layout);
 }
 
 }  // namespace texstream::render::pass_objects

@@ -35,6 +35,16 @@ Result<UniqueRenderPass> make_main_pass(VkDevice device, VkFormat colour_format)
 Result<UniqueRenderPass> make_wide_pass(VkDevice device);
 Result<UniqueFramebuffer> make_framebuffer(VkDevice device, VkRenderPass pass, std::vector<VkImageView> views,
                                            uint32_t w, uint32_t h);
+// A descriptor set layout of `bindings`, a pool sized for exactly one set of it (counts summed per type from the
+// bindings), and that set (freed with the pool).
+struct SingleSet {
+  UniqueDescriptorSetLayout layout;
+  UniqueDescriptorPool pool;
+  VkDescriptorSet set = VK_NULL_HANDLE;
+};
+Result<SingleSet> make_single_set(VkDevice device, std::span<const VkDescriptorSetLayoutBinding> bindings);
+// A pipeline layout of `sets` in order, with the passes' push constants (gpu::PassConstants, every stage).
+Result<UniquePipelineLayout> make_pipeline_layout(VkDevice device, std::span<const VkDescriptorSetLayout> sets);
 void memory_barrier(VkCommandBuffer cmd, VkPipelineStageFlags src_stage, VkAccessFlags src,
                     VkPipelineStageFlags dst_stage, VkAccessFlags dst);
 

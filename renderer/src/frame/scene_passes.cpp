@@ -172,33 +172,13 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
       {gpu::kBindingMetaImage, VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr},
       {gpu::kBindingInstances, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_VERTEX_BIT, nullptr},
   }};
-  VkDescriptorSetLayoutCreateInfo li{};
-  li.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO;
-  li.bindingCount = static_cast<uint32_t>(bindings.size());
-  li.pBindings = bindings.data();
-  VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
-  TS_VK_TRY(vkCreateDescriptorSetLayout(device, &li, nullptr, &set_layout));
-  set_layout_ = UniqueDescriptorSetLayout(device, set_layout);
-
-  const std::array<VkDescriptorPoolSize, 5> sizes{{{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1},
-                                                   {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 8},
-                                                   {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, gpu::kCachePlanes + 1},
-                                                   {VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1},
-                                                   {VK_DESCRIPTOR_TYPE_INPUT_ATTACHMENT, 1}}};
-  VkDescriptorPoolCreateInfo pi{};
-  pi.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
-  pi.maxSets = 1;
-  pi.poolSizeCount = static_cast<uint32_t>(sizes.size());
-  pi.pPoolSizes = sizes.data();
-  VkDescriptorPool pool = VK_NULL_HANDLE;
-  TS_VK_TRY(vkCreateDescriptorPool(device, &pi, nullptr, &pool));
-  pool_ = UniqueDescriptorPool(device, pool);
-  VkDescriptorSetAllocateInfo ai{};
-  ai.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
-  ai.descriptorPool = pool;
-  ai.descriptorSetCount = 1;
-  ai.pSetLayouts = &set_layout;
-  TS_VK_TRY(vkAllocateDescriptorSets(device, &ai, &set_));
+  auto single = make_single_set(device, bindings);
+  if (!single) return single.error();
+  SingleSet main_set = std::move(*single);
+  set_layout_ = std::move(main_set.layout);
+  pool_ = std::move(main_set.pool);
+  set_ = main_set.set;
+  VkDescriptorSetLayout set_layout = set_layout_.get();
 
   constexpr size_t kBuffers = 9;
   const std::array<VkDescriptorBufferInfo, kBuffers> buffers{{
@@ -264,16 +244,9 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
   ow.pImageInfo = &owner_image;
   vkUpdateDescriptorSets(device, static_cast<uint32_t>(writes.size()), writes.data(), 0, nullptr);
 
-  VkPushConstantRange range{kAllStages, 0, sizeof(gpu::PassConstants)};
-  VkPipelineLayoutCreateInfo pli{};
-  pli.sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO;
-  pli.setLayoutCount = 1;
-  pli.pSetLayouts = &set_layout;
-  pli.pushConstantRangeCount = 1;
-  pli.pPushConstantRanges = &range;
-  VkPipelineLayout layout = VK_NULL_HANDLE;
-  TS_VK_TRY(vkCreatePipelineLayout(device, &pli, nullptr, &layout));
-  layout_ = UniquePipelineLayout(device, layout);
+  auto layout = make_pipeline_layout(device, std::span<const VkDescriptorSetLayout>(&set_layout, 1));
+  if (!layout) return layout.error();
+  layout_ = std::move(*layout);
   return ok_status();
 }
 
@@ -297,30 +270,12 @@ Status ScenePasses::create_ground_descriptors(const VulkanContext& ctx) {
       {gpu::kGroundBindingTable, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr},
       {gpu::kGroundBindingNeeds, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr},
   }};
-  VkDescriptorSetLayoutCreateInfo li{};
-  li.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO;
-  li.bindingCount = static_cast<uint32_t>(bindings.size());
-  li.pBindings = bindings.data();
-  VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
-  TS_VK_TRY(vkCreateDescriptorSetLayout(device, &li, nullptr, &set_layout));
-  ground_set_layout_ = UniqueDescriptorSetLayout(device, set_layout);
-  const std::array<VkDescriptorPoolSize, 3> sizes{{{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1},
-                                                   {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1},
-                                                   {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 2}}};
-  VkDescriptorPoolCreateInfo pi{};
-  pi.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
-  pi.maxSets = 1;
-  pi.poolSizeCount = static_cast<uint32_t>(sizes.size());
-  pi.pPoolSizes = sizes.data();
-  VkDescriptorPool pool = VK_NULL_HANDLE;
-  TS_VK_TRY(vkCreateDescriptorPool(device, &pi, nullptr, &pool));
-  ground_pool_ = UniqueDescriptorPool(device, pool);
-  VkDescriptorSetAllocateInfo ai{};
-  ai.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
-  ai.descriptorPool = pool;
-  ai.descriptorSetCount = 1;
-  ai.pSetLayouts = &set_layout;
-  TS_VK_TRY(vkAllocateDescriptorSets(device, &ai, &ground_set_));
+  auto single = make_single_set(device, bindings);
+  if (!single) return single.error();
+  SingleSet ground_set = std::move(*single);
+  ground_set_layout_ = std::move(ground_set.layout);
+  ground_pool_ = std::move(ground_set.pool);
+  ground_set_ = ground_set.set;
   const VkDescriptorBufferInfo uniforms{ground_->uniforms(), 0, VK_WHOLE_SIZE};
   const VkDescriptorBufferInfo table{ground_->table(), 0, VK_WHOLE_SIZE};
   const VkDescriptorBufferInfo needs{ground_->needs(), 0, VK_WHOLE_SIZE};
@@ -347,17 +302,10 @@ Status ScenePasses::create_ground_descriptors(const VulkanContext& ctx) {
   vkUpdateDescriptorSets(device, static_cast<uint32_t>(w.size()), w.data(), 0, nullptr);
 
   // Set 0 as every pipeline has it, set 1 the ground's: binding set 0 once serves both layouts.
-  const std::array<VkDescriptorSetLayout, 2> layouts{set_layout_.get(), set_layout};
-  VkPushConstantRange range{kAllStages, 0, sizeof(gpu::PassConstants)};
-  VkPipelineLayoutCreateInfo pli{};
-  pli.sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO;
-  pli.setLayoutCount = static_cast<uint32_t>(layouts.size());
-  pli.pSetLayouts = layouts.data();
-  pli.pushConstantRangeCount = 1;
-  pli.pPushConstantRanges = &range;
-  VkPipelineLayout layout = VK_NULL_HANDLE;
-  TS_VK_TRY(vkCreatePipelineLayout(device, &pli, nullptr, &layout));
-  ground_layout_ = UniquePipelineLayout(device, layout);
+  const std::array<VkDescriptorSetLayout, 2> layouts{set_layout_.get(), ground_set_layout_.get()};
+  auto layout = make_pipeline_layout(device, layouts);
+  if (!layout) return layout.error();
+  ground_layout_ = std::move(*layout);
   return ok_status();
 }
 
