@@ -4,6 +4,7 @@
 # (2) the whole bird's-eye path with config/gpu.toml, sampling both processes' RSS and the GPU's memory.
 # Usage (bundle in .gpu/): [ATLAS=512] docs/bench/cache-budget-h200/scale.sh N [skip-bench]
 # ATLAS=PX: the atlas variant (texstream-gen --atlas PX, seed 000 §3.1) of the same city.
+# THREADS=N: generator threads (16); VALIDATE=1: the path run with the validation layer (VK_ADD_LAYER_PATH set).
 set -u
 cd "$(dirname "$0")/../../.."
 R=.gpu/run.sh
@@ -16,7 +17,7 @@ nvidia-smi --query-gpu=name,memory.total --format=csv,noheader
 df -h /tmp | tail -1
 if [ ! -f $city/scene.json ]; then
   t0=$(date +%s)
-  $R texstream-gen --out $city --textures $n --seed 1 --threads 16 --atlas $atlas > "$OUT/gen_$tag.log" 2>&1
+  $R texstream-gen --out $city --textures $n --seed 1 --threads ${THREADS:-16} --atlas $atlas > "$OUT/gen_$tag.log" 2>&1
   echo "gen $tag rc $? $(( $(date +%s) - t0 )) s, $(du -sh $city | cut -f1)"
 fi
 if [ "${2:-}" != skip-bench ]; then
@@ -28,7 +29,8 @@ fi
 # The whole path, sampled every 0.5 s: renderer and server RSS (ps), GPU memory used (nvidia-smi).
 t0=$(date +%s)
 $R texstream-render --config config/gpu.toml --set scene.dir=$city --set render.output_dir=/tmp/o_scale \
-   --set render.frames=0 --set render.write_every_frames=0 > "$OUT/render_scale_$tag.log" 2>&1 &
+   --set render.frames=0 --set render.write_every_frames=0 \
+   ${VALIDATE:+--set render.validation=true} > "$OUT/render_scale_$tag.log" 2>&1 &
 pid=$!
 rss_r=0; rss_s=0; gpu=0
 while kill -0 $pid 2>/dev/null; do
