@@ -4,7 +4,8 @@
 # (2) the whole bird's-eye path with config/gpu.toml, sampling both processes' RSS and the GPU's memory.
 # Usage (bundle in .gpu/): [ATLAS=512] docs/bench/cache-budget-h200/scale.sh N [skip-bench]
 # ATLAS=PX: the atlas variant (texstream-gen --atlas PX, seed 000 §3.1) of the same city.
-# THREADS=N: generator threads (16); VALIDATE=1: the path run with the validation layer (VK_ADD_LAYER_PATH set).
+# THREADS=N: generator threads (16); VALIDATE=1: the path run with the validation layer (VK_ADD_LAYER_PATH set);
+# FRAMES=N: only the path's first N frames (0: the whole path).
 set -u
 cd "$(dirname "$0")/../../.."
 R=.gpu/run.sh
@@ -29,7 +30,7 @@ fi
 # The whole path, sampled every 0.5 s: renderer and server RSS (ps), GPU memory used (nvidia-smi).
 t0=$(date +%s)
 $R texstream-render --config config/gpu.toml --set scene.dir=$city --set render.output_dir=/tmp/o_scale \
-   --set render.frames=0 --set render.write_every_frames=0 \
+   --set render.frames=${FRAMES:-0} --set render.write_every_frames=0 \
    ${VALIDATE:+--set render.validation=true} > "$OUT/render_scale_$tag.log" 2>&1 &
 pid=$!
 rss_r=0; rss_s=0; gpu=0
