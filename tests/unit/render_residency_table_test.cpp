@@ -1,4 +1,4 @@
-// TextureCache's sparse residency (cache/residency_table.hpp) and the map under it
+// TextureCache's sparse residency (cache/residency_table.hpp) and the map under it and MipFades
 // (cache/texture_index_map.hpp): the use list, entries going when idle, epochs never repeating, and the heap
 // not growing with the textures that passed through (docs/design/host_memory.md: < 1 B per texture).
 #include <gtest/gtest.h>
@@ -10,15 +10,18 @@
 #include <unordered_map>
 #include <vector>
 
+#include "texstream/render/cache/mip_fades.hpp"
 #include "texstream/render/cache/residency_table.hpp"
 #include "texstream/render/cache/texture_index_map.hpp"
 
 namespace {
 
 using texstream::TextureId;
+using texstream::render::MipFades;
 using texstream::render::Residency;
 using texstream::render::ResidencyTable;
 using texstream::render::TextureIndexMap;
+namespace gpu = texstream::gpu;
 
 std::vector<uint32_t> lru_order(const ResidencyTable& t) {
   std::vector<uint32_t> order;
@@ -174,6 +177,31 @@ TEST(ResidencyTable, HeapDoesNotGrowWithTexturesThatPassedThrough) {
     const size_t grown = heap_bytes() - before;
     EXPECT_LT(grown, size_t{kTextures}) << grown << " bytes for " << kTextures << " textures";
     RecordProperty("heap_bytes_per_texture", std::to_string(static_cast<double>(grown) / kTextures));
+  }
+}
+
+// The same for fades: textures fade in one after another, about 1,000 at a time.
+TEST(MipFades, HeapDoesNotGrowWithTexturesThatFaded) {
+  if (!kHeapMeasured) GTEST_SKIP() << "the sanitizer's malloc keeps no glibc statistics";
+  constexpr uint32_t kTextures = 1u << 20;
+  std::vector<gpu::TextureGpu> table(kTextures);
+  for (auto& t : table) {
+    t.placement = {0, gpu::kNotResident, 0, 10};
+    t.colour = {0, gpu::kNotResident, 0, 0};
+  }
+  const size_t before = heap_bytes();
+  {
+    MipFades fades(1.0);
+    fades.advance(0.0, table);
+    for (uint32_t t = 0; t < kTextures; ++t) {
+      gpu::TextureGpu& e = table[t];
+      e.placement.y = 3;
+      fades.on_publish(t, e, gpu::kNotResident);
+      if (t % 100 == 99) fades.advance(0.1, table);  // a fade lasts 10-11 advances: ~1,000 fading
+      ASSERT_LE(fades.fading(), 1200u);
+    }
+    const size_t grown = heap_bytes() - before;
+    EXPECT_LT(grown, size_t{kTextures}) << grown << " bytes for " << kTextures << " textures";
   }
 }
 

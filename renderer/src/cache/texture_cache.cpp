@@ -56,7 +56,7 @@ TextureCache::TextureCache(const TextureCacheOptions& options, const SceneData& 
       ring_(options.staging_bytes),
       residency_(scene.texture_records().size(), 0),
       entry_written_(scene.texture_records().size(), false),
-      fades_(options.fade_s, scene.texture_records().size()) {}
+      fades_(options.fade_s) {}
 
 namespace {
 
