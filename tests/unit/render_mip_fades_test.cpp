@@ -33,7 +33,7 @@ struct Table {
 };
 
 TEST(MipFades, AFirstLevelFadesInFromTheColormapOverTheFadeTime) {
-  MipFades f(0.2, 4);
+  MipFades f(0.2);
   Table tb;
   f.advance(0.0, tb.entries);
   tb.publish(f, 1, 7);
@@ -50,7 +50,7 @@ TEST(MipFades, AFirstLevelFadesInFromTheColormapOverTheFadeTime) {
 }
 
 TEST(MipFades, AFinerLevelFadesFromTheLevelBeforeIt) {
-  MipFades f(1.0, 4);
+  MipFades f(1.0);
   Table tb;
   f.advance(0.0, tb.entries);
   tb.publish(f, 2, 6);
@@ -61,7 +61,7 @@ TEST(MipFades, AFinerLevelFadesFromTheLevelBeforeIt) {
 }
 
 TEST(MipFades, ALevelArrivingMidFadeNeverJumpsByMoreThanHalfALevel) {
-  MipFades f(1.0, 4);
+  MipFades f(1.0);
   Table tb;
   f.advance(0.0, tb.entries);
   tb.publish(f, 0, 6);
@@ -79,7 +79,7 @@ TEST(MipFades, ALevelArrivingMidFadeNeverJumpsByMoreThanHalfALevel) {
 }
 
 TEST(MipFades, EvictionCoarserLevelsAndPreloadsDoNotFade) {
-  MipFades f(1.0, 4);
+  MipFades f(1.0);
   Table tb;
   tb.publish(f, 0, 0);  // before the first frame: a preload shows at once
   EXPECT_EQ(tb.entries[0].colour.z, 0u);
@@ -103,7 +103,7 @@ TEST(MipFades, EvictionCoarserLevelsAndPreloadsDoNotFade) {
 }
 
 TEST(MipFades, NoFadeTimeMeansNoFades) {
-  MipFades f(0.0, 4);
+  MipFades f(0.0);
   Table tb;
   f.advance(0.0, tb.entries);
   tb.publish(f, 3, 2);

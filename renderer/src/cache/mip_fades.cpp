@@ -20,8 +20,8 @@ void MipFades::on_publish(uint32_t texture, gpu::TextureGpu& t, uint32_t before)
     t.colour.y = before;
     t.colour.z = std::bit_cast<uint32_t>(1.0f);
   }
-  if (!listed_[texture]) {
-    listed_[texture] = 1;
+  if (!listed_.contains(TextureId(texture))) {
+    listed_.insert(TextureId(texture), 0);
     fading_.push_back(texture);
   }
 }
@@ -39,7 +39,7 @@ void MipFades::advance(double dt_s, std::span<gpu::TextureGpu> table) {
       fading_[kept++] = id;
     } else {
       t.colour.y = gpu::kNotResident;
-      listed_[id] = 0;
+      listed_.erase(TextureId(id));
     }
   }
   fading_.resize(kept);

@@ -54,10 +54,9 @@ TextureCache::TextureCache(const TextureCacheOptions& options, const SceneData& 
     : options_(options),
       scene_(scene),
       ring_(options.staging_bytes),
-      residency_(scene.texture_records().size()),
-      unplaceable_logged_(scene.texture_records().size(), false),
+      residency_(scene.texture_records().size(), 0),
       entry_written_(scene.texture_records().size(), false),
-      fades_(options.fade_s, scene.texture_records().size()) {}
+      fades_(options.fade_s) {}
 
 namespace {
 
@@ -183,6 +182,8 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
   if (!sparse) return sparse.error();
   c->sparse_ = std::move(*sparse);
   c->pages_ = std::make_unique<SparsePageTable>(c->sparse_->geometries(), c->sparse_->slot_count());
+  // A resident texture holds about a page or more: the table starts with room for one per page slot.
+  c->residency_ = ResidencyTable(scene.texture_records().size(), c->sparse_->slot_count());
   for (uint32_t i = 0; i < c->planes_.size(); ++i) {
     const CachePlane& shape = c->planes_[i].shape;
     const scene::TextureRecord* widest = tally[static_cast<uint32_t>(shape.format)].widest;
@@ -308,37 +309,50 @@ void TextureCache::failed(TextureId texture, MipLevel mip, CompletionStatus stat
 
 void TextureCache::evict(TextureId texture) {
   note_eviction();
-  Residency& r = residency_[texture.value];
-  if (r.mask != 0) --resident_count_;
-  r.mask = 0;
-  ++r.epoch;
-  r.evicted_before = true;
+  residency_.mark_evicted(texture);
   ++stats_.evictions;
   gpu::TextureGpu& t = table_.as<gpu::TextureGpu>()[texture.value];
   const uint32_t before = t.placement.y;
   t.placement.y = gpu::kNotResident;
   fades_.on_publish(texture.value, t, before);  // no fade survives an eviction
-  // Its pages: the submissions up to last_serial_ may still sample them, so they are unbound after those.
-  for (uint32_t mip = 0; r.bound != 0; ++mip) {
-    if (!(r.bound & (1u << mip))) continue;
-    r.bound &= ~(1u << mip);
-    pages_->release(page_rect(r.region, plane_of(texture)), mip, last_serial_);
-  }
   Plane& p = planes_[plane_of(texture)];
-  if (p.tree) {
-    p.tree->free(texture);
-    lru_unlink(texture.value);
+  if (p.tree) p.tree->free(texture);
+  // No entry: a ring texture placed whose copies were all dropped; nothing resident, bound or on its way.
+  Residency* r = residency_.find(texture);
+  if (!r) {
+    events_.push_back({stream::TextureEvent::Kind::kInvalidated, texture});
+    return;
   }
+  if (r->mask != 0) --resident_count_;
+  r->mask = 0;
+  r->epoch = residency_.new_epoch();
+  // Its pages: the submissions up to last_serial_ may still sample them, so they are unbound after those.
+  for (uint32_t mip = 0; r->bound != 0; ++mip) {
+    if (!(r->bound & (1u << mip))) continue;
+    r->bound &= ~(1u << mip);
+    pages_->release(page_rect(r->region, plane_of(texture)), mip, last_serial_);
+  }
+  residency_.lru_unlink(*r);
   // Copies not yet recorded would write into a region that now belongs to another texture: drop them.
   auto drop = [&](const Copy& c) {
     if (c.texture != texture) return false;
     release_staging(c.staging);
+    --r->copies;
     ++stats_.mips_dropped;
     return true;
   };
   std::erase_if(queued_, drop);
   std::erase_if(ready_, drop);
+  residency_.release_if_idle(*r);
   events_.push_back({stream::TextureEvent::Kind::kInvalidated, texture});
+}
+
+void TextureCache::drop_copy(const Copy& c) {
+  release_staging(c.staging);
+  Residency* r = residency_.find(c.texture);
+  TS_ASSERT(r != nullptr && r->copies > 0, "copy of texture %u without its residency", c.texture.value);
+  --r->copies;
+  residency_.release_if_idle(*r);
 }
 
 uint32_t TextureCache::plane_of(TextureId texture) const {
@@ -355,6 +369,13 @@ std::optional<CacheRegion> TextureCache::region_of(TextureId texture) const {
 
 PageRect TextureCache::page_rect(const CacheRegion& r, uint32_t plane) const {
   return PageRect{r.layer, r.origin_x, r.origin_y, r.width, r.height, planes_[plane].shape.block, plane};
+}
+
+void TextureCache::refuse_for_good(TextureId texture, const std::string& why) {
+  // Such a texture is marked broken (kFailed), so only copies already on their way come back: a short search.
+  if (std::find(refused_.begin(), refused_.end(), texture.value) != refused_.end()) return;
+  spdlog::warn("texture cache: {}", why);
+  refused_.push_back(texture.value);
 }
 
 void TextureCache::refuse_for_room(TextureId texture, MipLevel mip) {
@@ -389,9 +410,9 @@ Result<std::optional<CacheRegion>> TextureCache::place(TextureId texture, uint32
   }
   for (;;) {
     if (auto r = p.tree->allocate(texture, width, height)) {
-      Residency& res = residency_[texture.value];
+      Residency& res = residency_.get(texture);
       res.used_cycle = use_cycle_;
-      lru_append(texture.value);
+      residency_.lru_append(res);
       return std::optional<CacheRegion>(*r);
     }
     // No free square large enough: the plane's address space, not the memory, is short. Free by use, as for
@@ -405,12 +426,16 @@ Result<std::optional<CacheRegion>> TextureCache::place(TextureId texture, uint32
 
 std::optional<TextureId> TextureCache::lru_victim(TextureId keep, std::optional<uint32_t> plane) const {
   // The list is in order of last use, so once a texture was used this cycle, every later one was.
-  for (uint32_t t = lru_head_; t != 0; t = residency_[t - 1].lru_next) {
-    const Residency& r = residency_[t - 1];
-    if (r.used_cycle == use_cycle_) return std::nullopt;
-    if (t - 1 != keep.value && (!plane || plane_of(TextureId(t - 1)) == *plane)) return TextureId(t - 1);
-  }
-  return std::nullopt;
+  std::optional<TextureId> victim;
+  residency_.walk_lru([&](const Residency& r) {
+    if (r.used_cycle == use_cycle_) return false;
+    if (r.texture() != keep && (!plane || plane_of(r.texture()) == *plane)) {
+      victim = r.texture();
+      return false;
+    }
+    return true;
+  });
+  return victim;
 }
 
 bool TextureCache::evict_oldest_layer(uint32_t plane) {
@@ -429,48 +454,22 @@ bool TextureCache::evict_oldest_layer(uint32_t plane) {
   return false;
 }
 
-void TextureCache::lru_unlink(uint32_t texture) {
-  Residency& r = residency_[texture];
-  if (!r.listed) return;
-  if (r.lru_prev)
-    residency_[r.lru_prev - 1].lru_next = r.lru_next;
-  else
-    lru_head_ = r.lru_next;
-  if (r.lru_next)
-    residency_[r.lru_next - 1].lru_prev = r.lru_prev;
-  else
-    lru_tail_ = r.lru_prev;
-  r.lru_prev = r.lru_next = 0;
-  r.listed = false;
-}
-
-void TextureCache::lru_append(uint32_t texture) {
-  Residency& r = residency_[texture];
-  TS_ASSERT(!r.listed, "texture %u listed twice", texture);
-  r.lru_prev = lru_tail_;
-  r.lru_next = 0;
-  if (lru_tail_)
-    residency_[lru_tail_ - 1].lru_next = texture + 1;
-  else
-    lru_head_ = texture + 1;
-  lru_tail_ = texture + 1;
-  r.listed = true;
-}
-
 void TextureCache::touch(std::span<const stream::StreamCandidate> used) {
   ++use_cycle_;
   trimmable_.clear();
   if (options_.eviction != CacheEviction::kLru) return;
   for (const stream::StreamCandidate& c : used) {
     if (c.texture.value >= scene_.texture_records().size()) continue;
-    Residency& r = residency_[c.texture.value];
-    r.used_cycle = use_cycle_;
+    // A texture without an entry holds nothing to keep or trim, and place() stamps the cycle when it comes.
+    Residency* r = residency_.find(c.texture);
+    if (!r) continue;
+    r->used_cycle = use_cycle_;
     // NaN or below 0: wants the finest level; nothing to trim.
-    r.wanted = c.desired_mip >= 1.0f ? static_cast<uint8_t>(std::min(c.desired_mip, 31.0f)) : 0;
-    if (r.wanted >= 2 && (r.mask & ((1u << (r.wanted - 1)) - 1)) != 0) trimmable_.push_back(c.texture.value);
-    if (r.listed) {  // to the back: most recently used
-      lru_unlink(c.texture.value);
-      lru_append(c.texture.value);
+    r->wanted = c.desired_mip >= 1.0f ? static_cast<uint8_t>(std::min(c.desired_mip, 31.0f)) : 0;
+    if (r->wanted >= 2 && (r->mask & ((1u << (r->wanted - 1)) - 1)) != 0) trimmable_.push_back(c.texture.value);
+    if (r->listed()) {  // to the back: most recently used
+      residency_.lru_unlink(*r);
+      residency_.lru_append(*r);
     }
   }
 }
@@ -479,8 +478,10 @@ bool TextureCache::trim_one(TextureId keep) {
   while (!trimmable_.empty()) {
     const uint32_t t = trimmable_.back();
     trimmable_.pop_back();
-    Residency& r = residency_[t];
-    if (t == keep.value || r.wanted < 2) continue;
+    // Used this cycle, so lru_victim() spares it; were it evicted, no entry and nothing to trim.
+    Residency* found = residency_.find(TextureId(t));
+    if (!found || t == keep.value || found->wanted < 2) continue;
+    Residency& r = *found;
     // One level of margin below the wanted one, so a view that moves a little does not reload what it drops;
     // the coarsest resident level always stays (a BC1 texture's coarsest levels may be below its wanted one).
     const uint32_t coarsest = 1u << (31 - std::countl_zero(r.mask | 1u));
@@ -499,7 +500,7 @@ bool TextureCache::trim_one(TextureId keep) {
       ++stats_.trimmed_levels;
     }
     r.mask &= ~surplus;
-    publish(TextureId(t));  // the shader's range starts at the first level kept
+    publish(TextureId(t), r.mask);  // the shader's range starts at the first level kept
     events_.push_back({stream::TextureEvent::Kind::kTrimmed, TextureId(t),
                        MipLevel(static_cast<uint32_t>(std::countr_zero(r.mask)))});
     return true;
@@ -539,11 +540,7 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
   TS_ASSERT(texture.value < scene_.texture_records().size(), "commit of unknown texture %u", texture.value);
   if (auto prepared = prepare_texture(texture.value); !prepared) {
     // Streamed before any mesh of it was drawn (render.preload_all) and of another format: never shown.
-    if (!unplaceable_logged_[texture.value]) {
-      spdlog::warn("texture cache: {}", prepared.error().message);
-      unplaceable_logged_[texture.value] = true;
-      refused_.push_back(texture.value);
-    }
+    refuse_for_good(texture, prepared.error().message);
     release_staging(alloc);
     events_.push_back({stream::TextureEvent::Kind::kFailed, texture, mip, CompletionStatus::kNotFound});
     return;
@@ -562,11 +559,7 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
       return;
     }
     if (!placed) {
-      if (!unplaceable_logged_[texture.value]) {
-        spdlog::warn("texture cache: {}", placed.error().message);
-        unplaceable_logged_[texture.value] = true;
-        refused_.push_back(texture.value);
-      }
+      refuse_for_good(texture, placed.error().message);
       release_staging(alloc);
       // Not the file's fault, but it can never be shown: kNotFound marks it broken, so it is not asked again.
       events_.push_back({stream::TextureEvent::Kind::kFailed, texture, mip, CompletionStatus::kNotFound});
@@ -574,7 +567,7 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
     }
     region = **placed;
     ++stats_.texture_loads;
-    if (residency_[texture.value].evicted_before) ++stats_.texture_reloads;
+    if (residency_.evicted_before(texture)) ++stats_.texture_reloads;
     auto& t = table_.as<gpu::TextureGpu>()[texture.value];
     t.placement.x = region->layer | plane_of(texture) << gpu::kPlacementPlaneShift;
     t.region.x = region->origin_x;
@@ -586,11 +579,14 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
     events_.push_back({stream::TextureEvent::Kind::kRejected, texture, mip});
     return;
   }
-  queued_.push_back(Copy{texture, mip.value, alloc, residency_[texture.value].epoch, 0});
+  Residency& r = residency_.get(texture);
+  ++r.copies;
+  queued_.push_back(Copy{texture, mip.value, alloc, r.epoch, 0});
 }
 
 bool TextureCache::bind_pages_for(const Copy& c) {
-  Residency& r = residency_[c.texture.value];
+  // `c` holds the entry (Residency::copies), so it stays through evictions, this texture's included.
+  Residency& r = *residency_.find(c.texture);
   if (r.epoch != c.epoch) return false;
   if (r.bound & (1u << c.mip)) return true;
   while (true) {
@@ -639,7 +635,7 @@ Status TextureCache::prepare_uploads(uint64_t serial) {
     if (bind_pages_for(c)) {
       ready_.push_back(c);
     } else {
-      release_staging(c.staging);
+      drop_copy(c);
       ++stats_.mips_dropped;
     }
   }
@@ -666,7 +662,7 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
     if (auto st = prepare_uploads(serial); !st.ok()) {
       spdlog::error("texture cache: {}", st.error().message);
       for (const Copy& c : ready_) {
-        release_staging(c.staging);
+        drop_copy(c);
         events_.push_back({stream::TextureEvent::Kind::kRejected, c.texture, MipLevel(c.mip)});
       }
       ready_.clear();
@@ -737,8 +733,7 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
   return n;
 }
 
-void TextureCache::publish(TextureId texture) {
-  const uint32_t mask = residency_[texture.value].mask;
+void TextureCache::publish(TextureId texture, uint32_t mask) {
   auto& t = table_.as<gpu::TextureGpu>()[texture.value];
   const uint32_t before = t.placement.y;
   if (mask == 0) {
@@ -770,15 +765,16 @@ void TextureCache::on_submission_complete(uint64_t serial) {
   while (!in_flight_.empty() && in_flight_.front().serial <= serial) {
     const Copy c = in_flight_.front();
     in_flight_.pop_front();
-    release_staging(c.staging);
-    Residency& r = residency_[c.texture.value];
+    Residency& r = *residency_.find(c.texture);  // held by `c` until drop_copy
     if (r.epoch != c.epoch) {  // evicted while the copy was on its way: it wrote into a region no one samples
+      drop_copy(c);
       ++stats_.mips_dropped;
       continue;
     }
     if (r.mask == 0) ++resident_count_;
     r.mask |= 1u << c.mip;
-    publish(c.texture);
+    publish(c.texture, r.mask);
+    drop_copy(c);
     ++stats_.mips_uploaded;
     stats_.bytes_uploaded += c.staging.size;
     events_.push_back({stream::TextureEvent::Kind::kCommitted, c.texture, MipLevel(c.mip)});

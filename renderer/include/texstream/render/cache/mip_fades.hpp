@@ -8,14 +8,14 @@
 #include <span>
 #include <vector>
 
+#include "texstream/render/cache/texture_index_map.hpp"
 #include "texstream/render/scene/gpu_structs.hpp"
-#include "texstream/render/vulkan/zeroed_array.hpp"
 
 namespace texstream::render {
 
 class MipFades {
  public:
-  MipFades(double fade_s, size_t texture_count) : fade_s_(fade_s), listed_(texture_count) {}
+  explicit MipFades(double fade_s) : fade_s_(fade_s) {}
 
   // The entry's finest resident level changed from `before` (kNotResident: none) to t.placement.y (kNotResident:
   // evicted). Before the first advance() nothing fades: what a preload publishes shows at once.
@@ -27,8 +27,9 @@ class MipFades {
  private:
   double fade_s_;
   bool started_ = false;
-  std::vector<uint32_t> fading_;  // textures with listed_ set: a fade left, or one that ended since the last advance
-  ZeroedArray<uint8_t> listed_;
+  std::vector<uint32_t> fading_;  // textures in listed_: a fade left, or one that ended since the last advance
+  // The textures of fading_, so none is listed twice; sparse, as fading_ (docs/design/host_memory.md).
+  TextureIndexMap listed_;
 };
 
 }  // namespace texstream::render

@@ -39,6 +39,7 @@
 #include <filesystem>
 #include <memory>
 #include <optional>
+#include <string>
 #include <unordered_map>
 #include <utility>
 #include <vector>
@@ -48,11 +49,11 @@
 #include "texstream/render/cache/cache_allocator.hpp"
 #include "texstream/render/cache/mip_fades.hpp"
 #include "texstream/render/cache/quadtree_allocator.hpp"
+#include "texstream/render/cache/residency_table.hpp"
 #include "texstream/render/cache/sparse_memory.hpp"
 #include "texstream/render/cache/sparse_page_table.hpp"
 #include "texstream/render/cache/staging_ring.hpp"
 #include "texstream/render/vulkan/gpu_buffer.hpp"
-#include "texstream/render/vulkan/zeroed_array.hpp"
 #include "texstream/stream/stream_client.hpp"
 #include "texstream/stream/texture_states.hpp"
 
@@ -189,24 +190,11 @@ class TextureCache final : public stream::MipSink {
   Status write_stats_json(const std::filesystem::path& file) const;
 
  private:
-  struct Residency {
-    uint32_t mask = 0;   // bit L: mip L is in the image and published
-    uint32_t bound = 0;  // bit L: the pages under the region at mip L hold a reference for this texture
-    uint32_t epoch = 0;  // bumped on eviction: copies of an older epoch publish nothing
-    bool evicted_before = false;
-    CacheRegion region;  // valid while `bound` != 0 (the allocator forgets it when the layer goes)
-    // lru: the use list, oldest first (texture id + 1; 0 = none), for textures holding a region.
-    uint32_t lru_prev = 0;
-    uint32_t lru_next = 0;
-    uint32_t used_cycle = 0;  // the touch() cycle that last used it
-    bool listed = false;
-    uint8_t wanted = 0;  // the finest level the last touch() wanted (floor of the desired level)
-  };
   struct Copy {
     TextureId texture;
     uint32_t mip;
     StagingRing::Allocation staging;
-    uint32_t epoch;
+    uint64_t epoch;   // the texture's Residency::epoch when committed
     uint64_t serial;  // submission that carries it (after record_uploads)
   };
 
@@ -230,19 +218,22 @@ class TextureCache final : public stream::MipSink {
   std::optional<TextureId> lru_victim(TextureId keep, std::optional<uint32_t> plane = std::nullopt) const;
   // ring: evicts the oldest layer of `plane`, else of the plane holding the most layers. False: none left.
   bool evict_oldest_layer(uint32_t plane);
-  void lru_unlink(uint32_t texture);
   // lru, when nothing can be evicted: drops the levels of one texture in use that are finer than its wanted
   // level minus one (a texture seen close before and far now). False when no texture has such levels.
   bool trim_one(TextureId keep);
-  void lru_append(uint32_t texture);
   PageRect page_rect(const CacheRegion& r, uint32_t plane) const;
   void note_eviction();
   // lru: a copy dropped because everything that could make room is in use (kNoRoom: asked again later).
   void refuse_for_room(TextureId texture, MipLevel mip);
+  // A texture that can never be placed (another format, larger than a layer): logged and listed once.
+  void refuse_for_good(TextureId texture, const std::string& why);
   // Takes the page references of copy `c`, evicting oldest layers while the budget is short. False when
   // the copy's own texture was evicted on the way (the copy is then dropped).
   bool bind_pages_for(const Copy& c);
-  void publish(TextureId texture);
+  // A copy the cache lets go of (dropped or done): its staging and its hold on the texture's entry.
+  void drop_copy(const Copy& c);
+  // Writes the shader's range of resident levels from `mask` (the texture's Residency::mask).
+  void publish(TextureId texture, uint32_t mask);
   Status prepare_texture(uint32_t texture);
   void release_staging(const StagingRing::Allocation& a);
 
@@ -259,11 +250,11 @@ class TextureCache final : public stream::MipSink {
   GpuBuffer staging_;
   GpuBuffer table_;  // gpu::TextureGpu[texture_count], host-visible
   StagingRing ring_;
-  uint32_t lru_head_ = 0, lru_tail_ = 0;  // texture id + 1; 0 = empty
   uint32_t use_cycle_ = 1;
-  std::vector<uint32_t> trimmable_;   // textures of the last touch() holding levels finer than they want
-  ZeroedArray<Residency> residency_;  // per texture; all-zero = not resident (created in O(1), see zeroed_array.hpp)
-  uint64_t resident_count_ = 0;       // textures with a non-zero mask
+  std::vector<uint32_t> trimmable_;  // textures of the last touch() holding levels finer than they want
+  // Sparse: entries only for textures resident, placed or with copies on the way (docs/design/host_memory.md).
+  ResidencyTable residency_;
+  uint64_t resident_count_ = 0;  // textures with a non-zero mask
   std::vector<UploadTraceFrame> trace_;
   size_t trace_entries_ = 0;
   bool trace_open_ = false;  // the last prepare_uploads started a trace frame that record_uploads adds to
@@ -271,9 +262,8 @@ class TextureCache final : public stream::MipSink {
   std::vector<Copy> queued_;                                        // committed, pages not yet bound
   std::vector<Copy> ready_;                                         // pages bound (prepare_uploads), not yet recorded
   uint64_t prepared_serial_ = 0;
-  std::deque<Copy> in_flight_;  // recorded, submission not yet complete
-  std::vector<bool> unplaceable_logged_;
-  std::vector<uint32_t> refused_;    // the textures of unplaceable_logged_, in order
+  std::deque<Copy> in_flight_;       // recorded, submission not yet complete
+  std::vector<uint32_t> refused_;    // textures that can never be placed, in order (each logged once)
   std::vector<bool> entry_written_;  // prepare_texture wrote the texture's table entry
   MipFades fades_;
   TextureCacheStats stats_;
