@@ -188,7 +188,7 @@ class TextureStates {
   struct IdHash {
     size_t operator()(uint32_t id) const { return static_cast<size_t>(splitmix64_finalize(id)); }
   };
-  static_assert(sizeof(Entry) == 12);
+  static_assert(sizeof(Entry) == 12);  // the entry size the header comment and host_memory.md state
 
   // The level Algorithm 1 would load for `texture` in state `s` now, or nullopt.
   std::optional<uint32_t> next_mip(const State& s, uint32_t texture, float desired, float bias) const;
