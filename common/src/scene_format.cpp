@@ -481,7 +481,8 @@ MappedFile::~MappedFile() {
 Result<MappedFile> MappedFile::open(const fs::path& path) {
   MappedFile f;
   f.what_ = path.string();
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  // O_NONBLOCK: opening a FIFO must not wait for a writer; it is refused below (a regular file ignores the flag).
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
   if (fd < 0) {
     const auto code = errno == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIo;
     return make_error(code, f.what_ + ": cannot open: " + errno_text());
@@ -491,6 +492,10 @@ Result<MappedFile> MappedFile::open(const fs::path& path) {
     const std::string err = errno_text();
     ::close(fd);
     return make_error(ErrorCode::kIo, f.what_ + ": cannot stat: " + err);
+  }
+  if (!S_ISREG(st.st_mode)) {
+    ::close(fd);
+    return make_error(ErrorCode::kNotAFile, f.what_ + ": not a regular file");
   }
   f.size_ = static_cast<size_t>(st.st_size);
   if (f.size_ > 0) {

@@ -30,11 +30,10 @@ ResidentLevels levels_of(uint32_t mask, uint32_t mip_count) {
 
 }  // namespace
 
-MipUseLedger::MipUseLedger(TextureTable shapes) : shapes_(std::move(shapes)), uses_(shapes_.size()) {}
+MipUseLedger::MipUseLedger(TextureTable shapes) : shapes_(std::move(shapes)) {}
 
-void MipUseLedger::leave(uint32_t texture, uint32_t leaving) {
-  Use& u = uses_[texture];
-  const TextureShape& s = shapes_[texture];
+void MipUseLedger::leave(Use& u, uint32_t leaving) {
+  const TextureShape s = shapes_[u.key];
   for (uint32_t bits = leaving & ~u.displayed; bits != 0; bits &= bits - 1) {
     bytes_wasted_ += mip_bytes(s.format, s.width, s.height, static_cast<uint32_t>(std::countr_zero(bits)));
   }
@@ -42,25 +41,34 @@ void MipUseLedger::leave(uint32_t texture, uint32_t leaving) {
   u.displayed &= ~leaving;
 }
 
+void MipUseLedger::leave_and_settle(Use* u, uint32_t leaving) {
+  leave(*u, leaving);
+  if (u->resident == 0) uses_.erase(u);
+}
+
 void MipUseLedger::apply(std::span<const TextureEvent> events) {
   for (const TextureEvent& e : events) {
     const uint32_t t = e.texture.value;
-    if (t >= uses_.size()) continue;
+    if (t >= shapes_.size()) continue;
     switch (e.kind) {
       case TextureEvent::Kind::kCommitted: {
         if (e.mip.value >= kMaxLevels) break;
         const uint32_t bit = 1u << e.mip.value;
-        if (uses_[t].resident & bit) leave(t, bit);  // a second copy of the level replaces the first
-        uses_[t].resident |= bit;
-        const TextureShape& s = shapes_[t];
+        Use* u = uses_.find(t);
+        if (u == nullptr) u = uses_.insert(Use{t, 0, 0});
+        if (u->resident & bit) leave(*u, bit);  // a second copy of the level replaces the first
+        u->resident |= bit;
+        const TextureShape s = shapes_[t];
         bytes_uploaded_ += mip_bytes(s.format, s.width, s.height, e.mip.value);
         break;
       }
       case TextureEvent::Kind::kInvalidated:
-        leave(t, uses_[t].resident);
+        if (Use* u = uses_.find(t)) leave_and_settle(u, u->resident);
         break;
       case TextureEvent::Kind::kTrimmed:
-        if (e.mip.value < kMaxLevels) leave(t, uses_[t].resident & ((1u << e.mip.value) - 1));
+        if (Use* u = uses_.find(t); u != nullptr && e.mip.value < kMaxLevels) {
+          leave_and_settle(u, u->resident & ((1u << e.mip.value) - 1));
+        }
         break;
       case TextureEvent::Kind::kFailed:
       case TextureEvent::Kind::kRejected:
@@ -71,28 +79,33 @@ void MipUseLedger::apply(std::span<const TextureEvent> events) {
 }
 
 ResidentLevels MipUseLedger::levels(TextureId texture) const {
-  if (texture.value >= uses_.size()) return {};
-  return levels_of(uses_[texture.value].resident, shapes_[texture.value].mip_count);
+  if (texture.value >= shapes_.size()) return {};
+  const Use* u = uses_.find(texture.value);
+  return levels_of(u != nullptr ? u->resident : 0, shapes_[texture.value].mip_count);
 }
 
 double MipUseLedger::observe(std::span<const StreamCandidate> list) {
   for (const StreamCandidate& c : list) {
-    if (c.texture.value >= uses_.size() || !std::isfinite(c.desired_mip)) continue;
-    Use& u = uses_[c.texture.value];
-    const ResidentLevels l = levels_of(u.resident, shapes_[c.texture.value].mip_count);
+    if (c.texture.value >= shapes_.size() || !std::isfinite(c.desired_mip)) continue;
+    Use* u = uses_.find(c.texture.value);
+    if (u == nullptr) continue;  // nothing resident
+    const ResidentLevels l = levels_of(u->resident, shapes_[c.texture.value].mip_count);
     if (!l.finest) continue;
     const double d = std::clamp(static_cast<double>(c.desired_mip), static_cast<double>(*l.finest),
                                 static_cast<double>(*l.coarsest));
-    u.displayed |= 1u << static_cast<uint32_t>(std::floor(d));
-    u.displayed |= 1u << static_cast<uint32_t>(std::ceil(d));  // the same level unless d is fractional
+    u->displayed |= 1u << static_cast<uint32_t>(std::floor(d));
+    u->displayed |= 1u << static_cast<uint32_t>(std::ceil(d));  // the same level unless d is fractional
   }
   return weighted_mip_deficit(list, [this](TextureId t) { return levels(t); });
 }
 
 void MipUseLedger::finish() {
-  for (uint32_t t = 0; t < uses_.size(); ++t) {
-    if (uses_[t].resident) leave(t, uses_[t].resident);
-  }
+  // Every entry has a resident mip; leave() on a copy, as the table is cleared after.
+  uses_.for_each([this](const Use& entry) {
+    Use u = entry;
+    leave(u, u.resident);
+  });
+  uses_.clear();
 }
 
 double MipUseLedger::wasted_fraction() const {

@@ -28,26 +28,30 @@ uint32_t initial_mip_level(const TextureShape& shape) {
   return shape.mip_count == 0 ? 0 : std::min(level, shape.mip_count - 1);
 }
 
-TextureStates::TextureStates(TextureTable shapes) : shapes_(std::move(shapes)), states_(shapes_.size()) {
-  for (size_t i = 0; i < shapes_.size(); ++i) {
-    if (shapes_[i].mip_count == 0) states_[i].broken = true;
+TextureStates::TextureStates(TextureTable shapes) : shapes_(std::move(shapes)) {
+  for (const TextureShape& shape : shapes_) {
+    if (shape.mip_count == 0) ++broken_from_start_;
   }
 }
 
-std::optional<uint32_t> TextureStates::next_mip(const State& s, const TextureShape& shape, float desired,
-                                                float bias) const {
+std::optional<uint32_t> TextureStates::next_mip(const State& s, uint32_t texture, float desired, float bias) const {
   if (s.broken || s.pending != kNone) return std::nullopt;  // one request per texture in flight
   switch (s.phase) {
     case TexturePhase::kFinal:
       return std::nullopt;
-    case TexturePhase::kInitial:
+    case TexturePhase::kInitial: {
+      // The shape is read only here and for a request's size: a texture that streams nothing this cycle
+      // (most of the list, most frames) touches no record of the table.
+      const TextureShape shape = shapes_[texture];
+      if (shape.mip_count == 0) return std::nullopt;  // broken from start
       return initial_mip_level(shape);
+    }
     case TexturePhase::kActive:
       // Algorithm 1: `if texture.mipLevelSampled + b < texture.mipLevel` → load mipLevel - 1. Written so
       // that a NaN from the GPU metadata refines nothing. resident is set in Active with nothing pending
       // (roll_back returns a texture with nothing resident to Initial), and resident > 0 (0 is Final).
       if (s.resident == kNone || s.resident == 0) return std::nullopt;
-      if (desired + bias < static_cast<float>(s.resident)) return s.resident - 1;
+      if (desired + bias < static_cast<float>(s.resident)) return s.resident - 1u;
       return std::nullopt;
   }
   return std::nullopt;
@@ -61,6 +65,17 @@ void TextureStates::roll_back(State& s) {
       s.resident == kNone ? TexturePhase::kInitial : (s.resident == 0 ? TexturePhase::kFinal : TexturePhase::kActive);
 }
 
+TextureStates::Entry* TextureStates::pending_entry(TextureId texture, MipLevel mip) {
+  if (!contains(texture)) return nullptr;
+  Entry* e = states_.find(texture.value);
+  if (e == nullptr || e->state.pending == kNone || e->state.pending != mip.value) return nullptr;
+  return e;
+}
+
+void TextureStates::settle(Entry* e) {
+  if (e->state.is_default()) states_.erase(e);
+}
+
 CycleResult TextureStates::run_cycle(std::span<const StreamCandidate> candidates, uint64_t load_bytes, float bias,
                                      const Sender& send, size_t max_requests) {
   CycleResult out;
@@ -69,9 +84,9 @@ CycleResult TextureStates::run_cycle(std::span<const StreamCandidate> candidates
       ++out.unknown_textures;
       continue;
     }
-    State& s = states_[c.texture.value];
-    const TextureShape& shape = shapes_[c.texture.value];
-    const std::optional<uint32_t> mip = next_mip(s, shape, c.desired_mip, bias);
+    Entry* e = states_.find(c.texture.value);  // valid until the insert below: send() cannot reach the table
+    State s = e != nullptr ? e->state : State{};
+    const std::optional<uint32_t> mip = next_mip(s, c.texture.value, c.desired_mip, bias);
     if (!mip) continue;
     // Algorithm 1: "Stop streaming textures when the adaptive load size is reached" — tested before each
     // load, so the mip that first pushes the batch over s is still loaded.
@@ -83,6 +98,7 @@ CycleResult TextureStates::run_cycle(std::span<const StreamCandidate> candidates
       out.stopped_by_count = true;
       break;
     }
+    const TextureShape shape = shapes_[c.texture.value];
     const MipRequest request{c.texture, MipLevel(*mip), c.weight,
                              mip_bytes(shape.format, shape.width, shape.height, *mip)};
     const SendResult r = send(request);
@@ -91,10 +107,15 @@ CycleResult TextureStates::run_cycle(std::span<const StreamCandidate> candidates
       break;
     }
     if (r == SendResult::kSkip) continue;
-    s.pending = *mip;
+    s.pending = static_cast<uint8_t>(*mip);  // below 32 (kNone): initial_mip_level or resident - 1
     // Initial → Active; "Set to Final state as the highest resolution mipmap will be streamed" when the
     // level is mipLevelMin (the base level 0), also straight from Initial for a texture smaller than 4x4.
     s.phase = *mip == 0 ? TexturePhase::kFinal : TexturePhase::kActive;
+    if (e != nullptr) {
+      e->state = s;
+    } else {
+      states_.insert(Entry{c.texture.value, s});
+    }
     out.bytes += request.bytes;
     out.sent.push_back(request);
   }
@@ -102,20 +123,20 @@ CycleResult TextureStates::run_cycle(std::span<const StreamCandidate> candidates
 }
 
 bool TextureStates::on_committed(TextureId texture, MipLevel mip) {
-  if (!contains(texture)) return false;
-  State& s = states_[texture.value];
-  if (s.pending == kNone || s.pending != mip.value) return false;
+  Entry* e = pending_entry(texture, mip);
+  if (e == nullptr) return false;
+  State& s = e->state;
   s.pending = kNone;
-  s.resident = mip.value;
+  s.resident = static_cast<uint8_t>(mip.value);  // the pending level's value
   s.failures = 0;
   s.phase = mip.value == 0 ? TexturePhase::kFinal : TexturePhase::kActive;
   return true;
 }
 
 bool TextureStates::on_failed(TextureId texture, MipLevel mip, CompletionStatus status) {
-  if (!contains(texture)) return false;
-  State& s = states_[texture.value];
-  if (s.pending == kNone || s.pending != mip.value) return false;
+  Entry* e = pending_entry(texture, mip);
+  if (e == nullptr) return false;
+  State& s = e->state;
   roll_back(s);
   switch (status) {
     case CompletionStatus::kNotFound:
@@ -133,47 +154,56 @@ bool TextureStates::on_failed(TextureId texture, MipLevel mip, CompletionStatus 
     case CompletionStatus::kTimedOut:
       break;  // not the texture's fault: the next cycle asks again
   }
+  settle(e);
   return true;
 }
 
 bool TextureStates::on_rejected(TextureId texture, MipLevel mip) {
-  if (!contains(texture)) return false;
-  State& s = states_[texture.value];
-  if (s.pending == kNone || s.pending != mip.value) return false;
-  roll_back(s);
-  if (++s.failures >= kMaxCountedFailures) s.broken = true;
+  Entry* e = pending_entry(texture, mip);
+  if (e == nullptr) return false;
+  roll_back(e->state);
+  if (++e->state.failures >= kMaxCountedFailures) e->state.broken = true;
   return true;
 }
 
 bool TextureStates::on_no_room(TextureId texture, MipLevel mip) {
-  if (!contains(texture)) return false;
-  State& s = states_[texture.value];
-  if (s.pending == kNone || s.pending != mip.value) return false;
-  roll_back(s);
+  Entry* e = pending_entry(texture, mip);
+  if (e == nullptr) return false;
+  roll_back(e->state);
+  settle(e);
   return true;
 }
 
 void TextureStates::on_trimmed(TextureId texture, MipLevel finest) {
   if (!contains(texture)) return;
-  State& s = states_[texture.value];
+  Entry* e = states_.find(texture.value);
+  if (e == nullptr) return;  // nothing resident
+  State& s = e->state;
   // A level the texture does not have would leave it resident at nothing (the cache always keeps one level).
-  if (s.resident == kNone || s.resident >= finest.value || finest.value >= shapes_[texture.value].mip_count) return;
-  s.resident = finest.value;
+  if (s.resident == kNone || s.resident >= finest.value || finest.value >= shapes_[texture.value].mip_count ||
+      finest.value >= kNone)
+    return;
+  s.resident = static_cast<uint8_t>(finest.value);
   if (s.pending == kNone) s.phase = finest.value == 0 ? TexturePhase::kFinal : TexturePhase::kActive;
 }
 
 void TextureStates::invalidate(TextureId texture) {
   if (!contains(texture)) return;
-  State& s = states_[texture.value];
+  Entry* e = states_.find(texture.value);
+  if (e == nullptr) return;  // already Initial with nothing resident or pending
+  State& s = e->state;
   s.phase = TexturePhase::kInitial;
   s.resident = kNone;
   s.pending = kNone;
+  settle(e);  // gone unless broken or with counted failures
 }
 
 TextureStateView TextureStates::view(TextureId texture) const {
-  TS_ASSERT(contains(texture), "texture %u outside the table of %zu", texture.value, states_.size());
-  const State& s = states_[texture.value];
-  TextureStateView v{s.phase, std::nullopt, std::nullopt, s.broken, s.failures};
+  TS_ASSERT(contains(texture), "texture %u outside the table of %zu", texture.value, shapes_.size());
+  const Entry* e = states_.find(texture.value);
+  const State s = e != nullptr ? e->state : State{};
+  TextureStateView v{s.phase, std::nullopt, std::nullopt, s.broken || shapes_[texture.value].mip_count == 0,
+                     s.failures};
   if (s.resident != kNone) v.resident = s.resident;
   if (s.pending != kNone) v.pending = s.pending;
   return v;
@@ -181,10 +211,11 @@ TextureStateView TextureStates::view(TextureId texture) const {
 
 TextureStateCounts TextureStates::counts() const {
   TextureStateCounts c;
-  for (const State& s : states_) {
+  states_.for_each([&c](const Entry& e) {
+    const State& s = e.state;
     if (s.broken) {
       ++c.broken;
-      continue;
+      return;
     }
     if (s.pending != kNone) ++c.pending;
     switch (s.phase) {
@@ -198,7 +229,10 @@ TextureStateCounts TextureStates::counts() const {
         ++c.final;
         break;
     }
-  }
+  });
+  // Textures without an entry: Initial, or broken when their shape has no mips (those never get one).
+  c.broken += broken_from_start_;
+  c.initial += shapes_.size() - states_.size() - broken_from_start_;
   return c;
 }
 

@@ -4,6 +4,7 @@
 // answers exactly as one built in memory and as brute force; SceneData::open defers mesh checks to
 // check_mesh() without losing any.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -165,6 +166,13 @@ TEST_F(SceneMappedTest, HeadersAreCheckedAtOnceAndMeshesWhenAsked) {
   write_city(4, 20);
   patch(dir_ / "textures.bin", sizeof(TextureFileHeader) + 2 * sizeof(TextureRecord), uint32_t{0});
   expect_fails(map_texture_table(dir_), "textures.bin: texture 2: extent");
+
+  // Something that is not a regular file is refused naming it, at once: opening a FIFO must not wait for a
+  // writer (the server maps textures.bin too, and read_texture_table refused one the same way).
+  fs::remove(dir_ / "textures.bin");
+  ASSERT_EQ(::mkfifo((dir_ / "textures.bin").c_str(), 0600), 0);
+  expect_fails(map_texture_table(dir_), "textures.bin: not a regular file");
+  EXPECT_EQ(map_texture_table(dir_).error().code, ErrorCode::kNotAFile);
 }
 
 TEST_F(SceneMappedTest, MeshIndexRoundTripsAndIsRefusedWhenStaleOrBroken) {

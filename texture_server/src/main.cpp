@@ -194,8 +194,8 @@ int main(int argc, char** argv) {
       return kExitBadArguments;
     }
   }
-  // The first renderer's server takes this table; later ones read it again (the scene may have changed).
-  std::optional<std::vector<texstream::scene::TextureRecord>> first_scene = std::move(scene).value();
+  // The first renderer's server takes this table; later ones map it again (the scene may have changed).
+  texstream::server::SceneTextures first_scene = std::move(scene).value();
   texstream::Result<std::unique_ptr<texstream::Segment>> segment = texstream::Segment::open(segment_name);
   if (!segment.ok() && !spawned && segment.error().code == texstream::ErrorCode::kNotFound) {
     // Standalone and started before its renderer: wait for one to create the segment, as after a renderer

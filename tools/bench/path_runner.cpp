@@ -60,12 +60,14 @@ ResidentCache resident_cache(const render::SceneData& scene) {
   ResidentCache c;
   std::vector<uint64_t> per_extent(32, 0);
   uint32_t bytes_per_block = 0;
-  for (const TextureShape& s : scene.shapes()) {
+  for (const scene::TextureRecord& s : scene.texture_records()) {  // the records as they are: no copy of the table
     uint64_t e = 4;
     while (e < std::max(s.width, s.height)) e *= 2;
     c.layer_extent = std::max(c.layer_extent, e);
     ++per_extent[static_cast<size_t>(std::log2(static_cast<double>(e)))];
-    bytes_per_block = is_block_compressed(s.format) ? block_bytes(s.format) : 64;  // a 4x4 block
+    // The format was checked when the scene was opened.
+    const TexelFormat format = texel_format_from_raw(s.format).value_or(TexelFormat::kRgba8);
+    bytes_per_block = is_block_compressed(format) ? block_bytes(format) : 64;  // a 4x4 block
   }
   for (size_t k = 0; k < per_extent.size(); ++k) {
     if (!per_extent[k]) continue;

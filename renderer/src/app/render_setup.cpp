@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <chrono>
+#include <memory>
 #include <optional>
 
 #include "renderer.hpp"
@@ -98,8 +99,10 @@ Status Renderer::set_up() {
   if (!controller) return controller.error();
   controller_ = std::make_unique<stream::AdaptiveController>(std::move(*controller));
   load_bytes_ = controller_->load_bytes();
-  // One copy of the texture table, shared by the states, the ledger and the stream client (host_memory.md).
-  table_ = stream::TextureTable(scene_.shapes());
+  // The texture table is the mapped textures.bin, no heap copy, shared by the states, the ledger and the stream
+  // client; a copy of the opened scene (a few pointers) keeps the mapping alive for them (host_memory.md).
+  auto table_owner = std::make_shared<const SceneData>(scene_);
+  table_ = stream::TextureTable(table_owner, table_owner->texture_records());
   states_ = std::make_unique<stream::TextureStates>(table_);
   mip_use_ = std::make_unique<stream::MipUseLedger>(table_);
 

@@ -85,24 +85,24 @@ const char* to_string(RunOutcome outcome) {
   return "?";
 }
 
-Result<std::vector<scene::TextureRecord>> Server::read_scene(const std::filesystem::path& scene_dir) {
-  Result<std::vector<scene::TextureRecord>> textures = scene::read_texture_table(scene_dir);
-  if (!textures.ok()) return textures.error();
-  // read_texture_table validates extents and mip counts; the format is re-checked here because everything
+Result<SceneTextures> Server::read_scene(const std::filesystem::path& scene_dir) {
+  Result<scene::MappedTextureTable> mapped = scene::map_texture_table(scene_dir);
+  if (!mapped.ok()) return mapped.error();
+  const std::span<const scene::TextureRecord> textures = mapped->textures;
+  // map_texture_table validates extents and mip counts; the format is re-checked here because everything
   // downstream casts it.
-  for (size_t i = 0; i < textures->size(); ++i) {
-    if (!texel_format_from_raw((*textures)[i].format)) {
+  for (size_t i = 0; i < textures.size(); ++i) {
+    if (!texel_format_from_raw(textures[i].format)) {
       return make_error(ErrorCode::kCorrupt, "texture table of '" + scene_dir.string() + "': texture " +
                                                  std::to_string(i) + " has unknown format " +
-                                                 std::to_string((*textures)[i].format));
+                                                 std::to_string(textures[i].format));
     }
   }
-  return textures;
+  return SceneTextures(std::make_shared<const scene::MappedTextureTable>(std::move(mapped).value()));
 }
 
 Result<std::unique_ptr<Server>> Server::create(Segment& segment, const std::filesystem::path& scene_dir,
-                                               const ServerConfig& config, Storage& storage,
-                                               std::optional<std::vector<scene::TextureRecord>> scene) {
+                                               const ServerConfig& config, Storage& storage, SceneTextures scene) {
   if (config.worker_threads < 1 || config.worker_threads > 64) {
     return make_error(ErrorCode::kInvalidArgument,
                       "server.worker_threads must be in [1, 64], not " + std::to_string(config.worker_threads));
@@ -115,17 +115,17 @@ Result<std::unique_ptr<Server>> Server::create(Segment& segment, const std::file
     return make_error(ErrorCode::kInvalidArgument, "server.remote_fetches_in_flight must be in [1, 16], not " +
                                                        std::to_string(config.remote_fetches_in_flight));
   }
-  Result<std::vector<scene::TextureRecord>> textures =
-      scene ? Result<std::vector<scene::TextureRecord>>(std::move(*scene)) : read_scene(scene_dir);
-  if (!textures.ok()) return textures.error();
+  Result<SceneTextures> table = scene ? Result<SceneTextures>(std::move(scene)) : read_scene(scene_dir);
+  if (!table.ok()) return table.error();
+  const std::span<const scene::TextureRecord> textures = (*table)->textures;
   // The renderer states its texture table in the header: a server reading another scene would answer every
   // request for textures the renderer does not have (refused one by one as protocol errors). Refused here.
   if (const SegmentHeader& h = segment.header(); h.texture_table_fingerprint != 0) {
     uint64_t fingerprint = kTextureTableSeed;
-    for (const scene::TextureRecord& t : *textures) {
+    for (const scene::TextureRecord& t : textures) {
       fingerprint = texture_table_step(fingerprint, t.width, t.height, t.mip_count, t.format);
     }
-    if (h.texture_count != textures->size() || h.texture_table_fingerprint != fingerprint) {
+    if (h.texture_count != textures.size() || h.texture_table_fingerprint != fingerprint) {
       // kProtocol: this renderer's segment is not one this server can serve (main.cpp tells it from a bad
       // configuration: a standalone server waits for the next renderer).
       return make_error(ErrorCode::kProtocol,
@@ -133,13 +133,13 @@ Result<std::unique_ptr<Server>> Server::create(Segment& segment, const std::file
                                     "(fingerprint {:016x}), but this server's scene '{}' has {} (fingerprint "
                                     "{:016x}): the two read different scenes (scene.dir, --scene, storage.origin)",
                                     segment.name(), h.texture_count, h.texture_table_fingerprint, scene_dir.string(),
-                                    textures->size(), fingerprint));
+                                    textures.size(), fingerprint));
     }
   }
   if (!(config.rate_limit_mb_s >= 0)) {
     return make_error(ErrorCode::kInvalidArgument, "server.rate_limit_mb_s must be >= 0");
   }
-  std::unique_ptr<Server> server(new Server(segment, scene_dir, config, storage, std::move(textures).value()));
+  std::unique_ptr<Server> server(new Server(segment, scene_dir, config, storage, std::move(table).value()));
   // Through the storage the loads read (rate limit included), so that pages come through every tier as mips do.
   Result<std::unique_ptr<PageLoader>> pages =
       PageLoader::open(scene_dir, server->rate_limited_ ? *server->rate_limited_ : storage, server->stats_);
@@ -149,12 +149,13 @@ Result<std::unique_ptr<Server>> Server::create(Segment& segment, const std::file
 }
 
 Server::Server(Segment& segment, const std::filesystem::path& scene_dir, const ServerConfig& config, Storage& storage,
-               std::vector<scene::TextureRecord> textures)
+               SceneTextures textures)
     : segment_(segment),
       storage_(storage),
       scene_dir_(scene_dir),
       config_(config),
-      textures_(std::move(textures)),
+      table_(std::move(textures)),
+      textures_(table_->textures),
       requests_(segment.request_consumer()),
       completions_(segment.completion_producer()),
       rate_limited_(config.rate_limit_mb_s > 0 ? std::make_unique<RateLimitedStorage>(storage, config.rate_limit_mb_s,

@@ -10,13 +10,15 @@
 // Its residency also gives the frame's weighted mip deficit (mip_deficit.hpp), so both measures see exactly
 // what the shader samples: the run of resident levels ending at the coarsest, as TextureCache::publish.
 //
-// Cost: apply() is O(events), observe() O(list), finish() O(textures); memory 8 bytes per texture besides
-// the shapes. Single-threaded: the frame loop alone calls it.
+// Cost: apply() is O(events), observe() O(list), finish() O(entries). Memory: a 12-byte entry in an
+// open-addressing table (at most half full, never shrinking) per texture with a resident mip, none for the others
+// (docs/design/host_memory.md). Single-threaded: the frame loop alone calls it.
 #include <cstdint>
 #include <span>
 #include <vector>
 
 #include "texstream/common/ids.hpp"
+#include "texstream/common/open_table.hpp"
 #include "texstream/protocol/completion_check.hpp"
 #include "texstream/stream/mip_deficit.hpp"
 #include "texstream/stream/texture_states.hpp"
@@ -44,16 +46,31 @@ class MipUseLedger {
   // bytes_wasted() / bytes_uploaded(); NaN before any upload.
   double wasted_fraction() const;
 
+  // Textures with a resident mip: the entries held (none for the others).
+  size_t tracked() const { return uses_.size(); }
+
  private:
+  static constexpr uint32_t kNoTexture = 0xffffffffu;  // an empty slot: ids are below the table's size
+  // A texture with a resident mip; erased when its last one leaves.
   struct Use {
+    uint32_t key = kNoTexture;
     uint32_t resident = 0;   // bit L: mip L resident (as TextureCache's mask)
     uint32_t displayed = 0;  // bit L: the resident copy of mip L has been displayed
   };
-  // Mips in `leaving` (a subset of the resident mask) leave the cache.
-  void leave(uint32_t texture, uint32_t leaving);
+  struct UseUsed {
+    bool operator()(const Use& u) const { return u.key != kNoTexture; }
+  };
+  struct IdHash {
+    size_t operator()(uint32_t id) const { return static_cast<size_t>(splitmix64_finalize(id)); }
+  };
+  static_assert(sizeof(Use) == 12);  // the entry size the header comment and host_memory.md state
+  // Mips in `leaving` (a subset of u.resident) leave the cache; the caller erases `u` once nothing is resident.
+  void leave(Use& u, uint32_t leaving);
+  // leave(), then the entry goes if nothing is resident any more (invalidates pointers to entries).
+  void leave_and_settle(Use* u, uint32_t leaving);
 
   TextureTable shapes_;  // shared with the other users of the scene's table
-  std::vector<Use> uses_;
+  OpenTable<Use, UseUsed, IdHash> uses_;
   uint64_t bytes_uploaded_ = 0;
   uint64_t bytes_wasted_ = 0;
 };

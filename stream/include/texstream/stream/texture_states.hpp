@@ -19,6 +19,11 @@
 //   * The load-size test `if loadedBatchSize > s then break` runs before each load, exactly as in
 //     Algorithm 1, so the mip that first pushes the batch over s is still loaded; unlike the listing, the
 //     test comes before the state change, so the texture that hits the limit keeps its state.
+//
+// Memory: a texture in the default state (Initial, nothing resident or pending, not broken, no counted failure)
+// has no entry; one that is not has a 12-byte entry in an open-addressing table at most half full. So a
+// texture not in view costs nothing (docs/design/host_memory.md); the table is as large as the peak count of
+// resident, pending, broken or failed textures needs (it never shrinks).
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -27,6 +32,7 @@
 #include <vector>
 
 #include "texstream/common/ids.hpp"
+#include "texstream/common/open_table.hpp"
 #include "texstream/protocol/completion_check.hpp"
 #include "texstream/protocol/records.hpp"
 #include "texstream/stream/texture_table.hpp"
@@ -151,28 +157,51 @@ class TextureStates {
   // Each event in order, as the call its kind names.
   void apply(std::span<const TextureEvent> events);
 
-  size_t size() const { return states_.size(); }
-  bool contains(TextureId texture) const { return texture.value < states_.size(); }
+  size_t size() const { return shapes_.size(); }  // textures in the table
+  bool contains(TextureId texture) const { return texture.value < shapes_.size(); }
   TextureStateView view(TextureId texture) const;  // contract: contains(texture)
-  TextureStateCounts counts() const;
+  TextureStateCounts counts() const;               // O(entries)
+  // Textures whose state is not the default one: the entries held (a texture not in view has none).
+  size_t tracked() const { return states_.size(); }
 
  private:
+  static constexpr uint8_t kNone = 0xff;  // no level: levels are below 32 (a 32-bit extent has at most 32)
   struct State {
     TexturePhase phase = TexturePhase::kInitial;
-    uint32_t resident = kNone;
-    uint32_t pending = kNone;
+    uint8_t resident = kNone;
+    uint8_t pending = kNone;
     bool broken = false;
     uint8_t failures = 0;
+    // The state of a texture with no entry (unless its shape has no mips: broken, derived from the shape).
+    bool is_default() const {
+      return phase == TexturePhase::kInitial && resident == kNone && pending == kNone && !broken && failures == 0;
+    }
   };
-  static constexpr uint32_t kNone = 0xffffffffu;
+  static constexpr uint32_t kNoTexture = 0xffffffffu;  // an empty slot: ids are below the table's size
+  struct Entry {
+    uint32_t key = kNoTexture;
+    State state;
+  };
+  struct EntryUsed {
+    bool operator()(const Entry& e) const { return e.key != kNoTexture; }
+  };
+  struct IdHash {
+    size_t operator()(uint32_t id) const { return static_cast<size_t>(splitmix64_finalize(id)); }
+  };
+  static_assert(sizeof(Entry) == 12);  // the entry size the header comment and host_memory.md state
 
-  // The level Algorithm 1 would load for this texture now, or nullopt.
-  std::optional<uint32_t> next_mip(const State& s, const TextureShape& shape, float desired, float bias) const;
+  // The level Algorithm 1 would load for `texture` in state `s` now, or nullopt.
+  std::optional<uint32_t> next_mip(const State& s, uint32_t texture, float desired, float bias) const;
   // Undo the transition made when `s.pending` was sent.
   static void roll_back(State& s);
+  // The entry of a texture with a pending request, or nullptr: an event for `mip` changes only such a texture.
+  Entry* pending_entry(TextureId texture, MipLevel mip);
+  // Drops `e` if its texture is back in the default state (invalidates pointers to entries).
+  void settle(Entry* e);
 
   TextureTable shapes_;  // shared with the other users of the scene's table
-  std::vector<State> states_;
+  OpenTable<Entry, EntryUsed, IdHash> states_;
+  uint64_t broken_from_start_ = 0;  // shapes with no mips: broken without an entry
 };
 
 }  // namespace texstream::stream

@@ -3,6 +3,7 @@
 #include <cstdint>
 
 #include "texstream/common/ids.hpp"
+#include "texstream/common/open_table.hpp"
 
 namespace texstream::server {
 
@@ -16,13 +17,8 @@ struct MipKey {
 };
 
 struct MipKeyHash {
-  size_t operator()(MipKey k) const noexcept {
-    // splitmix64 finaliser: texture ids are dense and mips tiny, so the raw value hashes badly into buckets.
-    uint64_t x = k.value + 0x9e3779b97f4a7c15ull;
-    x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
-    x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
-    return static_cast<size_t>(x ^ (x >> 31));
-  }
+  // Texture ids are dense and mips tiny, so the raw value hashes badly into buckets (open_table.hpp).
+  size_t operator()(MipKey k) const noexcept { return static_cast<size_t>(splitmix64_finalize(k.value)); }
 };
 
 }  // namespace texstream::server

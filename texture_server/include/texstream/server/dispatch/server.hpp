@@ -31,6 +31,7 @@
 #include <filesystem>
 #include <memory>
 #include <optional>
+#include <span>
 #include <vector>
 
 #include "texstream/common/config.hpp"
@@ -57,20 +58,25 @@ enum class RunOutcome {
 };
 const char* to_string(RunOutcome outcome);
 
+// The scene's texture table: textures.bin mapped read-only, every record checked, no heap copy (16 bytes per
+// texture less than a vector: 91 MB at 5.7 M textures; docs/design/host_memory.md). Shared: main.cpp's copy
+// serves the first renderer's server.
+using SceneTextures = std::shared_ptr<const scene::MappedTextureTable>;
+
 class Server {
  public:
-  // The scene's texture table, validated (errors name the file). create() reads it again for each renderer;
-  // texstream-server reads it once at start too, so that a wrong scene is refused before it waits.
-  static Result<std::vector<scene::TextureRecord>> read_scene(const std::filesystem::path& scene_dir);
-  // Reads the scene's texture table (errors name the file), opens the page files scene.json names (a
+  // The scene's texture table, validated (errors name the file). create() maps it again for each renderer;
+  // texstream-server maps it once at start too, so that a wrong scene is refused before it waits.
+  static Result<SceneTextures> read_scene(const std::filesystem::path& scene_dir);
+  // Maps the scene's texture table (errors name the file), opens the page files scene.json names (a
   // missing or damaged one is an error naming it; PageLoader::open) and attaches to `segment`. The segment and the
   // storage must outlive the server. ErrorCode::kProtocol: the segment's renderer reads another scene (its
   // texture table differs); any other error is this server's configuration or scene.
-  // `scene`: the table read_scene() returned for scene_dir, taken instead of reading it again (a city's table
-  // is ~90 MB); empty: read now.
+  // `scene`: the table read_scene() returned for scene_dir, taken instead of checking it again (a city's table
+  // is ~90 MB); null: mapped now.
   static Result<std::unique_ptr<Server>> create(Segment& segment, const std::filesystem::path& scene_dir,
                                                 const ServerConfig& config, Storage& storage,
-                                                std::optional<std::vector<scene::TextureRecord>> scene = {});
+                                                SceneTextures scene = nullptr);
   ~Server();
   Server(const Server&) = delete;
   Server& operator=(const Server&) = delete;
@@ -94,7 +100,7 @@ class Server {
 
  private:
   Server(Segment& segment, const std::filesystem::path& scene_dir, const ServerConfig& config, Storage& storage,
-         std::vector<scene::TextureRecord> textures);
+         SceneTextures textures);
 
   // One pass of the loop; returns true if anything happened (then the loop does not sleep).
   bool drain_requests();
@@ -134,7 +140,8 @@ class Server {
   Storage& storage_;
   std::filesystem::path scene_dir_;
   ServerConfig config_;
-  std::vector<scene::TextureRecord> textures_;
+  SceneTextures table_;                             // holds the mapping textures_ reads
+  std::span<const scene::TextureRecord> textures_;  // table_->textures
   SpscRingConsumer<RequestRecord> requests_;
   SpscRingProducer<CompletionRecord> completions_;
   ServerStats stats_;
