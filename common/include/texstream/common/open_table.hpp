@@ -29,6 +29,11 @@ constexpr uint64_t splitmix64_finalize(uint64_t x) {
   return x ^ (x >> 31);
 }
 
+// The hash of a dense 32-bit id (a texture's): its splitmix64 finaliser.
+struct IdHash {
+  size_t operator()(uint32_t id) const { return static_cast<size_t>(splitmix64_finalize(id)); }
+};
+
 template <class Slot, class Used, class Hash>
 class OpenTable {
  public:

@@ -60,9 +60,6 @@ class MipUseLedger {
   struct UseUsed {
     bool operator()(const Use& u) const { return u.key != kNoTexture; }
   };
-  struct IdHash {
-    size_t operator()(uint32_t id) const { return static_cast<size_t>(splitmix64_finalize(id)); }
-  };
   static_assert(sizeof(Use) == 12);  // the entry size the header comment and host_memory.md state
   // Mips in `leaving` (a subset of u.resident) leave the cache; the caller erases `u` once nothing is resident.
   void leave(Use& u, uint32_t leaving);

@@ -185,9 +185,6 @@ class TextureStates {
   struct EntryUsed {
     bool operator()(const Entry& e) const { return e.key != kNoTexture; }
   };
-  struct IdHash {
-    size_t operator()(uint32_t id) const { return static_cast<size_t>(splitmix64_finalize(id)); }
-  };
   static_assert(sizeof(Entry) == 12);  // the entry size the header comment and host_memory.md state
 
   // The level Algorithm 1 would load for `texture` in state `s` now, or nullopt.
