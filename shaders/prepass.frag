@@ -23,7 +23,7 @@ layout(location = 0) out uint out_owner;
 
 void main() {
 #ifdef ALPHA_TEST
-  TextureGpu tex = textures[meshes[in_mesh].texture_id];
+  TextureGpu tex = textures[meshes[in_mesh].texture_slot];
   vec2 extent = vec2(tex.region.zw);
   vec2 dx = dFdx(in_uv) * extent;  // in uniform control flow
   vec2 dy = dFdy(in_uv) * extent;

@@ -105,7 +105,7 @@ vec3 shade_at(TextureGpu tex, AnisoLod s, float lod, vec2 major, vec2 extent, fl
 
 void main() {
   MeshGpu mesh = meshes[in_mesh];
-  TextureGpu tex = textures[mesh.texture_id];
+  TextureGpu tex = textures[mesh.texture_slot];
   vec2 extent = vec2(tex.region.zw);
   // Derivatives first, in uniform control flow.
   vec2 dx = dFdx(in_uv) * extent;

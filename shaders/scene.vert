@@ -29,7 +29,7 @@ void main() {
   uint id = gl_InstanceIndex > 0 ? instance_mesh[uint(gl_InstanceIndex) - 1u] : in_mesh;
   MeshGpu mesh = meshes[id];
   // transforms.bin: the instance's rotation and uniform scale, then its camera-relative origin.
-  vec3 relative = rotate(mesh.rotation, in_position * mesh.scale.x) + vec3(mesh.offset_x, mesh.offset_y, mesh.offset_z);
+  vec3 relative = rotate(mesh.rotation, in_position * mesh.scale) + vec3(mesh.offset_x, mesh.offset_y, mesh.offset_z);
   gl_Position = pc.view_proj * vec4(relative, 1.0);
   out_uv = in_uv;
   out_normal = rotate(mesh.rotation, in_normal);

@@ -22,7 +22,7 @@ struct mat4 { float m[16]; };  // column-major, as glm and GLSL store it
 // ---- descriptor set 0: one layout for every pipeline ----
 TS_CONST kBindingFrame = 0;        // uniform FrameUniforms
 TS_CONST kBindingMeshes = 1;       // buffer MeshGpu[mesh_count], camera-relative offsets, rewritten per frame
-TS_CONST kBindingTextures = 2;     // buffer TextureGpu[texture_count]
+TS_CONST kBindingTextures = 2;     // buffer TextureGpu[slots]: by MeshGpu.texture_slot, not by texture id
 TS_CONST kBindingMeshMeta = 3;     // buffer MeshMeta[mesh_count], the sparse visibility metadata (seed 000 §3.2)
 TS_CONST kBindingCache = 4;        // sampler2DArray[kCachePlanes]: the texture cache images (seed 000 §3.6)
 TS_CONST kBindingCompacted = 5;    // buffer CompactList: meshes with weight >= tau (seed 000 §3.3)
@@ -155,9 +155,12 @@ struct MeshGpu {
   float offset_x;       // mesh origin minus camera position, computed in double on the CPU, then rounded
   float offset_y;
   float offset_z;
-  uint texture_id;
+  uint texture_id;      // the mesh's texture (compact.comp copies it into CompactEntry for the CPU)
   vec4 rotation;        // unit quaternion (x, y, z, w) turning the vertices (transforms.bin; identity without)
-  vec4 scale;           // x: uniform scale of the vertices before the rotation; y, z, w: 0
+  float scale;          // uniform scale of the vertices before the rotation
+  uint texture_slot;    // the texture's entry in the texture table (kBindingTextures; TextureSlots)
+  uint reserved0;       // 0
+  uint reserved1;       // 0
 };
 
 struct TextureGpu {

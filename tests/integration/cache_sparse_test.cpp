@@ -5,6 +5,7 @@
 #include <unistd.h>
 #include "process_test_support.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -145,6 +146,35 @@ TEST(CacheBudget, TooSmallForOneLayerTextureIsANamedError) {
   const std::string log = slurp(dir / "render.log");
   EXPECT_NE(rc, 0);
   EXPECT_NE(log.find("cache.memory_bytes"), std::string::npos) << log;
+  fs::remove_all(dir);
+}
+
+// The texture table (gpu::TextureGpu, 48 B, host-visible) holds a slot per texture drawn in the frame or cached,
+// not one per scene texture (docs/design/host_memory.md, item 3): after a fly-through of a 12,000-texture city that
+// draws a few thousand textures at a time, the table is its first 4096 entries, under half of a per-texture table,
+// and slots of textures that left the view were freed for others. A per-texture table again fails the bound.
+TEST(CacheTable, TheTextureTableFollowsTheTexturesInUseNotTheScene) {
+  const fs::path dir = fresh_dir("table");
+  constexpr uint64_t kTextures = 12000, kEntryBytes = 48;
+  const fs::path scene = make_scene(dir, "bc1", static_cast<int>(kTextures));
+  const fs::path out = dir / "out";
+  const int rc = run(render_cmd(scene, out, "--set render.frames=40 --set stream.fade_ms=200"), dir / "render.log");
+  const std::string log = slurp(dir / "render.log");
+  ASSERT_EQ(rc, 0) << log;
+  const auto cache = nlohmann::json::parse(slurp(out / "cache.json"));
+  const auto summary = nlohmann::json::parse(slurp(out / "summary.json"));
+  EXPECT_EQ(summary["validation_errors"].get<int>(), 0) << log;
+  EXPECT_GT(summary["mips_streamed"].get<int>(), 0);
+  const auto slots = cache["texture_table_slots"].get<uint64_t>();
+  const auto peak = cache["texture_slots_peak"].get<uint64_t>();
+  EXPECT_EQ(cache["texture_table_bytes"].get<uint64_t>(), slots * kEntryBytes);
+  EXPECT_GT(peak, 0u);
+  EXPECT_LE(peak, slots);
+  // Doubling from 4096: never more than twice the slots held at once.
+  EXPECT_LE(slots, std::max<uint64_t>(4096, 2 * peak));
+  EXPECT_LT(peak, kTextures / 2) << "the path was meant to see a part of the city at a time";
+  EXPECT_LT(cache["texture_table_bytes"].get<uint64_t>(), kTextures * kEntryBytes / 2);
+  EXPECT_GT(cache["texture_slots_released"].get<uint64_t>(), 0u) << "no texture left the view: nothing reused";
   fs::remove_all(dir);
 }
 

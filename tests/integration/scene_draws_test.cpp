@@ -13,6 +13,7 @@
 #include "texstream/render/scene/broad_phase.hpp"
 #include "texstream/render/scene/scene_data.hpp"
 #include "texstream/render/scene/scene_gpu.hpp"
+#include "texstream/render/scene/texture_slots.hpp"
 #include "texstream/render/vulkan/vulkan_context.hpp"
 
 using namespace texstream;
@@ -114,7 +115,16 @@ TEST(SceneDraws, AdjacentMeshesMergePerPartInIndexOrderAndInstancesDrawAfterTheR
   EXPECT_TRUE(g->scene.is_instanced(4));
   EXPECT_FALSE(g->scene.is_instanced(7));
   FrameRecording rec;
-  g->scene.write_draws(s, visible, {0, 0, 0}, ViewportSplit{4}, rec);
+  TextureSlots slots(s.texture_records().size());
+  slots.begin_frame();
+  g->scene.write_draws(s, visible, {0, 0, 0}, ViewportSplit{4}, slots, rec);
+  // Every drawn mesh names its texture's table slot (one texture here: one slot, kept by the frame).
+  const auto* mesh_gpu = g->scene.meshes().as<gpu::MeshGpu>();
+  for (uint32_t id : visible) EXPECT_EQ(mesh_gpu[id].texture_slot, 0u) << "mesh " << id;
+  EXPECT_EQ(slots.find(0), 0u);
+  EXPECT_EQ(slots.in_use(), 1u);
+  slots.release_unused([](uint32_t) { return false; });
+  EXPECT_EQ(slots.in_use(), 1u) << "a texture drawn in the frame keeps its slot";
 
   // The main pass's list (6 7 0 1) in id order: 0 and 1 (indices 0-5) adjacent, one draw; 6 (18-20); 7
   // (12-14), the owner, not adjacent to 20. The wide pass's list (3 4): 3 (9-11); 4 (12-14), the instance, in
@@ -138,7 +148,7 @@ TEST(SceneDraws, AdjacentMeshesMergePerPartInIndexOrderAndInstancesDrawAfterTheR
 
   // Without 4 and 7, the main list's 3 and 6 stay apart (5 is not in view) and 0 merges with nothing.
   const std::vector<uint32_t> fewer{6, 3, 0, 1};
-  g->scene.write_draws(s, fewer, {0, 0, 0}, ViewportSplit{4}, rec);
+  g->scene.write_draws(s, fewer, {0, 0, 0}, ViewportSplit{4}, slots, rec);
   EXPECT_EQ(draws_of(g->scene, rec.draw_count), (std::vector<Draw>{{0, 6, 0}, {9, 3, 0}, {18, 3, 0}}));
   EXPECT_EQ(rec.wide_first, 3u);
   EXPECT_EQ(rec.draw_count, 3u);  // nothing reaches outside
@@ -160,9 +170,10 @@ TEST(SceneDraws, TheInstancesOfOneRangeAreOneInstancedDrawPerPass) {
   const std::vector<uint32_t> visible{8, 5, 1, 6, 7, 3, 4, 0};
   ASSERT_TRUE(g->scene.make_resident(s, visible, nullptr).ok());
   FrameRecording rec;
+  TextureSlots slots(s.texture_records().size());
   // Main pass: 8 5 1 6 7 3 (8 came first, so it owns mesh 3's ranges and 3 and 7 instance them; 5 owns mesh 1's,
   // 1 and 6 instance them). Wide pass: 4 0.
-  g->scene.write_draws(s, visible, {0, 0, 0}, ViewportSplit{6}, rec);
+  g->scene.write_draws(s, visible, {0, 0, 0}, ViewportSplit{6}, slots, rec);
   const std::vector<Draw> d = draws_of(g->scene, rec.draw_count);
   // Main: the owners 5 (3-5) and 8 (9-11) in id order are not adjacent: two runs; then (3-5) x {1, 6},
   // (9-11) x {3, 7}. Wide: 0 (0-2), then (3-5) x {4}.

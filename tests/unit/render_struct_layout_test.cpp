@@ -18,6 +18,8 @@ TEST(SharedStructs, SizesAndOffsets) {
   EXPECT_EQ(offsetof(MeshGpu, texture_id), 12u);
   EXPECT_EQ(offsetof(MeshGpu, rotation), 16u);
   EXPECT_EQ(offsetof(MeshGpu, scale), 32u);
+  EXPECT_EQ(offsetof(MeshGpu, texture_slot), 36u);
+  EXPECT_EQ(offsetof(MeshGpu, reserved1), 44u);
   EXPECT_EQ(sizeof(MeshMeta), 8u);
   EXPECT_EQ(sizeof(CompactEntry), 16u);
   EXPECT_EQ(sizeof(CompactListHeader), 16u);

@@ -5,7 +5,7 @@
 
 namespace texstream::render {
 
-void MipFades::on_publish(uint32_t texture, gpu::TextureGpu& t, uint32_t before) {
+void MipFades::on_publish(uint32_t slot, gpu::TextureGpu& t, uint32_t before) {
   const uint32_t finest = t.placement.y;
   // Evicted, coarser, or no fading: what is resident shows at once.
   if (!started_ || fade_s_ <= 0 || finest == gpu::kNotResident || (before != gpu::kNotResident && finest > before)) {
@@ -20,9 +20,9 @@ void MipFades::on_publish(uint32_t texture, gpu::TextureGpu& t, uint32_t before)
     t.colour.y = before;
     t.colour.z = std::bit_cast<uint32_t>(1.0f);
   }
-  if (!listed_.contains(TextureId(texture))) {
-    listed_.insert(TextureId(texture), 0);
-    fading_.push_back(texture);
+  if (!listed_.contains(TextureId(slot))) {  // the map's keys are slots here
+    listed_.insert(TextureId(slot), 0);
+    fading_.push_back(slot);
   }
 }
 

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <bit>
 #include <chrono>
+#include <cstring>
 #include <fstream>
 #include <nlohmann/json.hpp>
 
@@ -53,9 +54,9 @@ VkFormat cache_vk_format(TexelFormat format) {
 TextureCache::TextureCache(const TextureCacheOptions& options, const SceneData& scene)
     : options_(options),
       scene_(scene),
+      slots_(scene.texture_records().size()),
       ring_(options.staging_bytes),
       residency_(scene.texture_records().size(), 0),
-      entry_written_(scene.texture_records().size(), false),
       fades_(options.fade_s) {}
 
 namespace {
@@ -221,13 +222,9 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
   if (!staging) return staging.error();
   c->staging_ = std::move(*staging);
 
-  // Entries are written by prepare_textures when first used: the shader reads only the entries of the
-  // textures of the meshes it draws.
-  const size_t n = std::max<size_t>(scene.texture_records().size(), 1);
-  auto table =
-      GpuBuffer::create(ctx, n * sizeof(gpu::TextureGpu), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, MemoryUse::kHostVisible);
-  if (!table) return table.error();
-  c->table_ = std::move(*table);
+  // By slot, not by texture: the entries of the textures drawn or cached, whatever the scene's texture count.
+  c->ctx_ = &ctx;
+  TS_TRY(c->grow_table(kInitialTableSlots));
 
   // Every level of every layer starts in the layout the shader reads; copies move it to TRANSFER_DST and back.
   TS_TRY(run_one_shot(ctx, [&](VkCommandBuffer cmd) {
@@ -253,31 +250,83 @@ Result<std::unique_ptr<TextureCache>> TextureCache::create(const VulkanContext& 
 }
 
 Status TextureCache::prepare_textures(std::span<const uint32_t> textures) {
-  for (uint32_t t : textures) TS_TRY(prepare_texture(t));
+  for (uint32_t t : textures) TS_TRY(check_texture(t));
   return ok_status();
 }
 
-Status TextureCache::prepare_texture(uint32_t texture) {
+Status TextureCache::check_texture(uint32_t texture) const {
   const auto records = scene_.texture_records();
   TS_ASSERT(texture < records.size(), "texture %u of %zu", texture, records.size());
-  if (entry_written_[texture]) return ok_status();
   const scene::TextureRecord& r = records[texture];
   // The renderer never decodes: texel blocks go from the file to the image of their format unchanged.
-  if (r.format >= plane_of_format_.size() || plane_of_format_[r.format] < 0) {
-    const auto f = texel_format_from_raw(r.format);
-    return make_error(ErrorCode::kInvalidArgument,
-                      (options_.format ? "cache.format = " + std::string(to_string(*options_.format)) + " but texture "
-                                       : std::string("texture ")) +
-                          std::to_string(texture) + " of " + (scene_.dir / "textures.bin").string() + " is " +
-                          (f ? std::string(to_string(*f)) : "of unknown format " + std::to_string(r.format)));
+  if (r.format < plane_of_format_.size() && plane_of_format_[r.format] >= 0) return ok_status();
+  const auto f = texel_format_from_raw(r.format);
+  return make_error(ErrorCode::kInvalidArgument,
+                    (options_.format ? "cache.format = " + std::string(to_string(*options_.format)) + " but texture "
+                                     : std::string("texture ")) +
+                        std::to_string(texture) + " of " + (scene_.dir / "textures.bin").string() + " is " +
+                        (f ? std::string(to_string(*f)) : "of unknown format " + std::to_string(r.format)));
+}
+
+Status TextureCache::grow_table(uint32_t slots) {
+  if (slots <= table_slots_) return ok_status();
+  uint32_t n = std::max(table_slots_, kInitialTableSlots);
+  while (n < slots) n *= 2;
+  auto table = GpuBuffer::create(*ctx_, VkDeviceSize{n} * sizeof(gpu::TextureGpu), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT,
+                                 MemoryUse::kHostVisible);
+  if (!table) return table.error();
+  // Nothing in flight reads the old buffer (every method runs between submissions); the descriptor set is
+  // pointed at the new one before the next submission records its passes (RenderStack::submit).
+  if (table_slots_ > 0) {
+    std::memcpy(table->bytes().data(), table_.bytes().data(), size_t{table_slots_} * sizeof(gpu::TextureGpu));
   }
-  gpu::TextureGpu& t = table_.as<gpu::TextureGpu>()[texture];
-  t = gpu::TextureGpu{};
-  t.placement = {0, gpu::kNotResident, 0, r.mip_count};
-  t.region = {0, 0, r.width, r.height};
-  t.colour = {scene_.colours()[texture], gpu::kNotResident, 0, scene_.sampling_flags(texture)};
-  entry_written_[texture] = true;
+  table_ = std::move(*table);
+  table_slots_ = n;
   return ok_status();
+}
+
+Status TextureCache::write_fresh_entries() {
+  TS_TRY(grow_table(slots_.high_water()));
+  const auto records = scene_.texture_records();
+  auto* table = table_.as<gpu::TextureGpu>();
+  for (const uint32_t texture : slots_.take_fresh()) {
+    const uint32_t slot = slots_.find(texture);
+    if (slot == TextureSlots::kNone) continue;  // freed again before its entry was written
+    const scene::TextureRecord& r = records[texture];
+    gpu::TextureGpu& t = table[slot];
+    t = gpu::TextureGpu{};
+    t.placement = {0, gpu::kNotResident, 0, r.mip_count};
+    t.region = {0, 0, r.width, r.height};
+    t.colour = {scene_.colours()[texture], gpu::kNotResident, 0, scene_.sampling_flags(texture)};
+    // A ring texture can stay placed after its entry went (all its copies dropped): its next copy goes to that
+    // region, which commit() writes only for a texture it places.
+    if (const auto region = region_of(TextureId(texture))) {
+      t.placement.x = region->layer | plane_of(TextureId(texture)) << gpu::kPlacementPlaneShift;
+      t.region.x = region->origin_x;
+      t.region.y = region->origin_y;
+    }
+  }
+  return ok_status();
+}
+
+Status TextureCache::write_slots() {
+  TS_TRY(write_fresh_entries());
+  slots_.release_unused([&](uint32_t texture) { return residency_.find(TextureId(texture)) != nullptr; });
+  return ok_status();
+}
+
+Result<gpu::TextureGpu*> TextureCache::entry(TextureId texture) {
+  uint32_t slot = slots_.find(texture.value);
+  if (slot == TextureSlots::kNone) {
+    slot = slots_.acquire(texture.value);
+    TS_TRY(write_fresh_entries());
+  }
+  return &table_.as<gpu::TextureGpu>()[slot];
+}
+
+gpu::TextureGpu* TextureCache::entry_if_slotted(TextureId texture) {
+  const uint32_t slot = slots_.find(texture.value);
+  return slot == TextureSlots::kNone ? nullptr : &table_.as<gpu::TextureGpu>()[slot];
 }
 
 std::span<std::byte> TextureCache::reserve(TextureId, MipLevel, uint64_t bytes) {
@@ -311,10 +360,12 @@ void TextureCache::evict(TextureId texture) {
   note_eviction();
   residency_.mark_evicted(texture);
   ++stats_.evictions;
-  gpu::TextureGpu& t = table_.as<gpu::TextureGpu>()[texture.value];
-  const uint32_t before = t.placement.y;
-  t.placement.y = gpu::kNotResident;
-  fades_.on_publish(texture.value, t, before);  // no fade survives an eviction
+  // Without a slot the texture is drawn from a fresh entry, which is not resident, when it gets one.
+  if (gpu::TextureGpu* t = entry_if_slotted(texture)) {
+    const uint32_t before = t->placement.y;
+    t->placement.y = gpu::kNotResident;
+    fades_.on_publish(slots_.find(texture.value), *t, before);  // no fade survives an eviction
+  }
   Plane& p = planes_[plane_of(texture)];
   if (p.tree) p.tree->free(texture);
   // No entry: a ring texture placed whose copies were all dropped; nothing resident, bound or on its way.
@@ -538,11 +589,18 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
 
   // StreamClient checked the payload against the texture table; these are our own invariants.
   TS_ASSERT(texture.value < scene_.texture_records().size(), "commit of unknown texture %u", texture.value);
-  if (auto prepared = prepare_texture(texture.value); !prepared) {
+  if (auto checked = check_texture(texture.value); !checked) {
     // Streamed before any mesh of it was drawn (render.preload_all) and of another format: never shown.
-    refuse_for_good(texture, prepared.error().message);
+    refuse_for_good(texture, checked.error().message);
     release_staging(alloc);
     events_.push_back({stream::TextureEvent::Kind::kFailed, texture, mip, CompletionStatus::kNotFound});
+    return;
+  }
+  // A texture with residency has a slot (write_slots keeps it): given here, before place() makes the entry.
+  if (auto slotted = entry(texture); !slotted) {
+    spdlog::error("texture cache: texture {}: {}", texture.value, slotted.error().message);
+    release_staging(alloc);
+    events_.push_back({stream::TextureEvent::Kind::kRejected, texture, mip});  // asked again later
     return;
   }
   const scene::TextureRecord& rec = scene_.texture_records()[texture.value];
@@ -568,10 +626,11 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
     region = **placed;
     ++stats_.texture_loads;
     if (residency_.evicted_before(texture)) ++stats_.texture_reloads;
-    auto& t = table_.as<gpu::TextureGpu>()[texture.value];
-    t.placement.x = region->layer | plane_of(texture) << gpu::kPlacementPlaneShift;
-    t.region.x = region->origin_x;
-    t.region.y = region->origin_y;
+    gpu::TextureGpu* t = entry_if_slotted(texture);  // given above; place() hands out no slot
+    TS_ASSERT(t != nullptr, "texture %u placed without a slot", texture.value);
+    t->placement.x = region->layer | plane_of(texture) << gpu::kPlacementPlaneShift;
+    t->region.x = region->origin_x;
+    t->region.y = region->origin_y;
   }
   if ((region->extent >> mip.value) < plane.block) {
     // A BC level smaller than a block in a shared layer: writing it would overwrite a neighbour's texels.
@@ -734,11 +793,14 @@ uint32_t TextureCache::record_uploads(VkCommandBuffer cmd, uint64_t serial) {
 }
 
 void TextureCache::publish(TextureId texture, uint32_t mask) {
-  auto& t = table_.as<gpu::TextureGpu>()[texture.value];
+  // The texture has residency (a copy or a trim publishes), so it has a slot (write_slots keeps it).
+  const uint32_t slot = slots_.find(texture.value);
+  TS_ASSERT(slot != TextureSlots::kNone, "texture %u published without a slot", texture.value);
+  gpu::TextureGpu& t = table_.as<gpu::TextureGpu>()[slot];
   const uint32_t before = t.placement.y;
   if (mask == 0) {
     t.placement.y = gpu::kNotResident;
-    fades_.on_publish(texture.value, t, before);
+    fades_.on_publish(slot, t, before);
     return;
   }
   // The shader samples a contiguous range [finest, coarsest]: the run of resident levels that ends at the
@@ -748,11 +810,11 @@ void TextureCache::publish(TextureId texture, uint32_t mask) {
   while (finest > 0 && (mask & (1u << (finest - 1)))) --finest;
   t.placement.y = finest;
   t.placement.z = coarsest;
-  fades_.on_publish(texture.value, t, before);
+  fades_.on_publish(slot, t, before);
 }
 
 void TextureCache::advance_fades(double dt_s) {
-  fades_.advance(dt_s, std::span(table_.as<gpu::TextureGpu>(), scene_.texture_records().size()));
+  fades_.advance(dt_s, std::span(table_.as<gpu::TextureGpu>(), table_slots_));
 }
 
 void TextureCache::on_submission_complete(uint64_t serial) {
@@ -805,6 +867,12 @@ Status TextureCache::write_stats_json(const std::filesystem::path& file) const {
   j["allocated_bytes"] = sparse_->allocated_bytes();
   j["image_virtual_bytes"] = sparse_->image_bytes();
   j["create_seconds"] = stats_.create_seconds;
+  // The texture table by slot (docs/design/host_memory.md, item 3): its entries, bytes, the slots held at most
+  // and the slots freed for reuse.
+  j["texture_table_slots"] = table_slots_;
+  j["texture_table_bytes"] = table_.size();
+  j["texture_slots_peak"] = slots_.high_water();
+  j["texture_slots_released"] = slots_.released();
   j["frames"] = stats_.frames;
   j["budget_exceeded_frames"] = stats_.budget_exceeded_frames;
   j["max_bound_bytes"] = stats_.max_bound_bytes;

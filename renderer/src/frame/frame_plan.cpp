@@ -36,14 +36,22 @@ Result<FramePlan> plan_frame(RenderStack& stack, const Camera& cam, const Config
   step("broad_phase");
 
   // Meshes drawn for the first time: checked, their geometry queued for this frame's command buffer and their
-  // textures' table entries written, so the frame draws every one of them.
+  // textures checked, so the frame draws every one of them.
   std::vector<uint32_t>& new_textures = stack.new_textures();
   new_textures.clear();
   TS_TRY(stack.scene_gpu().make_resident(scene, visible, &new_textures));
   step("make_resident");
   TS_TRY(stack.cache().prepare_textures(new_textures));
   step("texture_entries");
-  stack.scene_gpu().write_draws(scene, visible, cam.position, plan.split, rec);
+  // Each drawn mesh names its texture's table slot: the textures drawn now keep theirs, those new to the table
+  // get one and an entry, and the slots of textures neither drawn nor cached are freed for reuse. Safe on every
+  // path (lock-step, reference frames, preload_all, the window): each submission is waited for before the next
+  // frame is planned (RenderStack::submit), and the submissions of this frame (its twin, its reference probe,
+  // load rounds) draw these meshes, whose slots this frame holds until the next plan.
+  TextureCache& cache = stack.cache();
+  cache.begin_frame();
+  stack.scene_gpu().write_draws(scene, visible, cam.position, plan.split, cache.texture_slots(), rec);
+  TS_TRY(cache.write_slots());
   step("draw_list");
   // ScenePasses::record adds the view mode and the feedback bit.
   const SceneGpu& gpu = stack.scene_gpu();

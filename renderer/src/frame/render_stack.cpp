@@ -108,6 +108,10 @@ Status RenderStack::submit(const Submission& s) {
   }
   if (s.uploads == Uploads::kAll || s.uploads == Uploads::kGeometry) TS_TRY(scene_gpu_->record_uploads(scene_, cmd_));
   step("record_uploads");
+  // Every submission is waited for below and nothing recorded so far binds the passes' descriptor set, so it may
+  // change now: the cache may have grown its texture table into a new buffer since the last submission
+  // (TextureCache::write_slots, commit).
+  passes_->bind_texture_table(cache_->texture_table());
   if (s.passes) passes_->record(cmd_, *s.passes);
   if (s.capture) capture_->record(cmd_, passes_->colour().handle());
   TS_VK_TRY(vkEndCommandBuffer(cmd_));

@@ -243,6 +243,7 @@ Status ScenePasses::create_descriptors(const VulkanContext& ctx, const TextureCa
   ow.descriptorType = VK_DESCRIPTOR_TYPE_INPUT_ATTACHMENT;
   ow.pImageInfo = &owner_image;
   vkUpdateDescriptorSets(device, static_cast<uint32_t>(writes.size()), writes.data(), 0, nullptr);
+  texture_table_ = cache.texture_table();
 
   auto layout = make_pipeline_layout(device, std::span<const VkDescriptorSetLayout>(&set_layout, 1));
   if (!layout) return layout.error();
@@ -476,6 +477,20 @@ Status ScenePasses::create_pipelines(const VulkanContext& ctx, ShaderCompiler& c
   TS_TRY(compute(comp->get(), compact_pipeline_));
   TS_TRY(compute(to_host->get(), compact_to_host_pipeline_));
   return ok_status();
+}
+
+void ScenePasses::bind_texture_table(VkBuffer table) {
+  if (table == texture_table_) return;
+  const VkDescriptorBufferInfo info{table, 0, VK_WHOLE_SIZE};
+  VkWriteDescriptorSet w{};
+  w.sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
+  w.dstSet = set_;
+  w.dstBinding = gpu::kBindingTextures;
+  w.descriptorCount = 1;
+  w.descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+  w.pBufferInfo = &info;
+  vkUpdateDescriptorSets(device_, 1, &w, 0, nullptr);
+  texture_table_ = table;
 }
 
 void ScenePasses::record(VkCommandBuffer cmd, const FrameRecording& frame) const {

@@ -16,6 +16,7 @@
 #include "texstream/render/scene/broad_phase.hpp"
 #include "texstream/render/scene/frame_recording.hpp"
 #include "texstream/render/scene/scene_data.hpp"
+#include "texstream/render/scene/texture_slots.hpp"
 #include "texstream/render/vulkan/vulkan_context.hpp"
 
 namespace texstream::render {
@@ -337,7 +338,8 @@ Status SceneGpu::record_uploads(const SceneData& scene, VkCommandBuffer cmd) {
 }
 
 void SceneGpu::write_draws(const SceneData& scene, std::span<const uint32_t> visible,
-                           const std::array<double, 3>& camera, const ViewportSplit& split, FrameRecording& rec) {
+                           const std::array<double, 3>& camera, const ViewportSplit& split, TextureSlots& slots,
+                           FrameRecording& rec) {
   // `drawn` holds mesh_count ids: the broad phase returns each mesh at most once.
   TS_ASSERT(visible.size() <= mesh_count_, "write_draws of %zu meshes of %u", visible.size(), mesh_count_);
   const size_t main_end = std::min<size_t>(split.main_end, visible.size());
@@ -356,7 +358,9 @@ void SceneGpu::write_draws(const SceneData& scene, std::span<const uint32_t> vis
     g.texture_id = m.texture_id;
     const scene::MeshTransform t = scene.mesh_transform(id);
     g.rotation = {t.rotation[0], t.rotation[1], t.rotation[2], t.rotation[3]};
-    g.scale = {t.scale, 0, 0, 0};
+    g.scale = t.scale;
+    g.texture_slot = slots.use(m.texture_id);
+    g.reserved0 = g.reserved1 = 0;
     drawn_out[drawn_count++] = id;  // each mesh once, whichever passes draw it
   }
   // Two lists, one per pass, each sorted and merged on its own.

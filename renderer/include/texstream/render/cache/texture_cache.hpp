@@ -30,6 +30,11 @@
 // The cache does not touch the texture state machine: what it learns (a mip published, rejected or failed, a
 // texture evicted) is queued as TextureEvents, in order, and the frame loop hands them over (take_events).
 //
+// The texture table (gpu::TextureGpu, host-visible) has an entry ("slot", TextureSlots) for each texture drawn in
+// the current frame or with residency, not one per scene texture: it starts at kInitialTableSlots and doubles
+// into a new buffer when the slots outgrow it (ScenePasses::bind_texture_table points the shaders at it); a slot is
+// freed once its texture is neither drawn nor cached (write_slots). docs/design/host_memory.md, item 3.
+//
 // Frame-thread only; every method runs between frames, when no submitted work reads the texture table.
 #include <vulkan/vulkan.h>
 
@@ -53,6 +58,7 @@
 #include "texstream/render/cache/sparse_memory.hpp"
 #include "texstream/render/cache/sparse_page_table.hpp"
 #include "texstream/render/cache/staging_ring.hpp"
+#include "texstream/render/scene/texture_slots.hpp"
 #include "texstream/render/vulkan/gpu_buffer.hpp"
 #include "texstream/stream/stream_client.hpp"
 #include "texstream/stream/texture_states.hpp"
@@ -89,7 +95,7 @@ struct TextureCacheStats {
   uint64_t max_bound_bytes = 0;         // most bytes bound at the end of any frame (pages + mip tail)
   uint64_t texture_loads = 0;           // textures placed in a region (first mip or again after an eviction)
   uint64_t texture_reloads = 0;         // of those, textures that had been evicted before (thrashing)
-  double create_seconds = 0;            // TextureCache::create (image, table of every texture, first barrier)
+  double create_seconds = 0;            // TextureCache::create (image, texture table, first barrier)
 };
 
 // What the frame's queue submission must wait for: the sparse binds recorded with its uploads.
@@ -107,6 +113,10 @@ struct UploadTraceFrame {
 };
 inline constexpr size_t kTraceEntries = size_t{1} << 16;
 
+// The texture table's first size: 4096 entries of 48 B (192 KiB). A view of the default city draws ~650
+// meshes; a larger working set doubles it a few times, once.
+inline constexpr uint32_t kInitialTableSlots = 4096;
+
 // One image of the cache: the textures of one texel format.
 struct CachePlane {
   TexelFormat format = TexelFormat::kRgba8;
@@ -121,12 +131,22 @@ class TextureCache final : public stream::MipSink {
   static Result<std::unique_ptr<TextureCache>> create(const VulkanContext& ctx, const TextureCacheOptions& options,
                                                       const SceneData& scene);
 
-  // The texture table entries of `textures` (not resident, City Colormap colour), written the first time a
-  // texture is named: by the meshes a frame draws for the first time (SceneGpu::make_resident), or by a commit.
-  // The table is allocated for every texture but only the entries in use are written, so creating the cache
-  // costs the same for 10^3 and 10^6 textures. Errors: a texture whose format is not cache.format (naming
-  // textures.bin and the record) when cache.format is not auto.
+  // Checks that `textures` can be drawn: each has a plane (the meshes a frame draws for the first time,
+  // SceneGpu::make_resident; render.preload_all: every texture). Errors: a texture whose format is not
+  // cache.format (naming textures.bin and the record) when cache.format is not auto. Their table entries come
+  // with their slots (write_slots, commit).
   Status prepare_textures(std::span<const uint32_t> textures);
+
+  // ---- the texture table's slots, once per frame plan (frame_plan.cpp) ----
+  // A new frame: the slots its draws take (SceneGpu::write_draws through texture_slots()) are its own.
+  void begin_frame() { slots_.begin_frame(); }
+  // The textures the shaders look up by slot (SceneGpu::write_draws writes MeshGpu::texture_slot).
+  TextureSlots& texture_slots() { return slots_; }
+  // After the frame's draws took their slots: writes the entries of textures given a slot (not resident, City
+  // Colormap colour), grows the table when they outgrew it, and frees the slots of textures neither drawn in
+  // this frame nor with residency. A freed slot may go to another texture at once: every submission has been
+  // waited for (RenderStack::submit) and this frame's meshes name only slots it drew. Errors: the new buffer's.
+  Status write_slots();
 
   // ---- MipSink (called from StreamClient::poll) ----
   std::span<std::byte> reserve(TextureId texture, MipLevel mip, uint64_t bytes) override;
@@ -154,8 +174,13 @@ class TextureCache final : public stream::MipSink {
   uint32_t plane_count() const { return static_cast<uint32_t>(planes_.size()); }
   const CachePlane& plane(uint32_t i) const { return planes_[i].shape; }
   VkImageView image_view(uint32_t plane = 0) const { return sparse_->view(plane); }
+  // The table buffer: a new one after the table grew (ScenePasses::bind_texture_table).
   VkBuffer texture_table() const { return table_.handle(); }
   VkDeviceSize texture_table_bytes() const { return table_.size(); }
+  uint32_t texture_table_slots() const { return table_slots_; }
+  // Slots held now, and at most (the free list is reused first, so the peak is the slots ever handed out).
+  uint32_t texture_slots_in_use() const { return slots_.in_use(); }
+  uint32_t texture_slots_peak() const { return slots_.high_water(); }
   uint32_t mip_levels(uint32_t plane = 0) const { return planes_[plane].shape.mip_levels; }
   uint32_t layer_extent(uint32_t plane = 0) const { return planes_[plane].shape.layer_extent; }
   uint64_t resident_textures() const;
@@ -234,7 +259,16 @@ class TextureCache final : public stream::MipSink {
   void drop_copy(const Copy& c);
   // Writes the shader's range of resident levels from `mask` (the texture's Residency::mask).
   void publish(TextureId texture, uint32_t mask);
-  Status prepare_texture(uint32_t texture);
+  // Whether the texture has a plane (prepare_textures); the error names the texture and cache.format.
+  Status check_texture(uint32_t texture) const;
+  // The texture's table entry, given a slot (and the entry written) when it has none. Errors: the table's growth.
+  Result<gpu::TextureGpu*> entry(TextureId texture);
+  // The entry of a texture that has a slot; nullptr when it has none (nothing to hide or update).
+  gpu::TextureGpu* entry_if_slotted(TextureId texture);
+  // Writes the entries of the textures given a slot since the last call, the table grown to hold them first.
+  Status write_fresh_entries();
+  // A table of at least `slots` entries (doubling), the entries so far copied into it.
+  Status grow_table(uint32_t slots);
   void release_staging(const StagingRing::Allocation& a);
 
   TextureCacheOptions options_;
@@ -248,7 +282,10 @@ class TextureCache final : public stream::MipSink {
   uint64_t completed_serial_ = 0;  // last submission known complete
   BindWait bind_wait_;
   GpuBuffer staging_;
-  GpuBuffer table_;  // gpu::TextureGpu[texture_count], host-visible
+  const VulkanContext* ctx_ = nullptr;
+  GpuBuffer table_;           // gpu::TextureGpu[table_slots_], host-visible, by slot
+  uint32_t table_slots_ = 0;  // entries table_ holds (slots_.high_water() or more)
+  TextureSlots slots_;        // texture -> slot: textures drawn this frame or with residency
   StagingRing ring_;
   uint32_t use_cycle_ = 1;
   std::vector<uint32_t> trimmable_;  // textures of the last touch() holding levels finer than they want
@@ -262,9 +299,8 @@ class TextureCache final : public stream::MipSink {
   std::vector<Copy> queued_;                                        // committed, pages not yet bound
   std::vector<Copy> ready_;                                         // pages bound (prepare_uploads), not yet recorded
   uint64_t prepared_serial_ = 0;
-  std::deque<Copy> in_flight_;       // recorded, submission not yet complete
-  std::vector<uint32_t> refused_;    // textures that can never be placed, in order (each logged once)
-  std::vector<bool> entry_written_;  // prepare_texture wrote the texture's table entry
+  std::deque<Copy> in_flight_;     // recorded, submission not yet complete
+  std::vector<uint32_t> refused_;  // textures that can never be placed, in order (each logged once)
   MipFades fades_;
   TextureCacheStats stats_;
 };

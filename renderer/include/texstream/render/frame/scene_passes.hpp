@@ -71,6 +71,10 @@ class ScenePasses {
                                                      const ScenePassesOptions& options, const SceneGpu& scene,
                                                      const TextureCache& cache, const GroundPages* ground = nullptr);
   void record(VkCommandBuffer cmd, const FrameRecording& frame) const;
+  // Points the texture table's binding at `table` when the cache has grown it into a new buffer
+  // (TextureCache::texture_table()). Between submissions only: no recorded or pending command buffer may use the
+  // descriptor set (RenderStack::submit calls it before recording, after the last submission's fence).
+  void bind_texture_table(VkBuffer table);
   // After the recorded frame's submission completed.
   PassTimes read_pass_times() const;
 
@@ -112,7 +116,8 @@ class ScenePasses {
   bool probe_anisotropic_ = false;
   UniqueDescriptorSetLayout set_layout_;
   UniqueDescriptorPool pool_;
-  VkDescriptorSet set_ = VK_NULL_HANDLE;  // freed with the pool
+  VkDescriptorSet set_ = VK_NULL_HANDLE;     // freed with the pool
+  VkBuffer texture_table_ = VK_NULL_HANDLE;  // what set_'s kBindingTextures names
   UniquePipelineLayout layout_;
   UniquePipeline prepass_pipeline_;
   UniquePipeline main_pipeline_;

@@ -24,12 +24,14 @@ static_assert(sizeof(PassConstants) == 80);  // push constants: Vulkan guarantee
 static_assert(offsetof(PassConstants, view_proj) == 0);
 static_assert(offsetof(PassConstants, pass) == 64);
 
-static_assert(sizeof(MeshGpu) == 48);  // std430: three floats, a uint, two vec4, no padding
+static_assert(sizeof(MeshGpu) == 48);  // std430: three floats, a uint, a vec4, a float, three uints, no padding
 static_assert(offsetof(MeshGpu, offset_x) == 0);
 static_assert(offsetof(MeshGpu, offset_z) == 8);
 static_assert(offsetof(MeshGpu, texture_id) == 12);
 static_assert(offsetof(MeshGpu, rotation) == 16);
 static_assert(offsetof(MeshGpu, scale) == 32);
+static_assert(offsetof(MeshGpu, texture_slot) == 36);
+static_assert(offsetof(MeshGpu, reserved1) == 44);
 
 static_assert(sizeof(TextureGpu) == 48);
 static_assert(offsetof(TextureGpu, placement) == 0);

@@ -38,6 +38,7 @@ class VulkanContext;
 struct FrameRecording;
 struct ViewportSplit;
 struct SceneData;
+class TextureSlots;
 
 struct SceneGpuStats {
   uint64_t meshes_resident = 0;  // meshes whose geometry is on the GPU
@@ -60,8 +61,9 @@ class SceneGpu {
   Status record_uploads(const SceneData& scene, VkCommandBuffer cmd);
 
   // For a list split by BroadPhase::split_by_viewport: for each mesh, its offset = origin - camera, subtracted
-  // in double and only then rounded to float (no jitter at map coordinates), its texture id, and its id in
-  // `drawn` (once); then two draw lists, the main pass's (meshes touching the viewport) and the wide pass's
+  // in double and only then rounded to float (no jitter at map coordinates), its texture id and its texture's
+  // slot (slots.use(): kept by this frame, handed out when the texture has none), and its id in `drawn` (once);
+  // then two draw lists, the main pass's (meshes touching the viewport) and the wide pass's
   // (meshes outside it): each list's meshes in id order, one VkDrawIndexedIndirectCommand per run of
   // adjacent index ranges. Fills the draw ranges of `rec` (draw_count, main_count, wide_first = main_count),
   // rec.mesh_count and the per-pass mesh counts; meshes without indices are never drawn. A pass draws its
@@ -69,7 +71,7 @@ class SceneGpu {
   // two coplanar meshes owns a pixel does not depend on the spatial index. Every mesh must have been made
   // resident.
   void write_draws(const SceneData& scene, std::span<const uint32_t> visible, const std::array<double, 3>& camera,
-                   const ViewportSplit& split, FrameRecording& rec);
+                   const ViewportSplit& split, TextureSlots& slots, FrameRecording& rec);
 
   bool is_resident(uint32_t mesh) const { return (resident_[mesh >> 6] >> (mesh & 63)) & 1u; }
   // A resident mesh that shares its owner's vertex and index ranges (instancing): drawn alone.
