@@ -2,7 +2,6 @@
 // (cache/texture_index_map.hpp): the use list, entries going when idle, epochs never repeating, and the heap
 // not growing with the textures that passed through (docs/design/host_memory.md: < 1 B per texture).
 #include <gtest/gtest.h>
-#include <malloc.h>
 
 #include <bit>
 #include <cstdint>
@@ -10,6 +9,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "../support/heap_usage.hpp"
 #include "texstream/render/cache/mip_fades.hpp"
 #include "texstream/render/cache/residency_table.hpp"
 #include "texstream/render/cache/texture_index_map.hpp"
@@ -32,18 +32,8 @@ std::vector<uint32_t> lru_order(const ResidencyTable& t) {
   return order;
 }
 
-// glibc's books: under ASan or TSan, malloc is the sanitizer's and mallinfo2 would not see the blocks.
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
-constexpr bool kHeapMeasured = false;
-#else
-constexpr bool kHeapMeasured = true;
-#endif
-
-// Bytes the process's malloc holds: the arena's chunks in use and the mmap'd ones (large blocks).
-size_t heap_bytes() {
-  const struct mallinfo2 m = mallinfo2();
-  return m.uordblks + m.hblkhd;
-}
+using texstream::test::heap_bytes;
+using texstream::test::kHeapMeasured;
 
 TEST(TextureIndexMap, AgreesWithAStandardMapThroughInsertsAndErases) {
   TextureIndexMap map(4);

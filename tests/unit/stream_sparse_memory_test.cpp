@@ -3,13 +3,13 @@
 // than the default one, and the texture table can be a view of records someone else holds (textures.bin's
 // mapping in texstream-render). The heap bound below fails if either record becomes dense again.
 #include <gtest/gtest.h>
-#include <malloc.h>
 
 #include <cstdint>
 #include <cstdio>
 #include <memory>
 #include <vector>
 
+#include "../support/heap_usage.hpp"
 #include "texstream/common/scene_format.hpp"
 #include "texstream/stream/mip_use_ledger.hpp"
 #include "texstream/stream/texture_states.hpp"
@@ -90,20 +90,14 @@ TEST(MipUseLedger, EntriesOnlyWhileAMipIsResident) {
   EXPECT_EQ(ledger.bytes_wasted(), ledger.bytes_uploaded());  // nothing was ever displayed
 }
 
-// Bytes malloc has handed out and not had back (glibc).
-int64_t heap_in_use() { return static_cast<int64_t>(mallinfo2().uordblks); }
-
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
-constexpr bool kOwnMalloc = false;  // the sanitizers' allocator: mallinfo2 says nothing
-#else
-constexpr bool kOwnMalloc = true;
-#endif
+// Bytes malloc holds (arena and mmap'd blocks: a dense 2 M-entry vector is one of the latter).
+int64_t heap_in_use() { return static_cast<int64_t>(test::heap_bytes()); }
 
 // 2 M textures, ~1,000 of them streamed, committed, displayed and some evicted over a few cycles: the states and
 // the ledger must grow the heap by less than a byte per texture (dense, they were 16 + 8 bytes per texture:
 // 48 MB here). The table itself is a view, built before the first measurement.
 TEST(TextureStatesAndMipUseLedger, CostLessThanAByteAPerTextureNotInView) {
-  if (!kOwnMalloc) GTEST_SKIP() << "mallinfo2 does not see the sanitizer's allocator";
+  if (!test::kHeapMeasured) GTEST_SKIP() << "mallinfo2 does not see the sanitizer's allocator";
   constexpr uint32_t kTextures = 2'000'000;
   constexpr uint32_t kInView = 1'000;
   const TextureTable table = view_of(std::vector<scene::TextureRecord>(kTextures, kRecord));
