@@ -101,6 +101,28 @@ INSTANTIATE_TEST_SUITE_P(Formats, CacheThrash,
                                             ::testing::Values("lru", "ring")),
                          [](const auto& p) { return std::get<0>(p.param) + "_" + std::get<1>(p.param); });
 
+// lru fills the free pages with the copies that fit before it evicts for one that does not: with budgets of
+// 4 MiB plus 1..3 pages (RGBA8: a 512² level 0 takes 16 pages), nothing goes while pages are free. Evicting in
+// commit order left those pages free at the first eviction (0.985, 0.970, 0.955 of the budget).
+TEST(CacheBudget, FreePagesAreFilledBeforeAnythingIsEvicted) {
+  const fs::path dir = fresh_dir("fill_first");
+  const fs::path scene = make_scene(dir, "rgba8", 600);
+  for (uint64_t pages = 1; pages <= 3; ++pages) {
+    const uint64_t budget = (4ull << 20) + pages * 65536;
+    const fs::path out = dir / ("out" + std::to_string(pages));
+    const int rc = run(render_cmd(scene, out,
+                                  "--set cache.memory_bytes=" + std::to_string(budget) +
+                                      " --set render.frames=40 --set render.write_every_frames=0"),
+                       dir / "render.log");
+    ASSERT_EQ(rc, 0) << slurp(dir / "render.log");
+    const auto cache = nlohmann::json::parse(slurp(out / "cache.json"));
+    ASSERT_EQ(cache["page_bytes"].get<uint64_t>(), 65536u) << "the budgets assume 64 KiB pages";
+    ASSERT_GT(cache["evictions"].get<uint64_t>(), 0u) << "the budget was never short";
+    EXPECT_GE(cache["fill_at_first_eviction"].get<double>(), 0.99) << budget << " B";
+  }
+  fs::remove_all(dir);
+}
+
 // Close to the facades, then a cut to a high view of the same street with a 1 MiB budget, far below the high
 // view's working set: textures still in view after the cut hold finer levels than they now want, and with
 // nothing unused left to evict the cache drops those levels (TextureCache::trim_one) instead of only refusing

@@ -643,26 +643,27 @@ void TextureCache::commit(TextureId texture, MipLevel mip, std::span<std::byte> 
   queued_.push_back(Copy{texture, mip.value, alloc, r.epoch, 0});
 }
 
-bool TextureCache::bind_pages_for(const Copy& c) {
+TextureCache::BindOutcome TextureCache::bind_pages_for(const Copy& c, bool may_evict) {
   // `c` holds the entry (Residency::copies), so it stays through evictions, this texture's included.
   Residency& r = *residency_.find(c.texture);
-  if (r.epoch != c.epoch) return false;
-  if (r.bound & (1u << c.mip)) return true;
+  if (r.epoch != c.epoch) return BindOutcome::kDropped;
+  if (r.bound & (1u << c.mip)) return BindOutcome::kBound;
   while (true) {
     const auto region = region_of(c.texture);
-    if (!region || r.epoch != c.epoch) return false;  // evicted while making room
+    if (!region || r.epoch != c.epoch) return BindOutcome::kDropped;  // evicted while making room
     if (pages_->acquire(page_rect(*region, plane_of(c.texture)), c.mip)) {
       TS_ASSERT(r.bound == 0 || (r.region.layer == region->layer && r.region.index == region->index),
                 "texture %u bound in two regions", c.texture.value);
       r.region = *region;
       r.bound |= 1u << c.mip;
-      return true;
+      return BindOutcome::kBound;
     }
+    if (!may_evict) return BindOutcome::kNoFreePages;
     // The evicted pages retire at last_serial_, which has completed by now in the renderer's
     // one-frame-in-flight loop, so reclaim() frees their slots at once.
     if (options_.eviction == CacheEviction::kRing) {
       // Seed §3.6: when the cache is full, the oldest layer goes.
-      if (!evict_oldest_layer(plane_of(c.texture))) return false;
+      if (!evict_oldest_layer(plane_of(c.texture))) return BindOutcome::kDropped;
       ++stats_.budget_evicted_layers;
     } else {
       const std::optional<TextureId> victim = lru_victim(c.texture);
@@ -672,7 +673,7 @@ bool TextureCache::bind_pages_for(const Copy& c) {
       }
       if (!victim) {
         refuse_for_room(c.texture, MipLevel(c.mip));
-        return false;
+        return BindOutcome::kDropped;
       }
       evict(*victim);
     }
@@ -688,10 +689,29 @@ Status TextureCache::prepare_uploads(uint64_t serial) {
   pages_->reclaim(completed_serial_);
   // Copies in commit order. An eviction on the way drops copies of evicted textures from ready_ (evict());
   // those still in `work` are recognised by their epoch.
+  // lru: the copies that fit the free pages first, then the rest with evictions, so that nothing is evicted
+  // while free pages could hold a copy of this frame (docs/design/cache_budget.md, "fill before evicting").
+  // The seed's ring evicts in commit order, as §3.6 has it.
   std::vector<Copy> work = std::move(queued_);
   queued_.clear();
+  const bool fill_first = options_.eviction != CacheEviction::kRing;
+  std::vector<Copy> short_of_pages;
   for (const Copy& c : work) {
-    if (bind_pages_for(c)) {
+    switch (bind_pages_for(c, !fill_first)) {
+      case BindOutcome::kBound:
+        ready_.push_back(c);
+        break;
+      case BindOutcome::kNoFreePages:
+        short_of_pages.push_back(c);
+        break;
+      case BindOutcome::kDropped:
+        drop_copy(c);
+        ++stats_.mips_dropped;
+        break;
+    }
+  }
+  for (const Copy& c : short_of_pages) {
+    if (bind_pages_for(c, true) == BindOutcome::kBound) {
       ready_.push_back(c);
     } else {
       drop_copy(c);

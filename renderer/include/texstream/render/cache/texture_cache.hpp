@@ -252,9 +252,11 @@ class TextureCache final : public stream::MipSink {
   void refuse_for_room(TextureId texture, MipLevel mip);
   // A texture that can never be placed (another format, larger than a layer): logged and listed once.
   void refuse_for_good(TextureId texture, const std::string& why);
-  // Takes the page references of copy `c`, evicting oldest layers while the budget is short. False when
-  // the copy's own texture was evicted on the way (the copy is then dropped).
-  bool bind_pages_for(const Copy& c);
+  enum class BindOutcome { kBound, kNoFreePages, kDropped };
+  // Takes the page references of copy `c`; with `may_evict`, evicting (lru victims, oldest layers) while the
+  // budget is short, else kNoFreePages when the free pages do not hold it. kDropped: the copy's own texture
+  // was evicted on the way or no room can be made (the copy is then dropped).
+  BindOutcome bind_pages_for(const Copy& c, bool may_evict);
   // A copy the cache lets go of (dropped or done): its staging and its hold on the texture's entry.
   void drop_copy(const Copy& c);
   // Writes the shader's range of resident levels from `mask` (the texture's Residency::mask).
