@@ -67,6 +67,11 @@ void visit_keys(Config& c, V&& v) {
     "served meanwhile. Seed 002 used 1; texstream-bench storage measured mips/s over a 20-30 ms origin rising from 1 "
     "to 8 (4: most of the gain, few threads and slots)",
     Range{1, 16});
+  v("server", "batch_scheduling", c.server.batch_scheduling, "bool",
+    "texstream-server's threads run SCHED_BATCH: woken by a request they wait for a tick instead of preempting the "
+    "renderer's frame thread (the renderer's IPC per frame p99 halved on a 2-core VM; docs/design/syscalls.md). "
+    "false: the ordinary policy",
+    kAny);
 
   v("render", "device", c.render.device, "name", "Substring of the Vulkan device name to use; empty: the first device",
     kAny);

@@ -2,6 +2,7 @@
 // layer: exit code 0, zero validation errors, the PNGs it promised, textures resident. Plus the error paths of
 // the command line.
 #include <gtest/gtest.h>
+#include <sched.h>
 
 #include <signal.h>
 #include <sys/wait.h>
@@ -255,6 +256,17 @@ TEST(RenderCli, AStandaloneServerServesRenderersOnItsSegmentName) {
       EXPECT_TRUE(child_left || standalone_waited) << log << "\n" << slurp(dir / "server.log");
     }
   }
+  // server.batch_scheduling (default true): every thread of the server runs SCHED_BATCH, so that its wake-ups
+  // never preempt a renderer's frame thread (docs/design/syscalls.md).
+  int threads = 0;
+  for (const auto& task : fs::directory_iterator("/proc/" + std::to_string(server) + "/task")) {
+    const pid_t tid = std::stoi(task.path().filename().string());
+    const int policy = sched_getscheduler(tid);
+    if (policy < 0) continue;  // a thread that ended meanwhile
+    EXPECT_EQ(policy, SCHED_BATCH) << "server thread " << tid;
+    ++threads;
+  }
+  EXPECT_GE(threads, 1);
   kill(server, SIGTERM);
   int status = 0;
   waitpid(server, &status, 0);

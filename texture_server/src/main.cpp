@@ -13,6 +13,7 @@
 // standalone server whose segment does not exist yet waits for a renderer to create it instead);
 // 4 the renderer broke the ring protocol; 5 the storage origin did not answer at start (a restart may
 // succeed: the renderer retries it like a crash, while 2 ends its run after three in a row).
+#include <sched.h>
 #include <signal.h>
 #include <sys/prctl.h>
 #include <unistd.h>
@@ -22,7 +23,9 @@
 #include <CLI/CLI.hpp>
 
 #include <atomic>
+#include <cerrno>
 #include <chrono>
+#include <cstring>
 #include <string>
 #include <thread>
 #include <vector>
@@ -161,6 +164,14 @@ int main(int argc, char** argv) {
   }
   setup_logging(config->server.log_level);
   install_stop_handlers();
+  // Before any thread starts (they inherit it): woken by the renderer's doorbell, a SCHED_BATCH server does not
+  // preempt the renderer's frame thread on its core (docs/design/syscalls.md, "The server's scheduling").
+  if (config->server.batch_scheduling) {
+    const sched_param none{};
+    if (sched_setscheduler(0, SCHED_BATCH, &none) != 0) {
+      spdlog::warn("server.batch_scheduling: sched_setscheduler(SCHED_BATCH) failed: {}", std::strerror(errno));
+    }
+  }
   // A RAM cache that cannot fit this machine (or the memory cgroup of a container) would be OOM-killed once
   // it filled, and again after every restart: refused here (the renderer checks the same before spawning).
   if (texstream::Status fits = texstream::check_server_memory(*config, texstream::read_memory_info()); !fits.ok()) {

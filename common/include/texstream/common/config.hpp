@@ -158,6 +158,7 @@ struct ServerConfig {
   RamCachePolicy cache_policy = RamCachePolicy::kLevel;  // RAM cache eviction
   double rate_limit_mb_s = 0;                            // storage read rate cap in MB/s (0: unlimited), seed 002 §3.3
   int64_t remote_fetches_in_flight = 4;  // bound on concurrent fetches from a remote/slow origin (seed 002: 1)
+  bool batch_scheduling = true;          // texstream-server runs SCHED_BATCH: never preempts the frame on wake-up
 };
 
 struct RenderConfig {
