@@ -5,17 +5,19 @@
 # Usage (bundle in .gpu/): [ATLAS=512] docs/bench/cache-budget-h200/scale.sh N [skip-bench]
 # ATLAS=PX: the atlas variant (texstream-gen --atlas PX, seed 000 §3.1) of the same city.
 # THREADS=N: generator threads (16); VALIDATE=1: the path run with the validation layer (VK_ADD_LAYER_PATH set);
-# FRAMES=N: only the path's first N frames (0: the whole path).
+# FRAMES=N: only the path's first N frames (0: the whole path). CITY_DIR=D: the city's parent folder (/tmp; a
+# tmpfs such as /dev/shm where the disk is too small: 5.7 M textures take 56 GB in 4 KiB blocks).
 set -u
 cd "$(dirname "$0")/../../.."
 R=.gpu/run.sh
 n=$1
 atlas=${ATLAS:-0}
-city=/tmp/city_$n
+root=${CITY_DIR:-/tmp}
+city=$root/city_$n
 tag=$n
-[ "$atlas" != 0 ] && city=/tmp/city_${n}_atlas$atlas && tag=${n}_atlas$atlas
+[ "$atlas" != 0 ] && city=$root/city_${n}_atlas$atlas && tag=${n}_atlas$atlas
 nvidia-smi --query-gpu=name,memory.total --format=csv,noheader
-df -h /tmp | tail -1
+df -h $root | tail -1
 if [ ! -f $city/scene.json ]; then
   t0=$(date +%s)
   $R texstream-gen --out $city --textures $n --seed 1 --threads ${THREADS:-16} --atlas $atlas > "$OUT/gen_$tag.log" 2>&1
