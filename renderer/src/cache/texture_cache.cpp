@@ -687,11 +687,10 @@ Status TextureCache::prepare_uploads(uint64_t serial) {
   prepared_serial_ = serial;
   bind_wait_ = BindWait{};
   pages_->reclaim(completed_serial_);
-  // Copies in commit order. An eviction on the way drops copies of evicted textures from ready_ (evict());
-  // those still in `work` are recognised by their epoch.
   // lru: the copies that fit the free pages first, then the rest with evictions, so that nothing is evicted
-  // while free pages could hold a copy of this frame (docs/design/cache_budget.md, "fill before evicting").
-  // The seed's ring evicts in commit order, as §3.6 has it.
+  // while free pages could hold a copy of this frame (docs/design/cache_budget.md, "fill before evicting");
+  // the seed's ring evicts in commit order (§3.6). An eviction drops copies of evicted textures from ready_
+  // (evict()); those still in `work` or `short_of_pages` are recognised by their epoch.
   std::vector<Copy> work = std::move(queued_);
   queued_.clear();
   const bool fill_first = options_.eviction != CacheEviction::kRing;
