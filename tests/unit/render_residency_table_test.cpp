@@ -33,7 +33,6 @@ std::vector<uint32_t> lru_order(const ResidencyTable& t) {
 }
 
 using texstream::test::heap_bytes;
-using texstream::test::kHeapMeasured;
 
 TEST(TextureIndexMap, AgreesWithAStandardMapThroughInsertsAndErases) {
   TextureIndexMap map(4);
@@ -122,7 +121,6 @@ TEST(ResidencyTable, EntriesDoNotMoveWhenThePoolGrows) {
 // by use, with about 1,000 resident at a time. What is left on the heap afterwards must not grow with the
 // 2 M (a dense 72 B entry per texture would be 144 MB; the reload bit is 0.125 B).
 TEST(ResidencyTable, HeapDoesNotGrowWithTexturesThatPassedThrough) {
-  if (!kHeapMeasured) GTEST_SKIP() << "the sanitizer's malloc keeps no glibc statistics";
   constexpr uint32_t kTextures = 2'000'000;
   constexpr uint32_t kResident = 1000;
   const size_t before = heap_bytes();
@@ -172,7 +170,6 @@ TEST(ResidencyTable, HeapDoesNotGrowWithTexturesThatPassedThrough) {
 
 // The same for fades: textures fade in one after another, about 1,000 at a time.
 TEST(MipFades, HeapDoesNotGrowWithTexturesThatFaded) {
-  if (!kHeapMeasured) GTEST_SKIP() << "the sanitizer's malloc keeps no glibc statistics";
   constexpr uint32_t kTextures = 1u << 20;
   std::vector<gpu::TextureGpu> table(kTextures);
   for (auto& t : table) {
