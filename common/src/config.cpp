@@ -143,6 +143,10 @@ void visit_keys(Config& c, V&& v) {
     "Requests outstanding at the server at once (pre-queue depth)", Range{1, 65536});
   v("stream", "max_mips_per_cycle", c.stream.max_mips_per_cycle, "mips", "Most mips requested in one streaming cycle",
     Range{1, 1e7});
+  v("stream", "levels_in_flight", c.stream.levels_in_flight, "levels",
+    "Most levels of one texture requested at once, each the next finer after what is resident or on its way "
+    "(1: the seed's Algorithm 1, one level per texture per round trip)",
+    Range{1, 16});
   v("stream", "colormap_blend", c.stream.colormap_blend, "bool",
     "Blend sampled colour with the City Colormap while finer mips arrive (false: sample directly)", kAny);
   v("stream", "blend", c.stream.blend, "name", "How the colormap is blended in:", kAny);

@@ -1,6 +1,9 @@
 #include "texstream/stream/texture_states.hpp"
 
 #include <algorithm>
+#include <bit>
+#include <cmath>
+#include <unordered_set>
 #include <utility>
 
 #include "texstream/common/contract.hpp"
@@ -28,47 +31,51 @@ uint32_t initial_mip_level(const TextureShape& shape) {
   return shape.mip_count == 0 ? 0 : std::min(level, shape.mip_count - 1);
 }
 
-TextureStates::TextureStates(TextureTable shapes) : shapes_(std::move(shapes)) {
+TextureStates::TextureStates(TextureTable shapes, uint32_t levels_in_flight)
+    : shapes_(std::move(shapes)), levels_in_flight_(std::max<uint32_t>(levels_in_flight, 1)) {
   for (const TextureShape& shape : shapes_) {
     if (shape.mip_count == 0) ++broken_from_start_;
   }
 }
 
+uint32_t TextureStates::frontier(const State& s) {
+  const uint32_t covered = s.resident | s.pending;
+  if (covered == 0) return kNone;
+  uint32_t level = 31u - static_cast<uint32_t>(std::countl_zero(covered));  // the coarsest
+  while (level > 0 && (covered & (1u << (level - 1)))) --level;
+  return level;
+}
+
+TexturePhase TextureStates::phase_of(const State& s) {
+  const uint32_t f = frontier(s);
+  if (f == kNone) return TexturePhase::kInitial;
+  return f == 0 ? TexturePhase::kFinal : TexturePhase::kActive;
+}
+
 std::optional<uint32_t> TextureStates::next_mip(const State& s, uint32_t texture, float desired, float bias) const {
-  if (s.broken || s.pending != kNone) return std::nullopt;  // one request per texture in flight
-  switch (s.phase) {
-    case TexturePhase::kFinal:
-      return std::nullopt;
-    case TexturePhase::kInitial: {
-      // The shape is read only here and for a request's size: a texture that streams nothing this cycle
-      // (most of the list, most frames) touches no record of the table.
-      const TextureShape shape = shapes_[texture];
-      if (shape.mip_count == 0) return std::nullopt;  // broken from start
-      return initial_mip_level(shape);
-    }
-    case TexturePhase::kActive:
-      // Algorithm 1: `if texture.mipLevelSampled + b < texture.mipLevel` → load mipLevel - 1. Written so
-      // that a NaN from the GPU metadata refines nothing. resident is set in Active with nothing pending
-      // (roll_back returns a texture with nothing resident to Initial), and resident > 0 (0 is Final).
-      if (s.resident == kNone || s.resident == 0) return std::nullopt;
-      if (desired + bias < static_cast<float>(s.resident)) return s.resident - 1u;
-      return std::nullopt;
+  if (s.broken) return std::nullopt;
+  // levels_in_flight = 1: "one request per texture in flight" (Algorithm 1).
+  if (static_cast<uint32_t>(std::popcount(s.pending)) >= levels_in_flight_) return std::nullopt;
+  const uint32_t f = frontier(s);
+  if (f == kNone) {
+    // Initial. The shape is read only here and for a request's size: a texture that streams nothing this
+    // cycle (most of the list, most frames) touches no record of the table.
+    const TextureShape shape = shapes_[texture];
+    if (shape.mip_count == 0) return std::nullopt;  // broken from start
+    return initial_mip_level(shape);
   }
+  // Algorithm 1: `if texture.mipLevelSampled + b < texture.mipLevel` → load mipLevel - 1, with mipLevel the
+  // frontier (what is displayed once the pending levels arrive). Written so that a NaN from the GPU metadata
+  // refines nothing; frontier 0 is Final.
+  if (f == 0) return std::nullopt;
+  if (desired + bias < static_cast<float>(f)) return f - 1u;
   return std::nullopt;
 }
 
-void TextureStates::roll_back(State& s) {
-  s.pending = kNone;
-  // Nothing displayed: the texture is as if never loaded (the Initial request failed, or the base mip of a
-  // tiny texture whose initial level is 0). Otherwise it stays Active and refines again from `resident`.
-  s.phase =
-      s.resident == kNone ? TexturePhase::kInitial : (s.resident == 0 ? TexturePhase::kFinal : TexturePhase::kActive);
-}
-
 TextureStates::Entry* TextureStates::pending_entry(TextureId texture, MipLevel mip) {
-  if (!contains(texture)) return nullptr;
+  if (!contains(texture) || mip.value >= 32) return nullptr;
   Entry* e = states_.find(texture.value);
-  if (e == nullptr || e->state.pending == kNone || e->state.pending != mip.value) return nullptr;
+  if (e == nullptr || !(e->state.pending & (1u << mip.value))) return nullptr;
   return e;
 }
 
@@ -79,38 +86,39 @@ void TextureStates::settle(Entry* e) {
 CycleResult TextureStates::run_cycle(std::span<const StreamCandidate> candidates, uint64_t load_bytes, float bias,
                                      const Sender& send, size_t max_requests) {
   CycleResult out;
-  for (const StreamCandidate& c : candidates) {
-    if (!contains(c.texture)) {
-      ++out.unknown_textures;
-      continue;
-    }
+  // Candidates (indices) sent a level in the pass before: only they can take another one in the next pass.
+  std::vector<uint32_t> sent_in_pass;
+  std::vector<uint32_t> next_pass;
+  enum class Visit : uint8_t { kNothing, kSent, kStop };
+  auto visit = [&](const StreamCandidate& c, uint32_t pass) {
     Entry* e = states_.find(c.texture.value);  // valid until the insert below: send() cannot reach the table
     State s = e != nullptr ? e->state : State{};
     const std::optional<uint32_t> mip = next_mip(s, c.texture.value, c.desired_mip, bias);
-    if (!mip) continue;
+    if (!mip) return Visit::kNothing;
     // Algorithm 1: "Stop streaming textures when the adaptive load size is reached" — tested before each
     // load, so the mip that first pushes the batch over s is still loaded.
     if (out.bytes > load_bytes) {
       out.stopped_by_load_size = true;
-      break;
+      return Visit::kStop;
     }
     if (out.sent.size() >= max_requests) {
       out.stopped_by_count = true;
-      break;
+      return Visit::kStop;
     }
     const TextureShape shape = shapes_[c.texture.value];
-    const MipRequest request{c.texture, MipLevel(*mip), c.weight,
+    // Pass k's level costs about 4^k times the first one's: its priority at the server is weight / 4^k.
+    const float priority = std::ldexp(c.weight, -2 * static_cast<int>(pass));
+    const MipRequest request{c.texture, MipLevel(*mip), priority,
                              mip_bytes(shape.format, shape.width, shape.height, *mip)};
     const SendResult r = send(request);
     if (r == SendResult::kStop) {
       out.stopped_by_sender = true;
-      break;
+      return Visit::kStop;
     }
-    if (r == SendResult::kSkip) continue;
-    s.pending = static_cast<uint8_t>(*mip);  // below 32 (kNone): initial_mip_level or resident - 1
-    // Initial → Active; "Set to Final state as the highest resolution mipmap will be streamed" when the
-    // level is mipLevelMin (the base level 0), also straight from Initial for a texture smaller than 4x4.
-    s.phase = *mip == 0 ? TexturePhase::kFinal : TexturePhase::kActive;
+    if (r == SendResult::kSkip) return Visit::kNothing;
+    // Below 32: initial_mip_level or frontier - 1. Initial → Active; "Set to Final state as the highest
+    // resolution mipmap will be streamed" when the level is mipLevelMin (the base level 0).
+    s.pending |= 1u << *mip;
     if (e != nullptr) {
       e->state = s;
     } else {
@@ -118,6 +126,33 @@ CycleResult TextureStates::run_cycle(std::span<const StreamCandidate> candidates
     }
     out.bytes += request.bytes;
     out.sent.push_back(request);
+    return Visit::kSent;
+  };
+  // A texture listed twice (meshes sharing it) takes one level in the first pass, at its heaviest entry's
+  // weight; with one level in flight its state already refuses the second.
+  std::unordered_set<uint32_t> sent_textures;
+  for (uint32_t i = 0; i < candidates.size(); ++i) {
+    const StreamCandidate& c = candidates[i];
+    if (!contains(c.texture)) {
+      ++out.unknown_textures;
+      continue;
+    }
+    if (levels_in_flight_ > 1 && sent_textures.count(c.texture.value)) continue;
+    const Visit v = visit(c, 0);
+    if (v == Visit::kStop) return out;
+    if (v == Visit::kSent && levels_in_flight_ > 1) {
+      sent_in_pass.push_back(i);
+      sent_textures.insert(c.texture.value);
+    }
+  }
+  for (uint32_t pass = 1; pass < levels_in_flight_ && !sent_in_pass.empty(); ++pass) {
+    next_pass.clear();
+    for (const uint32_t i : sent_in_pass) {
+      const Visit v = visit(candidates[i], pass);
+      if (v == Visit::kStop) return out;
+      if (v == Visit::kSent) next_pass.push_back(i);
+    }
+    sent_in_pass.swap(next_pass);
   }
   return out;
 }
@@ -126,10 +161,9 @@ bool TextureStates::on_committed(TextureId texture, MipLevel mip) {
   Entry* e = pending_entry(texture, mip);
   if (e == nullptr) return false;
   State& s = e->state;
-  s.pending = kNone;
-  s.resident = static_cast<uint8_t>(mip.value);  // the pending level's value
+  s.pending &= ~(1u << mip.value);
+  s.resident |= 1u << mip.value;
   s.failures = 0;
-  s.phase = mip.value == 0 ? TexturePhase::kFinal : TexturePhase::kActive;
   return true;
 }
 
@@ -137,7 +171,9 @@ bool TextureStates::on_failed(TextureId texture, MipLevel mip, CompletionStatus 
   Entry* e = pending_entry(texture, mip);
   if (e == nullptr) return false;
   State& s = e->state;
-  roll_back(s);
+  // The level is no longer pending: the frontier is back before it (Initial when nothing else is resident or
+  // pending; a base level that failed leaves the texture Active), and the next cycle asks for it again.
+  s.pending &= ~(1u << mip.value);
   switch (status) {
     case CompletionStatus::kNotFound:
     case CompletionStatus::kCorrupt:
@@ -161,7 +197,7 @@ bool TextureStates::on_failed(TextureId texture, MipLevel mip, CompletionStatus 
 bool TextureStates::on_rejected(TextureId texture, MipLevel mip) {
   Entry* e = pending_entry(texture, mip);
   if (e == nullptr) return false;
-  roll_back(e->state);
+  e->state.pending &= ~(1u << mip.value);
   if (++e->state.failures >= kMaxCountedFailures) e->state.broken = true;
   return true;
 }
@@ -169,7 +205,7 @@ bool TextureStates::on_rejected(TextureId texture, MipLevel mip) {
 bool TextureStates::on_no_room(TextureId texture, MipLevel mip) {
   Entry* e = pending_entry(texture, mip);
   if (e == nullptr) return false;
-  roll_back(e->state);
+  e->state.pending &= ~(1u << mip.value);
   settle(e);
   return true;
 }
@@ -179,12 +215,11 @@ void TextureStates::on_trimmed(TextureId texture, MipLevel finest) {
   Entry* e = states_.find(texture.value);
   if (e == nullptr) return;  // nothing resident
   State& s = e->state;
-  // A level the texture does not have would leave it resident at nothing (the cache always keeps one level).
-  if (s.resident == kNone || s.resident >= finest.value || finest.value >= shapes_[texture.value].mip_count ||
-      finest.value >= kNone)
+  // A level the texture does not have, or one not resident, would leave it resident at nothing (the cache
+  // always keeps one level).
+  if (finest.value >= shapes_[texture.value].mip_count || finest.value >= 32 || !(s.resident & (1u << finest.value)))
     return;
-  s.resident = static_cast<uint8_t>(finest.value);
-  if (s.pending == kNone) s.phase = finest.value == 0 ? TexturePhase::kFinal : TexturePhase::kActive;
+  s.resident &= ~((1u << finest.value) - 1u);  // the levels finer than `finest` are gone
 }
 
 void TextureStates::invalidate(TextureId texture) {
@@ -192,9 +227,8 @@ void TextureStates::invalidate(TextureId texture) {
   Entry* e = states_.find(texture.value);
   if (e == nullptr) return;  // already Initial with nothing resident or pending
   State& s = e->state;
-  s.phase = TexturePhase::kInitial;
-  s.resident = kNone;
-  s.pending = kNone;
+  s.resident = 0;
+  s.pending = 0;
   settle(e);  // gone unless broken or with counted failures
 }
 
@@ -202,10 +236,18 @@ TextureStateView TextureStates::view(TextureId texture) const {
   TS_ASSERT(contains(texture), "texture %u outside the table of %zu", texture.value, shapes_.size());
   const Entry* e = states_.find(texture.value);
   const State s = e != nullptr ? e->state : State{};
-  TextureStateView v{s.phase, std::nullopt, std::nullopt, s.broken || shapes_[texture.value].mip_count == 0,
+  TextureStateView v{phase_of(s),
+                     std::nullopt,
+                     std::nullopt,
+                     static_cast<uint32_t>(std::popcount(s.pending)),
+                     s.broken || shapes_[texture.value].mip_count == 0,
                      s.failures};
-  if (s.resident != kNone) v.resident = s.resident;
-  if (s.pending != kNone) v.pending = s.pending;
+  if (s.resident != 0) {
+    uint32_t level = 31u - static_cast<uint32_t>(std::countl_zero(s.resident));
+    while (level > 0 && (s.resident & (1u << (level - 1)))) --level;
+    v.resident = level;
+  }
+  if (s.pending != 0) v.pending = static_cast<uint32_t>(std::countr_zero(s.pending));
   return v;
 }
 
@@ -217,8 +259,8 @@ TextureStateCounts TextureStates::counts() const {
       ++c.broken;
       return;
     }
-    if (s.pending != kNone) ++c.pending;
-    switch (s.phase) {
+    if (s.pending != 0) ++c.pending;
+    switch (phase_of(s)) {
       case TexturePhase::kInitial:
         ++c.initial;
         break;

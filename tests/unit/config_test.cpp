@@ -239,7 +239,8 @@ TEST(Config, ControlCharactersInStringsRoundTrip) {
 
 // protocol.staging_slot_bytes = 0 sizes the slots for the scene's largest mip; a set value is kept.
 TEST(Config, AutoStagingSlotsHoldTheLargestMip) {
-  ProtocolConfig p;                                                     // 32 slots, auto
+  ProtocolConfig p;  // auto slot size
+  p.staging_slot_count = 32;
   EXPECT_EQ(effective_staging(p, 1000).slot_bytes, kMinAutoSlotBytes);  // small scenes: 64 KiB
   EXPECT_EQ(effective_staging(p, 1000).slot_count, 32u);
   // 2048 x 1024 RGBA8 (8 MiB): 32 slots of 8 MiB = 256 MiB, within the cap.

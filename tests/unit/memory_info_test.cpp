@@ -92,6 +92,7 @@ TEST_F(FakeRoots, NothingReadableMeansUnknownAndChecksPass) {
 
 TEST(ServerMemory, AServerThatCannotFitIsAConfigErrorNamingTheKeyAndTheLimit) {
   Config c;
+  c.protocol.staging_slot_count = 32;
   c.protocol.staging_slot_bytes = static_cast<int64_t>(kMiB);  // 32 slots of 1 MiB
   MemoryInfo m{1536 * kMiB, "memory cgroup limit (/sys/fs/cgroup/x/memory.max)", 1400 * kMiB};
   c.server.ram_cache_bytes = static_cast<int64_t>(3 * kGiB);

@@ -388,6 +388,65 @@ TEST(TextureStates, TrimmedLevelsAreRefinedAgainOnlyWhenWanted) {
   ASSERT_EQ(mips_of(s.run_cycle(nearer, kHuge, 0, rec.fn())), std::vector<uint32_t>{1});
 }
 
+// stream.levels_in_flight > 1: a texture's chain is pipelined. The first pass of a cycle is Algorithm 1's (each
+// texture its next level, in list order); each further pass gives one more level to the textures the pass before
+// sent one, at weight / 4^pass, so no texture's deeper level goes before another's next one.
+TEST(TextureStates, PipelinedLevelsGoOutBreadthFirstAtFallingPriority) {
+  stream::TextureStates s(table(), 3);
+  EXPECT_EQ(s.levels_in_flight(), 3u);
+  Recorder rec;
+  const std::vector<stream::StreamCandidate> list{cand(T0, 0.0f, 8.0f), cand(T1, 0.0f, 4.0f), cand(T0, 0.0f, 2.0f)};
+  auto r = s.run_cycle(list, kHuge, 0, rec.fn());
+  ASSERT_EQ(mips_of(r), (std::vector<uint32_t>{6, 8, 5, 7, 4, 6})) << "T0 listed twice takes one level per pass";
+  const float priorities[] = {8, 4, 2, 1, 0.5f, 0.25f};
+  for (size_t i = 0; i < r.sent.size(); ++i) EXPECT_FLOAT_EQ(r.sent[i].priority, priorities[i]) << i;
+  EXPECT_EQ(s.view(T0).pending_levels, 3u);
+  EXPECT_EQ(s.view(T0).pending, 4u) << "the finest level in flight";
+  EXPECT_EQ(s.view(T0).phase, stream::TexturePhase::kActive);
+  EXPECT_TRUE(s.run_cycle(list, kHuge, 0, rec.fn()).sent.empty()) << "three levels in flight each: nothing more";
+
+  // Answers in any order: a finer level that arrives first is resident on its own (the shader samples the run
+  // that ends at the coarsest resident level); the run grows as the coarser ones arrive.
+  ASSERT_TRUE(s.on_committed(T0, MipLevel(4)));
+  EXPECT_EQ(s.view(T0).resident, 4u);
+  ASSERT_TRUE(s.on_committed(T0, MipLevel(6)));
+  EXPECT_EQ(s.view(T0).resident, 6u);
+  // One level back in flight room: the next is the one after everything resident or pending (3).
+  ASSERT_EQ(mips_of(s.run_cycle(list, kHuge, 0, rec.fn())), (std::vector<uint32_t>{3, 2}));
+  ASSERT_TRUE(s.on_committed(T0, MipLevel(5)));
+  EXPECT_EQ(s.view(T0).resident, 4u);
+  // The load size stops the cycle across passes too, tested before each load: 64 B (level 6) then 256 B
+  // (level 5) go with s = 100 B, level 4 does not.
+  stream::TextureStates fresh(table(), 3);
+  const auto limited = fresh.run_cycle(std::vector<stream::StreamCandidate>{cand(T0, 0.0f)}, 100, 0, rec.fn());
+  ASSERT_EQ(mips_of(limited), (std::vector<uint32_t>{6, 5}));
+  EXPECT_TRUE(limited.stopped_by_load_size);
+}
+
+TEST(TextureStates, APipelinedLevelThatFailsIsAskedForAgainBeforeAnythingFiner) {
+  stream::TextureStates s(table(), 3);
+  Recorder rec;
+  const std::vector<stream::StreamCandidate> list{cand(T0, 0.0f)};
+  ASSERT_EQ(mips_of(s.run_cycle(list, kHuge, 0, rec.fn())), (std::vector<uint32_t>{6, 5, 4}));
+  ASSERT_TRUE(s.on_committed(T0, MipLevel(6)));
+  ASSERT_TRUE(s.on_failed(T0, MipLevel(5), CompletionStatus::kTimedOut));
+  ASSERT_TRUE(s.on_committed(T0, MipLevel(4)));
+  EXPECT_EQ(s.view(T0).resident, 6u) << "level 4 waits for 5: the sampled run ends at 6";
+  EXPECT_FALSE(s.view(T0).pending.has_value());
+  // The hole first, then what follows the run 6..4 it closes.
+  ASSERT_EQ(mips_of(s.run_cycle(list, kHuge, 0, rec.fn())), (std::vector<uint32_t>{5, 3, 2}));
+  ASSERT_TRUE(s.on_committed(T0, MipLevel(5)));
+  EXPECT_EQ(s.view(T0).resident, 4u);
+  // An eviction drops everything, pending included; late answers are refused.
+  s.invalidate(T0);
+  EXPECT_FALSE(s.on_committed(T0, MipLevel(3)));
+  EXPECT_EQ(s.view(T0).phase, stream::TexturePhase::kInitial);
+  EXPECT_EQ(s.view(T0).pending_levels, 0u);
+  // The base level in flight makes the texture Final only once every level down to it is covered.
+  ASSERT_EQ(mips_of(s.run_cycle(list, kHuge, 0, rec.fn())), (std::vector<uint32_t>{6, 5, 4}));
+  EXPECT_EQ(s.view(T0).phase, stream::TexturePhase::kActive);
+}
+
 TEST(TextureStates, ApplyingEventsEqualsTheCallsInOrder) {
   stream::TextureStates direct(table()), applied(table());
   Recorder rec;

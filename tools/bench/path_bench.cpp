@@ -258,11 +258,12 @@ int run_path(const PathArgs& args) {
     res.notes.push_back("The all-resident runs (resident, resident_blend, resident_seed_blend) were skipped: " +
                         cache.error + ". Ratios that need them are not measured.");
   }
-  runs.push_back(make("baseline", "baseline", "seed baseline (no adaptive streaming, no colour blending, no fade)",
-                      {"controller.mode=none", "stream.colormap_blend=false", "stream.fade_ms=0"}));
+  runs.push_back(
+      make("baseline", "baseline", "seed baseline (no adaptive streaming, no colour blending, no fade)",
+           {"controller.mode=none", "stream.colormap_blend=false", "stream.fade_ms=0", "stream.levels_in_flight=1"}));
   // The seed's method as published: Eq. 4-7 with the configured α, Eq. 8 blending (seed 000 §3.4, §3.7).
   runs.push_back(make("seed", "baseline", "seed method (Eq. 4-7, α = " + fmt_num(alpha_ms) + " ms, Eq. 8 blend)",
-                      {"controller.mode=seed", "stream.blend=seed", "stream.fade_ms=0"}));
+                      {"controller.mode=seed", "stream.blend=seed", "stream.fade_ms=0", "stream.levels_in_flight=1"}));
   if (!res.quick && resident_possible) {
     runs.push_back(make("resident", "baseline", "all textures resident (no streaming, no blending)",
                         {"render.preload_all=true", "stream.colormap_blend=false"}));

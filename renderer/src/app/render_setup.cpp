@@ -103,7 +103,7 @@ Status Renderer::set_up() {
   // client; a copy of the opened scene (a few pointers) keeps the mapping alive for them (host_memory.md).
   auto table_owner = std::make_shared<const SceneData>(scene_);
   table_ = stream::TextureTable(table_owner, table_owner->texture_records());
-  states_ = std::make_unique<stream::TextureStates>(table_);
+  states_ = std::make_unique<stream::TextureStates>(table_, static_cast<uint32_t>(cfg_.stream.levels_in_flight));
   mip_use_ = std::make_unique<stream::MipUseLedger>(table_);
 
   auto stack = RenderStack::create(scene_, *options);

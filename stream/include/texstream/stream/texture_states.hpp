@@ -12,8 +12,13 @@
 // How the paper's synchronous loop maps onto an asynchronous server:
 //   * The paper's `texture.mipLevel` (the displayed level) is `resident`: the finest level the renderer
 //     has uploaded, updated only by on_committed().
-//   * A request in flight is `pending`. A texture with a pending request is skipped ("only one request per
-//     texture in flight"), which is what makes the paper's "mipLevel ← texture.mipLevel - 1" step sound.
+//   * A request in flight is `pending`. With `levels_in_flight` = 1 (the seed's Algorithm 1) a texture with a
+//     pending request is skipped ("only one request per texture in flight"). With more, a texture may have up
+//     to that many levels in flight, each the next finer one after what is resident or pending (its chain is
+//     pipelined instead of one level per round trip: docs/design/pipelined_levels.md). Levels are kept as
+//     masks, so an answer that arrives ahead of a coarser one, or a coarser one that failed, is a hole that
+//     the next cycle asks for again; `resident` is the run of resident levels that ends at the coarsest one,
+//     the range the renderer's shader samples.
 //   * The state changes that Algorithm 1 makes when it decides to load happen when the request is sent;
 //     a failed load rolls them back (Initial request failed → Initial; base-mip request failed → Active).
 //   * The load-size test `if loadedBatchSize > s then break` runs before each load, exactly as in
@@ -21,7 +26,7 @@
 //     test comes before the state change, so the texture that hits the limit keeps its state.
 //
 // Memory: a texture in the default state (Initial, nothing resident or pending, not broken, no counted failure)
-// has no entry; one that is not has a 12-byte entry in an open-addressing table at most half full. So a
+// has no entry; one that is not has a 16-byte entry in an open-addressing table at most half full. So a
 // texture not in view costs nothing (docs/design/host_memory.md); the table is as large as the peak count of
 // resident, pending, broken or failed textures needs (it never shrinks).
 #include <cstddef>
@@ -70,8 +75,9 @@ enum class SendResult : uint8_t {
 
 struct TextureStateView {
   TexturePhase phase;
-  std::optional<uint32_t> resident;  // finest uploaded level, if any
-  std::optional<uint32_t> pending;   // level in flight, if any
+  std::optional<uint32_t> resident;  // finest level of the resident run that ends at the coarsest, if any
+  std::optional<uint32_t> pending;   // finest level in flight, if any
+  uint32_t pending_levels = 0;       // levels in flight (at most levels_in_flight)
   bool broken;
   uint32_t failures;  // consecutive counted failures (see kMaxCountedFailures)
 };
@@ -126,19 +132,24 @@ class TextureStates {
   static constexpr uint32_t kMaxCountedFailures = 4;
 
   // `shapes` is the scene's texture table, indexed by texture id. A shape with no mips is broken from start.
-  explicit TextureStates(TextureTable shapes);
+  // `levels_in_flight` (config stream.levels_in_flight, >= 1): most levels of one texture requested at once;
+  // 1 is the seed's Algorithm 1.
+  explicit TextureStates(TextureTable shapes, uint32_t levels_in_flight = 1);
 
   using Sender = std::function<SendResult(const MipRequest&)>;
 
   // One streaming cycle of Algorithm 1 (LoadTextures) over `candidates` in the given order (the caller
   // sorts by descending weight), with load size `load_bytes` (s) and mip bias `bias` (b >= 0). Every mip
   // chosen is passed to `send`, in order, and what it accepts is returned. `max_requests` (config
-  // stream.max_mips_per_cycle) caps the mips sent in one cycle on top of s.
+  // stream.max_mips_per_cycle) caps the mips sent in one cycle on top of s. With levels_in_flight > 1 the
+  // cycle makes up to that many passes: the first gives each texture its next level (Algorithm 1 exactly),
+  // each further pass one more level to the textures the pass before sent one, at priority weight / 4^pass
+  // (a level finer costs four times the bytes), so every texture's next level goes before anyone's deeper ones.
   CycleResult run_cycle(std::span<const StreamCandidate> candidates, uint64_t load_bytes, float bias,
                         const Sender& send, size_t max_requests = SIZE_MAX);
 
   // The renderer has uploaded `mip` of `texture` and may sample it. Returns false (and changes nothing)
-  // when that mip is not the pending one: a late answer to a request from before an invalidate().
+  // when that mip is not a pending one: a late answer to a request from before an invalidate().
   bool on_committed(TextureId texture, MipLevel mip);
   // The load of `mip` failed with `status` (kCancelled also for requests lost with a dead server). Rolls
   // the pending state back; kNotFound and kCorrupt mark the texture broken. Returns false when not pending.
@@ -158,6 +169,7 @@ class TextureStates {
   void apply(std::span<const TextureEvent> events);
 
   size_t size() const { return shapes_.size(); }  // textures in the table
+  uint32_t levels_in_flight() const { return levels_in_flight_; }
   bool contains(TextureId texture) const { return texture.value < shapes_.size(); }
   TextureStateView view(TextureId texture) const;  // contract: contains(texture)
   TextureStateCounts counts() const;               // O(entries)
@@ -167,16 +179,18 @@ class TextureStates {
  private:
   static constexpr uint8_t kNone = 0xff;  // no level: levels are below 32 (a 32-bit extent has at most 32)
   struct State {
-    TexturePhase phase = TexturePhase::kInitial;
-    uint8_t resident = kNone;
-    uint8_t pending = kNone;
+    uint32_t resident = 0;  // bit m: level m is uploaded (as the cache's residency mask)
+    uint32_t pending = 0;   // bit m: level m is in flight
     bool broken = false;
     uint8_t failures = 0;
     // The state of a texture with no entry (unless its shape has no mips: broken, derived from the shape).
-    bool is_default() const {
-      return phase == TexturePhase::kInitial && resident == kNone && pending == kNone && !broken && failures == 0;
-    }
+    bool is_default() const { return resident == 0 && pending == 0 && !broken && failures == 0; }
   };
+  // Where the run of resident-or-pending levels that starts at the coarsest one ends (its finest level), or
+  // kNone when nothing is resident or pending: Algorithm 1's `texture.mipLevel` once the pending arrive.
+  static uint32_t frontier(const State& s);
+  // Phase of a state: Initial with nothing resident or pending, Final once the frontier is the base level.
+  static TexturePhase phase_of(const State& s);
   static constexpr uint32_t kNoTexture = 0xffffffffu;  // an empty slot: ids are below the table's size
   struct Entry {
     uint32_t key = kNoTexture;
@@ -185,18 +199,17 @@ class TextureStates {
   struct EntryUsed {
     bool operator()(const Entry& e) const { return e.key != kNoTexture; }
   };
-  static_assert(sizeof(Entry) == 12);  // the entry size the header comment and host_memory.md state
+  static_assert(sizeof(Entry) == 16);  // the entry size the header comment and host_memory.md state
 
   // The level Algorithm 1 would load for `texture` in state `s` now, or nullopt.
   std::optional<uint32_t> next_mip(const State& s, uint32_t texture, float desired, float bias) const;
-  // Undo the transition made when `s.pending` was sent.
-  static void roll_back(State& s);
-  // The entry of a texture with a pending request, or nullptr: an event for `mip` changes only such a texture.
+  // The entry of a texture with `mip` pending, or nullptr: an event for `mip` changes only such a texture.
   Entry* pending_entry(TextureId texture, MipLevel mip);
   // Drops `e` if its texture is back in the default state (invalidates pointers to entries).
   void settle(Entry* e);
 
   TextureTable shapes_;  // shared with the other users of the scene's table
+  uint32_t levels_in_flight_ = 1;
   OpenTable<Entry, EntryUsed, IdHash> states_;
   uint64_t broken_from_start_ = 0;  // shapes with no mips: broken without an entry
 };
