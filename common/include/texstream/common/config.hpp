@@ -129,9 +129,9 @@ struct SceneConfig {
 
 struct ProtocolConfig {
   std::string segment_name;              // empty: "texstream-<renderer pid>"
-  int64_t request_ring_capacity = 1024;  // records, power of two
-  int64_t completion_ring_capacity = 1024;
-  int64_t staging_slot_count = 256;
+  int64_t request_ring_capacity = 4096;  // records, power of two
+  int64_t completion_ring_capacity = 4096;
+  int64_t staging_slot_count = 1024;
   int64_t staging_slot_bytes = 0;  // 0: the scene's largest mip (effective_staging)
   double heartbeat_timeout_ms =
       1400;  // hung after this long without progress; + one watchdog poll stays < 1.5 s (issue 9)
@@ -194,7 +194,7 @@ struct RenderConfig {
 struct StreamConfig {
   double tau = 150;                        // mesh weight cutoff (seed 000 §3.3, Table 2)
   double max_anisotropy = 16;              // A_m for the mip-level metadata; sampling uses A_m / 2 (seed 000 §3.2)
-  int64_t max_requests_in_flight = 256;    // pre-queue depth sent to the server per cycle
+  int64_t max_requests_in_flight = 2048;   // pre-queue depth sent to the server per cycle
   int64_t max_mips_per_cycle = 512;        // upload budget per streaming cycle
   int64_t levels_in_flight = 8;            // most levels of one texture requested at once (1: seed Algorithm 1)
   bool colormap_blend = true;              // colormap blended in while mips arrive; false samples directly
