@@ -419,14 +419,14 @@ bool is_pow2(int64_t v) { return v > 0 && (v & (v - 1)) == 0; }
 
 }  // namespace
 
-StagingShape effective_staging(const ProtocolConfig& protocol, uint64_t largest_mip_bytes) {
+StagingShape effective_staging(const ProtocolConfig& protocol, uint64_t largest_mip_bytes, uint64_t shm_free_bytes) {
   constexpr uint64_t kMaxSlotBytes = 64ull << 20;  // the segment's limit (protocol/segment_layout.hpp)
   StagingShape s{static_cast<uint64_t>(protocol.staging_slot_count),
                  static_cast<uint64_t>(protocol.staging_slot_bytes)};
   if (s.slot_bytes != 0) return s;
   s.slot_bytes = std::clamp<uint64_t>((largest_mip_bytes + 4095) / 4096 * 4096, kMinAutoSlotBytes, kMaxSlotBytes);
-  s.slot_count =
-      std::clamp<uint64_t>(kMaxAutoStagingBytes / s.slot_bytes, std::min<uint64_t>(4, s.slot_count), s.slot_count);
+  const uint64_t pool = std::min(kMaxAutoStagingBytes, shm_free_bytes / 2);
+  s.slot_count = std::clamp<uint64_t>(pool / s.slot_bytes, std::min<uint64_t>(4, s.slot_count), s.slot_count);
   return s;
 }
 

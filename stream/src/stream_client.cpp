@@ -2,6 +2,7 @@
 #include "stream_client_internal.hpp"
 
 #include <signal.h>
+#include <sys/statvfs.h>
 #include <unistd.h>
 
 #include <spdlog/spdlog.h>
@@ -133,7 +134,17 @@ Result<std::unique_ptr<StreamClient>> StreamClient::start(const Config& config, 
   {
     uint64_t largest = 0;
     for (const TextureShape& t : c->shapes_) largest = std::max(largest, mip_bytes(t.format, t.width, t.height, 0));
-    const StagingShape staging = effective_staging(config.protocol, largest);
+    // The segment is backed when it is made: auto slots leave half of /dev/shm's free space to others.
+    struct statvfs shm {};
+    const uint64_t shm_free = ::statvfs("/dev/shm", &shm) == 0 ? uint64_t{shm.f_bavail} * shm.f_frsize : UINT64_MAX;
+    const StagingShape staging = effective_staging(config.protocol, largest, shm_free);
+    if (staging.slot_count < static_cast<uint64_t>(config.protocol.staging_slot_count)) {
+      spdlog::info(
+          "stream client: {} staging slots of {} bytes (protocol.staging_slot_count {} lowered to keep the "
+          "pool within {} MiB and half of /dev/shm's {} MiB free)",
+          staging.slot_count, staging.slot_bytes, config.protocol.staging_slot_count, kMaxAutoStagingBytes >> 20,
+          shm_free == UINT64_MAX ? 0 : shm_free >> 20);
+    }
     c->config_.protocol.staging_slot_count = static_cast<int64_t>(staging.slot_count);
     c->config_.protocol.staging_slot_bytes = static_cast<int64_t>(staging.slot_bytes);
     uint64_t too_large = 0, first = 0, first_bytes = 0;

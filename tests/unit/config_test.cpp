@@ -258,5 +258,19 @@ TEST(Config, AutoStagingSlotsHoldTheLargestMip) {
   EXPECT_EQ(effective_staging(p, 8u << 20).slot_count, 32u);
 }
 
+// The segment is backed at creation: auto slots take at most half of /dev/shm's free space (a container's
+// 64 MiB /dev/shm holds the default 1024 slots of 64 KiB only in part), never fewer than 4; set slots are kept.
+TEST(Config, AutoStagingSlotsLeaveHalfOfDevShmFree) {
+  ProtocolConfig p;
+  ASSERT_EQ(p.staging_slot_count, 1024);
+  EXPECT_EQ(effective_staging(p, 1000).slot_count, 1024u);  // 64 MiB of 64 KiB slots
+  EXPECT_EQ(effective_staging(p, 1000, 64ull << 20).slot_count, 512u);
+  EXPECT_EQ(effective_staging(p, 1000, 64ull << 20).slot_bytes, kMinAutoSlotBytes);
+  EXPECT_EQ(effective_staging(p, 1000, 1ull << 20).slot_count, 8u);
+  EXPECT_EQ(effective_staging(p, 1000, 256ull << 10).slot_count, 4u);
+  p.staging_slot_bytes = 65536;
+  EXPECT_EQ(effective_staging(p, 1000, 1ull << 20).slot_count, 1024u) << "a set slot size is the user's choice";
+}
+
 }  // namespace
 }  // namespace texstream

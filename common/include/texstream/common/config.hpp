@@ -139,14 +139,17 @@ struct ProtocolConfig {
 
 // The staging slots a renderer creates: protocol.staging_slot_bytes, or when it is 0 (auto) the scene's
 // largest mip (`largest_mip_bytes`), 4 KiB aligned, at least kMinAutoSlotBytes, at most the protocol's 64 MiB;
-// with auto slots the count is lowered so that the pool stays within kMaxAutoStagingBytes (at least 4 slots).
+// with auto slots the count is lowered so that the pool stays within kMaxAutoStagingBytes and within half of
+// `shm_free_bytes` (the free space of /dev/shm: the segment is backed at creation, and containers often mount
+// only 64 MiB there), at least 4 slots.
 struct StagingShape {
   uint64_t slot_count = 0;
   uint64_t slot_bytes = 0;
 };
 inline constexpr uint64_t kMinAutoSlotBytes = 64u << 10;
 inline constexpr uint64_t kMaxAutoStagingBytes = 512ull << 20;
-StagingShape effective_staging(const ProtocolConfig& protocol, uint64_t largest_mip_bytes);
+StagingShape effective_staging(const ProtocolConfig& protocol, uint64_t largest_mip_bytes,
+                               uint64_t shm_free_bytes = UINT64_MAX);
 
 struct ServerConfig {
   bool spawn = true;           // false: no child; a standalone texstream-server serves segment_name
