@@ -264,6 +264,12 @@ int run_path(const PathArgs& args) {
   // The seed's method as published: Eq. 4-7 with the configured α, Eq. 8 blending (seed 000 §3.4, §3.7).
   runs.push_back(make("seed", "baseline", "seed method (Eq. 4-7, α = " + fmt_num(alpha_ms) + " ms, Eq. 8 blend)",
                       {"controller.mode=seed", "stream.blend=seed", "stream.fade_ms=0", "stream.levels_in_flight=1"}));
+  // Streaming flat out with ours' request pipeline (stream.levels_in_flight as configured): what the controller
+  // and the blend add on top of pipelining (docs/design/pipelined_levels.md). Full run, or by --only.
+  if (!res.quick) {
+    runs.push_back(make("flat_out", "baseline", "flat out, ours' pipelined levels (no controller, no blend)",
+                        {"controller.mode=none", "stream.colormap_blend=false", "stream.fade_ms=0"}));
+  }
   if (!res.quick && resident_possible) {
     runs.push_back(make("resident", "baseline", "all textures resident (no streaming, no blending)",
                         {"render.preload_all=true", "stream.colormap_blend=false"}));
