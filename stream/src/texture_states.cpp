@@ -38,12 +38,20 @@ TextureStates::TextureStates(TextureTable shapes, uint32_t levels_in_flight)
   }
 }
 
+namespace {
+
+// The finest level of the run of set bits that starts at the highest (the coarsest level); `mask` != 0.
+uint32_t run_end(uint32_t mask) {
+  uint32_t level = 31u - static_cast<uint32_t>(std::countl_zero(mask));
+  while (level > 0 && (mask & (1u << (level - 1)))) --level;
+  return level;
+}
+
+}  // namespace
+
 uint32_t TextureStates::frontier(const State& s) {
   const uint32_t covered = s.resident | s.pending;
-  if (covered == 0) return kNone;
-  uint32_t level = 31u - static_cast<uint32_t>(std::countl_zero(covered));  // the coarsest
-  while (level > 0 && (covered & (1u << (level - 1)))) --level;
-  return level;
+  return covered == 0 ? kNone : run_end(covered);
 }
 
 TexturePhase TextureStates::phase_of(const State& s) {
@@ -242,11 +250,7 @@ TextureStateView TextureStates::view(TextureId texture) const {
                      static_cast<uint32_t>(std::popcount(s.pending)),
                      s.broken || shapes_[texture.value].mip_count == 0,
                      s.failures};
-  if (s.resident != 0) {
-    uint32_t level = 31u - static_cast<uint32_t>(std::countl_zero(s.resident));
-    while (level > 0 && (s.resident & (1u << (level - 1)))) --level;
-    v.resident = level;
-  }
+  if (s.resident != 0) v.resident = run_end(s.resident);
   if (s.pending != 0) v.pending = static_cast<uint32_t>(std::countr_zero(s.pending));
   return v;
 }
