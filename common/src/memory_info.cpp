@@ -1,5 +1,7 @@
 #include "texstream/common/memory_info.hpp"
 
+#include <sys/statvfs.h>
+
 #include <algorithm>
 #include <cstdlib>
 #include <fstream>
@@ -8,6 +10,12 @@
 #include <vector>
 
 namespace texstream {
+
+uint64_t free_bytes_at(const std::filesystem::path& dir) {
+  struct statvfs fs {};
+  if (::statvfs(dir.c_str(), &fs) != 0) return UINT64_MAX;
+  return uint64_t{fs.f_bavail} * fs.f_frsize;
+}
 namespace {
 
 constexpr uint64_t kUnknown = std::numeric_limits<uint64_t>::max();

@@ -20,11 +20,9 @@ ResidentLevels levels_of(uint32_t mask, uint32_t mip_count) {
   l.mip_count = mip_count;
   if (mask == 0) return l;
   // TextureCache::publish: the shader samples the run of resident levels that ends at the coarsest one.
-  const uint32_t coarsest = 31u - static_cast<uint32_t>(std::countl_zero(mask));
-  uint32_t finest = coarsest;
-  while (finest > 0 && (mask & (1u << (finest - 1)))) --finest;
-  l.finest = finest;
-  l.coarsest = coarsest;
+  const MipRun run = sampled_run(mask);
+  l.finest = run.finest;
+  l.coarsest = run.coarsest;
   return l;
 }
 

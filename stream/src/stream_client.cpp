@@ -2,7 +2,6 @@
 #include "stream_client_internal.hpp"
 
 #include <signal.h>
-#include <sys/statvfs.h>
 #include <unistd.h>
 
 #include <spdlog/spdlog.h>
@@ -135,8 +134,7 @@ Result<std::unique_ptr<StreamClient>> StreamClient::start(const Config& config, 
     uint64_t largest = 0;
     for (const TextureShape& t : c->shapes_) largest = std::max(largest, mip_bytes(t.format, t.width, t.height, 0));
     // The segment is backed when it is made: auto slots leave half of /dev/shm's free space to others.
-    struct statvfs shm {};
-    const uint64_t shm_free = ::statvfs("/dev/shm", &shm) == 0 ? uint64_t{shm.f_bavail} * shm.f_frsize : UINT64_MAX;
+    const uint64_t shm_free = free_bytes_at("/dev/shm");
     const StagingShape staging = effective_staging(config.protocol, largest, shm_free);
     if (staging.slot_count < static_cast<uint64_t>(config.protocol.staging_slot_count)) {
       spdlog::info(

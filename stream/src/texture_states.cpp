@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
-#include <unordered_set>
 #include <utility>
 
 #include "texstream/common/contract.hpp"
@@ -38,20 +37,9 @@ TextureStates::TextureStates(TextureTable shapes, uint32_t levels_in_flight)
   }
 }
 
-namespace {
-
-// The finest level of the run of set bits that starts at the highest (the coarsest level); `mask` != 0.
-uint32_t run_end(uint32_t mask) {
-  uint32_t level = 31u - static_cast<uint32_t>(std::countl_zero(mask));
-  while (level > 0 && (mask & (1u << (level - 1)))) --level;
-  return level;
-}
-
-}  // namespace
-
 uint32_t TextureStates::frontier(const State& s) {
   const uint32_t covered = s.resident | s.pending;
-  return covered == 0 ? kNone : run_end(covered);
+  return covered == 0 ? kNone : sampled_run(covered).finest;
 }
 
 TexturePhase TextureStates::phase_of(const State& s) {
@@ -95,8 +83,10 @@ CycleResult TextureStates::run_cycle(std::span<const StreamCandidate> candidates
                                      const Sender& send, size_t max_requests) {
   CycleResult out;
   // Candidates (indices) sent a level in the pass before: only they can take another one in the next pass.
-  std::vector<uint32_t> sent_in_pass;
-  std::vector<uint32_t> next_pass;
+  std::vector<uint32_t>& sent_in_pass = pass_scratch_[0];
+  std::vector<uint32_t>& next_pass = pass_scratch_[1];
+  sent_in_pass.clear();
+  sent_textures_.clear();
   enum class Visit : uint8_t { kNothing, kSent, kStop };
   auto visit = [&](const StreamCandidate& c, uint32_t pass) {
     Entry* e = states_.find(c.texture.value);  // valid until the insert below: send() cannot reach the table
@@ -138,19 +128,18 @@ CycleResult TextureStates::run_cycle(std::span<const StreamCandidate> candidates
   };
   // A texture listed twice (meshes sharing it) takes one level in the first pass, at its heaviest entry's
   // weight; with one level in flight its state already refuses the second.
-  std::unordered_set<uint32_t> sent_textures;
   for (uint32_t i = 0; i < candidates.size(); ++i) {
     const StreamCandidate& c = candidates[i];
     if (!contains(c.texture)) {
       ++out.unknown_textures;
       continue;
     }
-    if (levels_in_flight_ > 1 && sent_textures.count(c.texture.value)) continue;
+    if (levels_in_flight_ > 1 && sent_textures_.count(c.texture.value)) continue;
     const Visit v = visit(c, 0);
     if (v == Visit::kStop) return out;
     if (v == Visit::kSent && levels_in_flight_ > 1) {
       sent_in_pass.push_back(i);
-      sent_textures.insert(c.texture.value);
+      sent_textures_.insert(c.texture.value);
     }
   }
   for (uint32_t pass = 1; pass < levels_in_flight_ && !sent_in_pass.empty(); ++pass) {
@@ -250,7 +239,7 @@ TextureStateView TextureStates::view(TextureId texture) const {
                      static_cast<uint32_t>(std::popcount(s.pending)),
                      s.broken || shapes_[texture.value].mip_count == 0,
                      s.failures};
-  if (s.resident != 0) v.resident = run_end(s.resident);
+  if (s.resident != 0) v.resident = sampled_run(s.resident).finest;
   if (s.pending != 0) v.pending = static_cast<uint32_t>(std::countr_zero(s.pending));
   return v;
 }

@@ -823,12 +823,10 @@ void TextureCache::publish(TextureId texture, uint32_t mask) {
     return;
   }
   // The shader samples a contiguous range [finest, coarsest]: the run of resident levels that ends at the
-  // coarsest one (Algorithm 1 refines one level at a time, so normally every resident level is in it).
-  const uint32_t coarsest = 31u - static_cast<uint32_t>(std::countl_zero(mask));
-  uint32_t finest = coarsest;
-  while (finest > 0 && (mask & (1u << (finest - 1)))) --finest;
-  t.placement.y = finest;
-  t.placement.z = coarsest;
+  // coarsest one (levels that arrive ahead of a coarser one wait for it: docs/design/pipelined_levels.md).
+  const MipRun run = sampled_run(mask);
+  t.placement.y = run.finest;
+  t.placement.z = run.coarsest;
   fades_.on_publish(slot, t, before);
 }
 

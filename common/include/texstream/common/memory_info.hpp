@@ -32,6 +32,10 @@ struct MemoryInfo {
 MemoryInfo read_memory_info(const std::filesystem::path& sys_root = "/sys",
                             const std::filesystem::path& proc_root = "/proc");
 
+// Free bytes of the file system at `dir` (shared-memory segments live in /dev/shm, a tmpfs that containers
+// often mount at 64 MiB), UINT64_MAX when it cannot be read.
+uint64_t free_bytes_at(const std::filesystem::path& dir = "/dev/shm");
+
 // "MemTotal:  24576000 kB" → bytes; nullopt if the field is missing or malformed.
 std::optional<uint64_t> meminfo_bytes(const std::string& meminfo_text, const std::string& field);
 // A cgroup limit file's text ("max\n", "9223372036854771712\n", "1610612736\n") → bytes; nullopt for no limit

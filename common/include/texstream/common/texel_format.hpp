@@ -2,6 +2,7 @@
 // Texel formats on the wire and on disk, and the mip arithmetic both processes must agree on: the server
 // computes where a mip lies and how large it is; the renderer re-computes the same to validate a completion.
 #include <algorithm>
+#include <bit>
 #include <cstdint>
 #include <optional>
 #include <string_view>
@@ -58,6 +59,20 @@ struct Extent2D {
   uint32_t height;
   constexpr bool operator==(const Extent2D&) const = default;
 };
+
+// The levels a texture is sampled from, given the mask of its resident levels (bit L: level L; levels are below
+// 32): the run of resident levels that ends at the coarsest one. A sparse image has no holes the sampler could
+// skip, so a finer level resident beyond a gap is not drawn until the gap is filled. `mask` != 0.
+struct MipRun {
+  uint32_t finest;
+  uint32_t coarsest;
+};
+constexpr MipRun sampled_run(uint32_t mask) {
+  const uint32_t coarsest = 31u - static_cast<uint32_t>(std::countl_zero(mask));
+  uint32_t finest = coarsest;
+  while (finest > 0 && (mask & (1u << (finest - 1)))) --finest;
+  return {finest, coarsest};
+}
 
 constexpr Extent2D mip_extent(uint32_t width, uint32_t height, uint32_t level) {
   return {std::max(1u, width >> level), std::max(1u, height >> level)};

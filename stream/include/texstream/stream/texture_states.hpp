@@ -34,6 +34,7 @@
 #include <functional>
 #include <optional>
 #include <span>
+#include <unordered_set>
 #include <vector>
 
 #include "texstream/common/ids.hpp"
@@ -210,6 +211,10 @@ class TextureStates {
 
   TextureTable shapes_;  // shared with the other users of the scene's table
   uint32_t levels_in_flight_ = 1;
+  // run_cycle's scratch, kept so that a cycle on the frame thread allocates nothing once warm: the candidates
+  // of the pass before and of this one, and the textures the first pass sent a level (levels_in_flight > 1).
+  std::vector<uint32_t> pass_scratch_[2];
+  std::unordered_set<uint32_t> sent_textures_;
   OpenTable<Entry, EntryUsed, IdHash> states_;
   uint64_t broken_from_start_ = 0;  // shapes with no mips: broken without an entry
 };
