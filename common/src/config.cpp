@@ -166,6 +166,10 @@ void visit_keys(Config& c, V&& v) {
   v("controller", "target_min_ms", c.controller.target_min_ms, "ms",
     "mode = auto: the target is never below this (one 60 Hz refresh: a frame inside it is no stutter)",
     Range{0, 3.6e6});
+  v("controller", "pace_share", c.controller.pace_share, "ratio",
+    "mode = auto: the mips one frame takes in are paced so that its streaming work (measured per mip) stays "
+    "within this share of the latency without streaming (0: no pacing)",
+    Range{0, 100});
   v("controller", "alpha_ms", c.controller.alpha_ms, "ms",
     "mode = seed: α, target maximum frame latency (seed 000 Table 2)", Range{0.1, 10000});
   v("controller", "beta", c.controller.beta, "levels", "β: maximum mip bias (Table 2)", Range{0, 16});

@@ -25,6 +25,7 @@ constexpr double kUpperEdgeScale = 1.2;
 
 // An hour: as AdaptiveController::kMaxFrameLatencyS.
 constexpr double kMaxTargetS = 3600.0;
+constexpr double kMaxPaceShare = 100.0;  // controller.pace_share: streaming may take up to 100 f a frame
 
 bool finite_non_negative(double v) { return std::isfinite(v) && v >= 0.0; }
 
@@ -53,6 +54,7 @@ Result<ControllerParams> ControllerParams::from_config(const ControllerConfig& c
   p.fixed_bias = c.fixed_bias;
   p.target_min_s = c.target_min_ms / 1e3;
   p.target_cap_s = c.target_ms / 1e3;
+  p.pace_share = c.pace_share;
   TS_TRY(p.validate());
   return p;
 }
@@ -73,6 +75,9 @@ Status ControllerParams::validate() const {
   }
   if (!(std::isfinite(target_cap_s) && target_cap_s >= 0 && target_cap_s <= kMaxTargetS)) {
     return bad("target_ms", "must be 0 (automatic) or a number up to 3600000, not " + num(target_cap_s * 1e3));
+  }
+  if (!(std::isfinite(pace_share) && pace_share >= 0 && pace_share <= kMaxPaceShare)) {
+    return bad("pace_share", "must be 0 (no pacing) or a number up to 100, not " + num(pace_share));
   }
   if (mode == ControllerMode::kFixed) {
     // The fixed mode is held to the same output ranges as the others rather than silently clamped.
@@ -162,6 +167,7 @@ HeadroomParams headroom_params(const ControllerParams& p) {
   h.beta = p.beta;
   h.target_min_s = p.target_min_s;
   h.target_cap_s = p.target_cap_s;
+  h.pace_share = p.pace_share;
   return h;
 }
 
@@ -175,9 +181,9 @@ Result<AdaptiveController> AdaptiveController::create(const ControllerParams& pa
   return c;
 }
 
-bool AdaptiveController::on_frame(double dt, double bytes) {
+bool AdaptiveController::on_frame(double dt, double bytes, double mips) {
   if (!(std::isfinite(dt) && dt >= 0.0 && dt <= kMaxFrameLatencyS && std::isfinite(bytes) && bytes >= 0.0 &&
-        bytes <= kMaxFrameBytes)) {
+        bytes <= kMaxFrameBytes && std::isfinite(mips) && mips >= 0.0 && mips <= kMaxFrameMips)) {
     ++rejected_;
     return false;
   }
@@ -224,7 +230,7 @@ bool AdaptiveController::on_frame(double dt, double bytes) {
             "load size %g outside [%g, %g]", s.s_bytes, params_.s_min_bytes, params_.s_max_bytes);
   TS_ASSERT(s.b >= 0.0 && s.b <= params_.beta, "mip bias %g outside [0, %g]", s.b, params_.beta);
   TS_ASSERT(s.l >= 0.0 && s.l <= 1.0, "load factor %g outside [0, 1]", s.l);
-  if (params_.mode == ControllerMode::kAuto) headroom_.on_frame(dt, bytes);
+  if (params_.mode == ControllerMode::kAuto) headroom_.on_frame(dt, bytes, mips);
   return true;
 }
 
@@ -256,6 +262,10 @@ double AdaptiveController::mip_bias() const {
       return params_.fixed_bias;
   }
   return 0.0;
+}
+
+double AdaptiveController::pace_mips() const {
+  return params_.mode == ControllerMode::kAuto ? headroom_.pace_mips() : HeadroomController::kNoPace;
 }
 
 double AdaptiveController::target_s() const {

@@ -1,6 +1,7 @@
 #include "texstream/stream/headroom_controller.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -46,47 +47,114 @@ double HeadroomController::bias(double beta, double t_b_s, double target_s) {
   return beta * AdaptiveController::smoothstep(kBiasFrom, kBiasFull, t_b_s / target_s);
 }
 
+namespace {
+
+// Non-negative least squares of y on one or two regressors, from centred sums (S_ij = Σ (x_i − x̄_i)(x_j − x̄_j),
+// S_iy likewise): every support (both, the first, the second) is tried and the feasible one that explains most
+// of y is kept. Coefficients stay 0 unless the fit explains y with a multiple correlation of at least `min_r`.
+// `use` says which regressors take part; the others get 0.
+std::array<double, 2> nonnegative_fit(const std::array<std::array<double, 2>, 2>& sxx, const std::array<double, 2>& sxy,
+                                      double syy, std::array<bool, 2> use, double min_r) {
+  std::array<double, 2> best{0, 0};
+  double best_explained = 0;
+  auto consider = [&](std::array<double, 2> b) {
+    if (!(b[0] >= 0 && b[1] >= 0 && std::isfinite(b[0]) && std::isfinite(b[1]))) return;
+    const double explained = b[0] * sxy[0] + b[1] * sxy[1];
+    if (explained > best_explained) {
+      best_explained = explained;
+      best = b;
+    }
+  };
+  for (int i = 0; i < 2; ++i) {
+    if (use[i] && sxx[i][i] > 0) {
+      std::array<double, 2> b{0, 0};
+      b[i] = sxy[i] / sxx[i][i];
+      consider(b);
+    }
+  }
+  const double det = sxx[0][0] * sxx[1][1] - sxx[0][1] * sxx[0][1];
+  // Both only when they are not (nearly) collinear: a 1e-6 relative determinant is a correlation above 0.999999.
+  if (use[0] && use[1] && det > 1e-6 * sxx[0][0] * sxx[1][1]) {
+    consider({(sxx[1][1] * sxy[0] - sxx[0][1] * sxy[1]) / det, (sxx[0][0] * sxy[1] - sxx[0][1] * sxy[0]) / det});
+  }
+  if (!(syy > 0) || best_explained < min_r * min_r * syy) return {0, 0};
+  return best;
+}
+
+}  // namespace
+
 void HeadroomController::fit() {
   State& s = state_;
   const size_t n = s.count;
+  const double nn = static_cast<double>(n);
   double min_dt = std::numeric_limits<double>::infinity();
-  double sx = 0, sy = 0, sxx = 0, sxy = 0, syy = 0;
+  double mean_dt = 0, mean_mb = 0, mean_mips = 0;
   double max_mb = 0, min_mb = std::numeric_limits<double>::infinity();
+  double max_mips = 0, min_mips = std::numeric_limits<double>::infinity();
   for (size_t i = 0; i < n; ++i) {
     min_dt = std::min(min_dt, s.dt[i]);
     max_mb = std::max(max_mb, s.mb[i]);
     min_mb = std::min(min_mb, s.mb[i]);
-    sx += s.mb[i];
-    sy += s.dt[i];
-    sxx += s.mb[i] * s.mb[i];
-    sxy += s.mb[i] * s.dt[i];
-    syy += s.dt[i] * s.dt[i];
+    max_mips = std::max(max_mips, s.mips[i]);
+    min_mips = std::min(min_mips, s.mips[i]);
+    mean_dt += s.dt[i] / nn;
+    mean_mb += s.mb[i] / nn;
+    mean_mips += s.mips[i] / nn;
   }
-  // k is plant knowledge: a window without enough spread in its uploads (a pause) keeps the last estimate.
-  // A window with spread refits it (and finds 0 when the uploads do not explain the latencies).
-  double k = s.k_s_per_mb;
-  if (n >= kMinFitFrames && max_mb - min_mb >= kMinSpreadMb) {
-    k = 0;
-    // Least squares over the window, recomputed every frame (nothing accumulates). Uploading cannot make a
-    // frame faster: a negative slope is noise or a view change and counts as 0; a degenerate one as 0 too.
-    const double nn = static_cast<double>(n);
-    const double var = nn * sxx - sx * sx, cov = nn * sxy - sx * sy, var_y = nn * syy - sy * sy;
-    // Only a slope that explains the latencies counts (correlation >= kMinCorrelation): on a GPU an upload
-    // costs ~nothing and any slope is noise, or a heavier view that happened to bring more mips.
-    const double r = var > 0 && var_y > 0 ? cov / std::sqrt(var * var_y) : 0.0;
-    if (var > 0 && std::isfinite(cov / var) && r >= kMinCorrelation) k = std::max(cov / var, 0.0);
+  // k and c are plant knowledge: a regressor whose window does not vary enough (a pause: no uploads, or
+  // none of a burst's mip counts) keeps its last estimate, and its part is taken out of the latencies before
+  // the other is refitted. A refit finds 0 for a regressor that does not explain the latencies.
+  double k = s.k_s_per_mb, c = s.c_s_per_mip;
+  const bool fit_k = n >= kMinFitFrames && max_mb - min_mb >= kMinSpreadMb;
+  const bool fit_c = n >= kMinFitFrames && max_mips - min_mips >= kPaceSpreadMips;
+  if (fit_k || fit_c) {
+    // Least squares over the window, recomputed every frame (nothing accumulates), non-negative: uploading
+    // cannot make a frame faster, so a negative slope is noise or a view change. Bytes and mips come together
+    // in a burst; fitting them jointly keeps a GPU's per-mip cost (binds, copy regions) from passing for a
+    // per-byte one (docs/controller.md, "pace").
+    std::array<std::array<double, 2>, 2> sxx{};
+    std::array<double, 2> sxy{};
+    double syy = 0;
+    for (size_t i = 0; i < n; ++i) {
+      const double x0 = s.mb[i] - mean_mb, x1 = s.mips[i] - mean_mips;
+      double y = s.dt[i] - mean_dt;
+      if (!fit_k) y -= k * x0;
+      if (!fit_c) y -= c * x1;
+      sxx[0][0] += x0 * x0;
+      sxx[0][1] += x0 * x1;
+      sxx[1][1] += x1 * x1;
+      sxy[0] += x0 * y;
+      sxy[1] += x1 * y;
+      syy += y * y;
+    }
+    const std::array<double, 2> b = nonnegative_fit(sxx, sxy, syy, {fit_k, fit_c}, kMinCorrelation);
+    if (fit_k) k = b[0];
+    if (fit_c) c = b[1];
   }
   double f = min_dt;
-  if (k > 0) {
-    for (size_t i = 0; i < n; ++i) f = std::min(f, s.dt[i] - k * s.mb[i]);
+  if (k > 0 || c > 0) {
+    for (size_t i = 0; i < n; ++i) f = std::min(f, s.dt[i] - k * s.mb[i] - c * s.mips[i]);
   }
   s.k_s_per_mb = k;
+  s.c_s_per_mip = c;
   s.f_s = std::clamp(f, kFloorShare * min_dt, min_dt);  // NaN cannot reach here: inputs are finite
 }
 
-void HeadroomController::on_frame(double dt_s, double bytes) {
-  TS_ASSERT(std::isfinite(dt_s) && dt_s >= 0 && std::isfinite(bytes) && bytes >= 0,
-            "headroom controller input out of contract: dt %g bytes %g", dt_s, bytes);
+void HeadroomController::fit_pace() {
+  State& s = state_;
+  // A frame's streaming work stays within share · f, and under the growth line: B / c mips (no cap while c
+  // is unknown or pacing is off).
+  s.pace_mips = kNoPace;
+  if (params_.pace_share > 0 && s.c_s_per_mip > 0) {
+    const double line = s.f_s + kGrowBelow * (s.target_s - s.f_s);
+    const double budget = std::min(params_.pace_share * s.f_s, line - s.f_s);
+    s.pace_mips = std::clamp(budget / s.c_s_per_mip, kPaceMinMips, kNoPace);
+  }
+}
+
+void HeadroomController::on_frame(double dt_s, double bytes, double mips) {
+  TS_ASSERT(std::isfinite(dt_s) && dt_s >= 0 && std::isfinite(bytes) && bytes >= 0 && std::isfinite(mips) && mips >= 0,
+            "headroom controller input out of contract: dt %g bytes %g mips %g", dt_s, bytes, mips);
   State& s = state_;
   // The first frame is start-up (pipelines, the first geometry): 40-420 ms on lavapipe, 200 ms on an H200
   // with a 300 K city. It says nothing about streaming, so it neither enters the fit nor cuts nor biases.
@@ -100,10 +168,12 @@ void HeadroomController::on_frame(double dt_s, double bytes) {
   s.t_w_s = t_w_s;
   s.dt[s.next] = dt_s;
   s.mb[s.next] = bytes / kBytesPerUnit;
+  s.mips[s.next] = mips;
   s.next = (s.next + 1) % kWindow;
   s.count = std::min(s.count + 1, kWindow);
   fit();
   s.target_s = target(s.f_s, params_);
+  fit_pace();
   // s never exceeds what the plant model says fits between f and the growth line in one frame: where uploads
   // cost frame time (lavapipe) a pause does not bank a full-size burst for the next cut; where they cost
   // nothing measurable (k = 0, a GPU) the cap is s_max.
@@ -121,8 +191,9 @@ void HeadroomController::on_frame(double dt_s, double bytes) {
   for (size_t i = 0; i < n; ++i) sum += s.dt[(s.next + kWindow - 1 - i) % kWindow];
   s.t_b_s = sum / static_cast<double>(n);
   s.b = bias(params_.beta, s.t_b_s, s.target_s);
-  TS_ASSERT(std::isfinite(s.s_bytes) && s.b >= 0 && s.b <= params_.beta, "headroom output out of range: s %g b %g",
-            s.s_bytes, s.b);
+  TS_ASSERT(std::isfinite(s.s_bytes) && s.b >= 0 && s.b <= params_.beta &&
+                (s.pace_mips >= kPaceMinMips && s.pace_mips <= kNoPace),
+            "headroom output out of range: s %g b %g pace %g", s.s_bytes, s.b, s.pace_mips);
 }
 
 }  // namespace texstream::stream

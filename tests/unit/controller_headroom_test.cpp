@@ -139,6 +139,81 @@ TEST(HeadroomController, RejectsBadBytesWithoutChangingState) {
   for (double bad : {std::nan(""), -1.0, HUGE_VAL, 2e18}) EXPECT_FALSE(c.on_frame(0.01, bad)) << bad;
   EXPECT_TRUE(c.headroom().state() == before);
   EXPECT_EQ(c.frames_rejected(), 4u);
+  for (double bad : {std::nan(""), -1.0, HUGE_VAL, 2e12}) EXPECT_FALSE(c.on_frame(0.01, 1e6, bad)) << bad;
+  EXPECT_TRUE(c.headroom().state() == before);
+}
+
+// Pace (issue 25, the H200's default city): frames take 2.5 ms plus 10 µs a mip, whatever their bytes (13 B to
+// 8 KB a mip in a frame: the cut frames there brought 512 mips of 7 KB or of 1 MB in all). After one cut's burst the
+// controller knows the cost of a mip and spreads the next burst so that no frame takes more than about twice the
+// latency without streaming; the backlog still clears.
+TEST(HeadroomController, PacesABurstOfMipsByTheirMeasuredCost) {
+  stream::AdaptiveController c = make(ControllerMode::kAuto);
+  int n = 0;
+  auto frame = [&](double mips) {
+    const double dt = 0.0025 + 1e-5 * mips;
+    EXPECT_TRUE(c.on_frame(dt, mips * std::exp2(4 + (n++ * 7) % 10), mips));
+    return dt;
+  };
+  EXPECT_EQ(c.pace_mips(), H::kNoPace);  // nothing known yet: no cap
+  for (int i = 0; i < 100; ++i) frame(i % 7);
+  for (int i = 0; i < 3; ++i) frame(512);  // the first cut, unpaced
+  const auto& h = c.headroom().state();
+  EXPECT_NEAR(h.c_s_per_mip, 1e-5, 1e-7);
+  EXPECT_NEAR(h.k_s_per_mb, 0.0, 1e-6);  // the burst's bytes are not taken for its cost
+  EXPECT_NEAR(h.f_s, 0.0025, 1e-5);
+  EXPECT_NEAR(c.pace_mips(), 250.0, 3.0);  // f / c
+  for (int i = 0; i < 100; ++i) frame(i % 5);
+  double backlog = 1500, worst = 0;
+  int frames = 0;
+  while (backlog > 0) {
+    const double take = std::min(backlog, std::floor(c.pace_mips()));
+    worst = std::max(worst, frame(take));
+    backlog -= take;
+    ++frames;
+  }
+  EXPECT_LE(worst, 2 * 0.0025 * 1.02);
+  EXPECT_LE(frames, 7);
+  EXPECT_EQ(c.load_size_bytes(), 64e6);  // pacing spreads the intake; the load size and bias are untouched
+  EXPECT_EQ(c.mip_bias(), 0.0);
+}
+
+// Bytes and mips, each with its own cost and varying apart (lavapipe: a big level costs its bytes, a small
+// one its count): the joint fit finds both, and f under them.
+TEST(HeadroomController, TellsTheCostOfABytesFromTheCostOfAMip) {
+  stream::AdaptiveController c = make(ControllerMode::kAuto);
+  for (int i = 0; i < 200; ++i) {
+    const double mb = (i * 37 % 11) * 0.5, mips = (i * 53 % 13) * 40.0;
+    ASSERT_TRUE(c.on_frame(0.020 + 0.002 * mb + 2e-5 * mips, mb * 1e6, mips));
+  }
+  const auto& h = c.headroom().state();
+  EXPECT_NEAR(h.k_s_per_mb, 0.002, 1e-6);
+  EXPECT_NEAR(h.c_s_per_mip, 2e-5, 1e-8);
+  EXPECT_NEAR(h.f_s, 0.020, 1e-6);
+}
+
+// Mips that cost nothing measurable: no pace. Pacing off (controller.pace_share = 0) or another mode: none.
+TEST(HeadroomController, NoPaceWithoutAMeasuredCostOrWhenTurnedOff) {
+  stream::AdaptiveController free_mips = make(ControllerMode::kAuto);
+  for (int i = 0; i < 200; ++i) ASSERT_TRUE(free_mips.on_frame(0.003 + (i % 3) * 1e-4, 0.0, (i % 4) * 300.0));
+  EXPECT_EQ(free_mips.headroom().state().c_s_per_mip, 0.0);
+  EXPECT_EQ(free_mips.pace_mips(), H::kNoPace);
+  for (ControllerMode mode : {ControllerMode::kAuto, ControllerMode::kSeed, ControllerMode::kNone}) {
+    stream::ControllerParams p;
+    p.mode = mode;
+    p.pace_share = mode == ControllerMode::kAuto ? 0.0 : 1.0;
+    auto c = stream::AdaptiveController::create(p);
+    ASSERT_TRUE(c.ok());
+    for (int i = 0; i < 200; ++i) ASSERT_TRUE(c->on_frame(0.0025 + 1e-5 * (i % 4) * 200, 0.0, (i % 4) * 200.0));
+    EXPECT_EQ(c->pace_mips(), H::kNoPace) << choice_name(mode);
+  }
+  stream::ControllerParams bad;
+  for (double share : {-1.0, 101.0, std::nan("")}) {
+    bad.pace_share = share;
+    auto c = stream::AdaptiveController::create(bad);
+    ASSERT_FALSE(c.ok());
+    EXPECT_NE(c.error().message.find("pace_share"), std::string::npos) << c.error().message;
+  }
 }
 
 }  // namespace

@@ -57,7 +57,7 @@ enum class Family : uint32_t {
   kNegative,             // negative values (and -0.0) among normal frames
   kAbsurd,               // just above the accepted maximum, 1e300, DBL_MAX
   kRandomBits,           // any 64-bit pattern reinterpreted as a double
-  kBadBytes,             // normal latencies, uploaded bytes NaN, ±inf, negative or absurd
+  kBadBytes,             // normal latencies, uploaded bytes or mip counts NaN, ±inf, negative or absurd
   kCount
 };
 const char* family_name(Family f);
@@ -174,6 +174,21 @@ inline double sample_bytes(Family f, Rng& rng) {
   return rng.log_uniform(1.0, 1e9);
 }
 
+// The mips uploaded in step `i` (mode auto fits their cost and paces by it): none, a few, a cut's burst, an
+// extreme; family kBadBytes also feeds invalid counts, kRandomBits any bit pattern.
+inline double sample_mips(Family f, Rng& rng) {
+  constexpr double kMaxMips = stream::AdaptiveController::kMaxFrameMips;
+  if (f == Family::kRandomBits) return from_bits(rng.next());
+  if (f == Family::kBadBytes && rng.chance(0.2)) {
+    static const double kBad[] = {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(),
+                                  -1.0, std::nextafter(kMaxMips, 1e300), 1e300};
+    return kBad[rng.next() % (sizeof kBad / sizeof kBad[0])];
+  }
+  if (rng.chance(0.3)) return 0.0;
+  if (rng.chance(0.05)) return rng.chance(0.5) ? kMaxMips : 4.9e-324;
+  return std::floor(rng.log_uniform(1.0, 4096.0));
+}
+
 // Parameter set `which` (0..9): five sets, each in mode seed (which < 5) and mode auto.
 inline stream::ControllerParams stress_params(uint32_t which) {
   stream::ControllerParams p;  // Table 2
@@ -185,7 +200,8 @@ inline stream::ControllerParams stress_params(uint32_t which) {
       p.alpha_s = 1e-4;
       p.beta = 16;
       p.target_min_s = 0;
-      break;  // tiny target, largest β config allows
+      p.pace_share = 100;
+      break;  // tiny target, largest β and pace share config allows
     case 2:
       p.alpha_s = 10.0;
       p.beta = 0;
@@ -200,7 +216,8 @@ inline stream::ControllerParams stress_params(uint32_t which) {
       p.s_min_bytes = 1;
       p.s_max_bytes = 1e5 * 1e6;
       p.target_cap_s = 1e-6;
-      break;  // config extremes
+      p.pace_share = 0;
+      break;  // config extremes, no pacing
   }
   return p;
 }
@@ -211,13 +228,15 @@ inline stream::AdaptiveController warmed(const stream::ControllerParams& p, uint
   stream::AdaptiveController ctl = std::move(*c);
   Rng rng(seed);
   for (int i = 0; i < 300 && warm != 0; ++i)
-    ctl.on_frame(warm == 1 ? 0.004 : rng.uniform(0.003, 0.06), warm == 1 ? 0.0 : rng.uniform(0.0, 64e6));
+    ctl.on_frame(warm == 1 ? 0.004 : rng.uniform(0.003, 0.06), warm == 1 ? 0.0 : rng.uniform(0.0, 64e6),
+                 warm == 1 ? 0.0 : std::floor(rng.uniform(0.0, 600.0)));
   return ctl;
 }
 
-inline bool accepted_input(double dt, double bytes = 0.0) {
+inline bool accepted_input(double dt, double bytes = 0.0, double mips = 0.0) {
   return std::isfinite(dt) && dt >= 0.0 && dt <= stream::AdaptiveController::kMaxFrameLatencyS &&
-         std::isfinite(bytes) && bytes >= 0.0 && bytes <= stream::AdaptiveController::kMaxFrameBytes;
+         std::isfinite(bytes) && bytes >= 0.0 && bytes <= stream::AdaptiveController::kMaxFrameBytes &&
+         std::isfinite(mips) && mips >= 0.0 && mips <= stream::AdaptiveController::kMaxFrameMips;
 }
 
 // Empty when every promise holds after a step.
@@ -240,6 +259,12 @@ inline std::string check_outputs(const stream::AdaptiveController& c) {
   if (!(std::isfinite(h.f_s) && h.f_s >= 0.0)) return "auto: latency without streaming not finite and >= 0";
   if (!(std::isfinite(h.k_s_per_mb) && h.k_s_per_mb >= 0.0)) return "auto: upload cost not finite and >= 0";
   if (!(std::isfinite(h.target_s) && h.target_s > 0.0)) return "auto: target not finite and > 0";
+  if (!(std::isfinite(h.c_s_per_mip) && h.c_s_per_mip >= 0.0)) return "auto: mip cost not finite and >= 0";
+  using H = stream::HeadroomController;
+  const double pace = c.pace_mips();
+  if (!(pace >= H::kPaceMinMips && pace <= H::kNoPace)) return "pace outside [kPaceMinMips, kNoPace]";
+  if (p.mode != ControllerMode::kAuto && pace != H::kNoPace) return "a pace outside mode auto";
+  if (p.mode == ControllerMode::kAuto && p.pace_share == 0 && pace != H::kNoPace) return "a pace with pacing off";
   return {};
 }
 
@@ -260,15 +285,16 @@ inline StressResult run_stress(const StressOptions& o) {
     for (size_t i = 0; i < o.steps_per_sequence; ++i) {
       const double dt = sample(fam, rng, i, o.steps_per_sequence);
       const double bytes = sample_bytes(fam, rng);
-      const bool should = accepted_input(dt, bytes);
+      const double mips = sample_mips(fam, rng);
+      const bool should = accepted_input(dt, bytes, mips);
       std::string what;
       if (should) {
-        if (!c.on_frame(dt, bytes)) what = "a valid input was rejected";
+        if (!c.on_frame(dt, bytes, mips)) what = "a valid input was rejected";
       } else {
         const stream::AdaptiveController::State before = c.state();
         const stream::HeadroomController::State before_auto = c.headroom().state();
         const uint64_t rejected = c.frames_rejected();
-        if (c.on_frame(dt, bytes)) {
+        if (c.on_frame(dt, bytes, mips)) {
           what = "an invalid input was accepted";
         } else if (!(c.state() == before) || !(c.headroom().state() == before_auto)) {
           what = "a rejected input changed the state";
@@ -282,10 +308,10 @@ inline StressResult run_stress(const StressOptions& o) {
       if (!what.empty()) {
         ++r.bad_outputs;
         if (r.first_failure.empty()) {
-          char buf[160];
-          std::snprintf(buf, sizeof buf, "sequence %llu (%s, mode %s) step %zu, input %a s %a bytes: ",
+          char buf[200];
+          std::snprintf(buf, sizeof buf, "sequence %llu (%s, mode %s) step %zu, input %a s %a bytes %a mips: ",
                         static_cast<unsigned long long>(q), family_name(fam),
-                        std::string(choice_name(c.params().mode)).c_str(), i, dt, bytes);
+                        std::string(choice_name(c.params().mode)).c_str(), i, dt, bytes, mips);
           r.first_failure = buf + what;
         }
       }

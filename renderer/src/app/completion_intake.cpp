@@ -40,7 +40,10 @@ Result<Renderer::Clock::duration> Renderer::take_completions() {
     LoadTimeSink timed(cache,
                        Clock::now() + std::chrono::duration_cast<Clock::duration>(
                                           std::chrono::duration<double, std::milli>(cfg_.controller.load_time_ms)));
-    client_->poll(timed, static_cast<size_t>(cfg_.stream.max_mips_per_cycle));
+    // Mode auto paces a frame's intake by the measured cost of a mip (headroom_controller.hpp, "pace").
+    const double pace = std::floor(controller_->pace_mips());
+    const auto limit = static_cast<size_t>(std::min(static_cast<double>(cfg_.stream.max_mips_per_cycle), pace));
+    client_->poll(timed, limit);
     if (timed.limited()) record_.count_load_time_limited();
     TS_TRY(server_not_refusing(kMaxDeathsBeforeAttach));
     return Clock::duration{0};

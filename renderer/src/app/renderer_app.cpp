@@ -64,6 +64,7 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   const auto t0 = Clock::now();
   stage_mark_ = t0;
   const uint64_t uploaded_before = stack_->cache().stats().bytes_uploaded;
+  const uint64_t mips_before = stack_->cache().stats().mips_uploaded;
   const bool first = index == 0;
   const auto frame0_step = [this](const char* name) { first_frame_stage(name); };
   const double time_s = static_cast<double>(index) * cfg_.render.frame_time_ms / 1000.0;
@@ -79,10 +80,13 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   auto plan = plan_frame(*stack_, cam, cfg_, plan_options);
   if (!plan) return plan.error();
   FrameRecording& rec = plan->rec;
+  const auto intake_start = Clock::now();
+  const double plan_ms = ms(intake_start - t0);
 
   // 2. The completions that arrived since the last frame, into the staging ring.
   auto waited = take_completions();
   if (!waited) return waited.error();
+  const double intake_ms = ms(Clock::now() - intake_start - *waited);
   // 2b. render.load_wanted_before_drawing (reference frames): the frame is drawn once with feedback, every mip
   //     it samples is loaded, and only then drawn below, without feedback. Like the lock-step wait, not frame
   //     latency: a real-time run has no such pass (docs/design/reference_frames.md).
@@ -135,6 +139,7 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   stack_->cache().advance_fades(first ? 0.0 : cfg_.render.frame_time_ms / 1e3);
   const auto own_start = Clock::now();
   TS_TRY(stack_->submit({&rec, Uploads::kAll, write || record_.compares(), first ? frame0_step : StepHook{}}));
+  const RenderStack::SubmitTimes submit_times = stack_->last_times();
   if (first) {
     spdlog::info(
         "first frame: {} meshes in the wide frustum ({} in the viewport's), {} meshes of {} uploaded ({:.1f} MB)",
@@ -156,6 +161,7 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   //    needbuffer asks for (pages.per_frame): in the cycle's generation (an older one would be superseded by it
   //    at once) and ahead of its mips, so that they cannot take every place in flight.
   const auto pages = [&] { request_ground_pages(index, pose); };
+  const auto cycle_start = Clock::now();
   if (rec.read_back_list) {
     last_list_ = read_candidates();
     have_list_ = true;
@@ -171,6 +177,7 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   }
   if (first) first_frame_stage("cycle");
   const auto own_end = Clock::now();
+  const double cycle_ms = ms(own_end - cycle_start);
   if (pairs && !twin_first) TS_TRY(draw_twin());
 
   // 6. The frame's latency (lock-step waits for the server are not frame latency: they would not exist in
@@ -178,8 +185,8 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   const Clock::duration shared = own_start - t0 - not_frame_time - (twin_first ? twin_time : Clock::duration{0});
   const double latency_ms = ms(shared + (own_end - own_start));
   // The frame's uploads let mode auto tell its streaming work from its rendering (headroom_controller.hpp).
-  controller_->on_frame(latency_ms / 1e3,
-                        static_cast<double>(stack_->cache().stats().bytes_uploaded - uploaded_before));
+  controller_->on_frame(latency_ms / 1e3, static_cast<double>(stack_->cache().stats().bytes_uploaded - uploaded_before),
+                        static_cast<double>(stack_->cache().stats().mips_uploaded - mips_before));
   tell_states();
 
   // 7. The frame's record (frames.csv) and, with render.write_every_frames, its PNG: not the run's time. The
@@ -196,6 +203,13 @@ Status Renderer::render_frame(uint64_t index, bool last) {
       record_.add(index, time_s, pose, latency_ms, ms(*waited), counters(), controller_readout(), quality, pixels);
   if (!frame) return frame.error();
   if (pairs) (*frame)->latency_off_ms = ms(shared + twin_time);
+  FrameRecord& parts = **frame;
+  parts.plan_ms = plan_ms;
+  parts.intake_ms = intake_ms;
+  parts.bind_ms = submit_times.bind_ms;
+  parts.record_ms = submit_times.record_ms;
+  parts.gpu_ms = submit_times.gpu_ms;
+  parts.cycle_ms = cycle_ms;
   if (write) {
     char name[32];
     std::snprintf(name, sizeof name, "frame_%05llu.png", static_cast<unsigned long long>(index));
@@ -226,7 +240,9 @@ FrameCounters Renderer::counters() const {
 }
 
 ControllerReadout Renderer::controller_readout() const {
-  return {controller_->weighted_latency_s() * 1e3, controller_->load_size_bytes() / 1e6, controller_->mip_bias()};
+  const double pace = controller_->pace_mips();
+  return {controller_->weighted_latency_s() * 1e3, controller_->load_size_bytes() / 1e6, controller_->mip_bias(),
+          pace < stream::HeadroomController::kNoPace ? pace : std::numeric_limits<double>::quiet_NaN()};
 }
 
 Result<RunSummary> Renderer::finish() {

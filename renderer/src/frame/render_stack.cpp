@@ -95,6 +95,12 @@ Status RenderStack::submit(const Submission& s) {
   auto step = [&](const char* name) {
     if (s.step) s.step(name);
   };
+  using Clock = std::chrono::steady_clock;
+  const auto ms_since = [](Clock::time_point t) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+  };
+  const auto begin = Clock::now();
+  double bind_ms = 0;
   ++serial_;
   TS_VK_TRY(vkResetCommandBuffer(cmd_, 0));
   VkCommandBufferBeginInfo bi{};
@@ -102,7 +108,9 @@ Status RenderStack::submit(const Submission& s) {
   bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
   TS_VK_TRY(vkBeginCommandBuffer(cmd_, &bi));
   if (s.uploads == Uploads::kAll || s.uploads == Uploads::kMips) {
+    const auto bind_start = Clock::now();
     TS_TRY(cache_->prepare_uploads(serial_));  // this frame's sparse binds: one vkQueueBindSparse
+    bind_ms = ms_since(bind_start);
     cache_->record_uploads(cmd_, serial_);
     if (ground_) ground_->record_uploads(cmd_);
   }
@@ -137,10 +145,11 @@ Status RenderStack::submit(const Submission& s) {
   VkDevice device = ctx_->device();
   VkFence fence = fence_.get();
   TS_VK_TRY(vkResetFences(device, 1, &fence));
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
+  const double record_ms = std::chrono::duration<double, std::milli>(t0 - begin).count() - bind_ms;
   TS_VK_TRY(vkQueueSubmit(ctx_->queue(), 1, &si, fence));
   TS_VK_TRY(vkWaitForFences(device, 1, &fence, VK_TRUE, UINT64_MAX));
-  last_gpu_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  last_times_ = SubmitTimes{bind_ms, record_ms, ms_since(t0)};
   cache_->on_submission_complete(serial_);
   if (ground_) ground_->on_submission_complete(s.passes != nullptr);
   step("gpu");

@@ -45,6 +45,13 @@ const std::vector<Column>& columns() {
       {"list_fresh", nullptr, nullptr, &FrameRecord::list_fresh},
       {"mip_deficit", &FrameRecord::mip_deficit},
       {"wasted_bytes", nullptr, &FrameRecord::wasted_bytes},
+      {"plan_ms", &FrameRecord::plan_ms},
+      {"intake_ms", &FrameRecord::intake_ms},
+      {"bind_ms", &FrameRecord::bind_ms},
+      {"record_ms", &FrameRecord::record_ms},
+      {"gpu_ms", &FrameRecord::gpu_ms},
+      {"cycle_ms", &FrameRecord::cycle_ms},
+      {"pace_mips", &FrameRecord::pace_mips},
   };
   return c;
 }

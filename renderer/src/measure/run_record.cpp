@@ -44,6 +44,7 @@ Result<FrameRecord*> RunRecord::add(uint64_t index, double time_s, const CameraP
   f.tw_ms = controller.tw_ms;
   f.load_size_mb = controller.load_size_mb;
   f.mip_bias = controller.mip_bias;
+  f.pace_mips = controller.pace_mips;
   f.mips = totals.mips_uploaded - prev_.mips_uploaded;
   f.bytes = totals.bytes_uploaded - prev_.bytes_uploaded;
   f.bound_pages = totals.bound_pages;

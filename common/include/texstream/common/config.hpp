@@ -211,6 +211,7 @@ struct ControllerConfig {
   ControllerMode mode = ControllerMode::kAuto;
   double target_ms = 0;           // auto: cap on the target (0: 2x the measured latency without streaming)
   double target_min_ms = 16.667;  // auto: the target is never below one 60 Hz refresh
+  double pace_share = 1.0;        // auto: a frame's streaming work stays within this share of f (0: no pacing)
   double alpha_ms = 16;           // seed: α, target maximum frame latency
   double beta = 8;                // β: maximum mip bias
   double s_min_mb = 0.065;        // minimum load size (one 64 KiB sparse block)

@@ -46,6 +46,7 @@ struct ControllerParams {
   double fixed_bias = 0;           // mode = fixed
   double target_min_s = 1.0 / 60;  // mode = auto: the target is never below this
   double target_cap_s = 0;         // mode = auto: the target's cap (0: none)
+  double pace_share = 1.0;         // mode = auto: a frame's streaming work <= share · f (0: no pacing)
 
   // Converts ms → s and MB → bytes; errors name the [controller] key.
   static Result<ControllerParams> from_config(const ControllerConfig& config);
@@ -104,6 +105,8 @@ class AdaptiveController {
   static constexpr double kMaxFrameLatencyS = 3600.0;
   // Bytes uploaded in one frame above an exabyte are a counter error; rejected like a bad latency.
   static constexpr double kMaxFrameBytes = 1e18;
+  // Mips uploaded in one frame above 10^12 are a counter error; rejected like a bad latency.
+  static constexpr double kMaxFrameMips = 1e12;
 
   // The controller's state after the last accepted frame (all latencies in seconds).
   struct State {
@@ -126,12 +129,12 @@ class AdaptiveController {
 
   static Result<AdaptiveController> create(const ControllerParams& params);
 
-  // One frame: Δt in seconds and the bytes of mips uploaded during it (mode auto uses them to tell the
-  // frame's streaming work from its rendering; the seed's equations ignore them). Returns false (and changes
-  // nothing but the rejected counter) for NaN, ±inf, negative or absurd (> kMaxFrameLatencyS, >
-  // kMaxFrameBytes) input. 0 and denormals are accepted (a frame can be that fast only on a broken clock, but
-  // they are numbers the equations handle).
-  bool on_frame(double frame_latency_s, double uploaded_bytes = 0);
+  // One frame: Δt in seconds, the bytes and the number of mips uploaded during it (mode auto uses them to
+  // tell the frame's streaming work from its rendering; the seed's equations ignore them). Returns false (and
+  // changes nothing but the rejected counter) for NaN, ±inf, negative or absurd (> kMaxFrameLatencyS, >
+  // kMaxFrameBytes, > kMaxFrameMips) input. 0 and denormals are accepted (a frame can be that fast only on a
+  // broken clock, but they are numbers the equations handle).
+  bool on_frame(double frame_latency_s, double uploaded_bytes = 0, double uploaded_mips = 0);
 
   // Outputs for the next streaming cycle: mode auto's (headroom_controller.hpp), mode seed's (Eq. 4-7), or
   // constant in mode none/fixed. The seed's state follows Eq. 4-7 in every mode (so a baseline run can still
@@ -139,6 +142,9 @@ class AdaptiveController {
   double load_size_bytes() const;
   uint64_t load_bytes() const;  // load_size_bytes() rounded down, for byte counters
   double mip_bias() const;
+  // The most mips the next frame should take in: mode auto's pace (headroom_controller.hpp), else no limit
+  // (HeadroomController::kNoPace).
+  double pace_mips() const;
   double load_factor() const { return state_.l; }
   double weighted_latency_s() const { return state_.t_w; }
   const State& state() const { return state_; }  // the seed's (Eq. 4-7)

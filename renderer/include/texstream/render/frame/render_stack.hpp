@@ -74,8 +74,14 @@ class RenderStack {
   // Records `s` into the command buffer, submits it after the cache's sparse binds, waits for it and
   // publishes its uploads (TextureCache::on_submission_complete).
   Status submit(const Submission& s);
-  // Submit to fence of the last submit(), in milliseconds.
-  double last_gpu_ms() const { return last_gpu_ms_; }
+  // Where the last submit() spent its time, in milliseconds (frames.csv bind_ms, record_ms, gpu_ms).
+  struct SubmitTimes {
+    double bind_ms = 0;    // the cache's page binds (prepare_uploads)
+    double record_ms = 0;  // the rest of the recording
+    double gpu_ms = 0;     // submit to fence
+  };
+  const SubmitTimes& last_times() const { return last_times_; }
+  double last_gpu_ms() const { return last_times_.gpu_ms; }
   // Waits for the device and destroys everything but the context, so that its validation counts include the
   // teardown. Only context() may be used afterwards.
   Status tear_down();
@@ -117,7 +123,7 @@ class RenderStack {
   VkCommandBuffer cmd_ = VK_NULL_HANDLE;
   UniqueFence fence_;
   uint64_t serial_ = 0;  // submissions so far: the cache publishes by it
-  double last_gpu_ms_ = 0;
+  SubmitTimes last_times_;
   std::vector<uint32_t> visible_;
   std::vector<uint32_t> new_textures_;
 };

@@ -11,7 +11,7 @@
 // FrameRecord that says what it holds:
 //   frame, time_s, wall_s, latency_ms, waited_ms, tw_ms, load_size_mb, mip_bias, mips, bytes, bound_pages,
 //   server_hit_rate, in_flight, camera_still, mse, psnr_db, ssim, popin_mse, latency_off_ms, list_fresh,
-//   mip_deficit, wasted_bytes
+//   mip_deficit, wasted_bytes, plan_ms, intake_ms, bind_ms, record_ms, gpu_ms, cycle_ms, pace_mips
 //
 // The stream-quality columns (docs/design/stream_metrics.md):
 //   mip_deficit   Σ W·max(0, displayed − wanted) / Σ W over the textures of the latest visibility list read
@@ -22,6 +22,15 @@
 //   wasted_bytes  running total of the bytes of streamed mips that have left the cache (evicted or replaced)
 //                 without ever having been displayed while resident; mips still resident at the end of the
 //                 run are added in summary.json only (wasted_bytes, wasted_bytes_frac).
+//
+// Where a frame's latency goes (wall clock, so lock-step runs are not compared on them; with the small steps
+// between them they add up to latency_ms):
+//   plan_ms    broad phase, draw lists, new meshes (frame_plan)
+//   intake_ms  completions taken into the staging ring (lock-step waits excluded)
+//   bind_ms    the cache's page binds for the frame's copies (prepare_uploads: one vkQueueBindSparse)
+//   record_ms  the rest of the command buffer's recording
+//   gpu_ms     submission to fence: the binds' wait, the copies, the passes
+//   cycle_ms   the visibility list read back and the streaming cycle started from it
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -54,6 +63,13 @@ struct FrameRecord {
   bool list_fresh = false;    // the frame read the visibility list back (a streaming cycle started from it)
   double mip_deficit = 0;     // weighted mip deficit, levels (above; NaN before the first list)
   uint64_t wasted_bytes = 0;  // bytes of mips that left the cache never displayed, all frames so far (above)
+  double plan_ms = 0;         // the latency's parts (above)
+  double intake_ms = 0;
+  double bind_ms = 0;
+  double record_ms = 0;
+  double gpu_ms = 0;
+  double cycle_ms = 0;
+  double pace_mips = 0;  // mode auto: the most mips the next frame takes in (NaN: no pace)
 };
 
 // Column names, in file order.

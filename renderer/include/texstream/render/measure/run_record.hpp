@@ -42,6 +42,7 @@ struct ControllerReadout {
   double tw_ms = 0;         // t_w (Eq. 5)
   double load_size_mb = 0;  // s, 10^6 bytes
   double mip_bias = 0;      // b, levels
+  double pace_mips = 0;     // the most mips the next frame takes in (NaN: no pace)
 };
 
 class RunRecord {
