@@ -106,6 +106,38 @@ TEST(FrameLog, BadInputNamesTheLineAndColumn) {
   EXPECT_NE(short_row.error().message.find("line 4"), std::string::npos);
 }
 
+// The parts of the frames that make the p99: 101 frames (frame 0 left out: 100), two slow ones (the p99 by
+// nearest rank is the 99th of 100: the quicker of the two), each part averaged over them.
+TEST(PathAnalysis, SlowestFramesPartsAreTheMeanOverThoseAtOrAboveTheP99) {
+  auto v = series(101, 1.0 / 30);
+  for (auto& f : v) {
+    f.latency_ms = 3.0;
+    f.gpu_ms = 2.0;
+    f.plan_ms = 1.0;
+  }
+  v[0].latency_ms = 100.0;  // start-up: left out
+  v[50].latency_ms = 8.0;
+  v[50].gpu_ms = 4.0;
+  v[50].intake_ms = 1.0;
+  v[50].bind_ms = 2.0;
+  v[50].mips = 500;
+  v[90].latency_ms = 6.0;
+  v[90].gpu_ms = 3.0;
+  v[90].intake_ms = 2.0;
+  v[90].mips = 300;
+  const RunAnalysis a = analyse_run(v, 1.0 / 30, {});
+  EXPECT_EQ(a.p99_latency_ms, 6.0);
+  EXPECT_EQ(a.slowest.frames, 2u);
+  EXPECT_DOUBLE_EQ(a.slowest.latency, 7.0);
+  EXPECT_DOUBLE_EQ(a.slowest.gpu, 3.5);
+  EXPECT_DOUBLE_EQ(a.slowest.intake, 1.5);
+  EXPECT_DOUBLE_EQ(a.slowest.bind, 1.0);
+  EXPECT_DOUBLE_EQ(a.slowest.plan, 1.0);
+  EXPECT_DOUBLE_EQ(a.slowest.mips, 400.0);
+  EXPECT_EQ(a.all.frames, 100u);
+  EXPECT_DOUBLE_EQ(a.all.latency, (98 * 3.0 + 14.0) / 100);
+}
+
 TEST(PathAnalysis, Stat3SkipsNaN) {
   const Stat3 s = stat3({3, kNaN, 1, 2, 10});
   EXPECT_EQ(s.samples, 4u);

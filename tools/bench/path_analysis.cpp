@@ -188,6 +188,26 @@ RunAnalysis analyse_run(const std::vector<render::FrameRecord>& frames, double f
   if (!lat.empty()) {
     a.p95_latency_ms = nearest_rank(lat, 0.95);
     a.p99_latency_ms = nearest_rank(lat, 0.99);
+    auto add = [](LatencyParts& p, const render::FrameRecord& f) {
+      ++p.frames;
+      p.latency += f.latency_ms;
+      p.plan += f.plan_ms;
+      p.intake += f.intake_ms;
+      p.bind += f.bind_ms;
+      p.record += f.record_ms;
+      p.gpu += f.gpu_ms;
+      p.cycle += f.cycle_ms;
+      p.mips += static_cast<double>(f.mips);
+    };
+    for (const render::FrameRecord& f : frames) {
+      if (!(f.index >= kWarmUpFrames || frames.size() <= kWarmUpFrames)) continue;
+      add(a.all, f);
+      if (f.latency_ms >= a.p99_latency_ms) add(a.slowest, f);
+    }
+    for (LatencyParts* p : {&a.all, &a.slowest}) {
+      const double n = static_cast<double>(std::max<uint64_t>(p->frames, 1));
+      for (double* v : {&p->latency, &p->plan, &p->intake, &p->bind, &p->record, &p->gpu, &p->cycle, &p->mips}) *v /= n;
+    }
   }
   const double end_s = frames.empty() ? 0.0 : frames.back().time_s + frame_time_s;
   for (size_t i = 0; i < cuts_s.size(); ++i) {

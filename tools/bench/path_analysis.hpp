@@ -92,6 +92,13 @@ CameraPath path_section(const CameraPath& path, double t0, double t1);
 // and t_w statistics (only those). Measured on lavapipe: frame 0 takes 40-420 ms, the next ones 10-50 ms.
 inline constexpr uint64_t kWarmUpFrames = 1;
 
+// Where frames spent their latency (frames.csv's parts, frame_log.hpp), mean over a set of frames, ms; mips the
+// mean mips uploaded in them.
+struct LatencyParts {
+  uint64_t frames = 0;
+  double latency = 0, plan = 0, intake = 0, bind = 0, record = 0, gpu = 0, cycle = 0, mips = 0;
+};
+
 struct RunAnalysis {
   uint64_t frames = 0;
   Stat3 latency_ms, tw_ms, load_size_mb, mip_bias, mips_per_s, mb_per_s, bound_pages, server_hit_rate;
@@ -106,6 +113,8 @@ struct RunAnalysis {
   Stat3 mip_deficit;                  // per frame, levels (frame_log.hpp)
   double integrated_mip_deficit = 0;  // Σ mip_deficit · Δt over the frames that have one (levels · s)
   std::vector<TimeToDetail> detail;   // one per cut inside the run
+  LatencyParts slowest;               // the frames at or above the p99 latency (those that make the p99)
+  LatencyParts all;                   // every frame the latency statistics count
 };
 RunAnalysis analyse_run(const std::vector<render::FrameRecord>& frames, double frame_time_s,
                         const std::vector<double>& cuts_s);

@@ -86,6 +86,28 @@ std::string error_table(const std::vector<ConfigRun>& runs) {
   return t;
 }
 
+// Where the frames that make the p99 spent their latency, beside every frame's mean (frames.csv's parts).
+nlohmann::json parts_json(const LatencyParts& p) {
+  return {{"frames", p.frames},      {"latency", num(p.latency)}, {"plan", num(p.plan)},
+          {"intake", num(p.intake)}, {"bind", num(p.bind)},       {"record", num(p.record)},
+          {"gpu", num(p.gpu)},       {"cycle", num(p.cycle)},     {"mips", num(p.mips)}};
+}
+
+std::string parts_table(const std::vector<ConfigRun>& runs) {
+  std::string t =
+      "| configuration | frames | latency | plan | intake | bind | record | gpu | cycle | mips |\n"
+      "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+  for (const ConfigRun& r : runs) {
+    if (!r.measured || !r.failure.empty()) continue;
+    for (const auto& [what, p] : {std::pair{"slowest 1 %", &r.analysis.slowest}, std::pair{"all", &r.analysis.all}}) {
+      t += fmt::format("| {} ({}) | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n", r.label, what, p->frames,
+                       cell(p->latency), cell(p->plan), cell(p->intake), cell(p->bind), cell(p->record), cell(p->gpu),
+                       cell(p->cycle), cell(p->mips, 0));
+    }
+  }
+  return t;
+}
+
 // Time to detail after each cut (path_analysis.hpp, TimeToDetail): one row per measured run, one column per
 // cut, "deficit / PSNR" seconds.
 std::string detail_table(const std::vector<ConfigRun>& runs, const std::vector<double>& cuts_s) {
@@ -189,6 +211,7 @@ Status write_results_json(const BenchResults& r, const std::filesystem::path& fi
                     {"frame_latency_ms", stat_json(a.latency_ms)},
                     {"p95_latency_ms", num(a.p95_latency_ms)},
                     {"p99_latency_ms", num(a.p99_latency_ms)},
+                    {"latency_parts_ms", {{"slowest_1pct", parts_json(a.slowest)}, {"all", parts_json(a.all)}}},
                     {"tw_ms", stat_json(a.tw_ms)},
                     {"load_size_mb", stat_json(a.load_size_mb)},
                     {"mip_bias", stat_json(a.mip_bias)},
@@ -340,6 +363,11 @@ Status write_report(const BenchResults& r, const std::filesystem::path& file, bo
   m += "## Lock-step (virtual clock, fixed per-frame budget)\n\n" + seed_table(group("lockstep")) + "\n";
   m += "## Run time against error (one row per configuration)\n\n" + error_table(r.runs) + "\n";
   m += "## Time to detail after each cut (s)\n\n" + detail_table(r.runs, r.cuts_s) + "\n";
+  m += "## Where the latency goes (ms, mean over the frames)\n\nThe frames at or above each run's p99 latency "
+       "against all its frames (frame 0 left out), by frames.csv's parts: plan (broad phase, draw lists), intake "
+       "(completions into the staging ring), bind (the cache's sparse binds), record, gpu (submission to fence: "
+       "copies and passes), cycle (list read back, streaming cycle); mips uploaded per frame.\n\n" +
+       parts_table(r.runs) + "\n";
   if (with_plots) {
     m += "## Plots\n\n";
     m += "![frame latency, t_w, s and b over time (seed 000 Fig. 6)](plots/fig6_ours.png)\n\n";
