@@ -399,6 +399,21 @@ TEST(RenderLockstep, FeedbackPairsDrawTheSameFramesAndLogBothLatencies) {
   for (const auto& f : *plain) {
     EXPECT_TRUE(std::isnan(f.latency_off_ms)) << "frame " << f.index << ": latency_off_ms without pairs";
   }
+  // Where the latency goes (frames.csv's parts): each part >= 0, every frame submits, and the parts are pieces
+  // of the latency, the twin's drawing in neither.
+  for (const auto* log : {&*plain, &*paired}) {
+    for (const auto& f : *log) {
+      const double parts[] = {f.plan_ms, f.intake_ms, f.bind_ms, f.record_ms, f.gpu_ms, f.cycle_ms};
+      double sum = 0;
+      for (double p : parts) {
+        EXPECT_GE(p, 0.0) << "frame " << f.index;
+        sum += p;
+      }
+      EXPECT_GT(f.gpu_ms, 0.0) << "frame " << f.index;
+      EXPECT_LE(sum, f.latency_ms + 1e-3) << "frame " << f.index;
+      EXPECT_TRUE(std::isnan(f.pace_mips)) << "frame " << f.index << ": a pace in mode none";
+    }
+  }
   // Not with a window: refused at start, naming the key.
   const int rc = run((kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
                          " --set render.window=true --set render.feedback_pairs=true --set render.output_dir=" +
