@@ -151,10 +151,26 @@ RunAnalysis analyse_run(const std::vector<render::FrameRecord>& frames, double f
   RunAnalysis a;
   a.frames = frames.size();
   std::vector<double> lat, tw, s, b, pages, hit, mse, psnr, ssim, deficit;
+  // The frames the latency statistics count: all but the start-up frame, unless that is all there is.
+  const auto counted = [&](const render::FrameRecord& f) {
+    return f.index >= kWarmUpFrames || frames.size() <= kWarmUpFrames;
+  };
+  const auto add = [](LatencyParts& p, const render::FrameRecord& f) {
+    ++p.frames;
+    p.latency += f.latency_ms;
+    p.plan += f.plan_ms;
+    p.intake += f.intake_ms;
+    p.bind += f.bind_ms;
+    p.record += f.record_ms;
+    p.gpu += f.gpu_ms;
+    p.cycle += f.cycle_ms;
+    p.mips += static_cast<double>(f.mips);
+  };
   for (const render::FrameRecord& f : frames) {
-    if (f.index >= kWarmUpFrames || frames.size() <= kWarmUpFrames) {
+    if (counted(f)) {
       lat.push_back(f.latency_ms);
       tw.push_back(f.tw_ms);
+      add(a.all, f);
     }
     s.push_back(f.load_size_mb);
     b.push_back(f.mip_bias);
@@ -188,21 +204,8 @@ RunAnalysis analyse_run(const std::vector<render::FrameRecord>& frames, double f
   if (!lat.empty()) {
     a.p95_latency_ms = nearest_rank(lat, 0.95);
     a.p99_latency_ms = nearest_rank(lat, 0.99);
-    auto add = [](LatencyParts& p, const render::FrameRecord& f) {
-      ++p.frames;
-      p.latency += f.latency_ms;
-      p.plan += f.plan_ms;
-      p.intake += f.intake_ms;
-      p.bind += f.bind_ms;
-      p.record += f.record_ms;
-      p.gpu += f.gpu_ms;
-      p.cycle += f.cycle_ms;
-      p.mips += static_cast<double>(f.mips);
-    };
     for (const render::FrameRecord& f : frames) {
-      if (!(f.index >= kWarmUpFrames || frames.size() <= kWarmUpFrames)) continue;
-      add(a.all, f);
-      if (f.latency_ms >= a.p99_latency_ms) add(a.slowest, f);
+      if (counted(f) && f.latency_ms >= a.p99_latency_ms) add(a.slowest, f);
     }
     for (LatencyParts* p : {&a.all, &a.slowest}) {
       const double n = static_cast<double>(std::max<uint64_t>(p->frames, 1));

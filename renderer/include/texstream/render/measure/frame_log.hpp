@@ -23,8 +23,8 @@
 //                 without ever having been displayed while resident; mips still resident at the end of the
 //                 run are added in summary.json only (wasted_bytes, wasted_bytes_frac).
 //
-// Where a frame's latency goes (wall clock, so lock-step runs are not compared on them; with the small steps
-// between them they add up to latency_ms):
+// Where a frame's latency goes (wall clock, so lock-step runs are not compared on them; they add up to
+// latency_ms less the small steps between them):
 //   plan_ms    broad phase, draw lists, new meshes (frame_plan)
 //   intake_ms  completions taken into the staging ring (lock-step waits excluded)
 //   bind_ms    the cache's page binds for the frame's copies (prepare_uploads: one vkQueueBindSparse)
