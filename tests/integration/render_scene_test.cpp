@@ -233,9 +233,12 @@ TEST(RenderCli, AStandaloneServerServesRenderersOnItsSegmentName) {
   ASSERT_GT(server, 0);
   for (const std::string spawn : {"false", "true"}) {
     const fs::path out = dir / ("out-" + spawn);
+    // With a child, the run lasts at least 1.5 s of paced frames: the standalone server looks for a new
+    // renderer every 100 ms, and a 0.2 s run could end before it ever tried the segment (CI, once).
+    const std::string frames = spawn == "true" ? "45 --set render.pace_frames=true" : "5";
     const int rc =
         run("timeout 120 " + (kBin / "texstream-render").string() + " --set scene.dir=" + (dir / "scene").string() +
-                " --set render.frames=5 --set render.width_px=160" +
+                " --set render.frames=" + frames + " --set render.width_px=160" +
                 " --set render.height_px=90 --set render.output_dir=" + out.string() +
                 " --set render.preload_all=true --set protocol.segment_name=" + name + " --set server.spawn=" + spawn,
             dir / ("render-" + spawn + ".log"));
