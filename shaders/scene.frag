@@ -91,13 +91,19 @@ vec3 shade_at(TextureGpu tex, AnisoLod s, float lod, vec2 major, vec2 extent, fl
   // Colormap blend c = (1 - M / M_max) c_s + (M / M_max) c_o (seed 000 Eq. 8). stream.blend = seed:
   // M = the displayed level, as written (a far texture stays part colormap for good). converge(_linear): M = the
   // levels still missing, displayed - the level sampled with everything resident, so a texture at its wanted
-  // level is drawn exactly as the reference; converge squares M / M_max (less error; docs/design/blend.md).
+  // level is drawn exactly as the reference; converge raises M / M_max to the power stream.blend_exponent
+  // (docs/design/blend.md).
   float blend = 0.0;
   if ((frame.flags.x & kFlagColormapBlend) != 0u && mip_max > 0.0) {
     bool seed = (frame.flags.x & kFlagBlendSeed) != 0u;
     float m = seed ? lod : max(lod - clamp(s.lod, 0.0, mip_max), 0.0);
     blend = m / mip_max;
-    if (!seed && (frame.flags.x & kFlagBlendLinear) == 0u) blend *= blend;
+    if (!seed && (frame.flags.x & kFlagBlendLinear) == 0u) {
+      // An integer power by products: 0 stays exactly 0 (pow(0, n) may go through log2).
+      uint n = (frame.flags.x >> kBlendExponentShift) & kBlendExponentMask;
+      float fraction = blend;
+      for (uint i = 1u; i < n; ++i) blend *= fraction;
+    }
   }
   return mix(sampled, colormap, blend);
 }

@@ -61,7 +61,10 @@ TS_CONST kFlagColormapBlend = 1u;  // colormap blending (config stream.colormap_
 TS_CONST kFlagLighting = 2u;       // headlight shading; off gives the plain texel colour
 TS_CONST kFlagFeedback = 4u;       // write visibility metadata (config render.feedback)
 TS_CONST kFlagBlendSeed = 8u;      // blend by Eq. 8 as written (stream.blend = seed), else by the missing levels
-TS_CONST kFlagBlendLinear = 16u;   // by the missing fraction (converge_linear), else by its square (converge)
+TS_CONST kFlagBlendLinear = 16u;   // by the missing fraction (converge_linear), else by its power (converge)
+// Bits 8-11 of FrameUniforms.flags.x: stream.blend_exponent (1-8), the power of the missing fraction (converge).
+TS_CONST kBlendExponentShift = 8u;
+TS_CONST kBlendExponentMask = 15u;
 // TextureGpu.colour.w: how the texture is sampled, scene::sampling_flags as written in sampling.bin (the cache
 // static_asserts that the two agree): wrap along u and v (kWrap*), alpha test with its cutoff in 1/255.
 TS_CONST kSamplingWrapUShift = 0u;

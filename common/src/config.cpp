@@ -150,6 +150,10 @@ void visit_keys(Config& c, V&& v) {
   v("stream", "colormap_blend", c.stream.colormap_blend, "bool",
     "Blend sampled colour with the City Colormap while finer mips arrive (false: sample directly)", kAny);
   v("stream", "blend", c.stream.blend, "name", "How the colormap is blended in:", kAny);
+  v("stream", "blend_exponent", c.stream.blend_exponent, "power",
+    "blend = converge: the colormap's share is (levels still missing / M_max) to this power (higher: less error "
+    "while levels arrive, smaller steps hidden)",
+    Range{1, 8});
   v("stream", "fade_ms", c.stream.fade_ms, "ms",
     "A newly resident finer level fades in from the one before it (a first level from the colormap) over this "
     "much path time; 0 shows it at once (render.load_wanted_before_drawing: always 0)",

@@ -212,3 +212,57 @@ TEST(RenderAtlas, TheAtlasedCityDrawsAsTheCityItCameFrom) {
   EXPECT_GE(c.mean_psnr, 40.0);
   if (!HasFailure()) fs::remove_all(dir);
 }
+
+// stream.blend = converge mixes the colormap in by (levels still missing / M_max)^n, n = stream.blend_exponent
+// (docs/design/blend.md): while levels arrive, a higher power stays closer to the unblended frame, and once
+// the wanted levels are resident every power draws the unblended frame exactly. Frames 1-3 of the path, lock-step,
+// with 16 mips a cycle, are mid-refinement (frame 0 has nothing resident: every blend draws the colormap alone).
+TEST(RenderBlend, TheColormapFadesOutByAPowerOfTheMissingLevels) {
+  const fs::path dir = texstream::test::fresh_dir("texstream_render_it_", "blend");
+  ASSERT_TRUE(generate_city(dir));
+  constexpr uint64_t kFrames = 4;
+  const std::string few = " --set render.frames=" + std::to_string(kFrames) + " --set stream.max_mips_per_cycle=16";
+  const std::string converge = " --set stream.colormap_blend=true --set stream.blend=converge";
+  ASSERT_TRUE(run_render(dir, "none", few).is_object());
+  for (const std::string n : {"1", "2", "4"}) {
+    ASSERT_TRUE(run_render(dir, "e" + n, few + converge + " --set stream.blend_exponent=" + n).is_object());
+  }
+  auto none = texstream::render::ReferenceFrames::open(dir / "none", kWidth, kHeight);
+  ASSERT_TRUE(none.ok());
+  // Summed MSE of frames 1-3 against the unblended run, per exponent.
+  auto distance = [&](const std::string& run) {
+    auto frames = texstream::render::ReferenceFrames::open(dir / run, kWidth, kHeight);
+    EXPECT_TRUE(frames.ok()) << run;
+    double sum = 0;
+    for (uint64_t i = 1; frames.ok() && i < kFrames; ++i) {
+      auto a = frames->frame(i);
+      auto e = none->frame(i);
+      EXPECT_TRUE(a.ok() && e.ok()) << run << " frame " << i;
+      if (!a.ok() || !e.ok()) return -1.0;
+      auto err = texstream::render::compare_images(*a, *e);
+      EXPECT_TRUE(err.ok());
+      if (err.ok()) sum += err->mse;
+    }
+    return sum;
+  };
+  const double e1 = distance("e1"), e2 = distance("e2"), e4 = distance("e4");
+  std::printf("MSE against the unblended frames 1-3: exponent 1 %.3f, 2 %.3f, 4 %.4f\n", e1, e2, e4);
+  EXPECT_GT(e4, 0.0) << "the blend did nothing while levels were missing";
+  EXPECT_LT(e4, e2);
+  EXPECT_LT(e2, e1);
+
+  // Every texture resident: each power draws the unblended frames exactly; the seed's Eq. 8 does not.
+  const std::string resident = few + " --set render.preload_all=true";
+  ASSERT_TRUE(run_render(dir, "resident_none", resident).is_object());
+  ASSERT_TRUE(run_render(dir, "resident_e3", resident + converge + " --set stream.blend_exponent=3").is_object());
+  ASSERT_TRUE(run_render(dir, "resident_seed", resident + " --set stream.colormap_blend=true --set stream.blend=seed")
+                  .is_object());
+  for (uint64_t i = 0; i < kFrames; ++i) {
+    const fs::path f = texstream::render::ReferenceFrames::frame_file(dir / "resident_e3", i);
+    EXPECT_TRUE(slurp(f) == slurp(texstream::render::ReferenceFrames::frame_file(dir / "resident_none", i)))
+        << f << " differs from the unblended frame with every texture resident";
+  }
+  const RunComparison seed = compare_runs(dir, "resident_seed", "resident_none", kFrames, 0.0);
+  EXPECT_LT(seed.identical, kFrames) << "Eq. 8 as written should keep its error floor with every texture resident";
+  if (!HasFailure()) fs::remove_all(dir);
+}

@@ -44,6 +44,8 @@ gpu::FrameUniforms frame_uniforms(const Camera& cam, const Config& cfg, uint32_t
     blend = gpu::kFlagColormapBlend;
     if (cfg.stream.blend == BlendMode::kSeed) blend |= gpu::kFlagBlendSeed;
     if (cfg.stream.blend == BlendMode::kConvergeLinear) blend |= gpu::kFlagBlendLinear;
+    const auto exponent = static_cast<uint32_t>(std::clamp<int64_t>(cfg.stream.blend_exponent, 1, 8));
+    blend |= exponent << gpu::kBlendExponentShift;
   }
   fu.flags = {blend | gpu::kFlagLighting, mesh_count, static_cast<uint32_t>(std::ceil(tau_fixed)), compact_capacity};
   fu.cache = {cache_layer_extents[0], cache_layer_extents[1], cache_layer_extents[2], cache_layer_extents[3]};

@@ -57,7 +57,7 @@ struct ChoiceTable<DebugView> {
 
 // How the City Colormap colour is blended with the sampled colour (stream.blend; docs/design/blend.md).
 enum class BlendMode : uint8_t {
-  kConverge,        // by the square of the missing fraction ((displayed - wanted) / M_max)^2; 0 once resident
+  kConverge,        // by a power of the missing fraction ((displayed - wanted) / M_max)^n (stream.blend_exponent)
   kConvergeLinear,  // by the missing fraction itself: smoother, but costs more error while levels arrive
   kSeed,            // seed 000 Eq. 8: by the displayed level, M / M_max (never 0 for a texture seen from afar)
 };
@@ -65,7 +65,8 @@ template <>
 struct ChoiceTable<BlendMode> {
   static constexpr std::array<ChoiceEntry<BlendMode>, 3> kEntries{
       {{BlendMode::kConverge, "converge",
-        "by the square of the fraction of levels still missing; exact once the wanted level is resident"},
+        "by the fraction of levels still missing to the power stream.blend_exponent; exact once the wanted level is "
+        "resident"},
        {BlendMode::kConvergeLinear, "converge_linear", "by the fraction of levels still missing"},
        {BlendMode::kSeed, "seed", "seed 000 Eq. 8, by the displayed level"}}};
 };
@@ -202,6 +203,7 @@ struct StreamConfig {
   int64_t levels_in_flight = 8;            // most levels of one texture requested at once (1: seed Algorithm 1)
   bool colormap_blend = true;              // colormap blended in while mips arrive; false samples directly
   BlendMode blend = BlendMode::kConverge;  // how (colormap_blend = true)
+  int64_t blend_exponent = 3;              // converge: the power of the missing fraction (docs/design/blend.md)
   double fade_ms = 0;                      // a newly resident level fades in over this much path time; 0: at once
   double foreground_distance_m = 500;      // Eq. 2: w_d falls from 1 at the camera to 0 at this view depth
 };
