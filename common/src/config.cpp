@@ -158,6 +158,7 @@ void visit_keys(Config& c, V&& v) {
     "A newly resident finer level fades in from the one before it (a first level from the colormap) over this "
     "much path time; 0 shows it at once (render.load_wanted_before_drawing: always 0)",
     Range{0, 1e5});
+  v("stream", "fade_when", c.stream.fade_when, "name", "When stream.fade_ms applies:", kAny);
   v("stream", "foreground_distance_m", c.stream.foreground_distance_m, "m",
     "Eq. 2 distance weight: w_d = (1 - min(depth / this, 1))^4 (the seed's c_w normalised to metres)",
     Range{1e-3, 1e7});

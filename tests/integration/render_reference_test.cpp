@@ -11,6 +11,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -264,5 +265,59 @@ TEST(RenderBlend, TheColormapFadesOutByAPowerOfTheMissingLevels) {
   }
   const RunComparison seed = compare_runs(dir, "resident_seed", "resident_none", kFrames, 0.0);
   EXPECT_LT(seed.identical, kFrames) << "Eq. 8 as written should keep its error floor with every texture resident";
+  if (!HasFailure()) fs::remove_all(dir);
+}
+
+// stream.fade_when (docs/design/blend.md, "The fade"): with `still`, a frame whose camera moved ends every fade,
+// so it is the frame drawn without fading, byte for byte; in the path's pauses levels fade in. With `always`
+// they fade in motion too. A fade of 100 s never ends by itself here; 16 mips a cycle keep levels arriving.
+TEST(RenderBlend, LevelsFadeInOnlyWhileTheCameraIsStill) {
+  const fs::path dir = texstream::test::fresh_dir("texstream_render_it_", "fade_when");
+  ASSERT_TRUE(generate_city(dir));
+  const std::string sets = " --set render.frames=14 --set stream.max_mips_per_cycle=16";
+  const std::string fade = " --set stream.fade_ms=100000 --set stream.fade_when=";
+  const auto at_once = run_render(dir, "at_once", sets);
+  ASSERT_TRUE(at_once.is_object());
+  ASSERT_TRUE(run_render(dir, "still", sets + fade + "still").is_object());
+  ASSERT_TRUE(run_render(dir, "always", sets + fade + "always").is_object());
+  const std::string csv = slurp(dir / "at_once" / "frames.csv");
+  // camera_still per frame, from frames.csv (column named in its header).
+  std::vector<bool> still_frames;
+  {
+    std::istringstream in(csv);
+    std::string line;
+    std::getline(in, line);
+    size_t column = 0, i = 0;
+    for (std::istringstream h(line); std::getline(h, line, ','); ++i) {
+      if (line == "camera_still") column = i;
+    }
+    ASSERT_GT(column, 0u);
+    while (std::getline(in, line)) {
+      std::istringstream row(line);
+      std::string cell;
+      for (size_t c = 0; c <= column; ++c) std::getline(row, cell, ',');
+      still_frames.push_back(cell == "1");
+    }
+  }
+  ASSERT_EQ(still_frames.size(), 14u);
+  uint64_t moving = 0, still_faded = 0, always_faded = 0;
+  for (uint64_t i = 0; i < still_frames.size(); ++i) {
+    const auto frame = [&](const char* run) {
+      return slurp(texstream::render::ReferenceFrames::frame_file(dir / run, i));
+    };
+    const bool same_as_at_once = frame("still") == frame("at_once");
+    if (!still_frames[i]) {
+      ++moving;
+      EXPECT_TRUE(same_as_at_once) << "frame " << i << ": the camera moved, yet a level was still fading";
+      always_faded += frame("always") != frame("at_once") ? 1 : 0;
+    } else {
+      still_faded += same_as_at_once ? 0 : 1;
+    }
+  }
+  std::printf("%llu moving frames, %llu still frames fading (still), %llu moving frames fading (always)\n",
+              static_cast<unsigned long long>(moving), static_cast<unsigned long long>(still_faded),
+              static_cast<unsigned long long>(always_faded));
+  EXPECT_GT(still_faded, 0u) << "no level faded in the pause";
+  EXPECT_GT(always_faded, 0u) << "fade_when = always did not fade in motion";
   if (!HasFailure()) fs::remove_all(dir);
 }

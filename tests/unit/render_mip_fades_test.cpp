@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <bit>
+#include <limits>
 #include <vector>
 
 #include "texstream/render/cache/mip_fades.hpp"
@@ -112,3 +113,20 @@ TEST(MipFades, NoFadeTimeMeansNoFades) {
 }
 
 }  // namespace
+
+// stream.fade_when = still: a frame whose camera moved advances by an infinite step, which ends every fade.
+TEST(MipFades, AnInfiniteStepEndsEveryFade) {
+  MipFades f(100.0);
+  Table tb;
+  f.advance(0.0, tb.entries);
+  tb.publish(f, 0, 7);
+  tb.publish(f, 3, 5);
+  f.advance(0.1, tb.entries);
+  EXPECT_EQ(f.fading(), 2u);
+  f.advance(std::numeric_limits<double>::infinity(), tb.entries);
+  EXPECT_EQ(f.fading(), 0u);
+  for (uint32_t id : {0u, 3u}) {
+    EXPECT_EQ(tb.entries[id].colour.y, gpu::kNotResident) << id;
+    EXPECT_EQ(tb.entries[id].colour.z, 0u) << id;
+  }
+}

@@ -242,7 +242,9 @@ int run_path(const PathArgs& args) {
   runs.push_back(make("ours", "baseline",
                       "ours (as configured: controller " + std::string(choice_name(base_config->controller.mode)) +
                           ", β = " + fmt_num(base_config->controller.beta) + ", blend " +
-                          std::string(choice_name(base_config->stream.blend)) + ")",
+                          std::string(choice_name(base_config->stream.blend)) + ", fade " +
+                          fmt_num(base_config->stream.fade_ms) + " ms " +
+                          std::string(choice_name(base_config->stream.fade_when)) + ")",
                       {}));
   // Ratios are taken between neighbours in run order (ours, in-process, resident, baseline), so slow drifts
   // of a shared machine's load affect both sides alike.

@@ -135,8 +135,14 @@ Status Renderer::render_frame(uint64_t index, bool last) {
 
   // 4. Draw: the uploads, the passes and, for a written or measured frame, the colour capture (the copy is
   //    part of every measured configuration alike, so ratios between them are unaffected). Fades (stream.fade_ms)
-  //    advance by the path's time per frame, so lock-step runs fade alike.
-  stack_->cache().advance_fades(first ? 0.0 : cfg_.render.frame_time_ms / 1e3);
+  //    advance by the path's time per frame, so lock-step runs fade alike; with stream.fade_when = still a
+  //    frame whose camera moved ends them all (in motion a pop hides among the frame's changes; blend.md).
+  const bool still = drawn_pose_ && same_pose(*drawn_pose_, pose);
+  drawn_pose_ = pose;
+  const bool end_fades = !still && cfg_.stream.fade_when == FadeWhen::kStill;
+  stack_->cache().advance_fades(first       ? 0.0
+                                : end_fades ? std::numeric_limits<double>::infinity()
+                                            : cfg_.render.frame_time_ms / 1e3);
   const auto own_start = Clock::now();
   TS_TRY(stack_->submit({&rec, Uploads::kAll, write || record_.compares(), first ? frame0_step : StepHook{}}));
   const RenderStack::SubmitTimes submit_times = stack_->last_times();

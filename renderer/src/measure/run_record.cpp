@@ -5,15 +5,6 @@
 
 namespace texstream::render {
 
-namespace {
-
-bool same_pose(const CameraPose& a, const CameraPose& b) {
-  return a.position[0] == b.position[0] && a.position[1] == b.position[1] && a.position[2] == b.position[2] &&
-         a.yaw_deg == b.yaw_deg && a.pitch_deg == b.pitch_deg;
-}
-
-}  // namespace
-
 Status RunRecord::compare_with(const std::filesystem::path& reference_dir, const std::filesystem::path& output_dir,
                                uint32_t width, uint32_t height) {
   auto measure = FrameMeasurement::open(reference_dir, output_dir, width, height);

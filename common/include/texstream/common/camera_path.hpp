@@ -18,6 +18,12 @@ struct CameraPose {
   double pitch_deg;
 };
 
+// Bit-equal poses: the camera did not move (a pause of the path, a still window).
+inline bool same_pose(const CameraPose& a, const CameraPose& b) {
+  return a.position[0] == b.position[0] && a.position[1] == b.position[1] && a.position[2] == b.position[2] &&
+         a.yaw_deg == b.yaw_deg && a.pitch_deg == b.pitch_deg;
+}
+
 struct CameraKey {
   double time_s;
   CameraPose pose;

@@ -71,6 +71,18 @@ struct ChoiceTable<BlendMode> {
        {BlendMode::kSeed, "seed", "seed 000 Eq. 8, by the displayed level"}}};
 };
 
+// When a newly resident level fades in (stream.fade_when; docs/design/blend.md, "The fade").
+enum class FadeWhen : uint8_t {
+  kStill,   // only while the camera is still: a pop shows there; in motion levels show at once
+  kAlways,  // every arrival, moving or not
+};
+template <>
+struct ChoiceTable<FadeWhen> {
+  static constexpr std::array<ChoiceEntry<FadeWhen>, 2> kEntries{
+      {{FadeWhen::kStill, "still", "only while the camera is still; a frame whose camera moved ends every fade"},
+       {FadeWhen::kAlways, "always", "every arrival, moving or not"}}};
+};
+
 // Streaming controller mode (controller.mode): docs/controller.md.
 enum class ControllerMode : uint8_t {
   kAuto,   // target 2x the latency without streaming, measured; s and b from it (headroom_controller.hpp)
@@ -204,7 +216,8 @@ struct StreamConfig {
   bool colormap_blend = true;              // colormap blended in while mips arrive; false samples directly
   BlendMode blend = BlendMode::kConverge;  // how (colormap_blend = true)
   int64_t blend_exponent = 3;              // converge: the power of the missing fraction (docs/design/blend.md)
-  double fade_ms = 0;                      // a newly resident level fades in over this much path time; 0: at once
+  double fade_ms = 200;                    // a newly resident level fades in over this much path time; 0: at once
+  FadeWhen fade_when = FadeWhen::kStill;   // fade only while the camera is still, or always
   double foreground_distance_m = 500;      // Eq. 2: w_d falls from 1 at the camera to 0 at this view depth
 };
 

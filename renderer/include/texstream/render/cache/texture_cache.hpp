@@ -166,7 +166,8 @@ class TextureCache final : public stream::MipSink {
   // Submission `serial` (and every earlier one) has completed: publish what it copied.
   void on_submission_complete(uint64_t serial);
   // Advances the fades (stream.fade_ms) by `dt_s` of path time; call once per frame before drawing it. Levels
-  // published before the first call show at once (a preload is no pop-in). docs/design/blend.md.
+  // published before the first call show at once (a preload is no pop-in); an infinite `dt_s` ends every fade
+  // (stream.fade_when = still, on a frame whose camera moved). docs/design/blend.md.
   void advance_fades(double dt_s);
   // What the texture state machine must hear since the last call, oldest first (TextureStates::apply).
   std::vector<stream::TextureEvent> take_events() { return std::exchange(events_, {}); }
