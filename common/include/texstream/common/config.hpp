@@ -71,7 +71,7 @@ struct ChoiceTable<BlendMode> {
        {BlendMode::kSeed, "seed", "seed 000 Eq. 8, by the displayed level"}}};
 };
 
-// When a newly resident level fades in (stream.fade_when; docs/design/blend.md, "The fade").
+// When a newly resident level fades in (stream.fade_when; docs/design/blend.md, "Fading while still").
 enum class FadeWhen : uint8_t {
   kStill,   // only while the camera is still: a pop shows there; in motion levels show at once
   kAlways,  // every arrival, moving or not
