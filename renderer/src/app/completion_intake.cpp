@@ -119,7 +119,6 @@ void Renderer::request_ground_pages(uint64_t frame, const CameraPose& pose) {
     const double pitch = (last_pose_->pitch_deg - pose.pitch_deg) * std::numbers::pi / 180.0;
     hotspot = pages::hotspot_from_turn(static_cast<float>(yaw), static_cast<float>(pitch), 0.01f);
   }
-  last_pose_ = pose;
   // Pages go ahead of the cycle's mips at the server: the per-frame budget (pages.per_frame) bounds them, and
   // the ground is under every view.
   const auto candidates = ground->plan(frame, hotspot);

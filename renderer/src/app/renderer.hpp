@@ -141,10 +141,10 @@ class Renderer {
   uint64_t cycles_ = 0;
   uint64_t last_cycle_sent_ = 0;
   uint64_t load_bytes_ = 0;
-  uint64_t deaths_before_frames_ = 0;     // server deaths before frame 0 (render.lockstep allows none after it)
-  std::optional<CameraPose> last_pose_;   // the previous frame's, for the ground's HotSpot (the turn per frame)
-  std::optional<CameraPose> drawn_pose_;  // the previous frame's, for stream.fade_when = still
-  stream::TextureTable table_;            // the scene's texture table (a view of textures.bin) for every streaming part
+  uint64_t deaths_before_frames_ = 0;  // server deaths before frame 0 (render.lockstep allows none after it)
+  // The previous frame's pose: the ground's HotSpot (the turn per frame) and stream.fade_when = still.
+  std::optional<CameraPose> last_pose_;
+  stream::TextureTable table_;  // the scene's texture table (a view of textures.bin) for every streaming part
 };
 
 }  // namespace texstream::render

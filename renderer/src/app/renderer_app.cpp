@@ -137,8 +137,7 @@ Status Renderer::render_frame(uint64_t index, bool last) {
   //    part of every measured configuration alike, so ratios between them are unaffected). Fades (stream.fade_ms)
   //    advance by the path's time per frame, so lock-step runs fade alike; with stream.fade_when = still a
   //    frame whose camera moved ends them all (in motion a pop hides among the frame's changes; blend.md).
-  const bool still = drawn_pose_ && same_pose(*drawn_pose_, pose);
-  drawn_pose_ = pose;
+  const bool still = last_pose_ && same_pose(*last_pose_, pose);
   const bool end_fades = !still && cfg_.stream.fade_when == FadeWhen::kStill;
   stack_->cache().advance_fades(first       ? 0.0
                                 : end_fades ? std::numeric_limits<double>::infinity()
@@ -182,6 +181,7 @@ Status Renderer::render_frame(uint64_t index, bool last) {
     pages();
   }
   if (first) first_frame_stage("cycle");
+  last_pose_ = pose;
   const auto own_end = Clock::now();
   const double cycle_ms = ms(own_end - cycle_start);
   if (pairs && !twin_first) TS_TRY(draw_twin());
