@@ -11,11 +11,11 @@
 #include <cstdlib>
 #include <filesystem>
 #include <nlohmann/json.hpp>
-#include <sstream>
 #include <string>
 #include <vector>
 
 #include "process_test_support.hpp"
+#include "texstream/render/measure/frame_log.hpp"
 #include "texstream/render/measure/image_metrics.hpp"
 #include "texstream/render/measure/reference_frames.hpp"
 
@@ -280,25 +280,10 @@ TEST(RenderBlend, LevelsFadeInOnlyWhileTheCameraIsStill) {
   ASSERT_TRUE(at_once.is_object());
   ASSERT_TRUE(run_render(dir, "still", sets + fade + "still").is_object());
   ASSERT_TRUE(run_render(dir, "always", sets + fade + "always").is_object());
-  const std::string csv = slurp(dir / "at_once" / "frames.csv");
-  // camera_still per frame, from frames.csv (column named in its header).
+  auto log = texstream::render::read_frame_log(dir / "at_once" / "frames.csv");
+  ASSERT_TRUE(log.ok()) << log.error().message;
   std::vector<bool> still_frames;
-  {
-    std::istringstream in(csv);
-    std::string line;
-    std::getline(in, line);
-    size_t column = 0, i = 0;
-    for (std::istringstream h(line); std::getline(h, line, ','); ++i) {
-      if (line == "camera_still") column = i;
-    }
-    ASSERT_GT(column, 0u);
-    while (std::getline(in, line)) {
-      std::istringstream row(line);
-      std::string cell;
-      for (size_t c = 0; c <= column; ++c) std::getline(row, cell, ',');
-      still_frames.push_back(cell == "1");
-    }
-  }
+  for (const auto& f : *log) still_frames.push_back(f.camera_still);
   ASSERT_EQ(still_frames.size(), 14u);
   uint64_t moving = 0, still_faded = 0, always_faded = 0;
   for (uint64_t i = 0; i < still_frames.size(); ++i) {
