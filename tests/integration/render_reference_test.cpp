@@ -268,9 +268,9 @@ TEST(RenderBlend, TheColormapFadesOutByAPowerOfTheMissingLevels) {
   if (!HasFailure()) fs::remove_all(dir);
 }
 
-// stream.fade_when (docs/design/blend.md, "The fade"): with `still`, a frame whose camera moved ends every fade,
-// so it is the frame drawn without fading, byte for byte; in the path's pauses levels fade in. With `always`
-// they fade in motion too. A fade of 100 s never ends by itself here; 16 mips a cycle keep levels arriving.
+// stream.fade_when (docs/design/blend.md, "Fading while still"): with `still`, a frame whose camera moved ends every
+// fade, so it is the frame drawn without fading, byte for byte; in the path's pauses levels fade in. With `always` they
+// fade in motion too. A fade of 100 s never ends by itself here; 16 mips a cycle keep levels arriving.
 TEST(RenderBlend, LevelsFadeInOnlyWhileTheCameraIsStill) {
   const fs::path dir = texstream::test::fresh_dir("texstream_render_it_", "fade_when");
   ASSERT_TRUE(generate_city(dir));
