@@ -284,6 +284,54 @@ TEST_F(SceneMappedTest, OpenedSceneDefersMeshChecksAndKeepsTheIndex) {
   EXPECT_EQ(second->node_count(), first->node_count());
 }
 
+// split_and_drop_unsampled is split_by_viewport and then drop_unsampled in one pass: the same ids in the same
+// order and the same runs, on one thread and (from kParallelMinMeshes ids on) on all of them. Random boxes from
+// 1 cm (far ones have no sample) to 60 m, all around the camera (some behind it, some straddling the viewport).
+TEST(DropUnsampled, OnePassEqualsTheSplitThenTheDrop) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> pos(-800, 800), up(-20, 80), angle(0, 360);
+  std::uniform_real_distribution<float> half(0.005f, 30.0f);
+  for (const size_t n : {size_t{5000}, render::BroadPhase::kParallelMinMeshes + 10000}) {
+    std::vector<MeshRecord> meshes(n);
+    for (MeshRecord& m : meshes) {
+      m = MeshRecord{};
+      m.origin[0] = kX + pos(rng);
+      m.origin[1] = kY + pos(rng);
+      m.origin[2] = up(rng);
+      for (int a = 0; a < 3; ++a) {
+        m.bounds_min[a] = -half(rng);
+        m.bounds_max[a] = half(rng);
+      }
+    }
+    const render::BroadPhase bp(meshes);
+    std::vector<uint32_t> all(n);
+    for (uint32_t i = 0; i < n; ++i) all[i] = i;
+    for (int v = 0; v < 4; ++v) {
+      std::shuffle(all.begin(), all.end(), rng);
+      const std::array<double, 3> cam{kX + pos(rng) * 0.2, kY + pos(rng) * 0.2, 40.0};
+      const glm::mat4 view = render::view_rotation(render::forward_from_angles(angle(rng), -15));
+      const glm::mat4 proj = render::perspective_reversed_z(60, 16.0 / 9.0, 0.5, 2000.0);
+      const glm::mat4 wide = render::perspective_reversed_z(90, 16.0 / 9.0, 0.5, 2000.0);
+      const render::SampleGrid main{proj * view, 320, 180, render::SampleGrid::margin_px_for(8)};
+      const render::SampleGrid wide_grid{wide * view, 160, 90, render::SampleGrid::margin_px_for(8)};
+      const auto viewport = render::Frustum::from_matrix(proj * view);
+      std::vector<uint32_t> one = all, two = all;
+      one.push_back(static_cast<uint32_t>(n + 3));  // not a mesh of the tree: both drop it
+      two.push_back(static_cast<uint32_t>(n + 3));
+      const render::ViewportSplit split = bp.split_by_viewport(viewport, cam, two);
+      const render::ViewportSplit dropped = bp.drop_unsampled(main, wide_grid, cam, two, split);
+      const render::ViewportSplit fused = bp.split_and_drop_unsampled(viewport, main, wide_grid, cam, one);
+      EXPECT_EQ(one, two) << n << " view " << v;
+      EXPECT_EQ(fused.main_end, dropped.main_end) << n << " view " << v;
+      // The case is not trivial: both runs hold meshes, and meshes were dropped from each.
+      EXPECT_GT(dropped.main_end, 0u);
+      EXPECT_LT(dropped.main_end, two.size());
+      EXPECT_LT(dropped.main_end, split.main_end);
+      EXPECT_LT(two.size() - dropped.main_end, all.size() - split.main_end);
+    }
+  }
+}
+
 // drop_unsampled: a mesh whose screen rectangle holds no pixel centre of its pass is dropped, one that holds
 // one is kept, one reaching behind the camera is kept; the runs keep their order and their new ends.
 TEST(DropUnsampled, KeepsExactlyTheMeshesThatCanCoverAPixelCentre) {

@@ -17,20 +17,21 @@ Result<FramePlan> plan_frame(RenderStack& stack, const Camera& cam, const Config
 
   // Broad phase over the wide frustum: the wide pass needs those meshes too.
   broad_phase.query(Frustum::from_matrix(cam.wide_proj * cam.view), cam.position, visible, options.stats);
-  // Touching / outside the viewport's frustum: the main pass draws the first run, the wide pass the second
-  // (W = 1 for meshes outside the viewport, seed 000 §3.2).
-  plan.split = broad_phase.split_by_viewport(Frustum::from_matrix(cam.proj * cam.view), cam.position, visible);
   plan.submitted = visible.size();
   const ScenePassesOptions& po = stack.passes().options();
   rec.main = main_pass_constants(cam);
   rec.wide = wide_pass_constants(cam, cfg.render.fov_y_deg, cfg.render.offscreen_fov_y_deg, po.height, po.wide_height);
-  // Meshes that cover no pixel centre of the passes drawing them have no fragment: neither uploaded nor drawn.
+  // Touching / outside the viewport's frustum: the main pass draws the first run, the wide pass the second
+  // (W = 1 for meshes outside the viewport, seed 000 §3.2). Meshes that cover no pixel centre of the pass
+  // drawing them have no fragment: neither uploaded nor drawn (both tests in one pass over the records).
+  const Frustum viewport = Frustum::from_matrix(cam.proj * cam.view);
   if (options.drop_unsampled) {
     const uint32_t bits = stack.context().properties().limits.subPixelPrecisionBits;
-    plan.split =
-        broad_phase.drop_unsampled(SampleGrid::from_columns(rec.main.view_proj.m, po.width, po.height, bits),
-                                   SampleGrid::from_columns(rec.wide.view_proj.m, po.wide_width, po.wide_height, bits),
-                                   cam.position, visible, plan.split);
+    plan.split = broad_phase.split_and_drop_unsampled(
+        viewport, SampleGrid::from_columns(rec.main.view_proj.m, po.width, po.height, bits),
+        SampleGrid::from_columns(rec.wide.view_proj.m, po.wide_width, po.wide_height, bits), cam.position, visible);
+  } else {
+    plan.split = broad_phase.split_by_viewport(viewport, cam.position, visible);
   }
   plan.unsampled = plan.submitted - visible.size();
   step("broad_phase");

@@ -162,27 +162,41 @@ ViewportSplit BroadPhase::split_by_viewport(const Frustum& viewport, const std::
 bool BroadPhase::covers_sample(const SampleGrid& grid, uint32_t id, const std::array<double, 3>& camera) const {
   const scene::MeshRecord& m = meshes_[id];
   // The corners as the vertex shader places vertices: the mesh's offset rounded to float (SceneGpu), plus
-  // positions inside the record's bounds; projected in double.
-  double offset[3];
-  for (int a = 0; a < 3; ++a) offset[a] = static_cast<double>(static_cast<float>(m.origin[a] - camera[a]));
+  // positions inside the record's bounds; projected in double. The projection is linear, so the eight corners
+  // are the lowest corner's clip position plus the box's three edges' (four products instead of eight): this
+  // test is most of a city frame's planning (docs/design/render_stack.md, *Planning a city frame*).
+  const glm::mat4& vp = grid.view_proj;
+  double lowest[3], extent[3];
+  for (int a = 0; a < 3; ++a) {
+    lowest[a] = static_cast<double>(static_cast<float>(m.origin[a] - camera[a])) + static_cast<double>(m.bounds_min[a]);
+    extent[a] = static_cast<double>(m.bounds_max[a]) - static_cast<double>(m.bounds_min[a]);  // exact in double
+  }
+  std::array<std::array<double, 4>, 8> clip;
+  std::array<std::array<double, 4>, 3> edge;
+  for (int r = 0; r < 4; ++r) {
+    clip[0][r] = static_cast<double>(vp[3][r]);
+    for (int c = 0; c < 3; ++c) {
+      clip[0][r] += static_cast<double>(vp[c][r]) * lowest[c];
+      edge[c][r] = static_cast<double>(vp[c][r]) * extent[c];
+    }
+  }
+  // Corner k has the bounds' maximum on axis a where bit a of k is set: corner k = corner (k without its top bit)
+  // plus that bit's edge.
+  for (int k = 1; k < 8; ++k) {
+    const int top = k >= 4 ? 2 : (k >= 2 ? 1 : 0);
+    const int from = k - (1 << top);
+    for (int r = 0; r < 4; ++r) clip[k][r] = clip[from][r] + edge[top][r];
+  }
   double lo[2] = {std::numeric_limits<double>::max(), std::numeric_limits<double>::max()};
   double hi[2] = {std::numeric_limits<double>::lowest(), std::numeric_limits<double>::lowest()};
-  const glm::mat4& vp = grid.view_proj;
-  for (int corner = 0; corner < 8; ++corner) {
-    double p[3];
-    for (int a = 0; a < 3; ++a)
-      p[a] = offset[a] + static_cast<double>((corner >> a) & 1 ? m.bounds_max[a] : m.bounds_min[a]);
-    double clip[4];
-    for (int r = 0; r < 4; ++r) {
-      clip[r] = static_cast<double>(vp[3][r]);
-      for (int c = 0; c < 3; ++c) clip[r] += static_cast<double>(vp[c][r]) * p[c];
-    }
+  const double size[2] = {static_cast<double>(grid.width), static_cast<double>(grid.height)};
+  for (const auto& c : clip) {
     // On or behind the camera plane the rectangle is unbounded: keep the mesh (1 mm: well inside any near
     // plane; NaN keeps it too).
-    if (!(clip[3] > 1e-3)) return true;
+    if (!(c[3] > 1e-3)) return true;
+    const double inv_w = 1.0 / c[3];
     for (int a = 0; a < 2; ++a) {
-      const double size = a == 0 ? grid.width : grid.height;
-      const double px = (clip[a] / clip[3] * 0.5 + 0.5) * size;
+      const double px = (c[a] * inv_w * 0.5 + 0.5) * size[a];
       if (!std::isfinite(px)) return true;  // a non-finite record: drawn, so make_resident reports it
       lo[a] = std::min(lo[a], px);
       hi[a] = std::max(hi[a], px);
@@ -191,12 +205,44 @@ bool BroadPhase::covers_sample(const SampleGrid& grid, uint32_t id, const std::a
   // A pixel centre i + 0.5 (i in [0, size)) inside [lo - margin, hi + margin] on both axes. Flipping y does not
   // change the set of centres.
   for (int a = 0; a < 2; ++a) {
-    const double size = a == 0 ? grid.width : grid.height;
     const double first = std::max(0.0, std::ceil(lo[a] - grid.margin_px - 0.5));
-    const double last = std::min(size - 1.0, std::floor(hi[a] + grid.margin_px - 0.5));
+    const double last = std::min(size[a] - 1.0, std::floor(hi[a] + grid.margin_px - 0.5));
     if (first > last) return false;
   }
   return true;
+}
+
+ViewportSplit BroadPhase::split_and_drop_unsampled(const Frustum& viewport, const SampleGrid& main,
+                                                   const SampleGrid& wide, const std::array<double, 3>& camera,
+                                                   std::vector<uint32_t>& ids) const {
+  enum : uint8_t { kDropped, kTouching, kOutside };
+  std::vector<uint8_t> kind(ids.size());
+  auto test = [&](size_t begin, size_t end) {
+    for (size_t i = begin; i < end; ++i) {
+      const uint32_t id = ids[i];
+      if (id >= meshes_.size()) {
+        kind[i] = kDropped;  // not a mesh of this tree, as split_by_viewport drops it
+        continue;
+      }
+      const bool outside = classify_mesh(viewport, id, camera) == Frustum::Side::kOutside;
+      kind[i] = !covers_sample(outside ? wide : main, id, camera) ? kDropped : outside ? kOutside : kTouching;
+    }
+  };
+  if (ids.size() < kParallelMinMeshes) {
+    test(0, ids.size());
+  } else {
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, ids.size(), 4096),
+                      [&](const tbb::blocked_range<size_t>& r) { test(r.begin(), r.end()); });
+  }
+  std::vector<uint32_t> outside;
+  size_t touching = 0;
+  for (size_t i = 0; i < ids.size(); ++i) {
+    if (kind[i] == kTouching) ids[touching++] = ids[i];  // touching <= i: in place, order kept
+    if (kind[i] == kOutside) outside.push_back(ids[i]);
+  }
+  ids.resize(touching);
+  ids.insert(ids.end(), outside.begin(), outside.end());
+  return ViewportSplit{static_cast<uint32_t>(touching)};
 }
 
 ViewportSplit BroadPhase::drop_unsampled(const SampleGrid& main, const SampleGrid& wide,

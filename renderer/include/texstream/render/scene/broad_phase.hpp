@@ -105,6 +105,13 @@ class BroadPhase {
   ViewportSplit drop_unsampled(const SampleGrid& main, const SampleGrid& wide, const std::array<double, 3>& camera,
                                std::vector<uint32_t>& ids, ViewportSplit split) const;
 
+  // split_by_viewport and then drop_unsampled, in one pass over the records on every core (each record read
+  // once): the same ids in the same order and the same runs. Most of a city frame's planning is these tests,
+  // and a record fetch, not the arithmetic, is most of their cost (docs/design/render_stack.md, *Planning a
+  // city frame*).
+  ViewportSplit split_and_drop_unsampled(const Frustum& viewport, const SampleGrid& main, const SampleGrid& wide,
+                                         const std::array<double, 3>& camera, std::vector<uint32_t>& ids) const;
+
   size_t node_count() const { return tree_.nodes.size(); }
   uint32_t depth() const { return tree_.depth; }
   size_t mesh_count() const { return tree_.order.size(); }
