@@ -19,6 +19,17 @@ namespace {
 // when the frustum covers only part of the city, few enough that each task still does real work.
 constexpr size_t kFrontierTarget = 64;
 
+// Runs `test(begin, end)` over [0, n): on this thread for a small view, in blocks on every core for a large one.
+template <class Test>
+void test_ids(size_t n, size_t parallel_from, Test&& test) {
+  if (n < parallel_from) {
+    test(size_t{0}, n);
+    return;
+  }
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096),
+                    [&](const tbb::blocked_range<size_t>& r) { test(r.begin(), r.end()); });
+}
+
 }  // namespace
 
 BroadPhase::BroadPhase(std::span<const scene::MeshRecord> meshes)
@@ -228,12 +239,7 @@ ViewportSplit BroadPhase::split_and_drop_unsampled(const Frustum& viewport, cons
       kind[i] = !covers_sample(outside ? wide : main, id, camera) ? kDropped : outside ? kOutside : kTouching;
     }
   };
-  if (ids.size() < kParallelMinMeshes) {
-    test(0, ids.size());
-  } else {
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, ids.size(), 4096),
-                      [&](const tbb::blocked_range<size_t>& r) { test(r.begin(), r.end()); });
-  }
+  test_ids(ids.size(), kParallelMinMeshes, test);
   std::vector<uint32_t> outside;
   size_t touching = 0;
   for (size_t i = 0; i < ids.size(); ++i) {
@@ -254,17 +260,12 @@ ViewportSplit BroadPhase::drop_unsampled(const SampleGrid& main, const SampleGri
     if (id >= meshes_.size()) return false;
     return covers_sample(i < main_end ? main : wide, id, camera);
   };
-  // The tests on every core for a large view (eight corner projections a mesh), the compaction in order.
+  // The tests on every core for a large view (a corner and three edges projected a mesh), the compaction in order.
   std::vector<uint8_t> kept_flags(ids.size());
   auto test = [&](size_t begin, size_t end) {
     for (size_t i = begin; i < end; ++i) kept_flags[i] = keep(i) ? 1 : 0;
   };
-  if (ids.size() < kParallelMinMeshes) {
-    test(0, ids.size());
-  } else {
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, ids.size(), 4096),
-                      [&](const tbb::blocked_range<size_t>& r) { test(r.begin(), r.end()); });
-  }
+  test_ids(ids.size(), kParallelMinMeshes, test);
   size_t kept = 0;
   ViewportSplit out;
   for (size_t i = 0; i < ids.size(); ++i) {
