@@ -18,6 +18,9 @@ namespace {
 // The parallel query splits the tree into about this many subtrees: enough for TBB to balance a few cores
 // when the frustum covers only part of the city, few enough that each task still does real work.
 constexpr size_t kFrontierTarget = 64;
+// split_and_drop_unsampled asks for the record this many ids ahead: the ids come in tree order, the records lie in
+// id order, so each fetch is a cache miss the prefetch overlaps (docs/design/render_stack.md).
+constexpr size_t kPrefetchAhead = 16;
 
 // Runs `test(begin, end)` over [0, n): on this thread for a small view, in blocks on every core for a large one.
 template <class Test>
@@ -230,6 +233,11 @@ ViewportSplit BroadPhase::split_and_drop_unsampled(const Frustum& viewport, cons
   std::vector<uint8_t> kind(ids.size());
   auto test = [&](size_t begin, size_t end) {
     for (size_t i = begin; i < end; ++i) {
+      if (i + kPrefetchAhead < end && ids[i + kPrefetchAhead] < meshes_.size()) {
+        const auto* ahead = reinterpret_cast<const char*>(&meshes_[ids[i + kPrefetchAhead]]);
+        __builtin_prefetch(ahead);
+        __builtin_prefetch(ahead + sizeof(scene::MeshRecord) - 1);
+      }
       const uint32_t id = ids[i];
       if (id >= meshes_.size()) {
         kind[i] = kDropped;  // not a mesh of this tree, as split_by_viewport drops it
