@@ -12,7 +12,6 @@
 // mismatches=...` (the times are medians over the views; docs/design/render_stack.md, *Planning a city frame*).
 #include <algorithm>
 #include <array>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -74,10 +73,6 @@ std::vector<scene::MeshRecord> synthetic_city(size_t count) {
   return meshes;
 }
 
-double ms_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
-
 int run_plan_bench(const PlanOptions& o) {
   std::vector<scene::MeshRecord> own;
   std::span<const scene::MeshRecord> meshes;
@@ -123,22 +118,22 @@ int run_plan_bench(const PlanOptions& o) {
     const render::SampleGrid main{proj * view, 1920, 1080, render::SampleGrid::margin_px_for(8)};
     const render::SampleGrid wide_grid{wide * view, 960, 540, render::SampleGrid::margin_px_for(8)};
     const auto viewport = render::Frustum::from_matrix(proj * view);
-    auto t0 = std::chrono::steady_clock::now();
+    Stopwatch clock;
     bp.query(render::Frustum::from_matrix(wide * view), cam, ids);
-    query_ms.push_back(ms_since(t0));
+    query_ms.push_back(clock.seconds() * 1e3);
     ids_per_view.push_back(static_cast<double>(ids.size()));
     render::ViewportSplit a{}, b{};
     for (int k = 0; k < 2; ++k) {
       if ((k == 0) == (v % 2 == 0)) {
         two = ids;
-        t0 = std::chrono::steady_clock::now();
+        clock.reset();
         a = bp.drop_unsampled(main, wide_grid, cam, two, bp.split_by_viewport(viewport, cam, two));
-        two_ms.push_back(ms_since(t0));
+        two_ms.push_back(clock.seconds() * 1e3);
       } else {
         one = ids;
-        t0 = std::chrono::steady_clock::now();
+        clock.reset();
         b = bp.split_and_drop_unsampled(viewport, main, wide_grid, cam, one);
-        fused_ms.push_back(ms_since(t0));
+        fused_ms.push_back(clock.seconds() * 1e3);
       }
     }
     if (one != two || a.main_end != b.main_end) ++mismatches;
@@ -149,10 +144,15 @@ int run_plan_bench(const PlanOptions& o) {
   std::printf("  query (wide frustum)           median %8.3f ms\n", q);
   std::printf("  split, then drop (two passes)  median %8.3f ms  p95 %8.3f ms\n", p2, percentile(two_ms, 95));
   std::printf("  split and drop in one pass     median %8.3f ms  p95 %8.3f ms\n", p1, percentile(fused_ms, 95));
-  std::printf(
-      "summary: meshes=%zu ids_per_view=%.0f query_ms=%.4g two_pass_ms=%.4g fused_ms=%.4g fused_speedup=%.4g "
-      "mismatches=%d\n",
-      meshes.size(), percentile(ids_per_view, 50), q, p2, p1, p1 > 0 ? p2 / p1 : 0.0, mismatches);
+  Summary()
+      .add("meshes", static_cast<double>(meshes.size()))
+      .add("ids_per_view", std::round(percentile(ids_per_view, 50)))
+      .add("query_ms", q)
+      .add("two_pass_ms", p2)
+      .add("fused_ms", p1)
+      .add("fused_speedup", p1 > 0 ? p2 / p1 : 0.0)
+      .add("mismatches", mismatches)
+      .print();
   return mismatches == 0 ? 0 : 1;
 }
 
